@@ -1,0 +1,1 @@
+"""One module per `benchlab` command (see benchlab.cli)."""

@@ -1,0 +1,39 @@
+"""Error figures of contract section 5: RMSE in K over the predicted channels, NRMSE per channel in %."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+import pandas as pd
+
+from benchlab.clutch import PREDICTED_CHANNELS
+
+
+def rmse_k(measured: pd.DataFrame, simulated: pd.DataFrame, channels: Iterable[str] = PREDICTED_CHANNELS) -> float:
+    """Root-mean-square error in K over all valid samples of the given channels together."""
+    errors = np.concatenate([(simulated[c] - measured[c]).to_numpy() for c in channels])
+    errors = errors[np.isfinite(errors)]
+    return float(np.sqrt(np.mean(errors ** 2))) if errors.size else float("nan")
+
+
+def nrmse_pct(measured: pd.DataFrame, simulated: pd.DataFrame, channels: Iterable[str] = PREDICTED_CHANNELS) -> float:
+    """100 * RMSE / (max - min of the measured signal), per channel, then averaged."""
+    values = [v for v in channel_nrmse_pct(measured, simulated, channels).values() if np.isfinite(v)]
+    return float(np.mean(values)) if values else float("nan")
+
+
+def channel_rmse_k(measured: pd.DataFrame, simulated: pd.DataFrame,
+                   channels: Iterable[str] = PREDICTED_CHANNELS) -> dict[str, float]:
+    """RMSE in K of each channel on its own."""
+    return {c: rmse_k(measured, simulated, (c,)) for c in channels}
+
+
+def channel_nrmse_pct(measured: pd.DataFrame, simulated: pd.DataFrame,
+                      channels: Iterable[str] = PREDICTED_CHANNELS) -> dict[str, float]:
+    """NRMSE in % of each channel on its own (NaN where the channel does not vary)."""
+    out = {}
+    for c in channels:
+        span = np.nanmax(measured[c].to_numpy()) - np.nanmin(measured[c].to_numpy())
+        out[c] = 100.0 * rmse_k(measured, simulated, (c,)) / span if span > 0 else float("nan")
+    return out

@@ -1,0 +1,120 @@
+"""Lumped thermal network: nodes with capacities, links with resistances, heat sources, boundaries.
+
+The paper's clutch (eq. 6-9) is one such network. A model extension is an edit of the
+network (a link whose resistance depends on a channel, a new source, a new node, a sensor
+lag), so the solver never changes when the physics does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+Params = Mapping[str, float]
+Channels = Mapping[str, np.ndarray]
+#: A resistance (K/W) or heat flow (W): a scalar, or one value per sample, from params and channels.
+ParamChannelFunction = Callable[[Params, Channels], "float | np.ndarray"]
+
+
+@dataclass(frozen=True)
+class Node:
+    """A lumped thermal mass whose temperature is a model state."""
+
+    name: str
+    capacity: str  # parameter name of the heat capacity in J/K
+
+
+@dataclass(frozen=True)
+class Boundary:
+    """A temperature imposed from outside (engine, ambient), taken from measured channels."""
+
+    name: str
+    temperature: Callable[[Channels], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Link:
+    """Heat conduction or convection between two nodes (or a node and a boundary)."""
+
+    a: str
+    b: str
+    resistance: ParamChannelFunction
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class Source:
+    """Heat flow in W injected into one node."""
+
+    node: str
+    heat_flow: ParamChannelFunction
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class Lag:
+    """A first-order sensor: a state that follows `node` with time constant parameter `time_constant`."""
+
+    name: str
+    node: str
+    time_constant: str  # parameter name, seconds
+
+
+@dataclass(frozen=True)
+class ThermalNetwork:
+    """The whole model structure; parameters are supplied separately as a name -> value map."""
+
+    nodes: tuple[Node, ...]
+    boundaries: tuple[Boundary, ...]
+    links: tuple[Link, ...]
+    sources: tuple[Source, ...]
+    outputs: Mapping[str, str]  # measured/simulated channel name -> state name
+    lags: tuple[Lag, ...] = ()
+    initial: Mapping[str, str] = field(default_factory=dict)  # state -> channel it starts from
+
+    @property
+    def state_names(self) -> list[str]:
+        return [n.name for n in self.nodes] + [lag.name for lag in self.lags]
+
+    def with_link(self, link: Link) -> "ThermalNetwork":
+        return replace(self, links=self.links + (link,))
+
+    def replace_links(self, keep: Callable[[Link], bool], new: tuple[Link, ...]) -> "ThermalNetwork":
+        return replace(self, links=tuple(l for l in self.links if keep(l)) + new)
+
+    def with_source(self, source: Source) -> "ThermalNetwork":
+        return replace(self, sources=self.sources + (source,))
+
+    def with_node(self, node: Node, initial_from: str) -> "ThermalNetwork":
+        return replace(self, nodes=self.nodes + (node,), initial={**self.initial, node.name: initial_from})
+
+    def with_lag(self, lag: Lag, output: str) -> "ThermalNetwork":
+        """Add a sensor lag and route the measured channel `output` through it."""
+        return replace(self, lags=self.lags + (lag,), outputs={**self.outputs, output: lag.name},
+                       initial={**self.initial, lag.name: self.initial.get(lag.node, output)})
+
+    def parameter_names(self) -> set[str]:
+        """Capacity and lag parameters named by the structure (link/source laws may use more)."""
+        return {n.capacity for n in self.nodes} | {lag.time_constant for lag in self.lags}
+
+    def validate(self) -> None:
+        """Raise ValueError for links or outputs that name unknown nodes."""
+        known = set(self.state_names) | {b.name for b in self.boundaries}
+        for link in self.links:
+            for end in (link.a, link.b):
+                if end not in known:
+                    raise ValueError(f"link {link.label or (link.a, link.b)} names unknown node {end!r}")
+        for src in self.sources:
+            if src.node not in {n.name for n in self.nodes}:
+                raise ValueError(f"source {src.label} heats unknown node {src.node!r}")
+        for channel, state in self.outputs.items():
+            if state not in self.state_names:
+                raise ValueError(f"output {channel} reads unknown state {state!r}")
+
+
+def as_samples(value: "float | np.ndarray", n: int) -> np.ndarray:
+    """Broadcast a scalar-or-array law result to one float64 value per sample."""
+    arr = np.asarray(value, dtype=np.float64)
+    return np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr

@@ -1,0 +1,127 @@
+"""Run files (contract section 1): HDF5, schema benchlab-run/1, channels on one grid in /aligned."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+
+from benchlab.errors import InputError
+
+SCHEMA = "benchlab-run/1"
+STATUSES = ("running", "complete", "aborted")
+#: Every channel the contract names, with its unit; the first ten are required.
+ALIGNED_UNITS: dict[str, str] = {
+    "time": "s", "engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": "N*m", "clutch_state": "1",
+    "friction_power": "W", "T_flywheel": "degC", "T_air": "degC", "T_housing": "degC", "T_ambient": "degC",
+    "T_engine": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC",
+}
+REQUIRED = tuple(list(ALIGNED_UNITS)[:10])
+TIME_TOLERANCE = 1e-6  # relative to dt
+
+
+def _text(value: object) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _open(path: Path) -> h5py.File:
+    if not path.exists():
+        raise InputError(path, "file", "an existing run file (not found)")
+    try:
+        return h5py.File(path, "r")
+    except OSError:
+        raise InputError(path, "file", "an HDF5 run file (cannot be opened as HDF5)") from None
+
+
+def load_run(path: "str | os.PathLike[str]") -> pd.DataFrame:
+    """The /aligned channels as a DataFrame; attrs hold dt, units, source and the root attributes."""
+    path = Path(path)
+    with _open(path) as f:
+        attrs = {k: _text(v) for k, v in f.attrs.items() if k in ("schema", "status", "protocol")}
+        if not attrs.get("schema", "").startswith(SCHEMA):
+            raise InputError(path, "schema", f"root attribute {SCHEMA!r}, got {attrs.get('schema')!r}")
+        if "aligned" not in f or not isinstance(f["aligned"], h5py.Group):
+            raise InputError(path, "/aligned", "a group of channels on one time grid")
+        group = f["aligned"]
+        dt = group.attrs.get("dt")
+        if dt is None or not np.isscalar(dt) or not np.isfinite(dt) or float(dt) <= 0:
+            raise InputError(path, "/aligned.dt", f"a positive time step in seconds, got {dt!r}")
+        columns, units = _read_channels(path, group)
+        time_dtype = group["time"].dtype
+    frame = pd.DataFrame(columns)
+    _check_time(path, frame["time"].to_numpy(), float(dt), time_dtype)
+    frame.attrs.update(attrs, dt=float(dt), units=units, source=str(path))
+    return frame
+
+
+def _read_channels(path: Path, group: h5py.Group) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    columns: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {}
+    for name in REQUIRED:
+        if name not in group:
+            raise InputError(path, f"/aligned/{name}", f"a required channel in {ALIGNED_UNITS[name]} (missing)")
+    length = None
+    for name, ds in group.items():
+        if not isinstance(ds, h5py.Dataset) or ds.ndim != 1 or not np.issubdtype(ds.dtype, np.number):
+            raise InputError(path, f"/aligned/{name}", "a 1-D numeric dataset")
+        if "units" not in ds.attrs:
+            raise InputError(path, f"/aligned/{name}.units", f"a units attribute ({ALIGNED_UNITS.get(name, 'any')})")
+        unit = _text(ds.attrs["units"])
+        if name in ALIGNED_UNITS and unit != ALIGNED_UNITS[name]:
+            raise InputError(path, f"/aligned/{name}.units", f"{ALIGNED_UNITS[name]!r}, got {unit!r}")
+        if length is not None and ds.shape[0] != length:
+            raise InputError(path, f"/aligned/{name}", f"length {length} like /aligned/time, got {ds.shape[0]}")
+        length = ds.shape[0]
+        columns[name] = ds[()].astype(np.float64)
+        units[name] = unit
+    ordered = {k: columns[k] for k in ALIGNED_UNITS if k in columns}
+    ordered.update({k: v for k, v in columns.items() if k not in ordered})
+    return ordered, units
+
+
+def time_step_tolerance(time: np.ndarray, dt: float, stored: np.dtype) -> float:
+    """How far a step may differ from dt: a millionth of dt plus the rounding of the stored type."""
+    eps = np.finfo(stored).eps if np.issubdtype(stored, np.floating) else 0.0
+    return TIME_TOLERANCE * dt + 4 * eps * float(np.max(np.abs(time)))
+
+
+def _check_time(path: Path, time: np.ndarray, dt: float, stored: np.dtype) -> None:
+    if len(time) < 2:
+        raise InputError(path, "/aligned/time", "at least two samples")
+    step_error = np.abs(np.diff(time) - dt)
+    tolerance = time_step_tolerance(time, dt, stored) if np.all(np.isfinite(time)) else 0.0
+    if not np.all(np.isfinite(time)) or np.max(step_error) > tolerance:
+        bad = int(np.argmax(~np.isfinite(np.diff(time)) | (step_error > tolerance)))
+        raise InputError(path, "/aligned/time", f"a uniform grid with step dt={dt} s (breaks at sample {bad + 1})")
+
+
+def write_run(path: "str | os.PathLike[str]", frame: pd.DataFrame, dt: float, protocol: str,
+              status: str = "complete", units: Mapping[str, str] | None = None) -> None:
+    """Write a complete run file: root attributes and every column of `frame` into /aligned."""
+    units = {**ALIGNED_UNITS, **dict(units or {})}
+    missing = [c for c in frame.columns if c not in units]
+    if missing:
+        raise ValueError(f"no unit known for channels {missing}")
+    with h5py.File(path, "w") as f:
+        f.attrs.update(schema=SCHEMA, status=status, protocol=protocol)
+        group = f.create_group("aligned")
+        group.attrs["dt"] = float(dt)
+        for name in frame.columns:
+            ds = group.create_dataset(name, data=frame[name].to_numpy(np.float64), compression="gzip",
+                                      compression_opts=4, shuffle=True)
+            ds.attrs["units"] = units[name]
+
+
+def write_simulated(path: "str | os.PathLike[str]", time: np.ndarray, simulated: pd.DataFrame,
+                    attrs: Mapping[str, str]) -> None:
+    """Write the contract's /simulated group (time plus the model's temperatures, degC)."""
+    with h5py.File(path, "w") as f:
+        f.attrs.update(attrs)
+        group = f.create_group("simulated")
+        group.create_dataset("time", data=time).attrs["units"] = "s"
+        for name in simulated.columns:
+            group.create_dataset(name, data=simulated[name].to_numpy(np.float64)).attrs["units"] = "degC"

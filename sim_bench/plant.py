@@ -1,0 +1,177 @@
+"""The simulated bench's thermal plant: the paper's network plus effects the identification model lacks.
+
+Each effect is switchable and scaled and is an edit of the true network, written here on the
+bench side independently of what `benchlab.diagnose` knows, so that hiding an effect in
+simulated data and finding it again is a real test. Effects that depend on the plant's own
+temperatures (radiation) are solved by fixed-point iteration over the whole horizon.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from benchlab.clutch import clutch_network, convection_resistance
+from benchlab.network import Lag, Link, Node, Source, ThermalNetwork
+from benchlab.params import paper_params
+from benchlab.solver import run_network
+
+STEFAN_BOLTZMANN = 5.670374419e-8
+KELVIN = 273.15
+
+Edit = Callable[[ThermalNetwork, dict[str, float]], ThermalNetwork]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A physical effect of the bench: its name, the signal it depends on, its mechanism, the network edit."""
+
+    name: str
+    signal: str | None
+    mechanism: str
+    edit: Edit
+    params: Mapping[str, float] = field(default_factory=dict)
+
+
+def _drop_convection(link: Link) -> bool:
+    return link.label not in ("R_PA", "R_FA")
+
+
+def slip_convection(gain_per_krpm: float) -> Effect:
+    """Convection grows with slip speed: R = f_R(ω_e, S) / (1 + g·|Δω|/1000 rpm)."""
+    def law(p, ch):
+        slip = np.abs(ch["engine_speed"] - ch["clutch_speed"])
+        return convection_resistance(p, ch) / (1.0 + p["slip_gain"] * slip / 1000.0)
+
+    def edit(net, p):
+        return net.replace_links(_drop_convection, (Link("P", "A", law, "R_PA"), Link("F", "A", law, "R_FA")))
+    return Effect("slip_convection", "slip_speed", "convection", edit, {"slip_gain": gain_per_krpm})
+
+
+def heat_split(plate_fraction: float) -> Effect:
+    """The friction power goes `plate_fraction` to the pressure plate, the rest to the flywheel."""
+    def edit(net, p):
+        return ThermalNetwork(net.nodes, net.boundaries, net.links,
+                              (Source("P", lambda q, ch: q["split"] * ch["friction_power"], "plate share"),
+                               Source("F", lambda q, ch: (1 - q["split"]) * ch["friction_power"], "flywheel share"))
+                              + tuple(s for s in net.sources if s.label not in ("P/2 plate", "P/2 flywheel")),
+                              net.outputs, net.lags, net.initial)
+    return Effect("heat_split", "friction_power", "heat_split", edit, {"split": plate_fraction})
+
+
+def gearbox_churning(watts_at_2000rpm: float) -> Effect:
+    """Gearbox losses heat the housing in proportion to the input-shaft speed squared."""
+    def edit(net, p):
+        return net.with_source(Source("T", lambda q, ch: q["churn_w"] * (ch["clutch_speed"] / 2000.0) ** 2,
+                                      "gearbox churning"))
+    return Effect("gearbox_churning", "clutch_speed", "heat_source", edit, {"churn_w": watts_at_2000rpm})
+
+
+def engine_heat(watts_at_2000rpm: float) -> Effect:
+    """An engine-side heat flow into the flywheel growing with engine speed (bearing and motor losses)."""
+    def edit(net, p):
+        return net.with_source(Source("F", lambda q, ch: q["engine_w"] * (ch["engine_speed"] / 2000.0),
+                                      "engine heat"))
+    return Effect("engine_heat", "engine_speed", "heat_source", edit, {"engine_w": watts_at_2000rpm})
+
+
+def plate_conduction(resistance_k_per_w: float) -> Effect:
+    """Pressure plate and flywheel exchange heat through the clamped disc when S = 1."""
+    def law(p, ch):
+        return np.where(ch["clutch_state"] >= 0.5, p["R_PF"], 1e6)
+
+    def edit(net, p):
+        return net.with_link(Link("P", "F", law, "R_PF"))
+    return Effect("plate_conduction", "clutch_state", "conduction", edit, {"R_PF": resistance_k_per_w})
+
+
+def sensor_lag(time_constant_s: float) -> Effect:
+    """The flywheel sensors follow the flywheel surface with a first-order lag."""
+    def edit(net, p):
+        return net.with_lag(Lag("F_sensor", "F", "tau_F"), "T_flywheel")
+    return Effect("sensor_lag", "T_flywheel", "sensor", edit, {"tau_F": time_constant_s})
+
+
+def extra_mass(capacity_j_per_k: float, resistance_k_per_w: float) -> Effect:
+    """A hub mass behind the flywheel stores heat: an extra node linked to the flywheel."""
+    def edit(net, p):
+        return net.with_node(Node("H", "C_H"), "T_flywheel").with_link(Link("F", "H", lambda q, ch: q["R_FH"], "R_FH"))
+    return Effect("extra_mass", None, "capacity", edit, {"C_H": capacity_j_per_k, "R_FH": resistance_k_per_w})
+
+
+def radiation(emissivity_area_m2: float) -> Effect:
+    """Flywheel and plate radiate to the housing: εA·σ·(T⁴ − T_T⁴), solved by fixed-point iteration."""
+    def flow(node: str, sign: float):
+        def heat(p, ch):
+            hot, cold = ch[f"_state_{node}"] + KELVIN, ch["_state_T"] + KELVIN
+            return sign * p["eps_area"] * STEFAN_BOLTZMANN * (hot ** 4 - cold ** 4)
+        return heat
+
+    def edit(net, p):
+        for node in ("F", "P"):
+            net = net.with_source(Source(node, flow(node, -1.0), f"radiation {node}"))
+            net = net.with_source(Source("T", flow(node, 1.0), f"radiation {node} to housing"))
+        return net
+    return Effect("radiation", "T_flywheel", "other", edit, {"eps_area": emissivity_area_m2})
+
+
+def custom_source(name: str, node: str, signal: str, mechanism: str,
+                  heat_flow: Callable[[Mapping[str, np.ndarray]], np.ndarray]) -> Effect:
+    """A heat flow of any shape into `node`, driven by channels: for effects no model term describes."""
+    def edit(net, p):
+        return net.with_source(Source(node, lambda q, ch: heat_flow(ch), name))
+    return Effect(name, signal, mechanism, edit)
+
+
+class ThermalPlant:
+    """True temperatures of the bench for given drivetrain channels; keeps its state between calls."""
+
+    RADIATION_ITERATIONS = 4
+
+    def __init__(self, params: Mapping[str, float] | None = None, effects: Sequence[Effect] = ()) -> None:
+        self.params: dict[str, float] = dict(params or paper_params("nonlinear"))
+        network = clutch_network()
+        for effect in effects:
+            self.params.update(effect.params)
+            network = effect.edit(network, self.params)
+        network.validate()
+        self.network = network
+        self.effects = tuple(effects)
+        self.state: np.ndarray | None = None
+        self._iterative = any(e.name == "radiation" for e in effects)
+
+    @property
+    def state_names(self) -> list[str]:
+        return self.network.state_names
+
+    def reset(self, temperature_c: float | Mapping[str, float]) -> None:
+        """Start every state (or each named state) at the given temperature."""
+        if isinstance(temperature_c, Mapping):
+            self.state = np.array([temperature_c[s] for s in self.state_names], dtype=float)
+        else:
+            self.state = np.full(len(self.state_names), float(temperature_c))
+
+    def advance(self, channels: Mapping[str, np.ndarray], dt: float) -> dict[str, np.ndarray]:
+        """True state temperatures at the start of each sample of `channels`; the state moves to their end."""
+        if self.state is None:
+            raise RuntimeError("reset() the plant before advancing it")
+        channels = dict(channels)
+        states = run_network(self.network, self.params, self._with_states(channels, None), dt, self.state)
+        for _ in range(self.RADIATION_ITERATIONS if self._iterative else 0):
+            states = run_network(self.network, self.params, self._with_states(channels, states), dt, self.state)
+        self.state = states[-1].copy()
+        return {name: states[:-1, i] for i, name in enumerate(self.state_names)}
+
+    def _with_states(self, channels: dict[str, np.ndarray], states: np.ndarray | None) -> dict[str, np.ndarray]:
+        if not self._iterative:
+            return channels
+        n = len(next(iter(channels.values())))
+        for i, name in enumerate(self.state_names):
+            channels[f"_state_{name}"] = states[:-1, i] if states is not None else np.full(n, self.state[i])
+        return channels
+
+    def sensor_temperatures(self, true_states: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """What the sensors see: measured channel name -> true temperature at the sensor."""
+        return {channel: true_states[state] for channel, state in self.network.outputs.items()}

@@ -1,0 +1,131 @@
+"""Run files, parameter files, `simulate` and `import` on the command line, and bad input."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+import benchlab
+from benchlab.cli import main
+from benchlab.params import paper_params, save_params
+from benchlab.runfile import ALIGNED_UNITS, REQUIRED
+
+
+@pytest.fixture()
+def params_file(tmp_path):
+    path = tmp_path / "p.json"
+    save_params(path, paper_params("nonlinear"))
+    return path
+
+
+def _foreign_run(path, n=300, dt=0.1):
+    """A contract-conforming file written with h5py alone, the way another tool would."""
+    with h5py.File(path, "w") as f:
+        f.attrs["schema"], f.attrs["status"], f.attrs["protocol"] = "benchlab-run/1", "complete", "imported"
+        g = f.create_group("aligned")
+        g.attrs["dt"] = dt
+        for name in REQUIRED:
+            values = np.arange(n) * dt if name == "time" else np.full(n, 30.0)
+            if name == "friction_power":
+                values = np.where(np.arange(n) < 100, 4000.0, 0.0)
+            if name == "clutch_state":
+                values = np.ones(n)
+            g.create_dataset(name, data=values.astype(np.float32)).attrs["units"] = np.bytes_(ALIGNED_UNITS[name])
+
+
+def test_round_trip_and_api(run_file, short_run):
+    run = benchlab.load_run(run_file)
+    assert list(run.columns)[:10] == list(REQUIRED)
+    assert run.attrs["dt"] == pytest.approx(0.01)
+    assert run.attrs["units"]["T_air"] == "degC"
+    np.testing.assert_array_equal(run["T_flywheel"].to_numpy(), short_run["T_flywheel"].to_numpy())
+
+
+def test_simulate_cli_on_foreign_file(tmp_path, params_file, capsys):
+    _foreign_run(tmp_path / "f.h5")
+    assert main(["simulate", str(tmp_path / "f.h5"), "--params", str(params_file), "--out", str(tmp_path / "s.h5")]) == 0
+    with h5py.File(tmp_path / "s.h5") as f:
+        g = f["simulated"]
+        assert set(g) == {"time", "T_pressure_plate", "T_flywheel", "T_air", "T_housing"}
+        assert all(g[k].attrs["units"] == ("s" if k == "time" else "degC") for k in g)
+        assert g["T_flywheel"][99] > g["T_flywheel"][0] + 1.0  # 100 samples of 2 kW each side heated it
+
+
+def test_import_csv(tmp_path, short_run):
+    csv = tmp_path / "d.csv"
+    short_run.iloc[:1000].to_csv(csv, index=False)
+    assert main(["import", str(csv), "--out", str(tmp_path / "r.h5")]) == 0
+    run = benchlab.load_run(tmp_path / "r.h5")
+    assert run.attrs["protocol"] == "imported" and len(run) == 1000
+    np.testing.assert_allclose(run["T_air"], short_run["T_air"].iloc[:1000])
+
+
+def _break(path, how):
+    with h5py.File(path, "a") as f:
+        how(f)
+
+
+BAD_RUNS = {
+    "missing channel": (lambda f: f["aligned"].__delitem__("T_air"), "/aligned/T_air"),
+    "missing units": (lambda f: f["aligned/T_housing"].attrs.__delitem__("units"), "/aligned/T_housing.units"),
+    "wrong units": (lambda f: f["aligned/engine_speed"].attrs.__setitem__("units", "rad/s"), "/aligned/engine_speed.units"),
+    "non-uniform time": (lambda f: f["aligned/time"].__setitem__(5, 0.77), "/aligned/time"),
+    "no schema": (lambda f: f.attrs.__delitem__("schema"), "schema"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_RUNS))
+def test_bad_run_file_is_one_line_exit_2(case, run_file, params_file, tmp_path, capsys):
+    how, field = BAD_RUNS[case]
+    _break(run_file, how)
+    code = main(["simulate", str(run_file), "--params", str(params_file), "--out", str(tmp_path / "s.h5")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and str(run_file) in err and field in err
+
+
+def test_not_hdf5_and_missing_file(tmp_path, params_file, capsys):
+    junk = tmp_path / "junk.h5"
+    junk.write_text("not hdf5")
+    assert main(["simulate", str(junk), "--params", str(params_file), "--out", str(tmp_path / "s.h5")]) == 2
+    assert "HDF5" in capsys.readouterr().err
+    assert main(["simulate", str(tmp_path / "none.h5"), "--params", str(params_file), "--out", "x.h5"]) == 2
+    assert "not found" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("edit,field", [
+    (lambda d: d["params"].pop("C_F"), "params.C_F"),
+    (lambda d: d["params"].__setitem__("R_AT", -0.1), "params.R_AT"),
+    (lambda d: d["params"].__setitem__("C_A", 0), "params.C_A"),
+    (lambda d: d.__setitem__("model", "quadratic"), "model"),
+])
+def test_bad_params_file(edit, field, run_file, params_file, tmp_path, capsys):
+    doc = json.loads(params_file.read_text())
+    edit(doc)
+    params_file.write_text(json.dumps(doc))
+    assert main(["simulate", str(run_file), "--params", str(params_file), "--out", str(tmp_path / "s.h5")]) == 2
+    err = capsys.readouterr().err
+    assert field in err and str(params_file) in err and len(err.strip().splitlines()) == 1
+
+
+def test_linear_params_file_may_omit_convection_terms(tmp_path):
+    path = tmp_path / "lin.json"
+    values = {k: v for k, v in paper_params("linear").items() if k not in ("a1", "b1", "a2", "b2")}
+    path.write_text(json.dumps({"model": "linear", "params": values}))
+    assert benchlab.load_params(path)["a1"] == 0.0
+
+
+def test_csv_missing_column_and_bad_value(tmp_path, short_run, capsys):
+    csv = tmp_path / "d.csv"
+    short_run.iloc[:50].drop(columns=["T_housing"]).to_csv(csv, index=False)
+    assert main(["import", str(csv), "--out", str(tmp_path / "r.h5")]) == 2
+    assert "column T_housing" in capsys.readouterr().err
+    frame = short_run.iloc[:50].copy()
+    frame["T_air"] = frame["T_air"].astype(object)
+    frame.loc[10, "T_air"] = "hot"
+    frame.to_csv(csv, index=False)
+    assert main(["import", str(csv), "--out", str(tmp_path / "r.h5")]) == 2
+    assert "column T_air, line 12" in capsys.readouterr().err
