@@ -1,0 +1,93 @@
+"""The ClutchSensorNode radio frame (see NODE_FRAME.md): pack/unpack, CRC-16/CCITT-FALSE, COBS framing.
+
+Pure functions on bytes, no I/O; shared by the gateway driver and the node emulator.
+"""
+
+from __future__ import annotations
+
+import binascii
+import struct
+from dataclasses import dataclass
+
+from drivers import cobs
+
+VERSION = 1
+DELIMITER = b"\x00"
+NO_VALUE = 0xFFFFFFFF
+_BODY = struct.Struct("<BBHIIIHbB")
+PAYLOAD_LEN = _BODY.size + 2
+ENCODED_LEN = PAYLOAD_LEN + 1
+
+CH1_OPEN = 0x01
+CH1_SHORT = 0x02
+CH2_OPEN = 0x04
+CH2_SHORT = 0x08
+LOW_SUPPLY = 0x10
+ADC_FAULT = 0x20
+NODE_RESET = 0x40
+
+
+class FrameError(ValueError):
+    """A delimited chunk that is not a valid frame; never becomes a reading."""
+
+
+class MalformedFrame(FrameError):
+    """Bad COBS, wrong length or unknown version."""
+
+
+class CrcMismatch(FrameError):
+    """Well-formed but the CRC does not match: corrupted on the way."""
+
+
+@dataclass(frozen=True, slots=True)
+class NodeFrame:
+    """Raw content of one frame; resistances in mΩ, NO_VALUE where the node measured nothing."""
+
+    seq: int
+    node_time_ms: int
+    r_mohm: tuple[int, int]
+    supply_mv: int
+    rssi_dbm: int
+    lqi: int
+    flags: int = 0
+    version: int = VERSION
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor); '123456789' → 0x29B1."""
+    return binascii.crc_hqx(data, 0xFFFF)
+
+
+def pack(frame: NodeFrame) -> bytes:
+    """The payload: little-endian fields followed by the big-endian CRC over them (PAYLOAD_LEN bytes)."""
+    body = _BODY.pack(frame.version, frame.flags, frame.seq, frame.node_time_ms, frame.r_mohm[0],
+                      frame.r_mohm[1], frame.supply_mv, frame.rssi_dbm, frame.lqi)
+    return body + crc16(body).to_bytes(2, "big")
+
+
+def encode(frame: NodeFrame) -> bytes:
+    """The frame as sent on the wire: COBS(payload) + 0x00 delimiter."""
+    return cobs.encode(pack(frame)) + DELIMITER
+
+
+def unpack(payload: bytes) -> NodeFrame:
+    """Check length, CRC and version of a COBS-decoded payload and return its fields; FrameError otherwise."""
+    if len(payload) != PAYLOAD_LEN:
+        raise MalformedFrame(f"payload is {len(payload)} bytes, expected {PAYLOAD_LEN}")
+    if crc16(payload) != 0:
+        raise CrcMismatch("CRC mismatch")
+    version, flags, seq, t_ms, r1, r2, supply, rssi, lqi = _BODY.unpack_from(payload)
+    if version != VERSION:
+        raise MalformedFrame(f"unknown frame version {version}")
+    return NodeFrame(seq, t_ms, (r1, r2), supply, rssi, lqi, flags, version)
+
+
+def decode(chunk: bytes) -> NodeFrame:
+    """A frame from one delimiter-free chunk of the byte stream; FrameError if it is not a valid frame."""
+    if len(chunk) != ENCODED_LEN:
+        raise MalformedFrame(f"chunk is {len(chunk)} bytes, expected {ENCODED_LEN}")
+    try:
+        payload = cobs.decode(chunk)
+    except cobs.CobsError as exc:
+        raise MalformedFrame(str(exc)) from None
+    return unpack(payload)
