@@ -1,0 +1,292 @@
+"""Bench controllers on CAN (drive motor, clutch actuator, load machine): set-points out, actual values in.
+
+The driver works on logical signal names (drivers/can_signals.py) so a vendor DBC plus a mapping replaces
+ours. `poll()` receives without blocking, decodes, watches every controller (silent: a watched message not
+seen within `silent_cycles` cycle times; faulted: fault code ≠ 0 or fault state; alive counter not +1) and
+sends the cyclic command frames, PC heartbeat and, while active, the emergency stop. Frames with an unknown
+id or a wrong DLC are counted, never decoded.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import can
+import cantools
+
+from drivers import can_signals as sig
+
+EventKind = Literal["silent", "back", "fault", "fault_cleared", "alive_error", "estop", "estop_released"]
+
+
+@dataclass(frozen=True, slots=True)
+class CanSample:
+    """One decoded frame: logical signal name → physical value (DBC scaling applied, units per the DBC)."""
+
+    t_host: float
+    controller: str
+    message: str
+    values: dict[str, float]
+
+
+@dataclass(frozen=True, slots=True)
+class ControllerEvent:
+    """Something the watchdog noticed about one controller (or an emergency stop seen on the bus)."""
+
+    t_host: float
+    controller: str
+    kind: EventKind
+    detail: str = ""
+
+
+@dataclass(slots=True)
+class CanStats:
+    """Counters of received and sent frames."""
+
+    frames_ok: int = 0
+    unknown_id: int = 0
+    bad_dlc: int = 0
+    decode_errors: int = 0
+    error_frames: int = 0
+    alive_errors: int = 0
+    sent: int = 0
+    send_errors: int = 0
+
+
+@dataclass(slots=True)
+class _Rx:
+    """How to decode and watch one received message."""
+
+    message: cantools.database.Message
+    controller: str
+    pairs: tuple[tuple[str, str], ...]
+    timeout_s: float | None
+    alive_key: str | None
+    alive_modulo: int
+    last_seen: float
+    last_alive: int | None = None
+
+
+@dataclass(slots=True)
+class _Tx:
+    """A message the PC sends: its current signal values, alive key and schedule."""
+
+    message: cantools.database.Message
+    values: dict[str, float]
+    keys: dict[str, str]
+    alive_signal: str | None
+    alive_modulo: int
+    cycle_s: float
+    next_due: float = 0.0
+
+
+class CanBench:
+    """Talks to the three bench controllers over any python-can bus."""
+
+    def __init__(self, bus: can.BusABC, *, dbc: str | Path = sig.BENCH_DBC,
+                 signals: Mapping[str, tuple[str, str]] = sig.BENCH_SIGNALS,
+                 clock: Callable[[], float] = time.monotonic, silent_cycles: float = 5,
+                 idle_rpm: float = 800.0, fault_state: int = sig.STATE_FAULT) -> None:
+        self.bus, self.clock, self.idle_rpm, self.fault_state = bus, clock, idle_rpm, fault_state
+        self.db = cantools.database.load_file(str(dbc))
+        self.stats = CanStats()
+        self.latest: dict[str, float] = {}
+        self.estop_active = False
+        self._events: list[ControllerEvent] = []
+        self._silent: dict[str, str] = {}
+        self._faulted: dict[str, bool] = {}
+        now = clock()
+        self._rx, self._tx = self._compile(signals, silent_cycles, now)
+        self._tx_of = {key: tx for tx in self._tx.values() for key in tx.keys}
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any], **kwargs: Any) -> "CanBench":
+        """Build the bus from a python-can config, e.g. {"interface": "socketcan", "channel": "can0"}."""
+        return cls(can.Bus(**config), **kwargs)
+
+    # -- set-points --------------------------------------------------------------------------------
+    def set_drive_speed(self, rpm: float) -> None:
+        """Drive motor (engine side) speed set-point in rpm; enables the drive."""
+        self._set({"drive.speed_setpoint": rpm, "drive.enable": 1})
+
+    def set_clutch_torque(self, nm: float) -> None:
+        """Clutch actuator torque set-point in N·m (clutch closed as far as needed); enables the actuator."""
+        self._set({"clutch.torque_setpoint": nm, "clutch.open_request": 0, "clutch.enable": 1})
+
+    def open_clutch(self) -> None:
+        """Open the clutch fully (torque set-point 0, open request)."""
+        self._set({"clutch.torque_setpoint": 0.0, "clutch.open_request": 1, "clutch.enable": 1})
+
+    def set_load_torque(self, nm: float) -> None:
+        """Load machine torque set-point in N·m; enables the load machine."""
+        self._set({"load.torque_setpoint": nm, "load.enable": 1})
+
+    def safe_state(self) -> None:
+        """Clutch open with zero torque, load torque 0, drive at idle speed; sent at once."""
+        self._set({"clutch.torque_setpoint": 0.0, "clutch.open_request": 1, "load.torque_setpoint": 0.0,
+                   "drive.speed_setpoint": self.idle_rpm})
+
+    def emergency_stop(self, source: int = sig.ESTOP_SOURCE_PC) -> None:
+        """Send the emergency stop now and repeat it every cycle until `release_emergency_stop()`."""
+        self.estop_active = True
+        self._set({"estop.request": 1, "estop.source": source})
+
+    def release_emergency_stop(self) -> None:
+        """Send one emergency-stop release and stop repeating it."""
+        self._set({"estop.request": 0})
+        self.estop_active = False
+
+    # -- receiving ---------------------------------------------------------------------------------
+    def poll(self) -> list[CanSample]:
+        """Receive every waiting frame without blocking, watch the controllers, send what is due."""
+        samples = []
+        while (msg := self.bus.recv(timeout=0)) is not None:
+            sample = self.handle(msg, self.clock())
+            if sample is not None:
+                samples.append(sample)
+        now = self.clock()
+        self._watch(now)
+        self._send_due(now)
+        return samples
+
+    def handle(self, msg: can.Message, t_host: float) -> CanSample | None:
+        """Decode and watch one received frame; None (and a counter) for anything not decodable."""
+        stats = self.stats
+        if msg.is_error_frame or msg.is_remote_frame:
+            stats.error_frames += 1
+            return None
+        rx = self._rx.get((msg.arbitration_id, msg.is_extended_id))
+        if rx is None:
+            stats.unknown_id += 1
+            return None
+        if len(msg.data) != rx.message.length:
+            stats.bad_dlc += 1
+            return None
+        try:
+            raw = rx.message.decode(msg.data, decode_choices=False)
+        except (cantools.database.DecodeError, ValueError, KeyError):
+            stats.decode_errors += 1
+            return None
+        values = {key: raw[name] for name, key in rx.pairs}
+        stats.frames_ok += 1
+        rx.last_seen = t_host
+        self.latest.update(values)
+        if rx.alive_key is not None:
+            self._check_alive(rx, int(values[rx.alive_key]), t_host)
+        if rx.controller == "estop":
+            self._event(t_host, "estop", "estop" if values.get("estop.request") else "estop_released",
+                        f"source {values.get('estop.source')}")
+        elif f"{rx.controller}.fault_code" in values or f"{rx.controller}.state" in values:
+            self._check_fault(rx.controller, values, t_host)
+        return CanSample(t_host, rx.controller, rx.message.name, values)
+
+    def pop_events(self) -> list[ControllerEvent]:
+        """Controller events since the last call, oldest first."""
+        events, self._events = self._events, []
+        return events
+
+    def close(self) -> None:
+        """Shut the bus down."""
+        self.bus.shutdown()
+
+    # -- internals ---------------------------------------------------------------------------------
+    def _compile(self, signals: Mapping[str, tuple[str, str]], silent_cycles: float,
+                 now: float) -> tuple[dict[tuple[int, bool], _Rx], dict[str, _Tx]]:
+        by_message: dict[str, list[tuple[str, str]]] = {}
+        for key, (message, signal) in signals.items():
+            self.db.get_message_by_name(message).get_signal_by_name(signal)  # KeyError names a bad mapping
+            by_message.setdefault(message, []).append((signal, key))
+        rx: dict[tuple[int, bool], _Rx] = {}
+        tx: dict[str, _Tx] = {}
+        for name, pairs in by_message.items():
+            message = self.db.get_message_by_name(name)
+            keys = {key: signal for signal, key in pairs}
+            alive = next((k for k in keys if k.endswith("alive")), None)
+            modulo = 1 << message.get_signal_by_name(keys[alive]).length if alive else 0
+            cycle_s = (message.cycle_time or 0) / 1000
+            controller = next(iter(keys)).split(".")[0]
+            if all(k in sig.TX_KEYS for k in keys):
+                values = {s.name: (s.initial or 0) for s in message.signals}
+                tx[name] = _Tx(message, values, keys, keys[alive] if alive else None, modulo, cycle_s, now)
+            if controller == "estop" or not all(k in sig.TX_KEYS for k in keys):
+                timeout = cycle_s * silent_cycles if cycle_s and controller != "estop" else None
+                rx[(message.frame_id, message.is_extended_frame)] = _Rx(
+                    message, controller, tuple(pairs), timeout, alive, modulo, now)
+        return rx, tx
+
+    def _set(self, updates: Mapping[str, float]) -> None:
+        touched = {}
+        for key, value in updates.items():
+            tx = self._tx_of[key]
+            tx.values[tx.keys[key]] = value
+            touched[tx.message.name] = tx
+        now = self.clock()
+        for tx in touched.values():
+            self._send(tx, now)
+
+    def _send_due(self, now: float) -> None:
+        for tx in self._tx.values():
+            repeating = tx.cycle_s and (tx is not self._tx_of.get("estop.request") or self.estop_active)
+            if repeating and now >= tx.next_due:
+                self._send(tx, now)
+
+    def _send(self, tx: _Tx, now: float) -> None:
+        if tx.alive_signal is not None:
+            tx.values[tx.alive_signal] = (int(tx.values[tx.alive_signal]) + 1) % tx.alive_modulo
+        data = tx.message.encode(tx.values, strict=False)
+        try:
+            self.bus.send(can.Message(arbitration_id=tx.message.frame_id, data=data,
+                                      is_extended_id=tx.message.is_extended_frame))
+            self.stats.sent += 1
+        except can.CanError:
+            self.stats.send_errors += 1
+        tx.next_due = tx.next_due + tx.cycle_s if now - tx.next_due < tx.cycle_s else now + tx.cycle_s
+
+    def _check_alive(self, rx: _Rx, alive: int, t_host: float) -> None:
+        if rx.last_alive is not None and alive != (rx.last_alive + 1) % rx.alive_modulo:
+            self.stats.alive_errors += 1
+            self._event(t_host, rx.controller, "alive_error",
+                        f"{rx.message.name}: {rx.last_alive} → {alive}")
+        rx.last_alive = alive
+
+    def _check_fault(self, controller: str, values: Mapping[str, float], t_host: float) -> None:
+        code = int(values.get(f"{controller}.fault_code", 0))
+        state = values.get(f"{controller}.state")
+        faulted = code != 0 or state == self.fault_state
+        if faulted != self._faulted.get(controller, False):
+            self._faulted[controller] = faulted
+            self._event(t_host, controller, "fault" if faulted else "fault_cleared", f"state {state}, code {code}")
+
+    def _watch(self, now: float) -> None:
+        overdue: dict[str, str] = {}
+        for rx in self._rx.values():
+            if rx.timeout_s is not None and now - rx.last_seen > rx.timeout_s:
+                overdue.setdefault(rx.controller, rx.message.name)
+        for controller in {rx.controller for rx in self._rx.values()}:
+            was, now_silent = controller in self._silent, controller in overdue
+            if now_silent and not was:
+                self._silent[controller] = overdue[controller]
+                self._event(now, controller, "silent", f"no {overdue[controller]} for > {self._timeout_of(overdue[controller])} s")
+            elif was and not now_silent:
+                del self._silent[controller]
+                self._event(now, controller, "back")
+
+    def _timeout_of(self, message: str) -> float | None:
+        return next(rx.timeout_s for rx in self._rx.values() if rx.message.name == message)
+
+    def _event(self, t_host: float, controller: str, kind: EventKind, detail: str = "") -> None:
+        self._events.append(ControllerEvent(t_host, controller, kind, detail))
+
+    @property
+    def silent(self) -> dict[str, str]:
+        """Controllers currently silent → the overdue message."""
+        return dict(self._silent)
+
+    @property
+    def faulted(self) -> set[str]:
+        """Controllers currently reporting a fault."""
+        return {c for c, f in self._faulted.items() if f}
