@@ -3,8 +3,9 @@
 The driver works on logical signal names (drivers/can_signals.py) so a vendor DBC plus a mapping replaces
 ours. `poll()` receives without blocking, decodes, watches every controller (silent: a watched message not
 seen within `silent_cycles` cycle times; faulted: fault code ≠ 0 or fault state; alive counter not +1) and
-sends the cyclic command frames, PC heartbeat and, while active, the emergency stop. Frames with an unknown
-id or a wrong DLC are counted, never decoded.
+sends the cyclic command frames, PC heartbeat and, while active, the emergency stop (not when opened
+`listen_only`, e.g. to probe a running bench). Frames with an unknown id or a wrong DLC are counted,
+never decoded.
 """
 
 from __future__ import annotations
@@ -90,8 +91,9 @@ class CanBench:
     def __init__(self, bus: can.BusABC, *, dbc: str | Path = sig.BENCH_DBC,
                  signals: Mapping[str, tuple[str, str]] = sig.BENCH_SIGNALS,
                  clock: Callable[[], float] = time.monotonic, silent_cycles: float = 5,
-                 idle_rpm: float = 800.0, fault_state: int = sig.STATE_FAULT) -> None:
+                 idle_rpm: float = 800.0, fault_state: int = sig.STATE_FAULT, listen_only: bool = False) -> None:
         self.bus, self.clock, self.idle_rpm, self.fault_state = bus, clock, idle_rpm, fault_state
+        self.listen_only = listen_only
         self.db = cantools.database.load_file(str(dbc))
         self.stats = CanStats()
         self.latest: dict[str, float] = {}
@@ -150,7 +152,8 @@ class CanBench:
                 samples.append(sample)
         now = self.clock()
         self._watch(now)
-        self._send_due(now)
+        if not self.listen_only:
+            self._send_due(now)
         return samples
 
     def handle(self, msg: can.Message, t_host: float) -> CanSample | None:
@@ -219,6 +222,8 @@ class CanBench:
         return rx, tx
 
     def _set(self, updates: Mapping[str, float]) -> None:
+        if self.listen_only:
+            raise RuntimeError("CanBench was opened listen-only; it sends nothing")
         touched = {}
         for key, value in updates.items():
             tx = self._tx_of[key]
