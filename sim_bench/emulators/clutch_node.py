@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from typing import Literal
 
-from drivers import node_frame
+from drivers import cobs, node_frame
 from drivers.node_frame import NodeFrame
 from sim_bench.emulators.providers import ConstantNodeInputs, NodeInputProvider, NodeInputs
 
@@ -90,10 +90,8 @@ class ClutchNodeEmulator:
         if t < self._silent_until:
             self.frames_suppressed += 1
             return
-        wire = node_frame.encode(frame)
-        if self._damage:
-            wire = self._apply_damage(wire, self._damage.pop(0))
-        self._out += wire
+        damage = self._damage.pop(0) if self._damage else None
+        self._out += self._wire(frame, damage)
         self.frames_sent += 1
 
     def _frame(self, t: float, inputs: NodeInputs) -> NodeFrame:
@@ -113,10 +111,15 @@ class ClutchNodeEmulator:
                          max(-128, min(inputs.rssi_dbm, 127)), max(0, min(inputs.lqi, 255)), flags)
 
     @staticmethod
-    def _apply_damage(wire: bytes, how: Damage) -> bytes:
-        if how == "truncate":
+    def _wire(frame: NodeFrame, damage: Damage | None) -> bytes:
+        """Encoded frame, damaged on request: a bit flipped in the payload (CRC catches it), cut off, or garbled."""
+        if damage == "flip":
+            payload = bytearray(node_frame.pack(frame))
+            payload[len(payload) // 2] ^= 0x01
+            return cobs.encode(bytes(payload)) + node_frame.DELIMITER
+        wire = node_frame.encode(frame)
+        if damage == "truncate":
             return wire[: len(wire) // 2] + node_frame.DELIMITER
-        if how == "garbage":
+        if damage == "garbage":
             return b"\x5a\xa5\xff\x13" + wire[4:]
-        middle = len(wire) // 2
-        return wire[:middle] + bytes([wire[middle] ^ 0x01 or 0x02]) + wire[middle + 1:]
+        return wire

@@ -39,6 +39,10 @@ class ScriptedSerial:
             raise AssertionError(f"driver sent {self._pending!r} after the script ended")
         return len(data)
 
+    def deliver(self, data: bytes) -> None:
+        """Unsolicited bytes from the device, arriving now."""
+        self._rx += data
+
     def read(self, size: int = 1) -> bytes:
         data = bytes(self._rx[:size])
         del self._rx[:size]
