@@ -1,0 +1,468 @@
+"""Crash-safe run-file writer: raw streams, events and the contract's /aligned grid, written as data arrives.
+
+Crash safety without trusting HDF5 to survive a kill mid-write: every dataset is created at its full
+planned capacity when the file is made (contiguous, allocated and filled with NaN, `/aligned/time` with
+the whole grid). While the run goes, the file's structure (its metadata) never changes: the writer only
+overwrites raw bytes inside allocated space, calls `flush()`, and then writes the progress record
+(`/acquire/progress`, one 8-byte word per counter) and flushes again. A process killed at any moment
+therefore leaves a file whose structure was complete and flushed before the run started: it opens, its
+`/aligned` grid is uniform, samples not yet written are NaN ("not measured"), and the progress record says
+how far the data is valid (at most `flush_every_s` of data behind the kill). Growing beyond the capacity,
+resuming, and closing build a new file next to the old one and `os.replace` it in one step, so there is
+always exactly one complete file under the run's name. Closing also compacts (exact lengths, compressed).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+SCHEMA = "benchlab-run/1"
+EVENT_KIND_LEN = 32
+EVENT_DETAIL_LEN = 160
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class StreamSpec:
+    """One raw stream as a device delivers it: columns (name, units) besides `time`, rate bound, hold."""
+
+    name: str
+    columns: tuple[tuple[str, str], ...]
+    rate_hz: float
+    hold_s: float
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(c for c, _ in self.columns)
+
+
+@dataclass(frozen=True)
+class AlignedSource:
+    """An /aligned channel taken from one raw column (times `scale`), held on the grid as its stream says."""
+
+    channel: str
+    stream: str
+    column: str
+    scale: float = 1.0
+
+
+Derive = Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class Layout:
+    """What a run file holds: the raw streams, how /aligned is built from them, the grid step."""
+
+    streams: tuple[StreamSpec, ...]
+    sources: tuple[AlignedSource, ...]
+    aligned_units: Mapping[str, str]  # every /aligned channel (time excluded) -> units, in file order
+    derive: Derive | None = None  # channels computed on the grid from the held ones (friction power, means)
+    dt: float = 0.01
+
+    def stream(self, name: str) -> StreamSpec:
+        return next(s for s in self.streams if s.name == name)
+
+
+@dataclass
+class _Pending:
+    times: list[float] = field(default_factory=list)
+    rows: list[Sequence[float]] = field(default_factory=list)
+
+
+def _str_array(values: Sequence[str], length: int) -> np.ndarray:
+    return np.array([v.encode("utf-8", "replace")[:length] for v in values], dtype=f"S{length}")
+
+
+class AlignedBuilder:
+    """Turns time-stamped readings into rows of the uniform grid: hold until the next reading or `hold_s`.
+
+    A reading at time t counts for grid points t_k >= t until the stream's next reading, but never longer
+    than the stream's `hold_s` (its expected period plus a margin): a missing reading is NaN, nothing is
+    carried across a drop-out. A reading whose value is NaN (sensor fault) is NaN on the grid.
+    """
+
+    def __init__(self, layout: Layout) -> None:
+        self.layout = layout
+        self.dt = layout.dt
+        self.rows = 0  # grid rows finalised
+        self._pending = {s.name: _Pending() for s in layout.streams}
+        self._carry: dict[str, tuple[float, np.ndarray] | None] = {s.name: None for s in layout.streams}
+        self._col = {s.name: {c: i for i, c in enumerate(s.names)} for s in layout.streams}
+
+    def add(self, stream: str, t: float, row: Sequence[float]) -> None:
+        pending = self._pending[stream]
+        pending.times.append(t)
+        pending.rows.append(row)
+
+    def finalise(self, until_row: int) -> dict[str, np.ndarray]:
+        """Channels for grid rows [rows, until_row) (time included); later readings stay pending."""
+        k0, k1 = self.rows, max(self.rows, until_row)
+        tk = np.arange(k0, k1) * self.dt
+        held: dict[str, np.ndarray] = {}
+        for spec in self.layout.streams:
+            pend, carry = self._pending[spec.name], self._carry[spec.name]
+            times = ([carry[0]] if carry else []) + pend.times
+            ncol = len(spec.columns)
+            rows = ([carry[1]] if carry else []) + [np.asarray(r, dtype=float) for r in pend.rows]
+            if not times:
+                values = np.full((k1 - k0, ncol), np.nan)
+            else:
+                rt, rv = np.asarray(times, dtype=float), np.asarray(rows, dtype=float).reshape(len(times), ncol)
+                order = np.argsort(rt, kind="stable")
+                rt, rv = rt[order], rv[order]
+                idx = np.searchsorted(rt, tk + _EPS, side="right") - 1
+                ok = idx >= 0
+                age = tk - rt[np.maximum(idx, 0)]
+                ok &= age < spec.hold_s + _EPS
+                values = np.where(ok[:, None], rv[np.maximum(idx, 0)], np.nan)
+                last = k1 - 1
+                keep = rt > last * self.dt + _EPS if k1 > k0 else np.ones(len(rt), bool)
+                before = np.flatnonzero(~keep)
+                self._carry[spec.name] = (rt[before[-1]], rv[before[-1]]) if before.size else carry
+                pend.times = rt[keep].tolist()
+                pend.rows = list(rv[keep])
+            for j, name in enumerate(spec.names):
+                held[f"{spec.name}/{name}"] = values[:, j]
+        out: dict[str, np.ndarray] = {"time": tk}
+        for src in self.layout.sources:
+            out[src.channel] = held[f"{src.stream}/{src.column}"] * src.scale
+        if self.layout.derive is not None:
+            out.update(self.layout.derive(out))
+        self.rows = k1
+        return out
+
+
+class RunWriter:
+    """Writes one run file as the data arrives; see the module docstring for the crash-safety scheme."""
+
+    def __init__(self, path: "str | os.PathLike[str]", layout: Layout, *, protocol: str,
+                 attrs: Mapping[str, Any] | None = None, schedule: Sequence[Mapping[str, Any]] = (),
+                 schedule_units: Mapping[str, str] | None = None, planned_s: float = 3600.0,
+                 flush_every_s: float = 1.0, state_fields: Sequence[str] = (), durable: bool = False, _resume: bool = False) -> None:
+        self.path = Path(path)
+        self.layout = layout
+        self.protocol = protocol
+        self.flush_every_s = flush_every_s
+        self.state_fields = tuple(state_fields)
+        self.state: dict[str, float] = {k: float("nan") for k in self.state_fields}
+        self.builder = AlignedBuilder(layout)
+        self._raw: dict[str, list[Sequence[float]]] = {s.name: [] for s in layout.streams}
+        self._raw_rows = {s.name: 0 for s in layout.streams}
+        self._events: list[tuple[float, int, str, str]] = []
+        self._event_rows = 0
+        self._last_flush_t = 0.0
+        self._now = 0.0
+        self.flushes = 0
+        self.durable = durable
+        self._fd: int | None = None
+        if _resume:
+            return
+        capacity = self._capacities(planned_s)
+        self._build(self.path, capacity, {
+            "attrs": {"schema": SCHEMA, "status": "running", "protocol": protocol, **dict(attrs or {})},
+            "schedule": list(schedule), "schedule_units": dict(schedule_units or {})}, None)
+        self._open()
+
+    # -- public API --------------------------------------------------------------------------------
+    def add(self, stream: str, t: float, row: Sequence[float]) -> None:
+        """One reading of `stream` at run time `t` (s): values in the stream's column order (NaN = no number)."""
+        self._raw[stream].append((t, *row))
+        self.builder.add(stream, t, row)
+
+    def event(self, t: float, kind: str, cycle: int = -1, detail: str = "") -> None:
+        """An entry of the events table (cycle start, engagement, interlock, fault, drop-out, ...)."""
+        self._events.append((float(t), int(cycle), kind, detail))
+
+    def advance(self, now: float, force: bool = False) -> bool:
+        """Data up to `now` is complete; flush once `flush_every_s` of data has accumulated. True if flushed."""
+        self._now = max(self._now, now)
+        if force or now - self._last_flush_t >= self.flush_every_s - _EPS:
+            self.flush(now)
+            return True
+        return False
+
+    def flush(self, now: float | None = None) -> None:
+        """Write everything up to `now` into the file, then commit the progress record."""
+        now = self._now if now is None else now
+        assert self._fd is not None
+        until_row = int(np.floor(now / self.layout.dt + _EPS)) + 1
+        self._ensure_capacity(until_row)
+        k0 = self.builder.rows
+        if until_row > k0:
+            rows = self.builder.finalise(until_row)
+            for name in self.layout.aligned_units:
+                self._put(f"aligned/{name}", k0, rows[name])
+        for spec in self.layout.streams:
+            buf = self._raw[spec.name]
+            if buf:
+                data = np.asarray(buf, dtype=float)
+                a = self._raw_rows[spec.name]
+                self._put(f"raw/{spec.name}/time", a, data[:, 0])
+                for j, name in enumerate(spec.names):
+                    self._put(f"raw/{spec.name}/{name}", a, data[:, j + 1])
+                self._raw_rows[spec.name] = a + len(data)
+                buf.clear()
+        if self._events:
+            a, ev = self._event_rows, self._events
+            self._put("events/time", a, np.array([e[0] for e in ev], dtype=float))
+            self._put("events/cycle", a, np.array([e[1] for e in ev], dtype=np.int64))
+            self._put("events/kind", a, _str_array([e[2] for e in ev], EVENT_KIND_LEN))
+            self._put("events/detail", a, _str_array([e[3] for e in ev], EVENT_DETAIL_LEN))
+            self._event_rows = a + len(ev)
+            self._events = []
+        if self.durable:
+            os.fsync(self._fd)
+        self._put("acquire/progress", 0, self._progress_vector(now))
+        if self.durable:
+            os.fsync(self._fd)
+        self._last_flush_t = now
+        self.flushes += 1
+
+    def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None) -> None:
+        """Flush, then replace the file by its compact, compressed form with root attribute `status`."""
+        if self._fd is None:
+            return
+        self.flush()
+        self._close_fd()
+        tmp = self._tmp()
+        with h5py.File(self.path, "r") as src:
+            self._copy(src, tmp, None, compact=True, status=status, attrs=attrs)
+        os.replace(tmp, self.path)
+
+    def abandon(self) -> None:
+        """Close the handle without compacting (the file stays 'running', valid up to its progress)."""
+        self._close_fd()
+
+    @property
+    def rows(self) -> int:
+        return self.builder.rows
+
+    @property
+    def event_count(self) -> int:
+        return self._event_rows + len(self._events)
+
+    # -- resume ------------------------------------------------------------------------------------
+    @classmethod
+    def resume(cls, path: "str | os.PathLike[str]", layout: Layout, *, extra_s: float,
+               flush_every_s: float = 1.0) -> "RunWriter":
+        """Reopen a run file ('running' after a crash, or 'aborted'): keep its valid data, add room for `extra_s`."""
+        path = Path(path)
+        with h5py.File(path, "r") as src:
+            progress = read_progress(src)
+            protocol = str(src.attrs.get("protocol", ""))
+            fields = [f for f in json.loads(src["acquire/progress"].attrs["fields"]) if f.startswith("state/")]
+            state_fields = [f[len("state/"):] for f in fields]
+            writer = cls(path, layout, protocol=protocol, flush_every_s=flush_every_s,
+                         state_fields=state_fields, _resume=True)
+            writer.state = {k: progress.get(f"state/{k}", float("nan")) for k in state_fields}
+            rows = int(progress["aligned_rows"])
+            writer.builder.rows = rows
+            writer._event_rows = int(progress["event_rows"])
+            writer._raw_rows = {s.name: int(progress.get(f"rows/{s.name}", 0)) for s in layout.streams}
+            t_end = (rows - 1) * layout.dt if rows else 0.0
+            writer._now = writer._last_flush_t = t_end
+            capacity = writer._capacities(t_end + extra_s)
+            tmp = writer._tmp()
+            writer._copy(src, tmp, capacity, compact=False, status="running", attrs=None)
+        os.replace(tmp, path)
+        writer._open()
+        return writer
+
+    # -- internals ---------------------------------------------------------------------------------
+    def _capacities(self, planned_s: float) -> dict[str, int]:
+        seconds = planned_s * 1.1 + 60.0
+        caps = {"aligned": int(np.ceil(seconds / self.layout.dt)) + 1, "events": int(seconds / 5) + 1000}
+        for s in self.layout.streams:
+            caps[f"raw/{s.name}"] = int(np.ceil(seconds * s.rate_hz)) + 100
+        return caps
+
+    def _tmp(self) -> Path:
+        return self.path.with_name(self.path.name + ".tmp")
+
+    def _open(self) -> None:
+        """Note where each dataset's bytes live, close HDF5, and keep a plain file descriptor for writing."""
+        self._where: dict[str, tuple[int, np.dtype, int]] = {}
+        with h5py.File(self.path, "r", locking=False) as f:
+            def visit(name: str, obj: Any) -> None:
+                if isinstance(obj, h5py.Dataset):
+                    offset = obj.id.get_offset()
+                    if offset is None or obj.chunks is not None or obj.compression:
+                        raise RuntimeError(f"{name}: not a contiguous allocated dataset")
+                    self._where[name] = (offset, obj.dtype.newbyteorder("<"), obj.shape[0])
+            f.visititems(visit)
+        self._fd = os.open(self.path, os.O_RDWR)
+
+    def _close_fd(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def _capacity(self, name: str) -> int:
+        return self._where[name][2]
+
+    def _put(self, name: str, start: int, values: np.ndarray) -> None:
+        offset, dtype, capacity = self._where[name]
+        if start + len(values) > capacity:
+            raise RuntimeError(f"{name}: capacity {capacity} exceeded")
+        data = np.ascontiguousarray(values, dtype=dtype)
+        os.pwrite(self._fd, data.tobytes(), offset + start * dtype.itemsize)
+
+    def _progress_fields(self) -> list[str]:
+        return (["aligned_rows", "event_rows", "t_data", "flushes"] + [f"rows/{s.name}" for s in self.layout.streams]
+                + [f"state/{k}" for k in self.state_fields])
+
+    def _progress_vector(self, now: float) -> np.ndarray:
+        values = [self.builder.rows, self._event_rows, now, self.flushes + 1]
+        values += [self._raw_rows[s.name] for s in self.layout.streams]
+        values += [self.state.get(k, np.nan) for k in self.state_fields]
+        return np.asarray(values, dtype=float)
+
+    def _ensure_capacity(self, until_row: int) -> None:
+        need = {"aligned": until_row, "events": self._event_rows + len(self._events)}
+        for s in self.layout.streams:
+            need[f"raw/{s.name}"] = self._raw_rows[s.name] + len(self._raw[s.name])
+        have = {"aligned": self._capacity("aligned/time"), "events": self._capacity("events/time")}
+        for s in self.layout.streams:
+            have[f"raw/{s.name}"] = self._capacity(f"raw/{s.name}/time")
+        if all(need[k] <= have[k] for k in need):
+            return
+        capacity = {k: max(have[k], 2 * need[k]) for k in have}
+        self._close_fd()
+        tmp = self._tmp()
+        with h5py.File(self.path, "r") as src:
+            self._copy(src, tmp, capacity, compact=False, status="running", attrs=None)
+        os.replace(tmp, self.path)
+        self._open()
+
+    def _build(self, path: Path, capacity: Mapping[str, int], meta: Mapping[str, Any],
+               data: Mapping[str, np.ndarray] | None) -> None:
+        """Create a file with every dataset at `capacity` (None: exact length of `data`)."""
+        data = data or {}
+        compact = capacity is None
+        tmp = path.with_name(path.name + ".tmp")
+        with h5py.File(tmp, "w", locking=False) as f:
+            f.attrs.update({k: v for k, v in meta["attrs"].items() if v is not None})
+            self._write_group(f, "aligned", {"time": "s", **self.layout.aligned_units},
+                              capacity, data, compact, "aligned")
+            f["aligned"].attrs["dt"] = float(self.layout.dt)
+            raw = f.create_group("raw")
+            for s in self.layout.streams:
+                self._write_group(raw, s.name, {"time": "s", **dict(s.columns)}, capacity, data, compact,
+                                  f"raw/{s.name}")
+                raw[s.name].attrs.update(rate_hz=s.rate_hz, hold_s=s.hold_s)
+            ev = f.create_group("events")
+            n_ev = len(data.get("events/time", ())) if compact else capacity["events"]
+            for name, dtype, units in (("time", "f8", "s"), ("cycle", "i8", "1"),
+                                       ("kind", f"S{EVENT_KIND_LEN}", ""), ("detail", f"S{EVENT_DETAIL_LEN}", "")):
+                fill = np.nan if name == "time" else (-1 if name == "cycle" else b"")
+                arr = np.full(n_ev, fill, dtype=dtype)
+                src = data.get(f"events/{name}")
+                if src is not None:
+                    arr[:len(src)] = src[:n_ev]
+                ds = ev.create_dataset(name, data=arr, track_times=False, **_compression(compact, arr))
+                ds.attrs["units"] = units
+            self._write_schedule(f, meta["schedule"], meta["schedule_units"])
+            acq = f.create_group("acquire")
+            fields = self._progress_fields()
+            prog = np.asarray(meta.get("progress", [0, 0, 0, 0] + [0] * len(self.layout.streams)
+                                       + [np.nan] * len(self.state_fields)), dtype=float)
+            ds = acq.create_dataset("progress", data=prog, track_times=False)
+            ds.attrs["fields"] = json.dumps(fields)
+            ds.attrs["units"] = "1"
+            acq.attrs["layout"] = json.dumps(describe_layout(self.layout))
+            f.flush()
+        os.replace(tmp, path)
+
+    def _write_group(self, parent: h5py.Group, name: str, columns: Mapping[str, str], capacity, data,
+                     compact: bool, prefix: str) -> None:
+        group = parent.create_group(name)
+        n = len(data.get(f"{prefix}/time", ())) if compact else capacity[prefix]
+        for col, units in columns.items():
+            arr = np.full(n, np.nan)
+            if col == "time" and prefix == "aligned":
+                arr = np.arange(n) * self.layout.dt
+            src = data.get(f"{prefix}/{col}")
+            if src is not None:
+                arr[:len(src)] = src[:n]
+            ds = group.create_dataset(col, data=arr, track_times=False, **_compression(compact, arr))
+            ds.attrs["units"] = units
+
+    def _write_schedule(self, f: h5py.File, schedule: Sequence[Mapping[str, Any]], units: Mapping[str, str]) -> None:
+        group = f.create_group("schedule")
+        group.attrs["steps_json"] = json.dumps(list(schedule), default=str)
+        if not schedule:
+            return
+        keys = list(schedule[0])
+        for key in keys:
+            values = [row.get(key) for row in schedule]
+            if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+                arr = np.asarray(values, dtype=float)
+            else:
+                arr = _str_array([json.dumps(v) if not isinstance(v, str) else v for v in values], 200)
+            ds = group.create_dataset(key, data=arr, track_times=False)
+            ds.attrs["units"] = units.get(key, "")
+
+    def _copy(self, src: h5py.File, dest: Path, capacity, *, compact: bool, status: str,
+              attrs: Mapping[str, Any] | None) -> None:
+        """Rebuild the file: valid data of `src` (per its progress record) at new capacities."""
+        progress = read_progress(src)
+        data: dict[str, np.ndarray] = {}
+        rows = int(progress["aligned_rows"])
+        for name in ["time", *self.layout.aligned_units]:
+            data[f"aligned/{name}"] = src["aligned"][name][:rows]
+        for s in self.layout.streams:
+            n = int(progress.get(f"rows/{s.name}", 0))
+            for col in ("time", *s.names):
+                data[f"raw/{s.name}/{col}"] = src["raw"][s.name][col][:n]
+        n_ev = int(progress["event_rows"])
+        for name in ("time", "cycle", "kind", "detail"):
+            data[f"events/{name}"] = src["events"][name][:n_ev]
+        meta_attrs = {k: v for k, v in src.attrs.items()}
+        meta_attrs["status"] = status
+        meta_attrs.update(dict(attrs or {}))
+        schedule = json.loads(src["schedule"].attrs.get("steps_json", "[]"))
+        units = {k: str(ds.attrs.get("units", "")) for k, ds in src["schedule"].items()}
+        fields = json.loads(src["acquire/progress"].attrs["fields"])
+        vec = self._progress_vector(progress["t_data"])
+        by_name = dict(zip(self._progress_fields(), vec))
+        for k, v in zip(fields, src["acquire/progress"][()]):
+            by_name.setdefault(k, v)
+        by_name.update({k: progress[k] for k in ("aligned_rows", "event_rows", "t_data", "flushes")})
+        for s in self.layout.streams:
+            by_name[f"rows/{s.name}"] = progress.get(f"rows/{s.name}", 0)
+        for k in self.state_fields:
+            by_name[f"state/{k}"] = self.state.get(k, progress.get(f"state/{k}", np.nan))
+        meta = {"attrs": meta_attrs, "schedule": schedule, "schedule_units": units,
+                "progress": [by_name[k] for k in self._progress_fields()]}
+        self._build(dest, capacity, meta, data)
+
+
+def _compression(compact: bool, arr: np.ndarray) -> dict[str, Any]:
+    if not compact or arr.size < 1024:
+        return {}
+    chunk = int(min(arr.size, 65536))
+    return {"chunks": (chunk,), "compression": "gzip", "compression_opts": 1, "shuffle": True}
+
+
+def read_progress(f: h5py.File) -> dict[str, float]:
+    """The progress record of a run file written by RunWriter: field -> value."""
+    ds = f["acquire/progress"]
+    return dict(zip(json.loads(ds.attrs["fields"]), (float(v) for v in ds[()])))
+
+
+def describe_layout(layout: Layout) -> dict[str, Any]:
+    """A JSON-able description of the layout (stored in /acquire, for people and tools)."""
+    return {"dt": layout.dt,
+            "streams": [{"name": s.name, "columns": dict(s.columns), "rate_hz": s.rate_hz, "hold_s": s.hold_s}
+                        for s in layout.streams],
+            "aligned": {src.channel: {"stream": src.stream, "column": src.column, "scale": src.scale}
+                        for src in layout.sources},
+            "derived": [c for c in layout.aligned_units if c not in {s.channel for s in layout.sources}]}
