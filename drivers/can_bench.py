@@ -20,6 +20,7 @@ import can
 import cantools
 
 from drivers import can_signals as sig
+from drivers.can_codec import MessageCodec, compile_codecs
 
 EventKind = Literal["silent", "back", "fault", "fault_cleared", "alive_error", "estop", "estop_released"]
 
@@ -62,9 +63,8 @@ class CanStats:
 class _Rx:
     """How to decode and watch one received message."""
 
-    message: cantools.database.Message
+    codec: MessageCodec
     controller: str
-    pairs: tuple[tuple[str, str], ...]
     timeout_s: float | None
     alive_key: str | None
     alive_modulo: int
@@ -74,12 +74,11 @@ class _Rx:
 
 @dataclass(slots=True)
 class _Tx:
-    """A message the PC sends: its current signal values, alive key and schedule."""
+    """A message the PC sends: its current values (logical keys), alive key and schedule."""
 
-    message: cantools.database.Message
+    codec: MessageCodec
     values: dict[str, float]
-    keys: dict[str, str]
-    alive_signal: str | None
+    alive_key: str | None
     alive_modulo: int
     cycle_s: float
     next_due: float = 0.0
@@ -103,7 +102,7 @@ class CanBench:
         self._faulted: dict[str, bool] = {}
         now = clock()
         self._rx, self._tx = self._compile(signals, silent_cycles, now)
-        self._tx_of = {key: tx for tx in self._tx.values() for key in tx.keys}
+        self._tx_of = {key: tx for tx in self._tx.values() for key in tx.codec.names.values()}
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any], **kwargs: Any) -> "CanBench":
@@ -166,15 +165,14 @@ class CanBench:
         if rx is None:
             stats.unknown_id += 1
             return None
-        if len(msg.data) != rx.message.length:
+        if len(msg.data) != rx.codec.length:
             stats.bad_dlc += 1
             return None
         try:
-            raw = rx.message.decode(msg.data, decode_choices=False)
-        except (cantools.database.DecodeError, ValueError, KeyError):
+            values = rx.codec.decode(msg.data)
+        except ValueError:
             stats.decode_errors += 1
             return None
-        values = {key: raw[name] for name, key in rx.pairs}
         stats.frames_ok += 1
         rx.last_seen = t_host
         self.latest.update(values)
@@ -185,7 +183,7 @@ class CanBench:
                         f"source {values.get('estop.source')}")
         elif f"{rx.controller}.fault_code" in values or f"{rx.controller}.state" in values:
             self._check_fault(rx.controller, values, t_host)
-        return CanSample(t_host, rx.controller, rx.message.name, values)
+        return CanSample(t_host, rx.controller, rx.codec.message.name, values)
 
     def pop_events(self) -> list[ControllerEvent]:
         """Controller events since the last call, oldest first."""
@@ -199,26 +197,20 @@ class CanBench:
     # -- internals ---------------------------------------------------------------------------------
     def _compile(self, signals: Mapping[str, tuple[str, str]], silent_cycles: float,
                  now: float) -> tuple[dict[tuple[int, bool], _Rx], dict[str, _Tx]]:
-        by_message: dict[str, list[tuple[str, str]]] = {}
-        for key, (message, signal) in signals.items():
-            self.db.get_message_by_name(message).get_signal_by_name(signal)  # KeyError names a bad mapping
-            by_message.setdefault(message, []).append((signal, key))
         rx: dict[tuple[int, bool], _Rx] = {}
         tx: dict[str, _Tx] = {}
-        for name, pairs in by_message.items():
-            message = self.db.get_message_by_name(name)
-            keys = {key: signal for signal, key in pairs}
+        for name, codec in compile_codecs(self.db, signals).items():
+            message, keys = codec.message, {key: signal for signal, key in codec.names.items()}
             alive = next((k for k in keys if k.endswith("alive")), None)
             modulo = 1 << message.get_signal_by_name(keys[alive]).length if alive else 0
             cycle_s = (message.cycle_time or 0) / 1000
             controller = next(iter(keys)).split(".")[0]
-            if all(k in sig.TX_KEYS for k in keys):
-                values = {s.name: (s.initial or 0) for s in message.signals}
-                tx[name] = _Tx(message, values, keys, keys[alive] if alive else None, modulo, cycle_s, now)
-            if controller == "estop" or not all(k in sig.TX_KEYS for k in keys):
+            sent_by_pc = all(k in sig.TX_KEYS for k in keys)
+            if sent_by_pc:
+                tx[name] = _Tx(codec, dict.fromkeys(keys, 0.0), alive, modulo, cycle_s, now)
+            if controller == "estop" or not sent_by_pc:
                 timeout = cycle_s * silent_cycles if cycle_s and controller != "estop" else None
-                rx[(message.frame_id, message.is_extended_frame)] = _Rx(
-                    message, controller, tuple(pairs), timeout, alive, modulo, now)
+                rx[(message.frame_id, message.is_extended_frame)] = _Rx(codec, controller, timeout, alive, modulo, now)
         return rx, tx
 
     def _set(self, updates: Mapping[str, float]) -> None:
@@ -227,8 +219,8 @@ class CanBench:
         touched = {}
         for key, value in updates.items():
             tx = self._tx_of[key]
-            tx.values[tx.keys[key]] = value
-            touched[tx.message.name] = tx
+            tx.values[key] = value
+            touched[id(tx)] = tx
         now = self.clock()
         for tx in touched.values():
             self._send(tx, now)
@@ -240,12 +232,12 @@ class CanBench:
                 self._send(tx, now)
 
     def _send(self, tx: _Tx, now: float) -> None:
-        if tx.alive_signal is not None:
-            tx.values[tx.alive_signal] = (int(tx.values[tx.alive_signal]) + 1) % tx.alive_modulo
-        data = tx.message.encode(tx.values, strict=False)
+        if tx.alive_key is not None:
+            tx.values[tx.alive_key] = (int(tx.values[tx.alive_key]) + 1) % tx.alive_modulo
+        message = tx.codec.message
         try:
-            self.bus.send(can.Message(arbitration_id=tx.message.frame_id, data=data,
-                                      is_extended_id=tx.message.is_extended_frame))
+            self.bus.send(can.Message(arbitration_id=message.frame_id, data=tx.codec.encode(tx.values),
+                                      is_extended_id=message.is_extended_frame))
             self.stats.sent += 1
         except can.CanError:
             self.stats.send_errors += 1
@@ -255,7 +247,7 @@ class CanBench:
         if rx.last_alive is not None and alive != (rx.last_alive + 1) % rx.alive_modulo:
             self.stats.alive_errors += 1
             self._event(t_host, rx.controller, "alive_error",
-                        f"{rx.message.name}: {rx.last_alive} → {alive}")
+                        f"{rx.codec.message.name}: {rx.last_alive} → {alive}")
         rx.last_alive = alive
 
     def _check_fault(self, controller: str, values: Mapping[str, float], t_host: float) -> None:
@@ -270,7 +262,7 @@ class CanBench:
         overdue: dict[str, str] = {}
         for rx in self._rx.values():
             if rx.timeout_s is not None and now - rx.last_seen > rx.timeout_s:
-                overdue.setdefault(rx.controller, rx.message.name)
+                overdue.setdefault(rx.controller, rx.codec.message.name)
         for controller in {rx.controller for rx in self._rx.values()}:
             was, now_silent = controller in self._silent, controller in overdue
             if now_silent and not was:
@@ -281,7 +273,7 @@ class CanBench:
                 self._event(now, controller, "back")
 
     def _timeout_of(self, message: str) -> float | None:
-        return next(rx.timeout_s for rx in self._rx.values() if rx.message.name == message)
+        return next(rx.timeout_s for rx in self._rx.values() if rx.codec.message.name == message)
 
     def _event(self, t_host: float, controller: str, kind: EventKind, detail: str = "") -> None:
         self._events.append(ControllerEvent(t_host, controller, kind, detail))

@@ -19,6 +19,7 @@ from sim_bench.emulators.providers import (ConstantNodeInputs, ConstantResistanc
 from sim_bench.emulators.realtime import RealtimeLoop
 from sim_bench.emulators.scpi_instrument import ScpiInstrumentEmulator
 from sim_bench.emulators.scripted_serial import ScriptedSerial
+from sim_bench.emulators.sim_can_bus import SimCanBus
 
 if __name__ not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append(__name__)
@@ -28,6 +29,6 @@ registry.set_default("node", ClutchNodeEmulator)
 __all__ = [
     "CanBenchEmulator", "ClutchNodeEmulator", "ConstantNodeInputs", "ConstantResistances", "DrivetrainActuals",
     "DrivetrainProvider", "FirstOrderDrivetrain", "ManualClock", "NodeInputProvider", "NodeInputs",
-    "RealtimeLoop", "ResistanceProvider", "ScpiInstrumentEmulator", "ScriptedSerial", "TemperatureResistances",
+    "RealtimeLoop", "ResistanceProvider", "ScpiInstrumentEmulator", "ScriptedSerial", "SimCanBus", "TemperatureResistances",
     "registry",
 ]

@@ -19,6 +19,7 @@ import can
 import cantools
 
 from drivers import can_signals as sig
+from drivers.can_codec import compile_codecs
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
 
@@ -54,16 +55,19 @@ class CanBenchEmulator:
         self.bus, self.clock, self.command_timeout_s = bus, clock, command_timeout_s
         self.provider = provider or FirstOrderDrivetrain(t0=clock())
         self.db = cantools.database.load_file(str(dbc))
-        self.signals = dict(signals)
+        self.codecs = compile_codecs(self.db, signals)
+        self._codec_of = {key: codec for codec in self.codecs.values() for key in codec.names.values()}
+        self._modulo = {key: 1 << self.db.get_message_by_name(m).get_signal_by_name(s).length
+                        for key, (m, s) in signals.items() if key.endswith("alive")}
         self.stats = EmulatorStats()
         self.estop = False
         self.controllers = {name: _Controller(name) for name in sig.CONTROLLERS}
-        self._rx = {self._message(key).frame_id: key.split(".")[0]
+        self._rx = {self._codec_of[key].message.frame_id: (key.split(".")[0], self._codec_of[key])
                     for key in ("drive.cmd_alive", "clutch.cmd_alive", "load.cmd_alive", "estop.request", "pc.hb_alive")}
         now = clock()
         for ctrl in self.controllers.values():
             for key in (f"{ctrl.name}.alive", f"{ctrl.name}.hb_alive"):
-                ctrl.next_due[self._message(key).name] = now
+                ctrl.next_due[key] = now
                 ctrl.alive[key] = 0
 
     # -- fault hooks ---------------------------------------------------------------------------------
@@ -112,17 +116,12 @@ class CanBenchEmulator:
         return (sig.STATE_RUNNING if ctrl.setpoints.get(f"{controller}.enable") else sig.STATE_READY), 0
 
     # -- internals -----------------------------------------------------------------------------------
-    def _message(self, key: str) -> cantools.database.Message:
-        return self.db.get_message_by_name(self.signals[key][0])
-
     def _receive(self, msg: can.Message) -> None:
-        owner = self._rx.get(msg.arbitration_id)
-        message = self.db.get_message_by_frame_id(msg.arbitration_id) if owner else None
-        if message is None or len(msg.data) != message.length or msg.is_extended_id != message.is_extended_frame:
+        owner, codec = self._rx.get(msg.arbitration_id, (None, None))
+        if codec is None or len(msg.data) != codec.length or msg.is_extended_id != codec.message.is_extended_frame:
             self.stats.malformed += 1
             return
-        raw = message.decode(msg.data, decode_choices=False)
-        values = {key: raw[s] for key, (m, s) in self.signals.items() if m == message.name}
+        values = codec.decode(msg.data)
         self.stats.commands_ok += 1
         if owner == "estop":
             self.estop = bool(values["estop.request"])
@@ -151,22 +150,17 @@ class CanBenchEmulator:
         n = ctrl.name
         values |= {f"{n}.state": state, f"{n}.fault_code": code, f"{n}.hb_state": state}
         for alive_key in (f"{n}.alive", f"{n}.hb_alive"):
-            message = self._message(alive_key)
-            due = ctrl.next_due[message.name]
+            codec = self._codec_of[alive_key]
+            due = ctrl.next_due[alive_key]
             if now < due:
                 continue
-            cycle = message.cycle_time / 1000
-            ctrl.next_due[message.name] = due + cycle if now - due < cycle else now + cycle
+            cycle = codec.message.cycle_time / 1000
+            ctrl.next_due[alive_key] = due + cycle if now - due < cycle else now + cycle
             if ctrl.silent:
                 continue
             if not ctrl.alive_frozen:
-                modulo = 1 << message.get_signal_by_name(self.signals[alive_key][1]).length
-                ctrl.alive[alive_key] = (ctrl.alive[alive_key] + 1) % modulo
-            self._send(message, values | {alive_key: ctrl.alive[alive_key]})
-
-    def _send(self, message: cantools.database.Message, values: Mapping[str, float]) -> None:
-        by_signal = {s: values[k] for k, (m, s) in self.signals.items() if m == message.name and k in values}
-        data = message.encode({s.name: by_signal.get(s.name, 0) for s in message.signals}, strict=False)
-        self.bus.send(can.Message(arbitration_id=message.frame_id, data=data,
-                                  is_extended_id=message.is_extended_frame))
-        self.stats.sent += 1
+                ctrl.alive[alive_key] = (ctrl.alive[alive_key] + 1) % self._modulo[alive_key]
+            values[alive_key] = ctrl.alive[alive_key]
+            self.bus.send(can.Message(arbitration_id=codec.message.frame_id, data=codec.encode(values),
+                                      is_extended_id=codec.message.is_extended_frame))
+            self.stats.sent += 1
