@@ -1,0 +1,276 @@
+"""Bench CAN: DBC contents, exact frames, codec vs cantools, watchdog events, fault injection, safe state."""
+
+import itertools
+
+import can
+import cantools
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from drivers import can_signals as sig
+from drivers.can_bench import CanBench
+from drivers.can_codec import MessageCodec
+from sim_bench.emulators import CanBenchEmulator, ManualClock, SimCanBus
+
+DB = cantools.database.load_file(str(sig.BENCH_DBC))
+_chan = itertools.count()
+
+MOTOROLA_DBC = """VERSION ""
+BS_:
+BU_: A
+BO_ 1024 Vendor: 8 A
+ SG_ Speed : 7|16@0- (0.25,-10) [-8000|8000] "rpm" A
+ SG_ Odd : 19|11@0+ (1,0) [0|2047] "" A
+ SG_ Flag : 24|1@1+ (1,0) [0|1] "" A
+ SG_ Tail : 39|20@0- (0.001,0) [-500|500] "" A
+"""
+
+
+@pytest.fixture
+def buses():
+    name = f"t{next(_chan)}"
+    pc, ctrl = can.Bus(interface="virtual", channel=name), can.Bus(interface="virtual", channel=name)
+    yield pc, ctrl
+    pc.shutdown()
+    ctrl.shutdown()
+
+
+def frames(bus: can.BusABC) -> list[tuple[int, bytes]]:
+    out = []
+    while (m := bus.recv(timeout=0)) is not None:
+        out.append((m.arbitration_id, bytes(m.data)))
+    return out
+
+
+def test_dbc_describes_every_controller() -> None:
+    for m in DB.messages:
+        assert m.cycle_time, m.name
+    for prefix in ("DM", "CA", "LM"):
+        for suffix in ("FaultCode", "Alive", "State"):
+            assert any(s.name == f"{prefix}_{suffix}" for m in DB.messages for s in m.signals)
+    names = {m.name for m in DB.messages}
+    assert {"EmergencyStop", "Heartbeat_PC", "Heartbeat_DriveMotor", "Heartbeat_ClutchActuator",
+            "Heartbeat_LoadMachine"} <= names
+    for message, signal in sig.BENCH_SIGNALS.values():
+        DB.get_message_by_name(message).get_signal_by_name(signal)
+
+
+def test_command_frames_table(buses) -> None:
+    pc, ctrl = buses
+    clock = ManualClock()
+    bench = CanBench(pc, clock=clock)
+    table = [
+        (lambda: bench.set_drive_speed(1500), [(0x100, "b80b010000000010")]),
+        (lambda: bench.set_clutch_torque(45), [(0x110, "9411020000000010")]),
+        (lambda: bench.set_load_torque(-300), [(0x120, "48f4010000000010")]),
+        (lambda: bench.emergency_stop(), [(0x010, "0110")]),
+        (lambda: bench.safe_state(), [(0x110, "0000030000000020"), (0x120, "0000010000000020"),
+                                      (0x100, "4006010000000020")]),
+        (lambda: bench.release_emergency_stop(), [(0x010, "0020")]),
+    ]
+    for action, expected in table:
+        action()
+        assert sorted(frames(ctrl)) == sorted((i, bytes.fromhex(h)) for i, h in expected)
+
+
+def test_cyclic_sending(buses) -> None:
+    pc, ctrl = buses
+    clock = ManualClock()
+    bench = CanBench(pc, clock=clock)
+    bench.emergency_stop()
+    frames(ctrl)
+    for _ in range(10):
+        clock.advance(0.01)
+        bench.poll()
+    ids = [i for i, _ in frames(ctrl)]
+    assert ids.count(0x100) == ids.count(0x110) == ids.count(0x120) == 10
+    assert ids.count(0x010) in (4, 5) and ids.count(0x710) == 1  # 20 ms and 100 ms cycles (float time)
+    alive = [d[7] >> 4 for i, d in frames_after(bench, ctrl, clock, 20) if i == 0x100]
+    assert all((b - a) % 16 == 1 for a, b in zip(alive, alive[1:]))
+
+
+def frames_after(bench: CanBench, bus: can.BusABC, clock: ManualClock, steps: int) -> list[tuple[int, bytes]]:
+    out = []
+    for _ in range(steps):
+        clock.advance(0.01)
+        bench.poll()
+        out += frames(bus)
+    return out
+
+
+def test_decode_table(buses) -> None:
+    pc, ctrl = buses
+    bench = CanBench(pc, clock=lambda: 3.0, listen_only=True)
+    table = [
+        ((0x101, "b80bc201020000a0"), "drive", {"drive.speed": 1500.0, "drive.torque": 45.0, "drive.state": 2,
+                                                "drive.fault_code": 0, "drive.alive": 10}),
+        ((0x111, "9411800c09000050"), "clutch", {"clutch.torque": 45.0, "clutch.position": 3.2,
+                                                 "clutch.clamp_state": 1, "clutch.state": 2,
+                                                 "clutch.fault_code": 0, "clutch.alive": 5}),
+        ((0x703, "0203"), "load", {"load.hb_state": 2, "load.hb_alive": 3}),
+    ]
+    for (ident, data), controller, values in table:
+        ctrl.send(can.Message(arbitration_id=ident, data=bytes.fromhex(data), is_extended_id=False))
+        (s,) = bench.poll()
+        assert (s.controller, s.t_host) == (controller, 3.0)
+        assert s.values == pytest.approx(values)
+    assert bench.latest["clutch.position"] == pytest.approx(3.2)
+
+
+def test_malformed_frames_counted_not_crashed(buses) -> None:
+    pc, ctrl = buses
+    bench = CanBench(pc, listen_only=True)
+    for msg in [can.Message(arbitration_id=0x101, data=b"\x01\x02", is_extended_id=False),
+                can.Message(arbitration_id=0x555, data=b"\x00" * 8, is_extended_id=False),
+                can.Message(arbitration_id=0x101, data=b"\x00" * 8, is_extended_id=True),
+                can.Message(arbitration_id=0x101, is_error_frame=True, is_extended_id=False)]:
+        ctrl.send(msg)
+    assert bench.poll() == []
+    assert (bench.stats.bad_dlc, bench.stats.unknown_id, bench.stats.error_frames) == (1, 2, 1)
+    with pytest.raises(RuntimeError):
+        bench.set_drive_speed(1000)
+
+
+def test_codec_matches_cantools_and_vectorised() -> None:
+    rng = np.random.default_rng(1)
+    db = cantools.database.Database()
+    db.add_dbc_string(MOTOROLA_DBC)
+    for m in list(DB.messages) + list(db.messages):
+        codec = MessageCodec(m)
+        rows = rng.integers(0, 256, (300, m.length), dtype=np.uint8)
+        cols = codec.decode_array(rows)
+        for i, row in enumerate(rows):
+            expected = m.decode(bytes(row), decode_choices=False)
+            assert codec.decode(bytes(row)) == pytest.approx(expected), m.name
+            assert {k: c[i] for k, c in cols.items()} == pytest.approx(expected), m.name
+            assert codec.encode(expected) == m.encode(expected, strict=False), m.name
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 0x7FF), st.binary(max_size=8), st.booleans())
+def test_fuzz_driver_any_frame(ident: int, data: bytes, extended: bool) -> None:
+    bench = CanBench(SimCanBus(f"fz{next(_chan)}"), clock=lambda: 0.0, listen_only=True)
+    sample = bench.handle(can.Message(arbitration_id=ident, data=data, is_extended_id=extended), 0.0)
+    s = bench.stats
+    assert (sample is not None) == (s.frames_ok == 1)
+    assert s.frames_ok + s.unknown_id + s.bad_dlc + s.decode_errors == 1
+    bench.close()
+
+
+# -- closed loop against the emulator in simulated time --------------------------------------------------
+
+@pytest.fixture
+def loop():
+    name = f"loop{next(_chan)}"
+    clock = ManualClock()
+    pc, ctrl = SimCanBus(name), SimCanBus(name)
+    emu, bench = CanBenchEmulator(ctrl, clock=clock), CanBench(pc, clock=clock)
+    yield clock, emu, bench
+    pc.shutdown()
+    ctrl.shutdown()
+
+
+def step(clock: ManualClock, emu: CanBenchEmulator, bench: CanBench, seconds: float, dt: float = 0.01) -> list:
+    out = []
+    for _ in range(round(seconds / dt)):
+        clock.advance(dt)
+        emu.poll()
+        out += bench.poll()
+    return out
+
+
+def test_set_points_are_tracked(loop) -> None:
+    clock, emu, bench = loop
+    bench.set_drive_speed(1500)
+    bench.set_clutch_torque(45)
+    bench.set_load_torque(30)
+    out = step(clock, emu, bench, 5.0)
+    latest = bench.latest
+    assert latest["drive.speed"] == pytest.approx(1500, abs=1) and latest["clutch.torque"] == pytest.approx(45, abs=0.1)
+    assert latest["load.torque"] == pytest.approx(30, abs=0.1) and latest["load.speed"] > 0
+    assert latest["drive.state"] == sig.STATE_RUNNING and latest["clutch.clamp_state"] == sig.CLAMP_SLIPPING
+    assert len(out) == 1500 + 150 and bench.stats.alive_errors == 0 and bench.pop_events() == []
+    assert emu.stats.malformed == 0
+
+
+def test_silent_controller_event_and_back(loop) -> None:
+    clock, emu, bench = loop
+    step(clock, emu, bench, 0.5)
+    emu.silence("clutch")
+    step(clock, emu, bench, 0.2)
+    (ev,) = bench.pop_events()
+    assert (ev.controller, ev.kind) == ("clutch", "silent") and 0.05 < ev.t_host - 0.5 <= 0.07
+    emu.silence("clutch", False)
+    step(clock, emu, bench, 1.0)
+    assert [(e.controller, e.kind) for e in bench.pop_events()] == [("clutch", "back")]
+    assert bench.stats.alive_errors == 0  # the counter continued from where it stopped
+
+
+def test_fault_code_event(loop) -> None:
+    clock, emu, bench = loop
+    bench.set_load_torque(100)
+    step(clock, emu, bench, 0.5)
+    emu.set_fault("load", 2)
+    step(clock, emu, bench, 0.5)
+    (ev,) = bench.pop_events()
+    assert (ev.controller, ev.kind) == ("load", "fault") and bench.faulted == {"load"}
+    assert bench.latest["load.fault_code"] == 2 and bench.latest["load.state"] == sig.STATE_FAULT
+    assert abs(bench.latest["load.torque"]) < 1.0  # faulted controller went to its safe set-point
+    emu.clear_fault("load")
+    step(clock, emu, bench, 0.1)
+    assert [e.kind for e in bench.pop_events()] == ["fault_cleared"]
+
+
+def test_frozen_alive_counter(loop) -> None:
+    clock, emu, bench = loop
+    step(clock, emu, bench, 0.2)
+    emu.freeze_alive("drive")
+    step(clock, emu, bench, 0.1)
+    assert bench.stats.alive_errors >= 9 and {e.kind for e in bench.pop_events()} == {"alive_error"}
+
+
+def test_raw_garbage_on_bus(loop) -> None:
+    clock, emu, bench = loop
+    step(clock, emu, bench, 0.1)
+    emu.send_raw(0x101, b"\x00\x01\x02")
+    emu.send_raw(0x7FF, b"\x00" * 8)
+    step(clock, emu, bench, 0.1)
+    assert bench.stats.bad_dlc == 1 and bench.stats.unknown_id == 1 and bench.stats.alive_errors == 0
+
+
+def test_command_timeout_fault(loop) -> None:
+    clock, emu, bench = loop
+    bench.set_drive_speed(1000)
+    step(clock, emu, bench, 0.5)
+    for _ in range(30):  # the PC stops sending; the controller notices
+        clock.advance(0.01)
+        emu.poll()
+    assert emu.state("drive") == (sig.STATE_FAULT, sig.FAULT_COMMAND_TIMEOUT)
+    step(clock, emu, bench, 0.1)
+    assert emu.state("drive") == (sig.STATE_RUNNING, 0)
+
+
+def test_emergency_stop_and_safe_state(loop) -> None:
+    clock, emu, bench = loop
+    bench.set_drive_speed(2000)
+    bench.set_clutch_torque(65)
+    bench.set_load_torque(300)
+    step(clock, emu, bench, 2.0)
+    bench.emergency_stop()
+    step(clock, emu, bench, 2.0)
+    assert emu.estop and all(bench.latest[f"{c}.state"] == sig.STATE_ESTOP for c in sig.CONTROLLERS)
+    assert bench.latest["clutch.torque"] < 0.5 and bench.latest["clutch.clamp_state"] == sig.CLAMP_OPEN
+    bench.release_emergency_stop()
+    bench.safe_state()
+    step(clock, emu, bench, 3.0)
+    assert not emu.estop
+    assert bench.latest["drive.speed"] == pytest.approx(800, abs=5) and bench.latest["load.torque"] == pytest.approx(0)
+    assert bench.latest["clutch.clamp_state"] == sig.CLAMP_OPEN
+
+
+def test_from_config() -> None:
+    bench = CanBench.from_config({"interface": "virtual", "channel": f"cfg{next(_chan)}"}, listen_only=True)
+    assert bench.poll() == []
+    bench.close()
