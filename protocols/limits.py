@@ -1,0 +1,129 @@
+"""The bench's limits: what a schedule may ask for (checked before anything moves) and the interlocks.
+
+Set-point limits are checked against the planned schedule by `check_schedule` (`benchlab run --dry-run`
+and before every run). Interlock limits hold whatever the protocol does: the runner watches them while
+running and puts the bench in its safe state (clutch open at zero torque, load torque zero, engine at
+idle) when one is crossed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import Any
+
+from protocols.schedule import OPERATORS, PHASES, Step
+
+RPM = math.pi / 30.0
+ACTIONS = ("wait", "abort")
+
+
+@dataclass(frozen=True)
+class BenchLimits:
+    """Set-point ranges and interlock thresholds (defaults fit the simulated bench and the paper's protocols)."""
+
+    max_engine_speed_rpm: float = 3000.0
+    idle_speed_rpm: float = 800.0
+    max_clutch_torque_nm: float = 100.0
+    max_load_torque_nm: float = 600.0
+    # interlocks
+    max_flywheel_c: float = 110.0
+    max_air_c: float = 80.0
+    radio_silence_s: float = 10.0
+    max_slip_time_s: float = 15.0
+    max_slip_energy_j: float = 150e3
+    heartbeat: bool = True  # a controller's heartbeat lost (the CAN driver's watchdog) trips an interlock
+    on_interlock: str = "wait"  # "wait": safe state, wait until clear + resume_after_s, next cycle; "abort"
+    resume_after_s: float = 30.0
+    clear_margin_k: float = 10.0  # an over-temperature clears this far below its limit
+    max_wait_s: float = 1800.0  # "wait" gives up (abort) after this long
+    # drivetrain facts used for estimates
+    gear_ratio: float = 15.0
+    load_inertia_kgm2: float = 70.0
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], source: str = "<limits>", prefix: str = "limits") -> "BenchLimits":
+        """Build from a config table, raising InputError naming the first bad field."""
+        from benchlab.errors import InputError
+
+        known = {f.name: f for f in fields(cls)}
+        clean: dict[str, Any] = {}
+        for key, value in values.items():
+            if key not in known:
+                raise InputError(source, f"{prefix}.{key}", f"one of {', '.join(known)} (unknown key)")
+            default = known[key].default
+            if isinstance(default, bool):
+                if not isinstance(value, bool):
+                    raise InputError(source, f"{prefix}.{key}", f"true or false, got {value!r}")
+            elif isinstance(default, str):
+                if value not in ACTIONS:
+                    raise InputError(source, f"{prefix}.{key}", f"one of {', '.join(ACTIONS)}, got {value!r}")
+            elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise InputError(source, f"{prefix}.{key}", f"a positive number, got {value!r}")
+            clean[key] = float(value) if isinstance(default, float) else value
+        return cls(**clean)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def launch_estimate(step: Step, limits: BenchLimits) -> tuple[float, float, bool]:
+    """(slip time s, slip energy J, synchronises) of a launch from standstill with constant torques."""
+    omega = step.engine_speed_rpm * RPM
+    reaction = step.load_torque_nm / limits.gear_ratio
+    inertia = limits.load_inertia_kgm2 / limits.gear_ratio ** 2
+    net = step.clutch_torque_nm - reaction
+    if net > 0:
+        t_sync = omega * inertia / net
+        if t_sync <= step.duration_s:
+            return t_sync, step.clutch_torque_nm * omega * t_sync / 2.0, True
+    t = step.duration_s
+    if net > 0:  # slows down the slip even if it does not finish
+        slip_end = omega - net / inertia * t
+        return t, step.clutch_torque_nm * (omega + slip_end) / 2.0 * t, False
+    return t, step.clutch_torque_nm * omega * t, False
+
+
+def check_schedule(steps: Sequence[Step], limits: BenchLimits) -> list[str]:
+    """Problems of a schedule against the limits, one line each (empty: the schedule may run)."""
+    problems: list[str] = []
+    for i, s in enumerate(steps):
+        where = f"step {i} (cycle {s.cycle}, {s.phase})"
+        if s.phase not in PHASES:
+            problems.append(f"{where}: unknown phase {s.phase!r}")
+            continue
+        if not (0.0 <= s.engine_speed_rpm <= limits.max_engine_speed_rpm):
+            problems.append(f"{where}: engine speed {s.engine_speed_rpm:g} rpm outside 0..{limits.max_engine_speed_rpm:g}")
+        if not (0.0 <= s.clutch_torque_nm <= limits.max_clutch_torque_nm):
+            problems.append(f"{where}: clutch torque {s.clutch_torque_nm:g} N*m outside 0..{limits.max_clutch_torque_nm:g}")
+        if abs(s.load_torque_nm) > limits.max_load_torque_nm:
+            problems.append(f"{where}: load torque {s.load_torque_nm:g} N*m beyond ±{limits.max_load_torque_nm:g}")
+        if not (s.duration_s > 0 and math.isfinite(s.duration_s)):
+            problems.append(f"{where}: duration {s.duration_s!r} s is not positive")
+        if s.phase == "launch":
+            t, energy, _ = launch_estimate(s, limits)
+            if s.duration_s > limits.max_slip_time_s:
+                problems.append(f"{where}: slip time up to {s.duration_s:g} s beyond the {limits.max_slip_time_s:g} s limit")
+            if energy > limits.max_slip_energy_j:
+                problems.append(f"{where}: slip energy up to {energy / 1e3:.0f} kJ beyond the "
+                                f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
+        if s.phase == "heat":
+            energy = s.clutch_torque_nm * s.engine_speed_rpm * RPM * s.pulse_s
+            if not (0 < s.pulse_s <= limits.max_slip_time_s):
+                problems.append(f"{where}: heat pulse {s.pulse_s:g} s outside 0..{limits.max_slip_time_s:g} s")
+            if energy > limits.max_slip_energy_j:
+                problems.append(f"{where}: heat pulse energy {energy / 1e3:.0f} kJ beyond the "
+                                f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
+            if s.rest_s <= 0:
+                problems.append(f"{where}: heat pulses need a rest between them (rest_s > 0)")
+            if s.clutch_torque_nm >= s.load_torque_nm / limits.gear_ratio:
+                problems.append(f"{where}: load torque {s.load_torque_nm:g} N*m cannot hold the output against "
+                                f"{s.clutch_torque_nm:g} N*m clutch torque")
+        for c in s.until:
+            if c.op not in OPERATORS:
+                problems.append(f"{where}: condition operator {c.op!r} not one of {', '.join(OPERATORS)}")
+            limit = {"T_flywheel": limits.max_flywheel_c, "T_air": limits.max_air_c}.get(c.channel)
+            if limit is not None and c.op in (">=", "steady") and c.value + c.band_k > limit - limits.clear_margin_k:
+                problems.append(f"{where}: target {c.channel} {c.value:g} too close to its interlock at {limit:g}")
+    return problems
