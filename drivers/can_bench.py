@@ -68,6 +68,8 @@ class _Rx:
     timeout_s: float | None
     alive_key: str | None
     alive_modulo: int
+    fault_key: str | None
+    state_key: str | None
     last_seen: float
     last_alive: int | None = None
 
@@ -181,8 +183,8 @@ class CanBench:
         if rx.controller == "estop":
             self._event(t_host, "estop", "estop" if values.get("estop.request") else "estop_released",
                         f"source {values.get('estop.source')}")
-        elif f"{rx.controller}.fault_code" in values or f"{rx.controller}.state" in values:
-            self._check_fault(rx.controller, values, t_host)
+        elif rx.fault_key or rx.state_key:
+            self._check_fault(rx, values, t_host)
         return CanSample(t_host, rx.controller, rx.codec.message.name, values)
 
     def pop_events(self) -> list[ControllerEvent]:
@@ -210,7 +212,10 @@ class CanBench:
                 tx[name] = _Tx(codec, dict.fromkeys(keys, 0.0), alive, modulo, cycle_s, now)
             if controller == "estop" or not sent_by_pc:
                 timeout = cycle_s * silent_cycles if cycle_s and controller != "estop" else None
-                rx[(message.frame_id, message.is_extended_frame)] = _Rx(codec, controller, timeout, alive, modulo, now)
+                fault, state = f"{controller}.fault_code", f"{controller}.state"
+                rx[(message.frame_id, message.is_extended_frame)] = _Rx(
+                    codec, controller, timeout, alive, modulo, fault if fault in keys else None,
+                    state if state in keys else None, now)
         return rx, tx
 
     def _set(self, updates: Mapping[str, float]) -> None:
@@ -250,13 +255,13 @@ class CanBench:
                         f"{rx.codec.message.name}: {rx.last_alive} → {alive}")
         rx.last_alive = alive
 
-    def _check_fault(self, controller: str, values: Mapping[str, float], t_host: float) -> None:
-        code = int(values.get(f"{controller}.fault_code", 0))
-        state = values.get(f"{controller}.state")
+    def _check_fault(self, rx: _Rx, values: Mapping[str, float], t_host: float) -> None:
+        code = int(values.get(rx.fault_key, 0))
+        state = values.get(rx.state_key)
         faulted = code != 0 or state == self.fault_state
-        if faulted != self._faulted.get(controller, False):
-            self._faulted[controller] = faulted
-            self._event(t_host, controller, "fault" if faulted else "fault_cleared", f"state {state}, code {code}")
+        if faulted != self._faulted.get(rx.controller, False):
+            self._faulted[rx.controller] = faulted
+            self._event(t_host, rx.controller, "fault" if faulted else "fault_cleared", f"state {state}, code {code}")
 
     def _watch(self, now: float) -> None:
         overdue: dict[str, str] = {}

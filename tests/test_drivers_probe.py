@@ -1,0 +1,64 @@
+"""`benchlab probe` against the emulators: output, JSON, exit codes."""
+
+import json
+
+import can
+import pytest
+
+from benchlab.cli import main
+from sim_bench.emulators import CanBenchEmulator, RealtimeLoop
+
+
+def test_probe_pt1000_text(capsys) -> None:
+    assert main(["probe", "pt1000", "--url", "sim://instrument"]) == 0
+    out = capsys.readouterr().out
+    assert "DAQ970A" in out and out.count("°C") == 4
+
+
+def test_probe_pt1000_json(capsys) -> None:
+    assert main(["probe", "pt1000", "--url", "sim://instrument", "--json", "--count", "2", "--mode", "frtd",
+                 "--channels", "(@101,102)"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert [r["channel"] for r in doc["readings"]] == [101, 102, 101, 102]
+    assert all(r["status"] == "ok" and r["temperature_c"] == pytest.approx(25.0, abs=1e-3) for r in doc["readings"])
+
+
+def test_probe_node_json(capsys) -> None:
+    assert main(["probe", "node", "--url", "sim://node", "--count", "3", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["samples"]) == 3 and doc["stats"]["crc_errors"] == 0
+
+
+def test_probe_can_against_running_emulator(capsys) -> None:
+    bus = can.Bus(interface="virtual", channel="probe-test")
+    emu = CanBenchEmulator(bus)
+    try:
+        with RealtimeLoop(emu.poll, period_s=0.002):
+            assert main(["probe", "can", "--url", "virtual:probe-test", "--count", "8", "--json"]) == 0
+    finally:
+        bus.shutdown()
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["samples"]) >= 8 and {s["controller"] for s in doc["samples"]} == {"drive", "clutch", "load"}
+    assert doc["stats"]["sent"] == 0  # probing never commands the bench
+
+
+def test_probe_can_nothing_there_exits_1(capsys) -> None:
+    assert main(["probe", "can", "--url", "virtual:nobody-here", "--timeout", "0.1"]) == 1
+    assert "silent" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv", [
+    ["probe", "pt1000", "--url", "nonsense://x"],
+    ["probe", "pt1000", "--url", "/dev/does-not-exist-benchlab"],
+    ["probe", "pt1000", "--url", "sim://no-such-emulator"],
+    ["probe", "pt1000", "--url", "sim://instrument", "--channels", "101-104"],
+    ["probe", "node", "--url", "nonsense://x"],
+    ["probe", "node", "--url", "sim://node", "--count", "0"],
+    ["probe", "can", "--url", "can0"],
+    ["probe", "can", "--url", "nosuchinterface:can0"],
+    ["probe", "can", "--url", "udp_multicast:239.0.0.1"],
+])
+def test_probe_bad_input_exits_2(argv: list[str], capsys) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("benchlab probe: ") and err.count("\n") == 1
