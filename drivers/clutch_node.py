@@ -13,7 +13,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol
 
-import numpy as np
 import serial
 
 from drivers import cvd, node_frame
@@ -117,7 +116,7 @@ class ClutchNodeGateway:
         return samples
 
     def read(self, count: int, timeout_s: float) -> list[NodeSample]:
-        """Block (wall-clock) until `count` samples arrived or `timeout_s` passed; for real-time use only."""
+        """Block (wall-clock) until at least `count` samples arrived or `timeout_s` passed; real-time use only."""
         samples: list[NodeSample] = []
         deadline = time.monotonic() + timeout_s
         while len(samples) < count and time.monotonic() < deadline:
@@ -215,18 +214,15 @@ class ClutchNodeGateway:
         return True
 
     def _samples(self, frames: list[tuple[NodeFrame, float]]) -> list[NodeSample]:
-        """Convert resistances of a batch of frames in one vectorised CVD call per channel."""
-        if not frames:
-            return []
-        raw = np.array([f.r_mohm for f, _ in frames], dtype=float) / 1000.0
-        temps = np.column_stack([cvd.temperature(raw[:, i], self.coefficients[i]) for i in range(2)])
         samples = []
-        for (f, t_host), r_row, t_row in zip(frames, raw.tolist(), temps.tolist()):
-            s1, s2 = self._status(f, 0, r_row[0], t_row[0]), self._status(f, 1, r_row[1], t_row[1])
+        for f, t_host in frames:
+            ohm = (f.r_mohm[0] / 1000.0, f.r_mohm[1] / 1000.0)
+            deg = (cvd.temperature(ohm[0], self.coefficients[0]), cvd.temperature(ohm[1], self.coefficients[1]))
+            s1, s2 = self._status(f, 0, ohm[0], deg[0]), self._status(f, 1, ohm[1], deg[1])
             samples.append(NodeSample(
                 f.seq, f.node_time_ms, t_host,
-                (r_row[0] if s1 in ("ok", "range") else None, r_row[1] if s2 in ("ok", "range") else None),
-                (t_row[0] if s1 == "ok" else None, t_row[1] if s2 == "ok" else None),
+                (ohm[0] if s1 in ("ok", "range") else None, ohm[1] if s2 in ("ok", "range") else None),
+                (deg[0] if s1 == "ok" else None, deg[1] if s2 == "ok" else None),
                 (s1, s2), f.supply_mv, f.rssi_dbm, f.lqi, f.flags))
         return samples
 

@@ -5,6 +5,7 @@ The only place in benchlab where a PT1000 resistance becomes a temperature (and 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,8 @@ def resistance(temperature_c: ArrayLike, coef: CvdCoefficients = PT1000) -> np.n
 
 def temperature(resistance_ohm: ArrayLike, coef: CvdCoefficients = PT1000) -> np.ndarray | float:
     """Temperature in °C for `resistance_ohm`: exact quadratic root at/above R0, Newton on the full equation below."""
+    if isinstance(resistance_ohm, (int, float)):
+        return _temperature_scalar(float(resistance_ohm), coef)
     r = np.asarray(resistance_ohm, dtype=float)
     with np.errstate(invalid="ignore"):
         t = (-coef.a + np.sqrt(coef.a**2 - 4.0 * coef.b * (1.0 - r / coef.r0))) / (2.0 * coef.b)
@@ -50,6 +53,18 @@ def temperature(resistance_ohm: ArrayLike, coef: CvdCoefficients = PT1000) -> np
             tb = tb - f / df
         t = np.where(below, tb, t)
     return _like(t, resistance_ohm)
+
+
+def _temperature_scalar(r: float, coef: CvdCoefficients) -> float:
+    """`temperature` for one float without numpy overhead (drivers convert one reading at a time)."""
+    disc = coef.a**2 - 4.0 * coef.b * (1.0 - r / coef.r0)
+    if r >= coef.r0 or math.isnan(r):
+        return (-coef.a + math.sqrt(disc)) / (2.0 * coef.b) if disc >= 0 else math.nan
+    t = (-coef.a + math.sqrt(disc)) / (2.0 * coef.b) if disc >= 0 else (r / coef.r0 - 1.0) / coef.a
+    for _ in range(_NEWTON_STEPS):
+        f = coef.r0 * (1.0 + coef.a * t + coef.b * t * t + coef.c * (t - 100.0) * t**3) - r
+        t -= f / (coef.r0 * (coef.a + 2.0 * coef.b * t + coef.c * (4.0 * t**3 - 300.0 * t * t)))
+    return t
 
 
 def in_range(temperature_c: ArrayLike) -> np.ndarray | bool:

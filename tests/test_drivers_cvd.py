@@ -45,3 +45,10 @@ def test_round_trip_property(t: float) -> None:
 def test_monotonic() -> None:
     r = cvd.resistance(np.linspace(-200, 850, 5000))
     assert np.all(np.diff(r) > 0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(min_value=0.0, max_value=5000.0))
+def test_scalar_and_vector_paths_agree(r: float) -> None:
+    vector = cvd.temperature(np.array([r]))[0]
+    assert cvd.temperature(r) == pytest.approx(vector, abs=1e-9, nan_ok=True)

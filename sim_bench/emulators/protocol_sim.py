@@ -61,6 +61,21 @@ class Serial(SerialBase):
         del self._rx[:size]
         return data
 
+    def read_until(self, expected: bytes = b"\n", size: int | None = None) -> bytes:
+        """Up to and including `expected` (or `size` bytes); works with timeout=0 in simulated time."""
+        deadline = None if self.timeout is None else time.monotonic() + self.timeout
+        self._pull()
+        while (expected not in self._rx and (size is None or len(self._rx) < size)
+               and (deadline is None or time.monotonic() < deadline)):
+            time.sleep(_WAIT_S)
+            self._pull()
+        end = self._rx.find(expected)
+        n = len(self._rx) if end < 0 else end + len(expected)
+        n = n if size is None else min(n, size)
+        data = bytes(self._rx[:n])
+        del self._rx[:n]
+        return data
+
     def write(self, data: bytes) -> int:
         if not self.is_open:
             raise PortNotOpenError()
