@@ -1,0 +1,62 @@
+"""`benchlab run PROTOCOL --bench sim|BENCH.toml --out RUN.h5`: run a protocol, acquire, write a run file."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from benchlab.errors import InputError
+from protocols.catalog import NAMES
+
+NAME = "run"
+HELP = "run a protocol (table1, cooldown-sweep, validation) on the simulated bench or a hardware bench"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("protocol", nargs="?", help=f"protocol: {', '.join(NAMES)} (taken from the file with --resume)")
+    parser.add_argument("--bench", default="sim", help="'sim' (simulated bench) or a BENCH.toml for hardware")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the schedule and the simulated bench")
+    parser.add_argument("--cycles", type=int, help="number of cycles (cooldown-sweep: grid points)")
+    parser.add_argument("--duration", type=float, help="planned duration in s (table1)")
+    parser.add_argument("--grid", help="cooldown-sweep grid: RPM:S[:SLIP_RPM],... e.g. 1000:1,1000:0,2000:0:500")
+    parser.add_argument("--out", help="run file to write (HDF5)")
+    parser.add_argument("--dry-run", action="store_true", help="print the schedule, check limits, estimate duration")
+    parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def run(args: argparse.Namespace) -> int:
+    from benchlab.runner.session import RunRequest, execute
+
+    if args.resume:
+        out = Path(args.resume)
+        if args.out and Path(args.out) != out:
+            raise InputError("--out", "--out", "the same file as --resume (a run is resumed in place)")
+    elif not args.dry_run and not args.out:
+        raise InputError("command line", "--out", "a run file to write")
+    else:
+        out = Path(args.out or "dry-run.h5")
+    if not args.resume and args.protocol not in NAMES:
+        raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)}, got {args.protocol!r}")
+    if args.cycles is not None and args.cycles <= 0:
+        raise InputError("command line", "--cycles", "a positive number of cycles")
+    if args.duration is not None and not args.duration > 0:
+        raise InputError("command line", "--duration", "a positive duration in s")
+    if args.bench != "sim" and not Path(args.bench).exists():
+        raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
+    tty = sys.stderr.isatty()
+
+    def progress(line: str) -> None:
+        print(("\r" + line.ljust(110)) if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+
+    request = RunRequest(protocol=args.protocol or "", out=out, bench=args.bench, seed=args.seed, cycles=args.cycles,
+                         duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
+                         progress=None if args.quiet else progress)
+    code, summary = execute(request)
+    if summary is not None:
+        if tty and not args.quiet:
+            print(file=sys.stderr)
+        print("\n".join(summary.lines()))
+        print(f"run file   {out}")
+    return code

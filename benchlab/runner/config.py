@@ -1,0 +1,137 @@
+"""BENCH.toml: where a hardware bench's devices are, how its channels map, its calibration and limits.
+
+Every field is checked before anything is opened; a bad one raises InputError naming it (one line, exit 2).
+See examples/bench.toml.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from benchlab.errors import InputError
+from benchlab.runner.devices import BenchConfig
+from drivers import cvd
+from protocols.limits import BenchLimits
+
+ALIGNED_TEMPERATURES = ("T_air", "T_housing", "T_ambient", "T_engine")
+_SECTIONS = ("instrument", "node", "can", "drivetrain", "acquisition", "limits")
+
+
+def _table(doc: Mapping[str, Any], key: str, src: str, required: bool = True) -> Mapping[str, Any]:
+    value = doc.get(key)
+    if value is None and not required:
+        return {}
+    if not isinstance(value, dict):
+        raise InputError(src, key, "a table" + (" (missing)" if value is None else f", got {value!r}"))
+    return value
+
+
+def _str(t: Mapping[str, Any], key: str, field: str, src: str, default: str | None = None) -> str:
+    value = t.get(key, default)
+    if not isinstance(value, str) or not value:
+        raise InputError(src, field, f"a non-empty string, got {value!r}")
+    return value
+
+
+def _num(t: Mapping[str, Any], key: str, field: str, src: str, default: float, integer: bool = False) -> float:
+    value = t.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise InputError(src, field, f"a positive number, got {value!r}")
+    if integer and int(value) != value:
+        raise InputError(src, field, f"an integer, got {value!r}")
+    return int(value) if integer else float(value)
+
+
+def _coefficients(t: Any, field: str, src: str) -> cvd.CvdCoefficients:
+    if not isinstance(t, dict):
+        raise InputError(src, field, f"a table of Callendar-Van Dusen coefficients r0, a, b, c, got {t!r}")
+    values = {}
+    for key in t:
+        if key not in ("r0", "a", "b", "c"):
+            raise InputError(src, f"{field}.{key}", "one of r0, a, b, c (unknown key)")
+        v = t[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise InputError(src, f"{field}.{key}", f"a finite number, got {v!r}")
+        values[key] = float(v)
+    if values.get("r0", 1000.0) <= 0:
+        raise InputError(src, f"{field}.r0", "a positive resistance in ohm")
+    return cvd.CvdCoefficients(**values)
+
+
+def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
+    """Read and check BENCH.toml; InputError naming the first bad field."""
+    src = str(path)
+    try:
+        doc = tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise InputError(src, "file", "an existing bench file (not found)") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(src, "file", f"TOML ({exc})") from None
+    for key in doc:
+        if key not in _SECTIONS:
+            raise InputError(src, key, f"one of the sections {', '.join(_SECTIONS)} (unknown)")
+    inst = _table(doc, "instrument", src)
+    channels_t = _table(inst, "channels", src)
+    channels: dict[int, str] = {}
+    for key, name in channels_t.items():
+        if not key.isdigit() or not 101 <= int(key) <= 999:
+            raise InputError(src, f"instrument.channels.{key}", "a channel number like 101")
+        if name not in ALIGNED_TEMPERATURES:
+            raise InputError(src, f"instrument.channels.{key}", f"one of {', '.join(ALIGNED_TEMPERATURES)}, got {name!r}")
+        channels[int(key)] = name
+    for required in ("T_air", "T_housing", "T_ambient"):
+        if required not in channels.values():
+            raise InputError(src, "instrument.channels", f"a channel for {required} (missing)")
+    mode = inst.get("mode", "fres")
+    if mode not in ("fres", "frtd"):
+        raise InputError(src, "instrument.mode", f"fres or frtd, got {mode!r}")
+    calib_t = _table(inst, "calibration", src, required=False)
+    calibration = {}
+    for key, coef in calib_t.items():
+        if not key.isdigit() or int(key) not in channels:
+            raise InputError(src, f"instrument.calibration.{key}", "a configured channel number")
+        calibration[int(key)] = _coefficients(coef, f"instrument.calibration.{key}", src)
+    node = _table(doc, "node", src)
+    node_cal = _table(node, "calibration", src, required=False)
+    node_coefs = []
+    for i in (1, 2):
+        node_coefs.append(_coefficients(node_cal[str(i)], f"node.calibration.{i}", src) if str(i) in node_cal
+                          else cvd.PT1000)
+    for key in node_cal:
+        if key not in ("1", "2"):
+            raise InputError(src, f"node.calibration.{key}", "1 or 2 (the flywheel sensors)")
+    can_t = _table(doc, "can", src)
+    interface = _str(can_t, "interface", "can.interface", src)
+    if interface == "udp_multicast":
+        raise InputError(src, "can.interface", "a CAN interface; udp_multicast leaves the machine, not allowed")
+    can_cfg = {k: v for k, v in can_t.items() if k != "dbc"}
+    dbc = can_t.get("dbc")
+    if dbc is not None:
+        dbc_path = Path(path).parent / _str(can_t, "dbc", "can.dbc", src)
+        if not dbc_path.exists():
+            raise InputError(src, "can.dbc", f"an existing DBC file ({dbc_path} not found)")
+        dbc = str(dbc_path)
+    drive = _table(doc, "drivetrain", src, required=False)
+    acq = _table(doc, "acquisition", src, required=False)
+    limits = BenchLimits.from_mapping(_table(doc, "limits", src, required=False), src)
+    return BenchConfig(
+        instrument_url=_str(inst, "url", "instrument.url", src), node_url=_str(node, "url", "node.url", src),
+        can=can_cfg, instrument_channels=channels, instrument_mode=mode,
+        instrument_baudrate=int(_num(inst, "baudrate", "instrument.baudrate", src, 115200, True)),
+        instrument_timeout_s=_num(inst, "timeout_s", "instrument.timeout_s", src, 2.0),
+        instrument_period_s=_num(inst, "period_s", "instrument.period_s", src, 0.2),
+        instrument_calibration=calibration,
+        node_baudrate=int(_num(node, "baudrate", "node.baudrate", src, 921600, True)),
+        node_period_s=_num(node, "period_s", "node.period_s", src, 0.05),
+        node_calibration=(node_coefs[0], node_coefs[1]), dbc=dbc,
+        gear_ratio=_num(drive, "gear_ratio", "drivetrain.gear_ratio", src, 15.0),
+        dt=_num(acq, "dt", "acquisition.dt", src, 0.01),
+        tick_s=_num(acq, "tick_s", "acquisition.tick_s", src, 0.1),
+        fast_tick_s=_num(acq, "fast_tick_s", "acquisition.fast_tick_s", src, 0.02),
+        flush_every_s=_num(acq, "flush_every_s", "acquisition.flush_every_s", src, 1.0),
+        limits=limits, source=src)

@@ -1,0 +1,326 @@
+"""The bench as the runner sees it: the three drivers behind one small interface, hardware or simulated.
+
+`DriverBench` opens the PT1000 scanner and the node gateway by pyserial URL and the controllers on a
+python-can bus, turns their typed readings into rows of the run file's raw streams (`layout()`), keeps
+the latest values the runner's conditions and interlocks need (`status`), and sends set-points. The
+simulated bench is only another set of URLs and another bus (plus a `service` hook that lets the
+emulators run up to the shared clock's time before the drivers poll).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from benchlab.acquire import AlignedSource, Layout, StreamSpec
+from drivers import cvd
+from drivers.can_signals import CLAMP_CLAMPED, CLAMP_SLIPPING
+from drivers.errors import DriverError
+from protocols.limits import BenchLimits
+
+RPM = math.pi / 30.0
+STATUS_CODES = {"ok": 0.0, "open": 1.0, "short": 2.0, "range": 3.0, "fault": 4.0}
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """Where the devices are and how their channels map; loaded from BENCH.toml or made by the sim bench."""
+
+    instrument_url: str
+    node_url: str
+    can: Mapping[str, Any]
+    instrument_channels: Mapping[int, str] = field(default_factory=lambda: {101: "T_air", 102: "T_housing",
+                                                                             103: "T_ambient"})
+    instrument_mode: str = "fres"
+    instrument_baudrate: int = 115200
+    instrument_timeout_s: float = 2.0
+    instrument_period_s: float = 0.2
+    instrument_calibration: Mapping[int, cvd.CvdCoefficients] = field(default_factory=dict)
+    node_baudrate: int = 921600
+    node_period_s: float = 0.05
+    node_calibration: tuple[cvd.CvdCoefficients, cvd.CvdCoefficients] = (cvd.PT1000, cvd.PT1000)
+    dbc: str | None = None
+    gear_ratio: float = 15.0
+    dt: float = 0.01
+    tick_s: float = 0.2
+    fast_tick_s: float = 0.05
+    flush_every_s: float = 1.0
+    limits: BenchLimits = BenchLimits()
+    source: str = "sim"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"source": self.source, "instrument": {"url": self.instrument_url, "mode": self.instrument_mode,
+                "channels": {str(k): v for k, v in self.instrument_channels.items()},
+                "period_s": self.instrument_period_s,
+                "calibration": {str(k): c.__dict__ if hasattr(c, "__dict__") else _coef(c)
+                                for k, c in self.instrument_calibration.items()}},
+                "node": {"url": self.node_url, "period_s": self.node_period_s,
+                         "calibration": [_coef(c) for c in self.node_calibration]},
+                "can": {k: v for k, v in self.can.items()}, "dbc": self.dbc, "gear_ratio": self.gear_ratio,
+                "acquisition": {"dt": self.dt, "tick_s": self.tick_s, "fast_tick_s": self.fast_tick_s,
+                                "flush_every_s": self.flush_every_s},
+                "limits": self.limits.as_dict()}
+
+
+def _coef(c: cvd.CvdCoefficients) -> dict[str, float]:
+    return {"r0": c.r0, "a": c.a, "b": c.b, "c": c.c}
+
+
+@dataclass
+class BenchStatus:
+    """Latest values the runner decides on (NaN/None while unknown)."""
+
+    t: float = 0.0
+    T_flywheel: float = math.nan
+    t_flywheel: float = -math.inf  # host time of the last node frame with a valid temperature
+    t_node: float = 0.0  # host time of the last node frame of any kind
+    T_air: float = math.nan
+    engine_speed: float = math.nan
+    clutch_speed: float = math.nan
+    clutch_torque: float = math.nan
+    clamp_state: int = 0
+    controllers_bad: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def slipping(self) -> bool:
+        return self.clamp_state == CLAMP_SLIPPING
+
+    @property
+    def locked(self) -> bool:
+        return self.clamp_state == CLAMP_CLAMPED
+
+    @property
+    def friction_power(self) -> float:
+        if not self.slipping or not np.isfinite(self.clutch_torque):
+            return 0.0
+        return abs(self.clutch_torque * (self.engine_speed - self.clutch_speed) * RPM)
+
+
+Reading = tuple[str, float, tuple[float, ...]]
+BenchEvent = tuple[float, str, str]  # (time, kind, detail)
+
+_CAN_STREAMS = {
+    "can_drive": (("speed", "drive.speed", "rpm"), ("torque", "drive.torque", "N*m"),
+                  ("state", "drive.state", "1"), ("fault_code", "drive.fault_code", "1")),
+    "can_clutch": (("torque", "clutch.torque", "N*m"), ("position", "clutch.position", "mm"),
+                   ("clamp_state", "clutch.clamp_state", "1"), ("state", "clutch.state", "1"),
+                   ("fault_code", "clutch.fault_code", "1")),
+    "can_load": (("torque", "load.torque", "N*m"), ("speed", "load.speed", "rpm"),
+                 ("state", "load.state", "1"), ("fault_code", "load.fault_code", "1")),
+}
+_STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_load"}
+
+
+def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Grid channels computed from held ones: clutch state, friction power, mean flywheel temperature."""
+    clamp = out["_clamp_state"]
+    state = np.where(np.isnan(clamp), np.nan, (clamp == CLAMP_SLIPPING) | (clamp == CLAMP_CLAMPED)).astype(float)
+    slip = (out["engine_speed"] - out["clutch_speed"]) * RPM
+    power = np.where(clamp == CLAMP_SLIPPING, np.abs(out["clutch_torque"] * slip), 0.0)
+    power[np.isnan(clamp) | np.isnan(slip) | np.isnan(out["clutch_torque"])] = np.nan
+    f1, f2 = out["T_flywheel_1"], out["T_flywheel_2"]
+    both = np.column_stack([f1, f2])
+    count = np.sum(np.isfinite(both), axis=1)
+    mean = np.where(count > 0, np.nansum(both, axis=1) / np.maximum(count, 1), np.nan)
+    return {"clutch_state": state, "friction_power": power, "T_flywheel": mean}
+
+
+ALIGNED_UNITS = {"engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": "N*m", "clutch_state": "1",
+                 "friction_power": "W", "T_flywheel": "degC", "T_air": "degC", "T_housing": "degC",
+                 "T_ambient": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC"}
+
+
+def bench_layout(config: BenchConfig) -> Layout:
+    """Raw streams of the drivers and how /aligned is built from them (documented in docs/runfile.md)."""
+    slow = max(config.tick_s, config.instrument_period_s)
+    dmm_cols: list[tuple[str, str]] = []
+    for name in config.instrument_channels.values():
+        dmm_cols += [(name, "degC"), (f"{name}_ohm", "ohm"), (f"{name}_status", "1")]
+    streams = [
+        StreamSpec("instrument", tuple(dmm_cols), 1.0 / min(config.instrument_period_s, config.fast_tick_s),
+                   1.5 * slow),
+        StreamSpec("node", (("seq", "1"), ("node_time", "s"), ("T_flywheel_1", "degC"), ("T_flywheel_2", "degC"),
+                            ("R_flywheel_1", "ohm"), ("R_flywheel_2", "ohm"), ("status_1", "1"), ("status_2", "1"),
+                            ("supply", "V"), ("rssi", "dBm"), ("lqi", "1"), ("flags", "1")),
+                   1.0 / config.node_period_s + 1.0, 1.5 * config.node_period_s),
+    ]
+    for stream, cols in _CAN_STREAMS.items():
+        streams.append(StreamSpec(stream, tuple((c, u) for c, _, u in cols), 1.0 / config.fast_tick_s, 1.5 * config.tick_s))
+    streams.append(StreamSpec("setpoints", (("engine_speed", "rpm"), ("clutch_torque", "N*m"), ("clutch_open", "1"),
+                                            ("load_torque", "N*m")), 5.0, math.inf))
+    sources = [AlignedSource("engine_speed", "can_drive", "speed"),
+               AlignedSource("clutch_speed", "can_load", "speed", config.gear_ratio),
+               AlignedSource("clutch_torque", "can_clutch", "torque"),
+               AlignedSource("_clamp_state", "can_clutch", "clamp_state"),
+               AlignedSource("load_torque", "can_load", "torque"),
+               AlignedSource("T_flywheel_1", "node", "T_flywheel_1"),
+               AlignedSource("T_flywheel_2", "node", "T_flywheel_2")]
+    for name in config.instrument_channels.values():
+        sources.append(AlignedSource(name, "instrument", name))
+    units = dict(ALIGNED_UNITS)
+    for name in config.instrument_channels.values():
+        units.setdefault(name, "degC")
+    return Layout(tuple(streams), tuple(sources), units, derive_aligned, config.dt)
+
+
+class DriverBench:
+    """The drivers of a bench (real or simulated) behind `command`/`safe_state`/`poll`."""
+
+    def __init__(self, config: BenchConfig, clock: Callable[[], float], *, bus: Any = None,
+                 service: Callable[[], None] | None = None) -> None:
+        import can as _can
+
+        from drivers.can_bench import CanBench
+        from drivers.clutch_node import ClutchNodeGateway
+        from drivers.pt1000 import Pt1000Scanner
+
+        self.config, self.clock, self.service = config, clock, service
+        self.layout = bench_layout(config)
+        self.status = BenchStatus()
+        self.events: list[BenchEvent] = []
+        self.readings: list[Reading] = []
+        channels = sorted(config.instrument_channels)
+        self.scanner = Pt1000Scanner.open(config.instrument_url, channels, mode=config.instrument_mode,
+                                          baudrate=config.instrument_baudrate, timeout=config.instrument_timeout_s,
+                                          coefficients=dict(config.instrument_calibration), clock=clock)
+        self.idn = self.scanner.identify()
+        self.scanner.reset()
+        self.gateway = ClutchNodeGateway.open(config.node_url, baudrate=config.node_baudrate,
+                                              period_s=config.node_period_s, clock=clock,
+                                              coefficients=config.node_calibration)
+        kwargs: dict[str, Any] = {"clock": clock, "idle_rpm": config.limits.idle_speed_rpm}
+        if config.dbc:
+            kwargs["dbc"] = config.dbc
+        self.can = CanBench(bus if bus is not None else _can.Bus(**dict(config.can)), **kwargs)
+        self._names = [config.instrument_channels[c] for c in self.scanner.channels]
+        self._next_scan = clock()
+        self._setpoints: tuple[float, ...] | None = None
+        self._last_error_t = -math.inf
+
+    # -- commands ----------------------------------------------------------------------------------
+    def command(self, engine_rpm: float, clutch_torque_nm: float, clutch_open: bool, load_nm: float) -> None:
+        """Set-points to the controllers (sent at once, then cyclically by the CAN driver)."""
+        self.can.set_drive_speed(engine_rpm)
+        if clutch_open:
+            self.can.open_clutch()
+        else:
+            self.can.set_clutch_torque(clutch_torque_nm)
+        self.can.set_load_torque(load_nm)
+        self._record_setpoints((engine_rpm, 0.0 if clutch_open else clutch_torque_nm, float(clutch_open), load_nm))
+
+    def safe_state(self) -> None:
+        """Clutch open at zero torque, load torque zero, engine to idle."""
+        self.can.safe_state()
+        self._record_setpoints((self.config.limits.idle_speed_rpm, 0.0, 1.0, 0.0))
+
+    def _record_setpoints(self, values: tuple[float, ...]) -> None:
+        if values != self._setpoints:
+            self._setpoints = values
+            self.readings.append(("setpoints", self.clock(), values))
+
+    # -- polling -----------------------------------------------------------------------------------
+    def poll(self) -> tuple[list[Reading], list[BenchEvent]]:
+        """Everything the devices delivered since the last poll, as raw-stream rows and events."""
+        if self.service is not None:
+            self.service()
+        now = self.clock()
+        self.status.t = now
+        self._poll_node(now)
+        if now >= self._next_scan - 1e-9:
+            self._poll_instrument(now)
+            self._next_scan = max(self._next_scan + self.config.instrument_period_s, now + 1e-9)
+        self._poll_can(now)
+        readings, events = self.readings, self.events
+        self.readings, self.events = [], []
+        return readings, events
+
+    def _poll_node(self, now: float) -> None:
+        try:
+            samples = self.gateway.poll()
+        except DriverError as exc:
+            self._error(now, "node_error", str(exc), self.gateway.reconnect)
+            return
+        if samples:
+            last_ms = samples[-1].node_time_ms
+            for s in samples:
+                lag = ((last_ms - s.node_time_ms) & 0xFFFFFFFF) / 1000.0
+                t = s.t_host - (lag if lag < 10 * self.config.node_period_s * len(samples) else 0.0)
+                temps = tuple(math.nan if v is None else v for v in s.temperature_c)
+                ohms = tuple(math.nan if v is None else v for v in s.resistance_ohm)
+                row = (float(s.seq), s.node_time_ms / 1000.0, *temps, *ohms,
+                       STATUS_CODES.get(s.sensor_status[0], 4.0), STATUS_CODES.get(s.sensor_status[1], 4.0),
+                       s.supply_mv / 1000.0, float(s.rssi_dbm), float(s.lqi), float(s.flags))
+                self.readings.append(("node", t, row))
+                self.status.t_node = max(self.status.t_node, t)
+                valid = [v for v in temps if np.isfinite(v)]
+                if valid:
+                    self.status.T_flywheel = sum(valid) / len(valid)
+                    self.status.t_flywheel = t
+        for ev in self.gateway.pop_events():
+            detail = f"last seq {ev.last_seq}"
+            if ev.span_s is not None:
+                detail += f", span {ev.span_s:.3f} s, lost {ev.lost_frames} frames"
+            self.events.append((ev.t_host, ev.kind, detail))
+
+    def _poll_instrument(self, now: float) -> None:
+        try:
+            readings = self.scanner.read()
+        except DriverError as exc:
+            self._error(now, "instrument_error", str(exc), self.scanner.reconnect)
+            return
+        row: list[float] = []
+        for r, name in zip(readings, self._names):
+            row += [math.nan if r.temperature_c is None else r.temperature_c,
+                    math.nan if r.resistance_ohm is None else r.resistance_ohm, STATUS_CODES[r.status]]
+            if name == "T_air" and r.temperature_c is not None:
+                self.status.T_air = r.temperature_c
+        t = readings[0].t_host if readings else now
+        self.readings.append(("instrument", t, tuple(row)))
+        for rec in self.scanner.error_log:
+            self.events.append((rec.t_host, "instrument_error", f"{rec.code},{rec.text}"))
+        self.scanner.error_log.clear()
+
+    def _poll_can(self, now: float) -> None:
+        try:
+            samples = self.can.poll()
+        except Exception as exc:  # noqa: BLE001 - a bus error is an event, the watchdog does the rest
+            self._error(now, "can_error", str(exc), None)
+            return
+        st = self.status
+        for s in samples:
+            stream = _STATUS_MESSAGE.get(s.controller)
+            if stream is None or not s.message.endswith("_Status"):
+                continue
+            cols = _CAN_STREAMS[stream]
+            self.readings.append((stream, s.t_host, tuple(float(s.values.get(key, math.nan)) for _, key, _ in cols)))
+            v = s.values
+            if "drive.speed" in v:
+                st.engine_speed = v["drive.speed"]
+            if "load.speed" in v:
+                st.clutch_speed = v["load.speed"] * self.config.gear_ratio
+            if "clutch.torque" in v:
+                st.clutch_torque = v["clutch.torque"]
+                st.clamp_state = int(v["clutch.clamp_state"])
+        for ev in self.can.pop_events():
+            self.events.append((ev.t_host, f"controller_{ev.kind}", f"{ev.controller}: {ev.detail}"))
+        st.controllers_bad = {**{c: "silent" for c in self.can.silent}, **{c: "fault" for c in self.can.faulted}}
+
+    def _error(self, now: float, kind: str, detail: str, reconnect: Callable[[], None] | None) -> None:
+        self.events.append((now, kind, detail))
+        if reconnect is not None and now - self._last_error_t > 1.0:
+            self._last_error_t = now
+            try:
+                reconnect()
+            except DriverError as exc:
+                self.events.append((now, kind, f"reconnect failed: {exc}"))
+
+    def close(self) -> None:
+        for closer in (self.scanner.close, self.gateway.close, self.can.close):
+            try:
+                closer()
+            except Exception:  # noqa: BLE001 - closing is best effort
+                pass

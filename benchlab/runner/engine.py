@@ -1,0 +1,400 @@
+"""Executes a protocol (a schedule of Steps) on a bench, acquiring everything, with interlocks that always hold.
+
+The loop ticks on the shared clock (fast ticks while the clutch slips or a launch runs, slow ticks
+otherwise): the bench's drivers are polled, their rows go to the run-file writer, the interlocks and the
+step's end conditions are evaluated on the latest values, and set-points are sent. An interlock puts the
+bench in its safe state at once (clutch open at zero torque, load torque zero, engine at idle) and is an
+event; then the runner waits until the cause has cleared (plus `resume_after_s`) and continues with the
+next cycle, or aborts, as the limits say. SIGINT/SIGTERM set a flag the loop checks every tick.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from benchlab.acquire import RunWriter
+from benchlab.runner.devices import BenchStatus
+from protocols.limits import BenchLimits
+from protocols.schedule import Condition, Step
+
+STATE_FIELDS = ("cycle", "next_step", "resumes", "energy_j")
+
+
+class Bench(Protocol):
+    """What the runner needs from a bench (DriverBench implements it)."""
+
+    status: BenchStatus
+    gateway: Any
+
+    def command(self, engine_rpm: float, clutch_torque_nm: float, clutch_open: bool, load_nm: float) -> None: ...
+    def safe_state(self) -> None: ...
+    def poll(self) -> tuple[list, list]: ...
+
+
+class Clock(Protocol):
+    def __call__(self) -> float: ...
+    def sleep_until(self, t: float) -> float: ...
+
+
+class Stopped(Exception):
+    """A stop was requested (signal) or an interlock aborts the run."""
+
+    def __init__(self, reason: str, code: int) -> None:
+        super().__init__(reason)
+        self.reason, self.code = reason, code
+
+
+class _SkipCycle(Exception):
+    pass
+
+
+@dataclass
+class Interlocks:
+    """Watches the limits that hold whatever the protocol does; tracks engagements (slip intervals)."""
+
+    limits: BenchLimits
+    slip_start: float | None = None
+    slip_energy: float = 0.0
+    total_energy: float = 0.0
+    engagements: int = 0
+    _last_t: float | None = None
+
+    def update(self, st: BenchStatus, now: float, events: list[tuple[str, str]]) -> None:
+        dt = 0.0 if self._last_t is None else max(0.0, now - self._last_t)
+        self._last_t = now
+        if st.slipping:
+            if self.slip_start is None:
+                self.slip_start, self.slip_energy = now, 0.0
+                self.engagements += 1
+                events.append(("engagement_start", ""))
+            power = st.friction_power * dt
+            self.slip_energy += power
+            self.total_energy += power
+        elif self.slip_start is not None:
+            events.append(("engagement_end", f"slip {now - self.slip_start:.2f} s, {self.slip_energy / 1e3:.1f} kJ"))
+            self.slip_start = None
+
+    def tripped(self, st: BenchStatus, now: float) -> list[tuple[str, str]]:
+        lim, out = self.limits, []
+        if np.isfinite(st.T_flywheel) and st.T_flywheel > lim.max_flywheel_c:
+            out.append(("flywheel_over_temperature", f"T_flywheel {st.T_flywheel:.1f} > {lim.max_flywheel_c:g} degC"))
+        if np.isfinite(st.T_air) and st.T_air > lim.max_air_c:
+            out.append(("air_over_temperature", f"T_air {st.T_air:.1f} > {lim.max_air_c:g} degC"))
+        if lim.heartbeat and st.controllers_bad:
+            out.append(("controller_lost", ", ".join(f"{c} {why}" for c, why in sorted(st.controllers_bad.items()))))
+        silence = now - st.t_node
+        if silence > lim.radio_silence_s:
+            out.append(("radio_silence", f"no flywheel frame for {silence:.1f} s > {lim.radio_silence_s:g} s"))
+        if self.slip_start is not None:
+            if now - self.slip_start > lim.max_slip_time_s:
+                out.append(("slip_time", f"slipping {now - self.slip_start:.1f} s > {lim.max_slip_time_s:g} s"))
+            if self.slip_energy > lim.max_slip_energy_j:
+                out.append(("slip_energy", f"{self.slip_energy / 1e3:.1f} kJ > {lim.max_slip_energy_j / 1e3:g} kJ"))
+        return out
+
+    def clear(self, st: BenchStatus, now: float) -> bool:
+        lim = self.limits
+        hot = np.isfinite(st.T_flywheel) and st.T_flywheel > lim.max_flywheel_c - lim.clear_margin_k
+        hot_air = np.isfinite(st.T_air) and st.T_air > lim.max_air_c - lim.clear_margin_k
+        radio = now - st.t_node > min(1.0, lim.radio_silence_s)
+        return not (hot or hot_air or (lim.heartbeat and st.controllers_bad) or radio or st.slipping)
+
+
+@dataclass
+class RunSummary:
+    cycles_planned: int
+    cycles_done: int = 0
+    energy_j: float = 0.0
+    engagements: int = 0
+    peak: dict[str, float] = field(default_factory=lambda: {"T_flywheel": -math.inf, "T_air": -math.inf})
+    events: collections.Counter = field(default_factory=collections.Counter)
+    frames_ok: int = 0
+    frames_lost: int = 0
+    status: str = "complete"
+    reason: str = ""
+    sim_s: float = 0.0
+    wall_s: float = 0.0
+
+    def lines(self) -> list[str]:
+        rate = self.frames_lost / max(1, self.frames_ok + self.frames_lost)
+        ev = ", ".join(f"{k} {v}" for k, v in sorted(self.events.items())) or "none"
+        speed = f" ({self.sim_s / self.wall_s:.0f}x real time)" if self.wall_s > 0 else ""
+        return [f"run {self.status}{': ' + self.reason if self.reason else ''}",
+                f"  cycles      {self.cycles_done} of {self.cycles_planned}",
+                f"  duration    {self.sim_s:.0f} s of bench time in {self.wall_s:.1f} s{speed}",
+                f"  energy      {self.energy_j / 1e3:.1f} kJ in {self.engagements} engagements",
+                f"  peak        T_flywheel {self.peak['T_flywheel']:.1f} degC, T_air {self.peak['T_air']:.1f} degC",
+                f"  drop-outs   {rate * 100:.2f} % of flywheel frames lost ({self.frames_lost} of "
+                f"{self.frames_ok + self.frames_lost})",
+                f"  events      {ev}"]
+
+
+class Runner:
+    """Runs `steps` on `bench`, writing into `writer`; `run()` returns the summary (status complete/aborted)."""
+
+    def __init__(self, bench: Bench, clock: Clock, steps: Sequence[Step], writer: RunWriter, limits: BenchLimits, *,
+                 tick_s: float = 0.2, fast_tick_s: float = 0.05, dt: float = 0.01,
+                 progress: Callable[[str], None] | None = None, progress_every_s: float = 2.0) -> None:
+        self.bench, self.clock, self.steps, self.writer, self.limits = bench, clock, tuple(steps), writer, limits
+        self.tick_s, self.fast_tick_s, self.dt = tick_s, fast_tick_s, dt
+        self.progress, self.progress_every_s = progress, progress_every_s
+        self.interlocks = Interlocks(limits)
+        self.summary = RunSummary(len({s.cycle for s in self.steps}))
+        self.stop_request: str | None = None
+        self.cycle = -1
+        self.synced = True
+        self._last_progress = -math.inf
+        self._history: collections.deque[tuple[float, float]] = collections.deque()
+        self._step_index = 0
+
+    # -- public ---------------------------------------------------------------------------------------
+    def request_stop(self, reason: str, code: int = 130) -> None:
+        self.stop_request = reason
+        self._stop_code = code
+
+    def run(self, start_step: int = 0) -> RunSummary:
+        wall0, t0 = time.perf_counter(), self.clock()
+        self.summary.energy_j = float(self.writer.state.get("energy_j", 0.0) or 0.0) if start_step else 0.0
+        if not math.isfinite(self.summary.energy_j):
+            self.summary.energy_j = 0.0
+        energy0 = self.summary.energy_j
+        self.bench.safe_state()
+        self._tick()
+        try:
+            i = start_step
+            while i < len(self.steps):
+                step = self.steps[i]
+                try:
+                    self._run_step(i, step)
+                    i += 1
+                    if i == len(self.steps) or self.steps[i].cycle != step.cycle:
+                        self.summary.cycles_done += 1
+                except _SkipCycle:
+                    cycle = step.cycle
+                    while i < len(self.steps) and self.steps[i].cycle == cycle:
+                        i += 1
+                    self.writer.event(self.clock(), "cycle_skipped", cycle, "after an interlock")
+            self.bench.safe_state()
+            self._tick()
+            self.writer.event(self.clock(), "run_complete", self.cycle)
+        except Stopped as stop:
+            self.bench.safe_state()
+            self.writer.event(self.clock(), "run_aborted", self.cycle, stop.reason)
+            self._tick(interlocks=False)
+            self.summary.status, self.summary.reason = "aborted", stop.reason
+            self.summary.exit_code = stop.code  # type: ignore[attr-defined]
+        self.summary.energy_j = energy0 + self.interlocks.total_energy
+        self.writer.state["energy_j"] = self.summary.energy_j
+        self.summary.engagements = self.interlocks.engagements
+        stats = getattr(getattr(self.bench, "gateway", None), "stats", None)
+        if stats is not None:
+            self.summary.frames_ok, self.summary.frames_lost = stats.frames_ok, stats.lost
+        self.summary.sim_s, self.summary.wall_s = self.clock() - t0, time.perf_counter() - wall0
+        self.writer.flush(self.clock())
+        return self.summary
+
+    # -- steps ----------------------------------------------------------------------------------------
+    def _run_step(self, index: int, step: Step) -> None:
+        now = self.clock()
+        if step.cycle != self.cycle:
+            self.cycle = step.cycle
+            self.synced = True
+            self.writer.state["cycle"] = step.cycle
+            self.writer.event(now, "cycle_start", step.cycle, _point_text(step))
+        self._step_index = index
+        self.writer.state["next_step"] = index
+        self._history.clear()
+        detail = step.phase + (f" {step.label}" if step.label else "") + (f" {_point_text(step)}" if step.point else "")
+        self.writer.event(now, "step_start", step.cycle, detail)
+        if step.label == "cooldown":
+            self.writer.event(now, "cooldown_start", step.cycle, _point_text(step))
+        t_end = now + step.duration_s
+        self._t_step_start = now
+        heat = _Pulses(step, now) if step.phase == "heat" else None
+        self._apply(step, heat)
+        reason = "time"
+        while True:
+            fast = step.phase == "launch" or self.bench.status.slipping or (heat is not None and heat.near(self.clock()))
+            self._tick(fast=fast)
+            now = self.clock()
+            st = self.bench.status
+            if step.phase == "launch" and st.locked and now > self._step_t0 + 2 * self.fast_tick_s:
+                self.writer.event(now, "synchronised", step.cycle, f"after {now - self._step_t0:.2f} s")
+                reason = "synchronised"
+                break
+            if step.until and self._conditions_met(step.until, now):
+                reason = "condition"
+                break
+            if now >= t_end - 1e-9:
+                if step.phase == "launch":
+                    self.synced = False
+                    self.writer.event(now, "slip_time_limit", step.cycle,
+                                      f"not synchronous after {step.duration_s:g} s: clutch opened")
+                elif step.until:
+                    self.writer.event(now, "timeout", step.cycle, "condition not reached: " +
+                                      " or ".join(c.describe() for c in step.until))
+                break
+            if heat is not None and heat.update(now, st, self._target(step)):
+                self._apply(step, heat)
+        if step.label == "cooldown":
+            self.writer.event(self.clock(), "cooldown_end", step.cycle, f"{reason}; {_point_text(step)}")
+        self.writer.event(self.clock(), "step_end", step.cycle, f"{step.phase}: {reason}")
+        self.writer.state["next_step"] = index + 1
+
+    @property
+    def _step_t0(self) -> float:
+        return self._t_step_start
+
+    def _apply(self, step: Step, heat: "_Pulses | None") -> None:
+        if step.phase == "launch":
+            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm, False, step.load_torque_nm)
+        elif step.phase == "drive":
+            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm, not self.synced, step.load_torque_nm)
+        elif step.phase == "heat":
+            on = heat is not None and heat.on
+            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm if on else 0.0, not on, step.load_torque_nm)
+        else:
+            self.bench.command(step.engine_speed_rpm, 0.0, True, step.load_torque_nm)
+
+    @staticmethod
+    def _target(step: Step) -> float:
+        return step.until[0].value if step.until else math.inf
+
+    def _conditions_met(self, conditions: Sequence[Condition], now: float) -> bool:
+        value = self.bench.status.T_flywheel
+        for c in conditions:
+            v = self.bench.status.T_flywheel if c.channel == "T_flywheel" else getattr(self.bench.status, c.channel, value)
+            if not np.isfinite(v):
+                continue
+            if c.op == ">=" and v >= c.value:
+                return True
+            if c.op == "<=" and v <= c.value:
+                return True
+            if c.op == "steady" and self._steady(c, now):
+                return True
+        return False
+
+    def _steady(self, c: Condition, now: float) -> bool:
+        h = self._history
+        if not h or now - h[0][0] < c.window_s:
+            return False
+        times = np.fromiter((p[0] for p in h), float, len(h))
+        vals = np.fromiter((p[1] for p in h), float, len(h))
+        w = times >= now - c.window_s
+        half = times >= now - c.window_s / 2
+        first, second = vals[w & ~half], vals[half]
+        if first.size == 0 or second.size == 0:
+            return False
+        mean = float(np.mean(vals[w]))
+        return abs(mean - c.value) <= c.band_k and abs(float(np.mean(second)) - float(np.mean(first))) <= c.drift_k
+
+    # -- the tick ---------------------------------------------------------------------------------------
+    def _tick(self, fast: bool = False, interlocks: bool = True) -> None:
+        tick = self.fast_tick_s if fast else self.tick_s
+        target = round((self.clock() + tick) / self.dt) * self.dt
+        self.clock.sleep_until(target)
+        if self.stop_request is not None and interlocks:
+            raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))
+        readings, events = self.bench.poll()
+        now = self.clock()
+        w = self.writer
+        for stream, t, row in readings:
+            w.add(stream, t, row)
+        for t, kind, detail in events:
+            w.event(t, kind, self.cycle, detail)
+            self.summary.events[kind] += 1
+        st = self.bench.status
+        if np.isfinite(st.T_flywheel):
+            self._history.append((now, st.T_flywheel))
+            while self._history and now - self._history[0][0] > 600.0:
+                self._history.popleft()
+            self.summary.peak["T_flywheel"] = max(self.summary.peak["T_flywheel"], st.T_flywheel)
+        if np.isfinite(st.T_air):
+            self.summary.peak["T_air"] = max(self.summary.peak["T_air"], st.T_air)
+        eng: list[tuple[str, str]] = []
+        self.interlocks.update(st, now, eng)
+        for kind, detail in eng:
+            w.event(now, kind, self.cycle, detail)
+        w.state["energy_j"] = self.summary.energy_j + self.interlocks.total_energy
+        w.advance(now)
+        self._report(now)
+        if interlocks:
+            causes = self.interlocks.tripped(st, now)
+            if causes:
+                self._handle_interlock(causes)
+
+    def _handle_interlock(self, causes: list[tuple[str, str]]) -> None:
+        now = self.clock()
+        self.bench.safe_state()
+        for kind, detail in causes:
+            self.writer.event(now, "interlock", self.cycle, f"{kind}: {detail}")
+            self.summary.events[f"interlock {kind}"] += 1
+        names = ", ".join(k for k, _ in causes)
+        if self.limits.on_interlock == "abort":
+            raise Stopped(f"interlock {names}", 1)
+        t_trip, t_clear = now, None
+        while True:
+            self._tick(interlocks=False)
+            if self.stop_request is not None:
+                raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))
+            now = self.clock()
+            if self.interlocks.clear(self.bench.status, now):
+                t_clear = now if t_clear is None else t_clear
+                if now - t_clear >= self.limits.resume_after_s:
+                    break
+            else:
+                t_clear = None
+            if now - t_trip > self.limits.max_wait_s:
+                raise Stopped(f"interlock {names} did not clear within {self.limits.max_wait_s:g} s", 1)
+        self.writer.event(self.clock(), "interlock_cleared", self.cycle, names)
+        raise _SkipCycle()
+
+    def _report(self, now: float) -> None:
+        if self.progress is None:
+            return
+        wall = time.perf_counter()
+        if wall - self._last_progress < self.progress_every_s:
+            return
+        self._last_progress = wall
+        step = self.steps[min(self._step_index, len(self.steps) - 1)]
+        left = sum(s.expected_s for s in self.steps[self._step_index + 1:])
+        cycles = self.summary.cycles_planned
+        self.progress(f"cycle {step.cycle + 1}/{cycles}  {step.phase:6s} {step.label:10s} t={now:8.1f} s  "
+                      f"T_flywheel {self.bench.status.T_flywheel:6.2f} degC  left ~{left:7.0f} s")
+
+
+class _Pulses:
+    """Pulsed heating: slip `pulse_s`, rest `rest_s`; a pulse starts only below the target and with the shaft held."""
+
+    def __init__(self, step: Step, now: float) -> None:
+        self.step = step
+        self.on = False
+        self.until = now + 2.0  # let the shaft come to rest under the holding load first
+
+    def near(self, now: float) -> bool:
+        return self.on or now >= self.until - 0.2
+
+    def update(self, now: float, st: BenchStatus, target: float) -> bool:
+        """Advance the pulse state; True if the set-points must change."""
+        if now < self.until - 1e-9:
+            return False
+        if self.on:
+            self.on, self.until = False, now + self.step.rest_s
+            return True
+        held = np.isfinite(st.clutch_speed) and abs(st.clutch_speed) < 20.0
+        if held and np.isfinite(st.T_flywheel) and st.T_flywheel < target:
+            self.on, self.until = True, now + self.step.pulse_s
+            return True
+        self.until = now + (self.step.rest_s if held else 0.5)
+        return False
+
+
+def _point_text(step: Step) -> str:
+    return " ".join(f"{k}={v:g}" for k, v in step.point)

@@ -1,0 +1,232 @@
+"""One `benchlab run`: protocol + bench + run file, from the checks before anything moves to the summary.
+
+Used by the CLI command and by tests (which pass a plant, faults or a smaller grid directly).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from benchlab.acquire import RunWriter, read_progress
+from benchlab.errors import InputError
+from benchlab.runner.devices import BenchConfig, DriverBench
+from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
+from benchlab.runner.threads import limit_blas_threads
+from protocols import catalog
+from protocols.limits import BenchLimits, check_schedule
+from protocols.schedule import Step, describe, duration_s, step_from_dict
+
+SCHEDULE_UNITS = {"duration_s": "s", "engine_speed_rpm": "rpm", "clutch_torque_nm": "N*m",
+                  "load_torque_nm": "N*m", "cycle": "1", "estimate_s": "s", "pulse_s": "s", "rest_s": "s"}
+
+
+@dataclass
+class RunRequest:
+    protocol: str
+    out: Path
+    bench: str = "sim"  # "sim" or a BENCH.toml path
+    seed: int = 1
+    cycles: int | None = None
+    duration_s: float | None = None
+    grid: str | None = None
+    dry_run: bool = False
+    resume: bool = False
+    plant: Any = None  # sim only: a ThermalPlant (default: the paper's clutch, nonlinear)
+    faults: Sequence[Any] = ()  # sim only: sim_bench.faults.Fault
+    sim_options: dict[str, Any] | None = None  # sim only: SimBenchConfig overrides
+    limits: BenchLimits | None = None  # sim only: limits (hardware: from BENCH.toml)
+    progress: Callable[[str], None] | None = None
+    install_signals: bool = True
+
+
+def software_version() -> str:
+    import benchlab
+
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=2,
+                             cwd=Path(__file__).resolve().parent).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        rev = ""
+    return f"benchlab {benchlab.__version__}" + (f" ({rev})" if rev else "")
+
+
+def _sim_bench_config(request: RunRequest, limits: BenchLimits) -> BenchConfig:
+    return BenchConfig(instrument_url="sim://pending", node_url="sim://pending", can={"interface": "sim"},
+                       instrument_timeout_s=0.05, limits=limits, source="sim", tick_s=0.2, fast_tick_s=0.05)
+
+
+def bench_config(request: RunRequest) -> BenchConfig:
+    """The bench's configuration: the simulated bench's, or BENCH.toml checked field by field."""
+    if request.bench == "sim":
+        return _sim_bench_config(request, request.limits or BenchLimits())
+    from benchlab.runner.config import load_bench_config
+
+    return load_bench_config(request.bench)
+
+
+def plan(request: RunRequest) -> tuple[tuple[Step, ...], BenchConfig, dict[str, Any]]:
+    """Schedule and bench config, checked: InputError before anything moves."""
+    config = bench_config(request)
+    try:
+        protocol = catalog.build(request.protocol, request.seed, request.cycles, request.duration_s, request.grid)
+    except ValueError as exc:
+        raise InputError(request.protocol, "--grid" if request.grid and "grid" in str(exc) else "protocol", str(exc)) from None
+    problems = check_schedule(protocol.steps, config.limits)
+    if problems and not request.dry_run:
+        raise InputError(request.protocol, "schedule", f"within the bench limits: {problems[0]}"
+                         + (f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""))
+    return protocol.steps, config, protocol.options
+
+
+def dry_run(request: RunRequest, out=sys.stdout) -> int:
+    steps, config, options = plan(request)
+    for line in describe(steps):
+        print(line, file=out)
+    problems = check_schedule(steps, config.limits)
+    total = duration_s(steps)
+    cycles = len({s.cycle for s in steps})
+    print(f"protocol {request.protocol}: {len(steps)} steps, {cycles} cycles, estimated {total:.0f} s "
+          f"({total / 3600:.2f} h)", file=out)
+    if problems:
+        for p in problems:
+            print(f"limit: {p}", file=out)
+        print(f"{len(problems)} problem(s) against the bench limits: the run would not start", file=out)
+        return 2
+    print("schedule within the bench limits", file=out)
+    return 0
+
+
+def _last_valid(f: h5py.File, name: str, rows: int) -> float:
+    values = f["aligned"][name][:rows]
+    valid = values[np.isfinite(values)]
+    return float(valid[-1]) if valid.size else math.nan
+
+
+def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
+    """Run (or resume) and return (exit code, summary)."""
+    limit_blas_threads(1)
+    if request.dry_run:
+        return dry_run(request), None
+    resume_state: dict[str, Any] | None = None
+    if request.resume:
+        resume_state = _resume_state(request)
+        steps = resume_state["steps"]
+        options: dict[str, Any] = resume_state["options"]
+        config = bench_config(request)
+        request = replace(request, protocol=resume_state["protocol"], seed=resume_state["seed"])
+    else:
+        steps, config, options = plan(request)
+    sim = None
+    clock: Any
+    t0 = resume_state["t0"] if resume_state else 0.0
+    if request.bench == "sim":
+        from sim_bench.bench import SimBench, SimBenchConfig
+
+        sim_opts = dict(request.sim_options or {})
+        seed = request.seed + (7919 * resume_state["resumes"] if resume_state else 0)
+        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0,
+                             initial_c=resume_state["initial"] if resume_state else None, **sim_opts)
+        sim = SimBench(cfg, plant=request.plant, faults=request.faults)
+        clock = sim.clock
+        config = replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
+                         can={"interface": "sim", "channel": sim.name + "-can"})
+        bench = DriverBench(config, clock, bus=sim.driver_bus, service=sim.service)
+    else:
+        from sim_bench.clock import RealClock
+
+        clock = RealClock(t0)
+        try:
+            bench = DriverBench(config, clock)
+        except Exception as exc:  # noqa: BLE001 - cannot reach the devices: one line, exit 1
+            raise RuntimeError(f"cannot open the bench: {exc}") from exc
+    layout = bench.layout
+    try:
+        if resume_state:
+            writer = RunWriter.resume(request.out, layout, extra_s=duration_s(steps[resume_state["start"]:]),
+                                      flush_every_s=config.flush_every_s)
+            writer.state["resumes"] = resume_state["resumes"]
+            writer.event(t0, "resume", int(resume_state["cycle"]),
+                         f"resume {resume_state['resumes']}: continuing with step {resume_state['start']}")
+        else:
+            attrs = {"seed": request.seed, "software_version": software_version(), "bench": request.bench,
+                     "bench_config": json.dumps(config.as_dict(), default=str),
+                     "protocol_options": json.dumps(options, default=str),
+                     "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "idn": bench.idn}
+            if sim is not None:
+                attrs["sim_bench"] = json.dumps(sim.cfg.as_dict(), default=str)
+                attrs["sim_truth"] = json.dumps({"params": dict(sim.physics.truth_params),
+                                                 "effects": [e.name for e in sim.physics.plant.effects
+                                                             if not e.name.startswith("fault heater")]})
+            writer = RunWriter(request.out, layout, protocol=request.protocol, attrs=attrs,
+                               schedule=[s.as_dict() for s in steps], schedule_units=SCHEDULE_UNITS,
+                               planned_s=duration_s(steps), flush_every_s=config.flush_every_s,
+                               state_fields=STATE_FIELDS, durable=sim is None)
+            writer.state["resumes"] = 0
+        runner = Runner(bench, clock, steps, writer, config.limits, tick_s=config.tick_s,
+                        fast_tick_s=config.fast_tick_s, dt=config.dt, progress=request.progress)
+        previous = {}
+        if request.install_signals:
+            for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
+                previous[sig] = signal.signal(sig, lambda s, f, c=code: runner.request_stop(signal.Signals(s).name, c))
+        try:
+            summary = runner.run(resume_state["start"] if resume_state else 0)
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        writer.close(summary.status)
+    finally:
+        bench.close()
+        if sim is not None:
+            sim.close()
+    code = 0 if summary.status == "complete" else getattr(summary, "exit_code", 1)
+    return code, summary
+
+
+def _resume_state(request: RunRequest) -> dict[str, Any]:
+    path = request.out
+    if not path.exists():
+        raise InputError(path, "file", "an existing run file to resume (not found)")
+    try:
+        f = h5py.File(path, "r")
+    except OSError:
+        raise InputError(path, "file", "an HDF5 run file (cannot be opened)") from None
+    with f:
+        if "acquire/progress" not in f or "schedule" not in f:
+            raise InputError(path, "/acquire/progress", "a run file written by benchlab run (no progress record)")
+        status = str(f.attrs.get("status", ""))
+        if status == "complete":
+            raise InputError(path, "status", "a run that is not complete ('running' or 'aborted'), got 'complete'")
+        bench = str(f.attrs.get("bench", ""))
+        if bench != request.bench:
+            raise InputError(path, "bench", f"the same bench as the run ({bench!r}), got --bench {request.bench!r}")
+        progress = read_progress(f)
+        steps = tuple(step_from_dict(row) for row in json.loads(f["schedule"].attrs["steps_json"]))
+        rows = int(progress["aligned_rows"])
+        dt = float(f["aligned"].attrs["dt"])
+        cycle = progress.get("state/cycle", math.nan)
+        cycle = -1 if not math.isfinite(cycle) else int(cycle)
+        start = next((i for i, s in enumerate(steps) if s.cycle > cycle), len(steps))
+        initial = {"T_flywheel": _last_valid(f, "T_flywheel", rows), "T_air": _last_valid(f, "T_air", rows),
+                   "T_housing": _last_valid(f, "T_housing", rows)}
+        resumes = progress.get("state/resumes", 0.0)
+        protocol = str(f.attrs.get("protocol"))
+        options = json.loads(f.attrs.get("protocol_options", "{}"))
+        seed = int(f.attrs.get("seed", request.seed))
+    f_init = initial["T_flywheel"] if math.isfinite(initial["T_flywheel"]) else 22.0
+    states = {"P": f_init, "F": f_init, "A": initial["T_air"] if math.isfinite(initial["T_air"]) else f_init,
+              "T": initial["T_housing"] if math.isfinite(initial["T_housing"]) else f_init}
+    return {"steps": steps, "start": start, "cycle": cycle, "t0": rows * dt, "initial": states,
+            "resumes": int(resumes if math.isfinite(resumes) else 0) + 1, "protocol": protocol,
+            "options": options, "seed": seed}

@@ -1,0 +1,320 @@
+"""The simulated bench: drivetrain + thermal plant + sensors wired into the device emulators as their providers.
+
+The runner talks to the *drivers* exactly as on hardware: the scanning DMM and the flywheel node's PC
+gateway behind `sim://` serial URLs, the three controllers on an in-process CAN bus. This module only
+supplies what the devices measure and when:
+
+* `SimPhysics` implements the emulators' provider interfaces (DrivetrainProvider, ResistanceProvider,
+  NodeInputProvider). It advances the analytic drivetrain and the thermal plant (batch ZOH solver) in
+  chunks of `chunk_s` on a `dt` grid, assuming the set-points hold; when a set-point changes inside a
+  computed chunk, the chunk is cut at that instant and recomputed from the stored state there. So the
+  physics costs one solver call per chunk or set-point change, not one per device reading.
+* Sensor noise and quantisation of every reading, ambient drift, radio drop-outs (the node emulator's
+  `radio_silence`), all from one seeded generator per purpose: the same seed gives the same run.
+* Fault hooks used by `sim_bench.faults` (heaters, a stuck clutch, ...).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from drivers import cvd
+from drivers.can_signals import CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING
+from sim_bench.clock import SimClock
+from sim_bench.drivetrain import RPM, Drivetrain, DrivetrainConfig
+from sim_bench.emulators import registry
+from sim_bench.emulators.can_controllers import CanBenchEmulator
+from sim_bench.emulators.clutch_node import ClutchNodeEmulator
+from sim_bench.emulators.drivetrain import DrivetrainActuals
+from sim_bench.emulators.providers import NodeInputs
+from sim_bench.emulators.scpi_instrument import ScpiInstrumentEmulator
+from sim_bench.plant import Effect, ThermalPlant, custom_source
+from sim_bench.virtual_run import AmbientConfig, SensorConfig
+
+try:  # the fast in-process bus if the emulator package has it, else python-can's virtual bus
+    from sim_bench.emulators.sim_can_bus import SimCanBus
+except ImportError:  # pragma: no cover
+    SimCanBus = None  # type: ignore[assignment]
+
+_ids = itertools.count()
+DMM_CHANNELS = {101: "T_air", 102: "T_housing", 103: "T_ambient"}
+
+
+@dataclass(frozen=True)
+class SimBenchConfig:
+    """Everything the simulated bench needs besides the plant: seed, grids, sensors, drop-outs."""
+
+    seed: int = 1
+    dt: float = 0.01
+    chunk_s: float = 2.0
+    sensors: SensorConfig = SensorConfig()
+    ambient: AmbientConfig = AmbientConfig()
+    drivetrain: DrivetrainConfig = DrivetrainConfig()
+    node_period_s: float = 0.05
+    dmm_channels: Mapping[int, str] = field(default_factory=lambda: dict(DMM_CHANNELS))
+    initial_c: float | Mapping[str, float] | None = None  # None: everything at ambient
+    t0: float = 0.0
+    dropouts: bool = True
+    position_stroke_mm: float = 8.0
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"seed": self.seed, "dt": self.dt, "chunk_s": self.chunk_s, "sensors": self.sensors.__dict__,
+                "ambient": self.ambient.__dict__, "gear_ratio": self.drivetrain.gear_ratio,
+                "load_inertia_kgm2": self.drivetrain.load_inertia_kgm2, "node_period_s": self.node_period_s,
+                "dmm_channels": {str(k): v for k, v in self.dmm_channels.items()}, "dropouts": self.dropouts}
+
+
+def fault_heater_effects() -> tuple[Effect, ...]:
+    """Zero heat sources on flywheel and air, driven by the channels `fault_heat_F`/`fault_heat_A` (W)."""
+    return (custom_source("fault heater F", "F", "fault", "heat_source", lambda ch: ch["fault_heat_F"]),
+            custom_source("fault heater A", "A", "fault", "heat_source", lambda ch: ch["fault_heat_A"]))
+
+
+class SimPhysics:
+    """Provider of the CAN, DMM and node emulators: chunked drivetrain + thermal plant + sensor noise."""
+
+    def __init__(self, config: SimBenchConfig, clock: SimClock, plant: ThermalPlant | None = None) -> None:
+        self.cfg, self.clock, self.dt = config, clock, config.dt
+        base = plant or ThermalPlant()
+        # the bench's own plant, plus fault heaters (zero unless a fault is injected)
+        self.plant = ThermalPlant(base.params, tuple(base.effects) + fault_heater_effects())
+        self.truth_params = dict(base.params)
+        seed = config.seed
+        self.rng_sensor = np.random.default_rng([seed, 1])
+        self.rng_dropout = np.random.default_rng([seed, 2])
+        self.drivetrain = Drivetrain(config.drivetrain)
+        self.gear = config.drivetrain.gear_ratio
+        k0 = self._index(config.t0)
+        amb0 = self._ambient(np.array([k0]))[0]
+        init = config.initial_c
+        if isinstance(init, Mapping):  # states not given (extra nodes, sensor lags) start like the flywheel
+            init = {name: float(init.get(name, init.get("F", amb0))) for name in self.plant.state_names}
+        self.plant.reset(amb0 if init is None else init)
+        self._chunks: list[tuple[int, dict[str, np.ndarray], dict[str, np.ndarray]]] = []
+        self._end = k0  # first index not computed yet
+        self.fault_heat = {"F": 0.0, "A": 0.0}
+        self.stuck: tuple[float, float] | None = None  # (clutch torque, until t): clutch clamped, output braked
+        self._setpoints = (0.0, False, 0.0, 0.0)
+        self.computed_s = 0.0
+        self.solver_calls = 0
+
+    # -- grid and chunks -----------------------------------------------------------------------------
+    def _index(self, t: float) -> int:
+        return int(math.floor(t / self.dt + 1e-6))
+
+    def _ambient(self, k: np.ndarray) -> np.ndarray:
+        a = self.cfg.ambient
+        return a.mean_c + a.drift_k * np.sin(2 * np.pi * k * self.dt / a.period_s)
+
+    def _compute(self, n: int) -> None:
+        k0 = self._end
+        self._apply_stuck(k0 * self.dt)
+        cols = self.drivetrain.advance(n, self.dt)
+        if self.stuck is not None:
+            cols["clutch_state"][:] = 1.0
+        cols["T_ambient"] = self._ambient(np.arange(k0, k0 + n))
+        cols["fault_heat_F"] = np.full(n, self.fault_heat["F"])
+        cols["fault_heat_A"] = np.full(n, self.fault_heat["A"])
+        states = self.plant.advance(cols, self.dt)
+        temps = self.plant.sensor_temperatures(states)
+        temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
+        self._chunks.append((k0, cols, temps))
+        if len(self._chunks) > 3:
+            self._chunks.pop(0)
+        self._end = k0 + n
+        self.computed_s += n * self.dt
+        self.solver_calls += 1
+
+    def _ensure(self, k: int) -> None:
+        while k >= self._end:
+            n = max(int(round(self.cfg.chunk_s / self.dt)), k - self._end + 1)
+            self._compute(n)
+
+    def _at(self, t: float) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], int]:
+        k = self._index(t)
+        self._ensure(k)
+        for k0, cols, temps in reversed(self._chunks):
+            if k >= k0:
+                return cols, temps, k - k0
+        k0, cols, temps = self._chunks[0]  # older than kept: the oldest sample we have
+        return cols, temps, 0
+
+    def _cut(self, t: float) -> None:
+        """Set-points change at t: drop everything computed from t on, restore the state there."""
+        k = self._index(t)
+        if k > self._end:
+            self._ensure(k - 1)
+        if k >= self._end:
+            return
+        while self._chunks and self._chunks[-1][0] > k:
+            self._chunks.pop()
+        k0, cols, temps = self._chunks[-1]
+        i = k - k0
+        self.drivetrain.clutch_rpm = float(cols["clutch_speed"][i])
+        self.plant.state = temps["_states"][i].copy()
+        self._chunks[-1] = (k0, {n: c[:i] for n, c in cols.items()}, {n: v[:i] for n, v in temps.items()})
+        if i == 0:
+            self._chunks.pop()
+        self._end = k
+
+    def _change(self, engine: float, clamped: bool, torque: float, load: float) -> None:
+        new = (float(engine), bool(clamped), float(torque), float(load))
+        if new == self._setpoints:
+            return
+        t = self.clock()
+        self._cut(t)
+        self._setpoints = new
+        self._apply_stuck(t)
+
+    def _apply_stuck(self, t: float) -> None:
+        engine, clamped, torque, load = self._setpoints
+        if self.stuck is not None and t < self.stuck[1]:
+            self.drivetrain.set_points(engine, True, self.stuck[0], 2.0 * self.gear * self.stuck[0])
+            self.drivetrain.clutch_rpm = 0.0
+        else:
+            self.stuck = None
+            self.drivetrain.set_points(engine, clamped, torque if clamped else 0.0, load)
+
+    # -- fault hooks -----------------------------------------------------------------------------------
+    def set_fault_heat(self, node: str, watts: float) -> None:
+        """A heater on the flywheel ("F") or the chamber air ("A") from now on (0 switches it off)."""
+        t = self.clock()
+        self._cut(t)
+        self.fault_heat[node] = float(watts)
+
+    def stick_clutch(self, torque_nm: float, duration_s: float) -> None:
+        """Clutch clamped at `torque_nm` and the output braked for `duration_s`, whatever is commanded."""
+        t = self.clock()
+        self._cut(t)
+        self.stuck = (float(torque_nm), t + duration_s)
+        self._apply_stuck(t)
+
+    # -- DrivetrainProvider (CAN controllers) ------------------------------------------------------------
+    def set_drive_speed(self, rpm: float) -> None:
+        _, clamped, torque, load = self._setpoints
+        self._change(rpm, clamped, torque, load)
+
+    def set_clutch(self, torque_nm: float, open_request: bool) -> None:
+        engine, _, _, load = self._setpoints
+        self._change(engine, not open_request, 0.0 if open_request else max(0.0, torque_nm), load)
+
+    def set_load_torque(self, torque_nm: float) -> None:
+        engine, clamped, torque, _ = self._setpoints
+        self._change(engine, clamped, torque, torque_nm)
+
+    def advance(self, t: float) -> None:
+        if self.stuck is not None and t >= self.stuck[1]:
+            until = self.stuck[1]
+            self._cut(until)
+            self.stuck = None
+            self._apply_stuck(until)
+        self._ensure(self._index(t))
+
+    def actuals(self) -> DrivetrainActuals:
+        cols, _, i = self._at(self.clock())
+        s = self.cfg.sensors
+        noise = self.rng_sensor.normal(0.0, 1.0, 3)
+        engine = cols["engine_speed"][i] + s.speed_noise_rpm * noise[0]
+        shaft = max(0.0, cols["clutch_speed"][i] + s.speed_noise_rpm * noise[1])
+        torque = abs(cols["clutch_torque"][i])
+        clamped = cols["clutch_state"][i] >= 0.5
+        slipping = clamped and cols["friction_power"][i] > 0.0
+        clamp = CLAMP_SLIPPING if slipping else (CLAMP_CLAMPED if clamped else CLAMP_OPEN)
+        torque_meas = max(0.0, torque + s.torque_noise_nm * noise[2]) if torque > 0 else 0.0
+        _, _, sp_torque, _ = self._setpoints
+        position = 0.0 if clamped else self.cfg.position_stroke_mm
+        return DrivetrainActuals(engine, cols["clutch_torque"][i], torque_meas, position, clamp,
+                                 shaft / self.gear, cols["load_torque"][i])
+
+    # -- ResistanceProvider (DMM) -----------------------------------------------------------------------
+    def get_resistances(self) -> Mapping[int, float]:
+        cols, temps, i = self._at(self.clock())
+        s = self.cfg.sensors
+        out = {}
+        for ch, name in self.cfg.dmm_channels.items():
+            true = cols["T_ambient"][i] if name == "T_ambient" else temps[name][i]
+            value = true + self.rng_sensor.normal(0.0, s.wired_noise_k)
+            out[ch] = float(cvd.resistance(value))
+        return out
+
+    # -- NodeInputProvider (flywheel node) -----------------------------------------------------------
+    def node_inputs(self, t: float) -> NodeInputs:
+        _, temps, i = self._at(t)
+        s = self.cfg.sensors
+        true = temps["T_flywheel"][i]
+        noise = self.rng_sensor.normal(0.0, s.node_noise_k, 2)
+        r = cvd.resistance(true + noise)
+        return NodeInputs((float(r[0]), float(r[1])), 5000, -60, 200)
+
+    # -- truth, for tests and analysis ----------------------------------------------------------------
+    def true_convection_resistance(self, engine_rpm: float, clutch_state: int) -> float:
+        from benchlab.clutch import convection_resistance
+
+        ch = {"engine_speed": np.array([float(engine_rpm)]), "clutch_state": np.array([float(clutch_state)])}
+        return float(np.asarray(convection_resistance(self.truth_params, ch)).ravel()[0])
+
+
+class SimBench:
+    """The emulated devices on their transports, fed by `SimPhysics`; `service()` runs them up to now."""
+
+    def __init__(self, config: SimBenchConfig = SimBenchConfig(), clock: SimClock | None = None,
+                 plant: ThermalPlant | None = None, faults: Sequence[Any] = ()) -> None:
+        self.cfg = config
+        self.faults = sorted(faults, key=lambda f: f.at_s)
+        self.faults_applied: list[Any] = []
+        self.clock = clock or SimClock(config.t0)
+        self.physics = SimPhysics(config, self.clock, plant)
+        name = f"benchlab-sim-{next(_ids)}"
+        self.name = name
+        self.dmm = ScpiInstrumentEmulator(self.physics, clock=self.clock)
+        self.node = ClutchNodeEmulator(self.physics, period_s=config.node_period_s, clock=self.clock)
+        registry.register(f"{name}-dmm", self.dmm)
+        registry.register(f"{name}-node", self.node)
+        if SimCanBus is not None:
+            self.emulator_bus = SimCanBus(f"{name}-can")
+            self.driver_bus = SimCanBus(f"{name}-can")
+        else:  # pragma: no cover
+            import can
+            self.emulator_bus = can.Bus(interface="virtual", channel=f"{name}-can")
+            self.driver_bus = can.Bus(interface="virtual", channel=f"{name}-can")
+        self.can = CanBenchEmulator(self.emulator_bus, self.physics, clock=self.clock)
+        s = config.sensors
+        self._dropout_rate = s.dropouts_per_hour / 3600.0 if config.dropouts else 0.0
+        self._next_dropout = self._draw_next(self.clock())
+
+    @property
+    def urls(self) -> dict[str, str]:
+        return {"instrument": f"sim://{self.name}-dmm", "node": f"sim://{self.name}-node"}
+
+    def _draw_next(self, t: float) -> float:
+        if self._dropout_rate <= 0:
+            return math.inf
+        return t + float(self.physics.rng_dropout.exponential(1.0 / self._dropout_rate))
+
+    def service(self) -> None:
+        """Before the drivers poll: start due radio drop-outs, let the controllers take commands and report."""
+        now = self.clock()
+        while self.faults and now >= self.faults[0].at_s:
+            fault = self.faults.pop(0)
+            fault.apply(self)
+            self.faults_applied.append(fault)
+        while now >= self._next_dropout:
+            length = float(self.physics.rng_dropout.exponential(self.cfg.sensors.dropout_mean_s))
+            self.node.radio_silence(max(length, self.cfg.node_period_s) - (now - self._next_dropout))
+            self._next_dropout = self._draw_next(self._next_dropout)
+        self.can.poll()
+
+    def close(self) -> None:
+        registry.unregister(f"{self.name}-dmm")
+        registry.unregister(f"{self.name}-node")
+        for bus in (self.emulator_bus, self.driver_bus):
+            try:
+                bus.shutdown()
+            except Exception:  # noqa: BLE001 - closing twice is fine
+                pass
