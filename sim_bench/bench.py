@@ -44,6 +44,7 @@ except ImportError:  # pragma: no cover
 
 _ids = itertools.count()
 DMM_CHANNELS = {101: "T_air", 102: "T_housing", 103: "T_ambient"}
+MAX_DROPOUT_MEANS = 4.0  # radio drop-outs are exponential, cut at 4 means (8 s): longer silence is a fault
 
 
 @dataclass(frozen=True)
@@ -124,6 +125,15 @@ class SimPhysics:
         states = self.plant.advance(cols, self.dt)
         temps = self.plant.sensor_temperatures(states)
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
+        # what the sensors read on this grid: noise per sample, resistances in one vectorised call each
+        sc, rng = self.cfg.sensors, self.rng_sensor
+        for j in (1, 2):
+            temps[f"_R_node{j}"] = cvd.resistance(temps["T_flywheel"] + rng.normal(0.0, sc.node_noise_k, n))
+        for ch, name in self.cfg.dmm_channels.items():
+            true = cols["T_ambient"] if name == "T_ambient" else temps[name]
+            temps[f"_R_dmm{ch}"] = cvd.resistance(true + rng.normal(0.0, sc.wired_noise_k, n))
+        temps["_noise_speed"] = rng.normal(0.0, sc.speed_noise_rpm, (n, 2))
+        temps["_noise_torque"] = rng.normal(0.0, sc.torque_noise_nm, n)
         self._chunks.append((k0, cols, temps))
         if len(self._chunks) > 3:
             self._chunks.pop(0)
@@ -217,16 +227,15 @@ class SimPhysics:
         self._ensure(self._index(t))
 
     def actuals(self) -> DrivetrainActuals:
-        cols, _, i = self._at(self.clock())
-        s = self.cfg.sensors
-        noise = self.rng_sensor.normal(0.0, 1.0, 3)
-        engine = cols["engine_speed"][i] + s.speed_noise_rpm * noise[0]
-        shaft = max(0.0, cols["clutch_speed"][i] + s.speed_noise_rpm * noise[1])
+        cols, temps, i = self._at(self.clock())
+        noise = temps["_noise_speed"][i]
+        engine = cols["engine_speed"][i] + noise[0]
+        shaft = max(0.0, cols["clutch_speed"][i] + noise[1])
         torque = abs(cols["clutch_torque"][i])
         clamped = cols["clutch_state"][i] >= 0.5
         slipping = clamped and cols["friction_power"][i] > 0.0
         clamp = CLAMP_SLIPPING if slipping else (CLAMP_CLAMPED if clamped else CLAMP_OPEN)
-        torque_meas = max(0.0, torque + s.torque_noise_nm * noise[2]) if torque > 0 else 0.0
+        torque_meas = max(0.0, torque + temps["_noise_torque"][i]) if torque > 0 else 0.0
         _, _, sp_torque, _ = self._setpoints
         position = 0.0 if clamped else self.cfg.position_stroke_mm
         return DrivetrainActuals(engine, cols["clutch_torque"][i], torque_meas, position, clamp,
@@ -234,23 +243,13 @@ class SimPhysics:
 
     # -- ResistanceProvider (DMM) -----------------------------------------------------------------------
     def get_resistances(self) -> Mapping[int, float]:
-        cols, temps, i = self._at(self.clock())
-        s = self.cfg.sensors
-        out = {}
-        for ch, name in self.cfg.dmm_channels.items():
-            true = cols["T_ambient"][i] if name == "T_ambient" else temps[name][i]
-            value = true + self.rng_sensor.normal(0.0, s.wired_noise_k)
-            out[ch] = float(cvd.resistance(value))
-        return out
+        _, temps, i = self._at(self.clock())
+        return {ch: float(temps[f"_R_dmm{ch}"][i]) for ch in self.cfg.dmm_channels}
 
     # -- NodeInputProvider (flywheel node) -----------------------------------------------------------
     def node_inputs(self, t: float) -> NodeInputs:
         _, temps, i = self._at(t)
-        s = self.cfg.sensors
-        true = temps["T_flywheel"][i]
-        noise = self.rng_sensor.normal(0.0, s.node_noise_k, 2)
-        r = cvd.resistance(true + noise)
-        return NodeInputs((float(r[0]), float(r[1])), 5000, -60, 200)
+        return NodeInputs((float(temps["_R_node1"][i]), float(temps["_R_node2"][i])), 5000, -60, 200)
 
     # -- truth, for tests and analysis ----------------------------------------------------------------
     def true_convection_resistance(self, engine_rpm: float, clutch_state: int) -> float:
@@ -305,7 +304,8 @@ class SimBench:
             fault.apply(self)
             self.faults_applied.append(fault)
         while now >= self._next_dropout:
-            length = float(self.physics.rng_dropout.exponential(self.cfg.sensors.dropout_mean_s))
+            mean = self.cfg.sensors.dropout_mean_s
+            length = min(float(self.physics.rng_dropout.exponential(mean)), MAX_DROPOUT_MEANS * mean)
             self.node.radio_silence(max(length, self.cfg.node_period_s) - (now - self._next_dropout))
             self._next_dropout = self._draw_next(self._next_dropout)
         self.can.poll()

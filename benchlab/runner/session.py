@@ -64,7 +64,8 @@ def software_version() -> str:
 
 def _sim_bench_config(request: RunRequest, limits: BenchLimits) -> BenchConfig:
     return BenchConfig(instrument_url="sim://pending", node_url="sim://pending", can={"interface": "sim"},
-                       instrument_timeout_s=0.05, limits=limits, source="sim", tick_s=0.2, fast_tick_s=0.05)
+                       instrument_timeout_s=0.05, limits=limits, source="sim", tick_s=0.5, fast_tick_s=0.05,
+                       instrument_period_s=0.5)
 
 
 def bench_config(request: RunRequest) -> BenchConfig:
