@@ -7,7 +7,7 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from benchlab.clutch import SIMULATED_CHANNELS, clutch_network
+from benchlab.clutch import PREDICTED_CHANNELS, SIMULATED_CHANNELS, clutch_network
 from benchlab.errors import InputError
 from benchlab.network import Params, ThermalNetwork
 from benchlab.solver import run_network
@@ -34,6 +34,9 @@ def input_channels(run: pd.DataFrame) -> dict[str, np.ndarray]:
                 continue
             raise InputError(source, f"/aligned/{name}", "at least one valid sample")
         channels[name] = values
+    for name in PREDICTED_CHANNELS:  # measured temperatures as signals for laws (radiation, learned terms)
+        if name in channels:
+            channels[f"{name}_filled"] = pd.Series(channels[name]).ffill().bfill().to_numpy()
     return channels
 
 

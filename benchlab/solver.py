@@ -4,7 +4,7 @@ Between two samples the inputs (heat flows, boundary temperatures) and the opera
 (link resistances) are held, so the state update over one step is exactly
 x[k+1] = Ad x[k] + Bd u[k] with [Ad Bd] from the matrix exponential of the augmented
 continuous system. Operating points are keyed by their conductances, quantised to a relative
-resolution of `resolution` (1e-6 by default: a far smaller error than any sensor's), and
+resolution of `resolution` (1e-6 by default: far below any sensor's error), and
 each distinct one is discretised once.
 """
 
@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 import scipy.linalg
 from numba import njit
 
@@ -83,22 +84,42 @@ def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
 
 
 def _operating_points(conductances: list, n: int, resolution: float) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Group samples by quantised varying conductances; return index per sample and per-point values."""
+    """Group samples by quantised varying conductances; return index per sample and per-point values.
+
+    Links that share one law (R_PA = R_FA) share one key column; the key columns are combined
+    into one integer code per sample and factorised in linear time.
+    """
     varying = [i for i, g in enumerate(conductances) if isinstance(g, np.ndarray)]
     if not varying:
         return np.zeros(n, dtype=np.int64), [np.array([g]) for g in conductances]
-    keys = np.stack([np.rint(np.log(conductances[i]) / resolution) for i in varying], axis=1).astype(np.int64)
-    change = np.ones(n, dtype=bool)
-    change[1:] = np.any(keys[1:] != keys[:-1], axis=1)
-    run_keys = keys[change]
-    unique_keys, run_index = np.unique(run_keys, axis=0, return_inverse=True)
-    op_index = np.repeat(run_index.ravel(), np.diff(np.append(np.flatnonzero(change), n)))
+    columns: list[np.ndarray] = []
+    column_of: dict[int, int] = {}
+    for i in varying:
+        same = next((j for j, c in enumerate(columns) if conductances[varying[j]] is conductances[i]
+                     or np.array_equal(conductances[varying[j]], conductances[i])), None)
+        if same is None:
+            columns.append(np.rint(np.log(conductances[i]) / resolution).astype(np.int64))
+            same = len(columns) - 1
+        column_of[i] = same
+    code = np.zeros(n, dtype=np.int64)
+    uniques = []
+    for col in columns:
+        col_codes, col_uniques = pd.factorize(col)
+        uniques.append(col_uniques)
+        code = code * len(col_uniques) + col_codes
+    op_index, op_codes = pd.factorize(code)
+    op_index = op_index.astype(np.int64)
+    per_column = []
+    for col_uniques in reversed(uniques):
+        per_column.append(col_uniques[op_codes % len(col_uniques)])
+        op_codes = op_codes // len(col_uniques)
+    per_column.reverse()
     per_op: list[np.ndarray] = []
     for i, g in enumerate(conductances):
-        if i in varying:
-            per_op.append(np.exp(unique_keys[:, varying.index(i)] * resolution))
+        if i in column_of:
+            per_op.append(np.exp(per_column[column_of[i]] * resolution))
         else:
-            per_op.append(np.full(len(unique_keys), g))
+            per_op.append(np.full(len(op_codes), g))
     return op_index, per_op
 
 

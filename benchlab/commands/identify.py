@@ -1,0 +1,51 @@
+"""`benchlab identify RUN.h5 [RUN2.h5 …] --model linear|nonlinear --out P.json [--validate V.h5 …]`."""
+
+from __future__ import annotations
+
+import argparse
+
+from benchlab.errors import InputError
+from benchlab.identify.api import identify, parse_fixed
+from benchlab.identify.spec import clutch_spec
+from benchlab.params import check_params, save_params
+from benchlab.runfile import load_run
+
+NAME = "identify"
+HELP = "grey-box identification of the clutch model from one or more run files"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("runs", nargs="+", help="run files to fit together")
+    parser.add_argument("--model", choices=("linear", "nonlinear"), default="nonlinear")
+    parser.add_argument("--out", required=True, help="parameter file to write (JSON)")
+    parser.add_argument("--validate", nargs="*", default=[], help="run files to validate on (not fitted)")
+    parser.add_argument("--fix", nargs="*", default=[], metavar="NAME=VALUE", help="hold parameters fixed")
+    parser.add_argument("--starts", type=int, default=6, help="number of starting points (local minima exist)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the starting points")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        fixed = parse_fixed(args.fix)
+    except ValueError as exc:
+        raise InputError("--fix", str(exc).split(":")[0].removeprefix("--fix "), "NAME=NUMBER") from None
+    known = {p.name for p in clutch_spec(args.model).free}
+    for name in fixed:
+        if name not in known:
+            raise InputError("--fix", name, f"a free parameter of the {args.model} model ({', '.join(sorted(known))})")
+    check_params("nonlinear", {**{k: 1.0 for k in known}, **fixed, "b1": -1e-3, "b2": -1e-3}, "--fix")
+    runs = [load_run(p) for p in args.runs]
+    validate = [load_run(p) for p in args.validate]
+    result = identify(runs, args.model, fixed, validate, starts=args.starts, seed=args.seed)
+    save_params(args.out, result.params, result.summary())
+    se = result.uncertainty.standard_errors
+    print(f"{args.out}: {args.model} model from {len(runs)} run(s), {result.fit.starts} starts")
+    for name, value in result.params.items():
+        if name in se:
+            print(f"  {name:7s} = {value:12.6g} ± {se[name]:.3g}")
+    for label, group in (("fit", result.fitting), ("validation", result.validation)):
+        for path, figures in group.items():
+            print(f"  {label:10s} {path}: RMSE {figures['rmse_K']:.3f} K, NRMSE {figures['nrmse_pct']:.2f} %")
+    for warning in result.uncertainty.warnings:
+        print(f"  warning: {warning}")
+    return 0

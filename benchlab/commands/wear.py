@@ -1,0 +1,81 @@
+"""`benchlab wear RUN.h5 --params P.json [--clutch CLUTCH.toml] [--predict N] [--json] [--plot OUT.png]`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+from benchlab.errors import InputError
+from benchlab.params import load_params
+from benchlab.runfile import load_run
+from benchlab.wear.analysis import DEFAULT_HORIZON, DEFAULT_PATHS, WearReport, analyse_wear
+from benchlab.wear.clutchfile import default_clutch, load_clutch
+
+NAME = "wear"
+HELP = "friction energy, lining wear, health and remaining life from a run (eq. 1-3)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
+    parser.add_argument("--params", required=True, help="thermal parameter file (JSON)")
+    parser.add_argument("--clutch", help="clutch file (TOML: z, r, maps of eq. 1-3); default: documented assumptions")
+    parser.add_argument("--predict", type=int, default=DEFAULT_HORIZON, metavar="N_ENGAGEMENTS",
+                        help=f"horizon for the failure probability and expected wear (default {DEFAULT_HORIZON})")
+    parser.add_argument("--paths", type=int, default=DEFAULT_PATHS, help="Monte Carlo paths for the remaining life")
+    parser.add_argument("--seed", type=int, default=0, help="Monte Carlo seed")
+    parser.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    parser.add_argument("--plot", metavar="OUT.png", help="write a figure of energy, temperature, wear and life")
+
+
+def _finite(value: object) -> object:
+    """JSON has no NaN or infinity: write them as null."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _summary(report: WearReport) -> str:
+    doc = report.as_dict()
+    life, health = doc["life"], doc["health"]
+    lines = [f"friction energy {doc['friction_energy_J'] / 1e3:.1f} kJ in {doc['engagements']} engagements "
+             f"({doc['slip_time_s']:.1f} s slipping), split plate/flywheel {report.split:.2f}"]
+    for side, s in doc["wear"].items():
+        lines.append(f"{side:>8} side: {s['energy_J'] / 1e3:.1f} kJ at mean {s['mean_lining_temperature_C'] or float('nan'):.1f} degC, "
+                     f"wear {s['wear_run_mm'] * 1e3:.3f} um, height {s['height_mm']:.4f} mm, mu {s['mu_at_rating']:.4f}")
+    lines.append(f"health {health['health']:.4f} ({'WORN' if health['worn'] else 'ok'}, limited by {health['limited_by']}): "
+                 f"{health['transmissible_torque_Nm']:.1f} N*m transmissible vs {health['max_engine_torque_Nm']:.1f} N*m engine")
+    e, h = life["engagements"], life["hours"]
+    fmt = lambda v, f: "n/a" if v is None else format(v, f)  # noqa: E731
+    lines.append(f"remaining life (engagements) P10/P50/P90: {fmt(e['p10'], '.0f')} / {fmt(e['p50'], '.0f')} / "
+                 f"{fmt(e['p90'], '.0f')}; hours {fmt(h['p10'], '.0f')} / {fmt(h['p50'], '.0f')} / {fmt(h['p90'], '.0f')}; "
+                 f"P(worn within {life['horizon_engagements']}) = {life['p_fail_within_horizon']:.3f}")
+    if doc["mu_estimate"]:
+        mu = doc["mu_estimate"]
+        lines.append(f"mu estimated from actuator position: median {mu['median']:.3f} (model {mu['model_median']:.3f}, "
+                     f"{mu['samples']} samples)")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.predict < 1:
+        raise InputError("--predict", "N_ENGAGEMENTS", f"a positive number of engagements, got {args.predict}")
+    if args.paths < 1:
+        raise InputError("--paths", "paths", f"a positive number of Monte Carlo paths, got {args.paths}")
+    spec = load_clutch(args.clutch) if args.clutch else default_clutch()
+    measured = load_run(args.run)
+    params = load_params(args.params)
+    report = analyse_wear(measured, params, spec, horizon=args.predict, paths=args.paths, seed=args.seed,
+                          params_source=str(args.params))
+    if args.plot:
+        from benchlab.wear.plot import plot_wear
+        plot_wear(report, args.plot)
+    if args.json:
+        print(json.dumps(_finite(report.as_dict()), default=float))
+    else:
+        print(_summary(report))
+    return 0

@@ -1,0 +1,19 @@
+"""Error figures of a parameter set on a full-resolution run (contract section 5)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import pandas as pd
+
+from benchlab.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
+from benchlab.network import ThermalNetwork
+from benchlab.simulation import simulate
+
+
+def evaluate(run: pd.DataFrame, params: Mapping[str, float], network: ThermalNetwork | None = None) -> dict:
+    """RMSE (K) and NRMSE (%) overall and per predicted channel, simulated at the run's own step."""
+    sim = simulate(run, params, network)
+    return {"rmse_K": rmse_k(run, sim), "nrmse_pct": nrmse_pct(run, sim),
+            "channels": {c: {"rmse_K": v, "nrmse_pct": channel_nrmse_pct(run, sim, (c,))[c]}
+                         for c, v in channel_rmse_k(run, sim).items()}}

@@ -1,0 +1,119 @@
+"""Output-error fit of a ModelSpec to one or more runs: simulate, compare, adjust (scipy least_squares).
+
+Positive parameters are fitted as logarithms, signed ones scaled by their start value, so
+every coordinate moves on a scale of one. The problem has local minima, so fits start from
+several points spread around the neutral priors and the best is polished to convergence.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from benchlab.identify.data import FitData
+from benchlab.identify.spec import ModelSpec
+from benchlab.network import ThermalNetwork
+from benchlab.solver import run_network
+
+KEY_RESOLUTION = 1e-12  # operating points are already exact repeats after prepare(); keep them apart exactly
+
+
+@dataclass
+class FitResult:
+    """Fitted values, their uncertainty, and the residuals on the fitting data."""
+
+    spec: ModelSpec
+    params: dict[str, float]
+    cost: float
+    rmse_k: float
+    n_residuals: int
+    jacobian: np.ndarray  # d residual / d parameter (physical units), fitting samples only
+    residuals: np.ndarray
+    starts: int = 1
+    start_costs: list[float] = field(default_factory=list)
+
+    @property
+    def free_names(self) -> list[str]:
+        return [p.name for p in self.spec.free]
+
+
+def _to_x(spec: ModelSpec, values: Mapping[str, float]) -> np.ndarray:
+    return np.array([np.log(values[p.name]) if p.log else values[p.name] / p.linear_scale for p in spec.free])
+
+
+def _from_x(spec: ModelSpec, x: np.ndarray) -> dict[str, float]:
+    out = dict(spec.fixed)
+    for p, xi in zip(spec.free, x):
+        out[p.name] = float(np.exp(xi)) if p.log else float(xi * p.linear_scale)
+    return out
+
+
+def _bounds(spec: ModelSpec) -> tuple[np.ndarray, np.ndarray]:
+    lo = [np.log(p.lower) if p.log else p.lower / p.linear_scale for p in spec.free]
+    hi = [np.log(p.upper) if p.log else p.upper / p.linear_scale for p in spec.free]
+    return np.array(lo), np.array(hi)
+
+
+def initial_state(network: ThermalNetwork, data: FitData, params: Mapping[str, float]) -> np.ndarray:
+    """States start at the first valid measurement of their channel; an `init_<state>` parameter overrides."""
+    return np.array([params.get(f"init_{s}", data.first_valid[network.initial[s]]) for s in network.state_names])
+
+
+def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
+    """Model outputs at the fitting step for the measured channels of `data`."""
+    states = run_network(network, params, data.channels, data.dt, initial_state(network, data, params),
+                         KEY_RESOLUTION)[:-1]
+    index = {s: i for i, s in enumerate(network.state_names)}
+    return {c: states[:, index[network.outputs[c]]] for c in data.targets}
+
+
+def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datasets: Sequence[FitData]) -> np.ndarray:
+    """Simulated minus measured, every fitted channel of every run, valid masked samples only."""
+    parts = []
+    for data in datasets:
+        sim = simulate_outputs(network, params, data)
+        for c, target in data.targets.items():
+            use = data.mask & np.isfinite(target)
+            parts.append(sim[c][use] - target[use])
+    return np.concatenate(parts)
+
+
+def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = None,
+        start: Mapping[str, float] | None = None) -> FitResult:
+    """One local fit from the spec's starting values (or `start`)."""
+    x0 = _to_x(spec, {p.name: p.initial for p in spec.free} | dict(start or {}))
+    lo, hi = _bounds(spec)
+    x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        return residual_vector(spec.network, _from_x(spec, x), datasets)
+
+    sol = least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
+                        xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    params = _from_x(spec, sol.x)
+    scale = np.array([params[p.name] if p.log else p.linear_scale for p in spec.free])
+    jac = sol.jac / scale  # chain rule: d r / d p = d r / d x * d x / d p
+    return FitResult(spec, params, float(2 * sol.cost), float(np.sqrt(np.mean(sol.fun ** 2))), len(sol.fun),
+                     jac, sol.fun)
+
+
+def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6, seed: int = 0,
+                   spread: float = 3.0, scout_nfev: int = 25) -> FitResult:
+    """Scout fits from `starts` points (the priors, then log-uniform within ×/÷ spread), polish the best."""
+    rng = np.random.default_rng(seed)
+    scouts = []
+    for i in range(starts):
+        start = {p.name: p.initial for p in spec.free}
+        if i:
+            for p in spec.free:
+                factor = float(np.exp(rng.uniform(-np.log(spread), np.log(spread))))
+                start[p.name] = float(np.clip(p.initial * factor, p.lower, p.upper))
+        scouts.append(fit(spec, datasets, max_nfev=scout_nfev, start=start))
+    best = min(scouts, key=lambda r: r.cost)
+    final = fit(spec, datasets, start={k: best.params[k] for k in best.free_names})
+    final.starts = starts
+    final.start_costs = sorted(r.cost for r in scouts)
+    return final
