@@ -17,6 +17,7 @@ HELP = "friction energy, lining wear, health and remaining life from a run (eq. 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The command's arguments (contract section 3 plus the Monte Carlo's size and seed)."""
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
     parser.add_argument("--params", required=True, help="thermal parameter file (JSON)")
     parser.add_argument("--clutch", help="clutch file (TOML: z, r, maps of eq. 1-3); default: documented assumptions")
@@ -39,20 +40,26 @@ def _finite(value: object) -> object:
     return value
 
 
+def _percentiles(values: dict[str, float | None]) -> str:
+    return " / ".join("n/a" if values[k] is None else f"{values[k]:.0f}" for k in ("p10", "p50", "p90"))
+
+
 def _summary(report: WearReport) -> str:
+    """A few human-readable lines: energy, per-side wear, health, remaining life, μ estimate."""
     doc = report.as_dict()
     life, health = doc["life"], doc["health"]
     lines = [f"friction energy {doc['friction_energy_J'] / 1e3:.1f} kJ in {doc['engagements']} engagements "
              f"({doc['slip_time_s']:.1f} s slipping), split plate/flywheel {report.split:.2f}"]
     for side, s in doc["wear"].items():
-        lines.append(f"{side:>8} side: {s['energy_J'] / 1e3:.1f} kJ at mean {s['mean_lining_temperature_C'] or float('nan'):.1f} degC, "
+        mean_c = s["mean_lining_temperature_C"]
+        lines.append(f"{side:>8} side: {s['energy_J'] / 1e3:.1f} kJ at mean "
+                     f"{'n/a' if mean_c is None else format(mean_c, '.1f')} degC, "
                      f"wear {s['wear_run_mm'] * 1e3:.3f} um, height {s['height_mm']:.4f} mm, mu {s['mu_at_rating']:.4f}")
-    lines.append(f"health {health['health']:.4f} ({'WORN' if health['worn'] else 'ok'}, limited by {health['limited_by']}): "
-                 f"{health['transmissible_torque_Nm']:.1f} N*m transmissible vs {health['max_engine_torque_Nm']:.1f} N*m engine")
-    e, h = life["engagements"], life["hours"]
-    fmt = lambda v, f: "n/a" if v is None else format(v, f)  # noqa: E731
-    lines.append(f"remaining life (engagements) P10/P50/P90: {fmt(e['p10'], '.0f')} / {fmt(e['p50'], '.0f')} / "
-                 f"{fmt(e['p90'], '.0f')}; hours {fmt(h['p10'], '.0f')} / {fmt(h['p50'], '.0f')} / {fmt(h['p90'], '.0f')}; "
+    lines.append(f"health {health['health']:.4f} ({'WORN' if health['worn'] else 'ok'}, "
+                 f"limited by {health['limited_by']}): {health['transmissible_torque_Nm']:.1f} N*m transmissible "
+                 f"vs {health['max_engine_torque_Nm']:.1f} N*m engine")
+    lines.append(f"remaining life P10/P50/P90: {_percentiles(life['engagements'])} engagements, "
+                 f"{_percentiles(life['hours'])} h; "
                  f"P(worn within {life['horizon_engagements']}) = {life['p_fail_within_horizon']:.3f}")
     if doc["mu_estimate"]:
         mu = doc["mu_estimate"]
@@ -62,6 +69,7 @@ def _summary(report: WearReport) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Analyse the run; print JSON or a summary, optionally write the figure."""
     if args.predict < 1:
         raise InputError("--predict", "N_ENGAGEMENTS", f"a positive number of engagements, got {args.predict}")
     if args.paths < 1:

@@ -16,7 +16,8 @@ from benchlab.wear.life import STATE_FIELDS, LifeDistribution, remaining_life
 from benchlab.wear.model import WearHistory, wear_history
 from benchlab.wear.state import SIDES, WearState
 from benchlab.wear.thermal import heat_split, lining_temperatures
-from benchlab.wear.torque import ACTUATOR_CHANNEL, estimate_mu, friction_coefficient, normal_force, total_wear_mm, transmissible_torque
+from benchlab.wear.torque import (ACTUATOR_CHANNEL, estimate_mu, friction_coefficient, normal_force, total_wear_mm,
+                                  transmissible_torque)
 
 DEFAULT_HORIZON = 10_000
 DEFAULT_PATHS = 500

@@ -1,4 +1,4 @@
-"""Why temperature matters: the same run's wear with the model's, a constant and the bench's true lining temperatures."""
+"""Why temperature matters: one run's wear with the model's, a constant and the bench's true lining temperatures."""
 
 from __future__ import annotations
 

@@ -50,7 +50,8 @@ def assess(spec: ClutchSpec, state: WearState) -> Health:
                         np.array(state.loss_plate), np.array(state.loss_flywheel)))
     return Health(
         transmissible_torque_Nm=torque, new_torque_Nm=new, max_engine_torque_Nm=spec.max_engine_torque_nm,
-        height_plate_mm=spec.height_mm - state.wear_plate_mm, height_flywheel_mm=spec.height_mm - state.wear_flywheel_mm,
+        height_plate_mm=spec.height_mm - state.wear_plate_mm,
+        height_flywheel_mm=spec.height_mm - state.wear_flywheel_mm,
         min_height_mm=spec.min_height_mm,
         total_wear_mm=float(total_wear_mm(spec, state.wear_plate_mm, state.wear_flywheel_mm)),
         health=float(np.clip(min(margin_torque, margin_height), 0.0, 1.0)), worn=is_worn,

@@ -41,8 +41,8 @@ class OnlineWear:
         channels = {"engine_speed": np.concatenate([grid, grid]), "clutch_state": np.repeat([0.0, 1.0], len(grid)),
                     "clutch_speed": zeros, "friction_power": zeros, "T_ambient": zeros}
         disc = discretise(split_network(split), params, channels, dt)
-        self.tables = [[(disc.Ad[op].tolist(), disc.Bd[op].tolist()) for op in disc.op_index[s * len(grid):(s + 1) * len(grid)]]
-                       for s in (0, 1)]
+        points = [disc.op_index[:len(grid)], disc.op_index[len(grid):]]  # clutch open, clamped
+        self.tables = [[(disc.Ad[op].tolist(), disc.Bd[op].tolist()) for op in ops] for ops in points]
         self.inv_step, self.last = 1.0 / speed_step_rpm, len(grid) - 1
         self.dt, self.split = dt, split
         self.x = [float(v) for v in x0]
