@@ -165,6 +165,7 @@ class Runner:
         if not math.isfinite(self.summary.energy_j):
             self.summary.energy_j = 0.0
         energy0 = self.summary.energy_j
+        self.summary.cycles_done = len({s.cycle for s in self.steps[:start_step]})
         self.bench.safe_state()
         self._tick()
         try:
@@ -221,8 +222,8 @@ class Runner:
         self._apply(step, heat)
         reason = "time"
         while True:
-            fast = step.phase == "launch" or self.bench.status.slipping or (heat is not None and heat.near(self.clock()))
-            self._tick(fast=fast)
+            fast = step.phase == "launch" or (self.bench.status.slipping and heat is None)
+            self._tick(fast=fast, until=heat.until if heat is not None else math.inf)
             now = self.clock()
             st = self.bench.status
             if step.phase == "launch" and st.locked and now > self._step_t0 + 2 * self.fast_tick_s:
@@ -296,9 +297,10 @@ class Runner:
         return abs(mean - c.value) <= c.band_k and abs(float(np.mean(second)) - float(np.mean(first))) <= c.drift_k
 
     # -- the tick ---------------------------------------------------------------------------------------
-    def _tick(self, fast: bool = False, interlocks: bool = True) -> None:
+    def _tick(self, fast: bool = False, interlocks: bool = True, until: float = math.inf) -> None:
         tick = self.fast_tick_s if fast else self.tick_s
-        target = round((self.clock() + tick) / self.dt) * self.dt
+        now = self.clock()
+        target = round(min(now + tick, max(until, now + self.dt)) / self.dt) * self.dt
         self.clock.sleep_until(target)
         if self.stop_request is not None and interlocks:
             raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))

@@ -1,0 +1,259 @@
+"""Cool-down analysis of a cooldown-sweep run: R_FA = R_PA per operating point, then the fit of eq. (11).
+
+Each cool-down segment (events `cooldown_start`/`cooldown_end`) is fitted with the paper's 4-state model
+(eq. 6-9, `benchlab.clutch.clutch_network`) driven by the measured inputs: the convection resistance R
+(constant during the segment) and the unmeasured initial pressure-plate temperature ϑ_P(0) are free, every
+other parameter comes from a parameter file identified beforehand (e.g. from a Table 1 run). The initial
+flywheel, air and housing temperatures are free too (started at their first measured values): a single
+noisy first sample would otherwise bias R by many standard errors. The single-exponential shortcut (fit
+ϑ_F = ϑ_∞ + Δ·exp(−t/τ), R = τ/C_F) is biased because ϑ_P ≠ ϑ_F and the air warms and cools with them.
+
+Residuals are the measured T_flywheel and T_air minus the model, taken once per `sample_s` (the held
+/aligned samples between two readings are not independent) and weighted by each channel's noise, which
+is estimated from the measured signal itself (differences of consecutive readings). The standard error
+of R comes from the Jacobian at the optimum, scaled by the reduced chi-square when it exceeds 1; the
+stated uncertainty is the expanded one, U = 2·SE (about 95 %).
+
+Eq. (11): R = a1·exp(b1·ω_e) + R0 for S = 1 and a2·exp(b2·ω_e) + R0 for S = 0, fitted to the table by
+weighted least squares (weights 1/SE²), standard errors from the covariance (scaled by the reduced
+chi-square when it exceeds 1).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import pandas as pd
+import scipy.optimize
+
+from benchlab.clutch import clutch_network
+from benchlab.errors import InputError
+from benchlab.runfile import load_run
+from benchlab.simulation import initial_state, input_channels
+from benchlab.solver import run_network
+
+COVERAGE_K = 2.0
+FIT_CHANNELS = ("T_flywheel", "T_air")
+TABLE_UNITS = {"cycle": "1", "engine_speed": "rpm", "clutch_state": "1", "slip_speed": "rpm", "t_start": "s",
+               "t_end": "s", "R": "K/W", "R_se": "K/W", "R_u": "K/W", "T_P0": "degC", "T_P0_se": "K",
+               "rmse_K": "K", "n": "1", "chi2_red": "1", "R_true": "K/W"}
+
+
+@dataclass
+class CooldownResult:
+    cycle: int
+    engine_speed: float
+    clutch_state: int
+    slip_speed: float
+    t_start: float
+    t_end: float
+    R: float
+    R_se: float
+    R_u: float
+    T_P0: float
+    T_P0_se: float
+    rmse_K: float
+    n: int
+    chi2_red: float
+    R_true: float = math.nan
+
+
+def _events(path: Path) -> list[tuple[float, int, str, str]]:
+    with h5py.File(path, "r") as f:
+        if "events" not in f:
+            raise InputError(path, "/events", "an events table (a run written by benchlab run)")
+        g = f["events"]
+        n = len(g["time"])
+        if "acquire/progress" in f:
+            prog = dict(zip(json.loads(f["acquire/progress"].attrs["fields"]), f["acquire/progress"][()]))
+            n = min(n, int(prog.get("event_rows", n)))
+        return [(float(t), int(c), k.decode(), d.decode()) for t, c, k, d in
+                zip(g["time"][:n], g["cycle"][:n], g["kind"][:n], g["detail"][:n])]
+
+
+def _point(detail: str) -> dict[str, float]:
+    return {k: float(v) for k, v in re.findall(r"(\w+)=([-+0-9.eE]+)", detail)}
+
+
+def segments(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, dict[str, float]]]:
+    """(cycle, t_start, t_end, point) of every completed cool-down of the run."""
+    path = Path(path)
+    out, open_ = [], {}
+    for t, cycle, kind, detail in _events(path):
+        if kind == "cooldown_start":
+            open_[cycle] = (t, _point(detail))
+        elif kind == "cooldown_end" and cycle in open_:
+            t0, point = open_.pop(cycle)
+            if detail.startswith("condition"):
+                out.append((cycle, t0, t, point))
+    return out
+
+
+def _noise(values: np.ndarray) -> float:
+    """Noise of a held signal from differences between consecutive distinct readings (robust MAD)."""
+    v = values[np.isfinite(values)]
+    if v.size < 10:
+        return math.nan
+    change = np.flatnonzero(np.diff(v) != 0)
+    d = np.diff(v[np.append(change, change[-1] + 1)]) if change.size > 5 else np.diff(v)
+    d = d - np.median(d)
+    return float(1.4826 * np.median(np.abs(d)) / math.sqrt(2.0))
+
+
+def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, t_end: float,
+                sample_s: float = 1.0, channels: Sequence[str] = FIT_CHANNELS) -> dict[str, float]:
+    """Fit R and ϑ_P(0) of the 4-state model on [t_start, t_end] of `run` (the /aligned frame)."""
+    dt = float(run.attrs["dt"])
+    time = run["time"].to_numpy()
+    seg = run[(time >= t_start) & (time <= t_end)].reset_index(drop=True)
+    power = seg["friction_power"].to_numpy()
+    hot = np.flatnonzero(np.nan_to_num(power) > 0)
+    if hot.size and hot[-1] < len(seg) // 4:  # a launch tail at the start: begin after it
+        seg = seg.iloc[hot[-1] + 1:].reset_index(drop=True)
+    seg.attrs.update(run.attrs)
+    if len(seg) < 100:
+        raise ValueError(f"cool-down [{t_start:g}, {t_end:g}] s too short")
+    network = clutch_network()
+    inputs = input_channels(seg)
+    x0 = initial_state(network, inputs, str(run.attrs.get("source", "<run>")))
+    names = network.state_names
+    step = max(1, int(round(sample_s / dt)))
+    idx = np.arange(0, len(seg), step)
+    measured = {c: seg[c].to_numpy()[idx] for c in channels}
+    sigma = {c: _noise(seg[c].to_numpy()) for c in channels}
+    sigma = {c: (s if np.isfinite(s) and s > 0 else 0.05) for c, s in sigma.items()}
+    out_index = {c: names.index(network.outputs[c]) for c in channels}
+    base = dict(params)
+    base.update(a1=0.0, a2=0.0)
+
+    free = ["P"] + [s for s in ("F", "A", "T") if s in names]
+
+    def simulate(theta: np.ndarray) -> np.ndarray:
+        p = dict(base)
+        p["R0"] = float(theta[0])
+        x = x0.copy()
+        for name, value in zip(free, theta[1:]):
+            x[names.index(name)] = value
+        return run_network(network, p, inputs, dt, x)[:-1]
+
+    def residuals(theta: np.ndarray) -> np.ndarray:
+        states = simulate(theta)
+        parts = []
+        for c in channels:
+            r = (states[idx, out_index[c]] - measured[c]) / sigma[c]
+            parts.append(r[np.isfinite(r)])
+        return np.concatenate(parts)
+
+    r_guess = float(np.clip(params.get("R0", 0.2) + params.get("a1", 0.0) * 0.5, 0.02, 5.0))
+    theta0 = np.array([r_guess, x0[names.index("F")] + 2.0] + [x0[names.index(s)] for s in free[1:]])
+    k = len(free)
+    fit = scipy.optimize.least_squares(residuals, theta0, bounds=([1e-4] + [-50.0] * k, [50.0] + [400.0] * k),
+                                       x_scale=np.array([0.05] + [1.0] * k), diff_step=1e-4)
+    n, p = fit.fun.size, fit.x.size
+    chi2 = float(fit.fun @ fit.fun) / max(1, n - p)
+    jac = fit.jac
+    cov = np.linalg.pinv(jac.T @ jac) * max(1.0, chi2)
+    se = np.sqrt(np.diag(cov))
+    states = simulate(fit.x)
+    err = np.concatenate([(states[idx, out_index[c]] - measured[c]) for c in channels])
+    return {"R": float(fit.x[0]), "R_se": float(se[0]), "T_P0": float(fit.x[1]), "T_P0_se": float(se[1]),
+            "rmse_K": float(np.sqrt(np.nanmean(err ** 2))), "n": n, "chi2_red": chi2}
+
+
+def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_s: float = 1.0) -> list[CooldownResult]:
+    """Every cool-down of a cooldown-sweep run, fitted; R_true filled in for a simulated bench."""
+    path = Path(path)
+    run = load_run(path)
+    truth = None
+    with h5py.File(path, "r") as f:
+        if "sim_truth" in f.attrs:
+            truth = json.loads(f.attrs["sim_truth"]).get("params")
+    results = []
+    for cycle, t0, t1, point in segments(path):
+        fit = fit_segment(run, params, t0, t1, sample_s)
+        rpm, state = point.get("engine_speed", math.nan), int(point.get("clutch_state", 0))
+        r_true = math.nan
+        if truth is not None:
+            from benchlab.clutch import convection_resistance
+
+            r_true = float(np.asarray(convection_resistance(truth, {"engine_speed": np.array([rpm]),
+                                                                     "clutch_state": np.array([float(state)])})).ravel()[0])
+        results.append(CooldownResult(cycle, rpm, state, point.get("slip_speed", math.nan), t0, t1, fit["R"],
+                                      fit["R_se"], COVERAGE_K * fit["R_se"], fit["T_P0"], fit["T_P0_se"],
+                                      fit["rmse_K"], int(fit["n"]), fit["chi2_red"], r_true))
+    return results
+
+
+def fit_eq11(results: Sequence[CooldownResult]) -> dict[str, float]:
+    """a1, b1, a2, b2, R0 (and *_se) of eq. (11) from the per-point resistances; ValueError if underdetermined."""
+    rows = [r for r in results if np.isfinite(r.R) and r.R_se > 0]
+    by_state = {s: [r for r in rows if r.clutch_state == s] for s in (0, 1)}
+    if len(rows) < 5 or any(len({r.engine_speed for r in by_state[s]}) < 2 for s in (0, 1)):
+        raise ValueError("eq. (11) needs at least 5 cool-downs with 2 engine speeds in each clutch state")
+    w = np.array([r.engine_speed for r in rows]) / 1000.0  # krpm inside, for conditioning
+    s = np.array([r.clutch_state for r in rows])
+    y = np.array([r.R for r in rows])
+    e = np.array([r.R_se for r in rows])
+
+    def model(th: np.ndarray) -> np.ndarray:
+        a1, b1, a2, b2, r0 = th
+        return np.where(s == 1, a1 * np.exp(b1 * w), a2 * np.exp(b2 * w)) + r0
+
+    th0 = np.array([0.3, -1.0, 0.4, -1.0, max(1e-3, 0.8 * y.min())])
+    fit = scipy.optimize.least_squares(lambda th: (model(th) - y) / e, th0,
+                                       bounds=([0, -20, 0, -20, 0], [50, 5, 50, 5, 50]))
+    n, p = y.size, 5
+    chi2 = float(fit.fun @ fit.fun) / max(1, n - p) if n > p else math.nan
+    cov = np.linalg.pinv(fit.jac.T @ fit.jac) * (max(1.0, chi2) if np.isfinite(chi2) else 1.0)
+    se = np.sqrt(np.diag(cov))
+    scale = np.array([1.0, 1e-3, 1.0, 1e-3, 1.0])  # b in 1/rpm
+    names = ("a1", "b1", "a2", "b2", "R0")
+    out = {k: float(v * c) for k, v, c in zip(names, fit.x, scale)}
+    out.update({f"{k}_se": float(v * c) for k, v, c in zip(names, se, scale)})
+    out["chi2_red"] = chi2
+    out["points"] = n
+    return out
+
+
+def store(path: "str | os.PathLike[str]", results: Sequence[CooldownResult], eq11: Mapping[str, float] | None,
+          params_source: str = "") -> None:
+    """Write /analysis/cooldowns (one dataset per column, with units) and /analysis/eq11 into the run file."""
+    with h5py.File(path, "r+") as f:
+        group = f.require_group("analysis")
+        if "cooldowns" in group:
+            del group["cooldowns"]
+        table = group.create_group("cooldowns")
+        table.attrs.update(coverage_k=COVERAGE_K, params=params_source, method="4-state model, R and T_P0 free")
+        rows = [asdict(r) for r in results]
+        for key, units in TABLE_UNITS.items():
+            ds = table.create_dataset(key, data=np.array([row[key] for row in rows], dtype=float))
+            ds.attrs["units"] = units
+        if "eq11" in group:
+            del group["eq11"]
+        if eq11 is not None:
+            g = group.create_group("eq11")
+            units = {"a1": "K/W", "a2": "K/W", "R0": "K/W", "b1": "1/rpm", "b2": "1/rpm"}
+            for k, v in eq11.items():
+                ds = g.create_dataset(k, data=float(v))
+                base = k.removesuffix("_se")
+                ds.attrs["units"] = units.get(base, "1")
+
+
+def table_lines(results: Sequence[CooldownResult], eq11: Mapping[str, float] | None) -> list[str]:
+    lines = ["cycle  engine_rpm  S  slip_rpm     R K/W    ±U(k=2)    T_P0 degC   rmse K   R_true"]
+    for r in results:
+        lines.append(f"{r.cycle:5d}  {r.engine_speed:10.0f}  {r.clutch_state:d}  {r.slip_speed:8.0f}  {r.R:8.4f}  "
+                     f"{r.R_u:9.4f}  {r.T_P0:10.2f}  {r.rmse_K:7.3f}  {r.R_true:7.4f}")
+    if eq11 is not None:
+        lines.append("eq. (11): " + ", ".join(f"{k} = {eq11[k]:.4g} ± {eq11[k + '_se']:.2g}"
+                                              for k in ("a1", "b1", "a2", "b2", "R0")))
+    return lines
