@@ -23,6 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", help="run file to write (HDF5)")
     parser.add_argument("--dry-run", action="store_true", help="print the schedule, check limits, estimate duration")
     parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
+    parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
+                        "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -59,4 +61,8 @@ def run(args: argparse.Namespace) -> int:
             print(file=sys.stderr)
         print("\n".join(summary.lines()))
         print(f"run file   {out}")
+        if args.params and code == 0 and (args.protocol == "cooldown-sweep" or args.resume):
+            from benchlab.commands import cooldown
+
+            cooldown.run(argparse.Namespace(run=str(out), params=args.params, sample=1.0, json=False, no_store=False))
     return code

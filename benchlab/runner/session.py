@@ -49,6 +49,8 @@ class RunRequest:
     limits: BenchLimits | None = None  # sim only: limits (hardware: from BENCH.toml)
     progress: Callable[[str], None] | None = None
     install_signals: bool = True
+    steps: tuple[Step, ...] | None = None  # a custom schedule instead of the named protocol's (tests, scripts)
+    keep: dict[str, Any] | None = None  # if given, execute() leaves "sim", "bench", "runner" in it (tests)
 
 
 def software_version() -> str:
@@ -80,10 +82,14 @@ def bench_config(request: RunRequest) -> BenchConfig:
 def plan(request: RunRequest) -> tuple[tuple[Step, ...], BenchConfig, dict[str, Any]]:
     """Schedule and bench config, checked: InputError before anything moves."""
     config = bench_config(request)
-    try:
-        protocol = catalog.build(request.protocol, request.seed, request.cycles, request.duration_s, request.grid)
-    except ValueError as exc:
-        raise InputError(request.protocol, "--grid" if request.grid and "grid" in str(exc) else "protocol", str(exc)) from None
+    if request.steps is not None:
+        protocol = catalog.Protocol(request.protocol, tuple(request.steps), {"custom": True})
+    else:
+        try:
+            protocol = catalog.build(request.protocol, request.seed, request.cycles, request.duration_s, request.grid)
+        except ValueError as exc:
+            field = "--grid" if request.grid and "grid" in str(exc) else "protocol"
+            raise InputError(request.protocol, field, str(exc)) from None
     problems = check_schedule(protocol.steps, config.limits)
     if problems and not request.dry_run:
         raise InputError(request.protocol, "schedule", f"within the bench limits: {problems[0]}"
@@ -177,6 +183,8 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             writer.state["resumes"] = 0
         runner = Runner(bench, clock, steps, writer, config.limits, tick_s=config.tick_s,
                         fast_tick_s=config.fast_tick_s, dt=config.dt, progress=request.progress)
+        if request.keep is not None:
+            request.keep.update(sim=sim, bench=bench, runner=runner)
         previous = {}
         if request.install_signals:
             for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):

@@ -1,0 +1,64 @@
+"""`benchlab cooldown RUN.h5 --params P.json`: convection resistance per cool-down and the fit of eq. (11)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from dataclasses import asdict
+from pathlib import Path
+
+import h5py
+
+from benchlab.errors import InputError
+
+NAME = "cooldown"
+HELP = "fit R_FA = R_PA for every cool-down of a cooldown-sweep run, then eq. (11); stores /analysis"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run", help="run file of a cooldown-sweep")
+    parser.add_argument("--params", required=True,
+                        help="parameter file (identified from a Table 1 run) for every parameter but R; "
+                             "'sim-truth' uses the simulated bench's true parameters stored in the run")
+    parser.add_argument("--sample", type=float, default=1.0, help="residual sampling period in s (default 1)")
+    parser.add_argument("--json", action="store_true", help="print the table and eq. (11) as JSON")
+    parser.add_argument("--no-store", action="store_true", help="do not write /analysis into the run file")
+
+
+def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
+    if spec == "sim-truth":
+        with h5py.File(run, "r") as f:
+            if "sim_truth" not in f.attrs:
+                raise InputError(run, "sim_truth", "a run of the simulated bench for --params sim-truth")
+            return dict(json.loads(f.attrs["sim_truth"])["params"])
+    from benchlab.params import load_params
+
+    return dict(load_params(spec))
+
+
+def run(args: argparse.Namespace) -> int:
+    from benchlab.cooldown import analyse, fit_eq11, store, table_lines
+    from benchlab.runfile import load_run
+
+    path = Path(args.run)
+    load_run(path)  # checks the file (InputError on a bad one)
+    params = load_analysis_params(args.params, path)
+    results = analyse(path, params, args.sample)
+    if not results:
+        raise InputError(path, "/events", "completed cool-downs (cooldown_start/cooldown_end events)")
+    try:
+        eq11 = fit_eq11(results)
+    except ValueError:
+        eq11 = None
+    if not args.no_store:
+        store(path, results, eq11, args.params)
+    if args.json:
+        clean = lambda v: None if isinstance(v, float) and not math.isfinite(v) else v  # noqa: E731
+        print(json.dumps({"cooldowns": [{k: clean(v) for k, v in asdict(r).items()} for r in results],
+                          "eq11": {k: clean(v) for k, v in eq11.items()} if eq11 else None}, indent=1))
+    else:
+        print("\n".join(table_lines(results, eq11)))
+        if eq11 is None:
+            print("eq. (11): not enough points (needs 5 cool-downs, 2 engine speeds per clutch state)")
+    return 0

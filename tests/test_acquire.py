@@ -1,0 +1,134 @@
+"""Acquisition: the aligned grid's hold rules, the run-file layout, crash safety under SIGKILL, resume."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from benchlab.acquire import AlignedBuilder, AlignedSource, Layout, RunWriter, StreamSpec, read_progress
+from benchlab.runfile import ALIGNED_UNITS, load_run
+
+CHANNELS = {k: v for k, v in ALIGNED_UNITS.items() if k not in ("time", "T_engine")}
+
+
+def _layout(dt: float = 0.01, hold: float = 0.075) -> Layout:
+    cols = tuple(CHANNELS.items())
+    return Layout((StreamSpec("s", cols, 20.0, hold),), tuple(AlignedSource(k, "s", k) for k in CHANNELS),
+                  CHANNELS, None, dt)
+
+
+def test_reading_held_until_next_or_hold_limit_never_across_gaps():
+    spec = StreamSpec("a", (("x", "1"),), 20.0, hold_s=0.075)
+    layout = Layout((spec,), (AlignedSource("x", "a", "x"),), {"x": "1"}, None, 0.01)
+    b = AlignedBuilder(layout)
+    for t, v in ((0.0, 1.0), (0.05, 2.0), (0.10, np.nan), (0.15, 4.0), (0.60, 5.0)):
+        b.add("a", t, (v,))
+    x = b.finalise(71)["x"]
+    assert np.all(x[0:5] == 1.0) and np.all(x[5:10] == 2.0)  # held until the next reading
+    assert np.all(np.isnan(x[10:15]))  # a reading without a number is NaN on the grid
+    assert np.all(x[15:23] == 4.0) and np.all(np.isnan(x[23:60]))  # held 75 ms, then nothing across the gap
+    assert np.all(x[60:68] == 5.0) and np.all(np.isnan(x[68:71]))
+
+
+def test_finalise_in_pieces_equals_in_one_go():
+    spec = StreamSpec("a", (("x", "1"),), 20.0, hold_s=0.2)
+    layout = Layout((spec,), (AlignedSource("x", "a", "x", 2.0),), {"x": "1"}, None, 0.01)
+    rng = np.random.default_rng(1)
+    times = np.sort(rng.uniform(0, 10, 150))
+    one, pieces = AlignedBuilder(layout), AlignedBuilder(layout)
+    for t in times:
+        one.add("a", t, (t,))
+    whole = one.finalise(1001)["x"]
+    parts, i = [], 0
+    for k in range(1, 1002, 37):
+        while i < len(times) and times[i] <= (k - 1) * 0.01:
+            pieces.add("a", times[i], (times[i],))
+            i += 1
+        parts.append(pieces.finalise(k)["x"])
+    parts.append(pieces.finalise(1001)["x"])
+    np.testing.assert_array_equal(np.concatenate(parts), whole)
+
+
+def test_run_file_layout_units_status_and_events(tmp_path):
+    path = tmp_path / "run.h5"
+    w = RunWriter(path, _layout(), protocol="table1", attrs={"seed": 3}, planned_s=2.0,
+                  schedule=[{"phase": "open", "duration_s": 1.0}], schedule_units={"duration_s": "s"},
+                  state_fields=("cycle",))
+    t = 0.0
+    while t < 5.0:  # beyond the planned capacity: the file grows
+        t = round(t + 0.05, 10)
+        w.add("s", t, [t] * len(CHANNELS))
+        w.advance(t)
+    w.event(1.0, "cycle_start", 0, "x")
+    with h5py.File(path, "r") as f:
+        assert f.attrs["status"] == "running"
+    w.close("complete")
+    run = load_run(path)
+    assert run.attrs["status"] == "complete" and run.attrs["protocol"] == "table1"
+    assert run["time"].iloc[-1] == pytest.approx(5.0)
+    with h5py.File(path, "r") as f:
+        missing = []
+        f.visititems(lambda n, o: missing.append(n) if isinstance(o, h5py.Dataset) and "units" not in o.attrs else None)
+        assert missing == []
+        assert f["events/kind"][0] == b"cycle_start" and f.attrs["seed"] == 3
+        assert json.loads(f["schedule"].attrs["steps_json"])[0]["phase"] == "open"
+        assert not os.path.exists(str(path) + ".tmp")
+
+
+WRITER = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {root!r})
+    from tests.test_acquire import _layout, CHANNELS
+    from benchlab.acquire import RunWriter
+    w = RunWriter(sys.argv[1], _layout(), protocol="table1", planned_s=600.0, state_fields=("cycle",))
+    t = 0.0
+    while True:
+        t = round(t + 0.05, 10)
+        w.add("s", t, [t] * len(CHANNELS))
+        if w.advance(t):
+            w.state["cycle"] = t
+            if t > 2:
+                print("go", flush=True)
+""")
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.37, 1.1])
+def test_sigkill_leaves_a_readable_file_missing_at_most_one_second(tmp_path, delay):
+    path = tmp_path / "killed.h5"
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    proc = subprocess.Popen([sys.executable, "-c", WRITER.format(root=root), str(path)], stdout=subprocess.PIPE)
+    assert proc.stdout.readline().strip() == b"go"
+    time.sleep(delay)
+    with h5py.File(path, "r") as f:  # progress as seen just before the kill
+        before = read_progress(f)["t_data"]
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    run = load_run(path)  # readable by the contract's reader
+    assert run.attrs["status"] == "running"
+    with h5py.File(path, "r") as f:
+        progress = read_progress(f)
+    rows = int(progress["aligned_rows"])
+    valid = run["engine_speed"].to_numpy()[:rows]
+    assert np.all(np.isfinite(valid[5:]))  # everything up to the progress mark is there
+    t_valid = run["time"].to_numpy()[rows - 1]
+    assert progress["t_data"] >= before and t_valid == pytest.approx(progress["t_data"], abs=0.011)
+    # resume: the valid part is kept, new data appended, file completes
+    w = RunWriter.resume(path, _layout(), extra_s=2.0)
+    t0 = t_valid
+    for k in range(1, 21):
+        w.add("s", t0 + 0.05 * k, [t0 + 0.05 * k] * len(CHANNELS))
+        w.advance(t0 + 0.05 * k)
+    w.close("complete")
+    run2 = load_run(path)
+    assert run2.attrs["status"] == "complete"
+    assert run2["time"].iloc[-1] == pytest.approx(t0 + 1.0, abs=0.011)
+    np.testing.assert_array_equal(run2["engine_speed"].to_numpy()[:rows], valid)
