@@ -1,0 +1,134 @@
+"""The runner on the simulated bench (drivers over sim:// serial URLs and an in-process CAN bus).
+
+Same seed, same /aligned; every interlock tripped by an injected fault leaves the bench safe; SIGTERM
+closes the file as aborted.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from benchlab.runfile import load_run
+from benchlab.runner.session import RunRequest, execute
+from drivers.can_signals import CLAMP_OPEN
+from protocols.limits import BenchLimits
+from protocols.schedule import Step
+from sim_bench.faults import Fault
+
+IDLE = BenchLimits().idle_speed_rpm
+
+
+def _events(path):
+    with h5py.File(path, "r") as f:
+        g = f["events"]
+        return [(float(t), k.decode(), d.decode()) for t, k, d in zip(g["time"][:], g["kind"][:], g["detail"][:])]
+
+
+def test_same_seed_same_aligned_data(tmp_path):
+    runs = []
+    for name in ("a.h5", "b.h5"):
+        code, summary = execute(RunRequest("table1", tmp_path / name, seed=11, cycles=3, install_signals=False))
+        assert code == 0 and summary.cycles_done == 3
+        runs.append(load_run(tmp_path / name))
+    a, b = runs
+    assert list(a.columns) == list(b.columns) and len(a) == len(b) > 20000
+    for c in a.columns:
+        np.testing.assert_array_equal(a[c].to_numpy(), b[c].to_numpy())
+    assert a.attrs["status"] == "complete"
+    # physically sensible: launches heat the clutch, friction power only while clamped
+    assert np.nanmax(a["friction_power"]) > 1000 and np.all(a["friction_power"][a["clutch_state"] == 0] == 0)
+    kinds = [k for _, k, _ in _events(tmp_path / "a.h5")]
+    assert kinds.count("cycle_start") == 3 and "engagement_start" in kinds and "synchronised" in kinds
+    c, _ = execute(RunRequest("table1", tmp_path / "c.h5", seed=12, cycles=3, install_signals=False))
+    assert not np.array_equal(load_run(tmp_path / "c.h5")["T_flywheel"].to_numpy()[:20000],
+                              a["T_flywheel"].to_numpy()[:20000], equal_nan=True)
+
+
+STEPS = (Step("open", 40.0, 2000.0, 0.0, 0.0, 0), Step("launch", 10.0, 2000.0, 60.0, 100.0, 1),
+         Step("drive", 30.0, 2000.0, 60.0, 100.0, 1), Step("open", 30.0, 1500.0, 0.0, 100.0, 2))
+
+
+def _run_with(tmp_path, faults, action="abort", **limits):
+    keep: dict = {}
+    lim = BenchLimits(on_interlock=action, resume_after_s=5.0, **limits)
+    code, summary = execute(RunRequest("custom", tmp_path / "run.h5", steps=STEPS, faults=faults, limits=lim,
+                                       keep=keep, install_signals=False, sim_options={"dropouts": False}))
+    return code, summary, keep, _events(tmp_path / "run.h5")
+
+
+def _assert_safe(keep, path):
+    physics = keep["sim"].physics
+    engine, clamped, torque, load = physics._setpoints
+    assert (engine, clamped, torque, load) == (IDLE, False, 0.0, 0.0)  # what the controllers apply
+    with h5py.File(path, "r") as f:
+        sp = f["raw/setpoints"]
+        last = [float(sp[c][-1]) for c in ("engine_speed", "clutch_torque", "clutch_open", "load_torque")]
+        assert last == [IDLE, 0.0, 1.0, 0.0]  # what the runner commanded last
+        assert f.attrs["status"] == "aborted"
+
+
+@pytest.mark.parametrize("fault, kind", [
+    (Fault(3.0, "flywheel_heater", 30000.0), "flywheel_over_temperature"),
+    (Fault(3.0, "air_heater", 15000.0), "air_over_temperature"),
+    (Fault(3.0, "controller_silent", target="load"), "controller_lost"),
+    (Fault(3.0, "controller_fault", 2.0, target="clutch"), "controller_lost"),
+    (Fault(3.0, "radio_silence", duration_s=30.0), "radio_silence"),
+    (Fault(3.0, "stuck_clutch", 10.0, 25.0), "slip_time"),
+    (Fault(3.0, "stuck_clutch", 70.0, 25.0), "slip_energy"),
+])
+def test_each_interlock_trips_on_its_fault_and_leaves_the_bench_safe(tmp_path, fault, kind):
+    code, summary, keep, events = _run_with(tmp_path, [fault])
+    interlocks = [d for _, k, d in events if k == "interlock"]
+    assert code == 1 and summary.status == "aborted"
+    assert interlocks and interlocks[0].startswith(kind), interlocks
+    t_fault = fault.at_s
+    t_trip = next(t for t, k, _ in events if k == "interlock")
+    assert t_fault <= t_trip < t_fault + (40.0 if kind == "flywheel_over_temperature" else 20.0)
+    if fault.kind != "stuck_clutch":  # a stuck clutch obeys again only when the fault ends
+        _assert_safe(keep, tmp_path / "run.h5")
+        status = keep["bench"].status
+        assert status.clamp_state == CLAMP_OPEN
+
+
+def test_interlock_wait_then_next_cycle(tmp_path):
+    faults = [Fault(3.0, "radio_silence", duration_s=15.0)]
+    code, summary, keep, events = _run_with(tmp_path, faults, action="wait")
+    kinds = [k for _, k, _ in events]
+    assert code == 0 and summary.status == "complete"
+    assert kinds.index("interlock") < kinds.index("interlock_cleared") < kinds.index("cycle_skipped")
+    cleared = next(t for t, k, _ in events if k == "interlock_cleared")
+    assert cleared >= 3.0 + 15.0 + 5.0 - 0.6  # silence over, plus resume_after_s
+    starts = [t for t, k, _ in events if k == "cycle_start"]
+    skipped = next(t for t, k, _ in events if k == "cycle_skipped")
+    assert len(starts) == 3 and starts[0] < skipped <= starts[1]  # rest of cycle 0 skipped, 1 and 2 run
+    assert "dropout_start" in kinds and "dropout_end" in kinds
+
+
+def test_sigterm_puts_bench_safe_and_file_aborted(tmp_path):
+    out = tmp_path / "term.h5"
+    proc = subprocess.Popen([sys.executable, "-m", "benchlab.cli", "run", "table1", "--bench", "sim", "--duration",
+                             "7200", "--out", str(out), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.time() + 60
+    while time.time() < deadline and not out.exists():
+        time.sleep(0.05)
+    time.sleep(1.5)
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 143, stderr
+    run = load_run(out)
+    assert run.attrs["status"] == "aborted"
+    events = _events(out)
+    assert events[-1][1] == "run_aborted" and "SIGTERM" in events[-1][2]
+    with h5py.File(out, "r") as f:
+        sp = f["raw/setpoints"]
+        assert [float(sp[c][-1]) for c in ("engine_speed", "clutch_torque", "clutch_open", "load_torque")] == \
+            [IDLE, 0.0, 1.0, 0.0]
+    assert b"run aborted" in stdout
