@@ -373,12 +373,18 @@ class Runner:
 
 
 class _Pulses:
-    """Pulsed heating: slip `pulse_s`, rest `rest_s`; a pulse starts only below the target and with the shaft held."""
+    """Pulsed heating: slip `pulse_s`, rest `rest_s`, the shaft held by the load.
+
+    A pulse starts only while the flywheel is below the target minus half the rise of the previous pulse,
+    so the saw-tooth the pulses leave is centred on the target.
+    """
 
     def __init__(self, step: Step, now: float) -> None:
         self.step = step
         self.on = False
         self.until = now + 2.0  # let the shaft come to rest under the holding load first
+        self.rise = 0.0
+        self._t_start_temp = math.nan
 
     def near(self, now: float) -> bool:
         return self.on or now >= self.until - 0.2
@@ -389,10 +395,13 @@ class _Pulses:
             return False
         if self.on:
             self.on, self.until = False, now + self.step.rest_s
+            if np.isfinite(st.T_flywheel) and np.isfinite(self._t_start_temp):
+                self.rise = max(0.0, st.T_flywheel - self._t_start_temp)
             return True
         held = np.isfinite(st.clutch_speed) and abs(st.clutch_speed) < 20.0
-        if held and np.isfinite(st.T_flywheel) and st.T_flywheel < target:
+        if held and np.isfinite(st.T_flywheel) and st.T_flywheel < target - self.rise / 2.0:
             self.on, self.until = True, now + self.step.pulse_s
+            self._t_start_temp = st.T_flywheel
             return True
         self.until = now + (self.step.rest_s if held else 0.5)
         return False

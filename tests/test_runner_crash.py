@@ -1,0 +1,70 @@
+"""A 2-hour Table 1 run on the simulated bench: killed with SIGKILL in the middle, readable, resumed to the end.
+
+The two halves together must take well under a minute of wall time.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+
+from benchlab.acquire import read_progress
+from benchlab.runfile import load_run
+
+
+def _progress(path):
+    try:
+        with h5py.File(path, "r") as f:
+            return read_progress(f)
+    except (OSError, KeyError):
+        return None
+
+
+def test_two_hour_table1_killed_readable_and_resumed(tmp_path):
+    out = tmp_path / "table1.h5"
+    cmd = [sys.executable, "-m", "benchlab.cli", "run", "table1", "--bench", "sim", "--seed", "3",
+           "--duration", "7200", "--out", str(out), "--quiet"]
+    wall0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    progress = None
+    while time.perf_counter() - wall0 < 120:
+        progress = _progress(out) if out.exists() else None
+        if progress and progress["t_data"] > 2400:
+            break
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    wall_first = time.perf_counter() - wall0
+
+    run = load_run(out)  # readable as it was left
+    assert run.attrs["status"] == "running"
+    progress = _progress(out)
+    rows = int(progress["aligned_rows"])
+    assert progress["t_data"] > 2400 and rows > 240000
+    assert np.isfinite(run["engine_speed"].to_numpy()[rows - 200:rows]).all()  # data up to the last flush
+    cycle_at_kill = int(progress["state/cycle"])
+    before = {c: run[c].to_numpy()[:rows] for c in ("T_flywheel", "engine_speed", "friction_power")}
+
+    wall1 = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "benchlab.cli", "run", "--resume", str(out), "--bench", "sim",
+                           "--quiet"], capture_output=True, text=True, timeout=120)
+    wall_resume = time.perf_counter() - wall1
+    assert done.returncode == 0, done.stderr
+    run = load_run(out)
+    assert run.attrs["status"] == "complete"
+    assert run["time"].iloc[-1] > 6000
+    for c, values in before.items():  # what was acquired before the kill is kept as it was
+        np.testing.assert_array_equal(run[c].to_numpy()[:rows], values)
+    with h5py.File(out, "r") as f:
+        kinds = [k.decode() for k in f["events/kind"][:]]
+        cycles = f["events/cycle"][:]
+        starts = sorted(set(cycles[np.array(kinds) == "cycle_start"].tolist()))
+    assert "resume" in kinds
+    assert cycle_at_kill + 1 in starts and starts[-1] == max(starts)  # went on with the next planned cycle
+    assert wall_first + wall_resume < 60.0, (wall_first, wall_resume)
