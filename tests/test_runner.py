@@ -126,7 +126,8 @@ def test_sigterm_puts_bench_safe_and_file_aborted(tmp_path):
     run = load_run(out)
     assert run.attrs["status"] == "aborted"
     events = _events(out)
-    assert events[-1][1] == "run_aborted" and "SIGTERM" in events[-1][2]
+    aborted = [d for _, k, d in events if k == "run_aborted"]
+    assert len(aborted) == 1 and "SIGTERM" in aborted[0]
     with h5py.File(out, "r") as f:
         sp = f["raw/setpoints"]
         assert [float(sp[c][-1]) for c in ("engine_speed", "clutch_torque", "clutch_open", "load_torque")] == \

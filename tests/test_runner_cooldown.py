@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from benchlab.clutch import convection_resistance
-from benchlab.cooldown import COVERAGE_K, analyse, store
+from benchlab.cooldown import COVERAGE_K, SYSTEMATIC_REL, analyse, store
 from benchlab.runner.session import RunRequest, execute
 from sim_bench.plant import ThermalPlant
 
@@ -38,7 +38,7 @@ def test_sweep_recovers_true_convection_resistance_within_uncertainty(sweep):
         true_r = float(np.ravel(convection_resistance(plant.params, {"engine_speed": np.array([r.engine_speed]),
                                                                       "clutch_state": np.array([float(r.clutch_state)])}))[0])
         assert r.R_true == pytest.approx(true_r)
-        assert r.R_u == pytest.approx(COVERAGE_K * r.R_se)
+        assert r.R_u == pytest.approx(COVERAGE_K * np.hypot(r.R_se, SYSTEMATIC_REL * r.R))
         assert abs(r.R - true_r) <= r.R_u, (r, true_r)
         assert r.R_u < 0.02 * true_r  # and the uncertainty is informative
         assert 0.5 < r.chi2_red < 2.0

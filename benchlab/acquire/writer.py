@@ -109,26 +109,34 @@ class AlignedBuilder:
         held: dict[str, np.ndarray] = {}
         for spec in self.layout.streams:
             pend, carry = self._pending[spec.name], self._carry[spec.name]
-            times = ([carry[0]] if carry else []) + pend.times
             ncol = len(spec.columns)
-            rows = ([carry[1]] if carry else []) + [np.asarray(r, dtype=float) for r in pend.rows]
-            if not times:
+            n_new = len(pend.times)
+            if carry is None and n_new == 0:
                 values = np.full((k1 - k0, ncol), np.nan)
             else:
-                rt, rv = np.asarray(times, dtype=float), np.asarray(rows, dtype=float).reshape(len(times), ncol)
-                order = np.argsort(rt, kind="stable")
-                rt, rv = rt[order], rv[order]
+                rt = np.empty(n_new + (carry is not None))
+                rv = np.empty((len(rt), ncol))
+                j = 0
+                if carry is not None:
+                    rt[0], rv[0] = carry
+                    j = 1
+                if n_new:
+                    rt[j:] = pend.times
+                    rv[j:] = np.asarray(pend.rows, dtype=float).reshape(n_new, ncol)
+                if np.any(np.diff(rt) < 0):
+                    order = np.argsort(rt, kind="stable")
+                    rt, rv = rt[order], rv[order]
                 idx = np.searchsorted(rt, tk + _EPS, side="right") - 1
-                ok = idx >= 0
-                age = tk - rt[np.maximum(idx, 0)]
-                ok &= age < spec.hold_s + _EPS
-                values = np.where(ok[:, None], rv[np.maximum(idx, 0)], np.nan)
-                last = k1 - 1
-                keep = rt > last * self.dt + _EPS if k1 > k0 else np.ones(len(rt), bool)
-                before = np.flatnonzero(~keep)
-                self._carry[spec.name] = (rt[before[-1]], rv[before[-1]]) if before.size else carry
-                pend.times = rt[keep].tolist()
-                pend.rows = list(rv[keep])
+                safe = np.maximum(idx, 0)
+                ok = (idx >= 0) & (tk - rt[safe] < spec.hold_s + _EPS)
+                values = rv[safe]
+                values[~ok] = np.nan
+                keep = rt > (k1 - 1) * self.dt + _EPS if k1 > k0 else np.ones(len(rt), bool)
+                n_before = int(np.count_nonzero(~keep))
+                if n_before:
+                    self._carry[spec.name] = (rt[n_before - 1], rv[n_before - 1].copy())
+                pend.times = rt[n_before:].tolist()
+                pend.rows = [tuple(r) for r in rv[n_before:]]
             for j, name in enumerate(spec.names):
                 held[f"{spec.name}/{name}"] = values[:, j]
         out: dict[str, np.ndarray] = {"time": tk}

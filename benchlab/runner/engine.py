@@ -153,6 +153,7 @@ class Runner:
         self._last_progress = -math.inf
         self._history: collections.deque[tuple[float, float]] = collections.deque()
         self._step_index = 0
+        self._commanded = False
 
     # -- public ---------------------------------------------------------------------------------------
     def request_stop(self, reason: str, code: int = 130) -> None:
@@ -222,7 +223,8 @@ class Runner:
         self._apply(step, heat)
         reason = "time"
         while True:
-            fast = step.phase == "launch" or (self.bench.status.slipping and heat is None)
+            fast = step.phase == "launch" or (self.bench.status.slipping and heat is None) or self._commanded
+            self._commanded = False
             self._tick(fast=fast, until=heat.until if heat is not None else math.inf)
             now = self.clock()
             st = self.bench.status
@@ -254,6 +256,7 @@ class Runner:
         return self._t_step_start
 
     def _apply(self, step: Step, heat: "_Pulses | None") -> None:
+        self._commanded = True  # the next tick comes soon: the controllers take the new set-points at once
         if step.phase == "launch":
             self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm, False, step.load_torque_nm)
         elif step.phase == "drive":

@@ -66,7 +66,7 @@ def software_version() -> str:
 
 def _sim_bench_config(request: RunRequest, limits: BenchLimits) -> BenchConfig:
     return BenchConfig(instrument_url="sim://pending", node_url="sim://pending", can={"interface": "sim"},
-                       instrument_timeout_s=0.05, limits=limits, source="sim", tick_s=0.5, fast_tick_s=0.05,
+                       instrument_timeout_s=0.05, limits=limits, source="sim", tick_s=1.0, fast_tick_s=0.05,
                        instrument_period_s=0.5)
 
 
@@ -97,7 +97,8 @@ def plan(request: RunRequest) -> tuple[tuple[Step, ...], BenchConfig, dict[str, 
     return protocol.steps, config, protocol.options
 
 
-def dry_run(request: RunRequest, out=sys.stdout) -> int:
+def dry_run(request: RunRequest, out: Any = None) -> int:
+    out = out or sys.stdout
     steps, config, options = plan(request)
     for line in describe(steps):
         print(line, file=out)

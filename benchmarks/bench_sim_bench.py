@@ -1,0 +1,90 @@
+"""Simulated-bench speed: simulated seconds per wall second, full stack.
+
+    .venv/bin/python benchmarks/bench_sim_bench.py [--duration S] [--seed N] [--quick]
+
+Full stack = `benchlab run table1 --bench sim`: drivetrain + thermal plant (chunked) as providers of the
+emulated DMM (SCPI over a sim:// serial URL), ClutchSensorNode gateway (COBS frames over a sim:// URL)
+and CAN controllers (in-process CAN bus, DBC frames); the real drivers poll them; the runner executes the
+schedule with interlocks; the acquisition writes raw streams, events and the 10 ms /aligned grid into
+HDF5 with a flush every simulated second; the file is compacted at the end. Reported: wall and CPU time
+(CPU excludes time lost to other processes on a shared machine), the speed factor, where the time goes
+(profile of a shorter run), and frames and rows handled. Target: >= 500x real time (exit 1 if missed).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import cProfile  # noqa: E402
+import pstats  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import h5py  # noqa: E402
+
+from benchlab.acquire import read_progress  # noqa: E402
+from benchlab.runner.session import RunRequest, execute  # noqa: E402
+
+TARGET = 500.0
+
+
+def one_run(out: Path, duration: float, seed: int) -> tuple[float, float, float, dict]:
+    keep: dict = {}
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    code, summary = execute(RunRequest("table1", out, seed=seed, duration_s=duration, install_signals=False, keep=keep))
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    assert code == 0, summary.lines()
+    with h5py.File(out, "r") as f:
+        counts = {k: len(f["raw"][k]["time"]) for k in f["raw"]}
+        counts["aligned rows"] = len(f["aligned/time"])
+        counts["events"] = len(f["events/time"])
+    sim = keep["sim"]
+    counts["solver calls"] = sim.physics.solver_calls
+    counts["CAN frames sent by emulators"] = sim.can.stats.sent
+    counts["node frames"] = sim.node.frames_sent
+    return summary.sim_s, wall, cpu, counts
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration", type=float, default=7200.0)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--quick", action="store_true", help="1800 s instead of 2 h")
+    args = ap.parse_args()
+    duration = 1800.0 if args.quick else args.duration
+    with tempfile.TemporaryDirectory() as tmp:
+        execute(RunRequest("table1", Path(tmp) / "warm.h5", cycles=1, install_signals=False))  # imports, numba
+        sim_s, wall, cpu, counts = one_run(Path(tmp) / "run.h5", duration, args.seed)
+        print(f"table1 {duration:.0f} s planned, {sim_s:.0f} s simulated")
+        print(f"  wall {wall:6.2f} s  -> {sim_s / wall:6.0f}x real time")
+        print(f"  cpu  {cpu:6.2f} s  -> {sim_s / cpu:6.0f}x real time per core (other load excluded)")
+        for k, v in counts.items():
+            print(f"  {k:30s} {v:>10,d}")
+        prof = cProfile.Profile()
+        prof.enable()
+        execute(RunRequest("table1", Path(tmp) / "prof.h5", seed=args.seed, duration_s=600.0, install_signals=False))
+        prof.disable()
+        stats = pstats.Stats(prof)
+        total = sum(v[2] for v in stats.stats.values())
+        groups = {"emulators (sim_bench/emulators)": "sim_bench/emulators", "drivers": "/drivers/",
+                  "physics (sim_bench/bench, plant, solver)": ("sim_bench/bench", "sim_bench/plant", "solver.py",
+                                                              "drivetrain.py"),
+                  "acquisition (benchlab/acquire)": "benchlab/acquire", "runner + devices": "benchlab/runner"}
+        print("  self time by layer (600 s profile):")
+        for label, keys in groups.items():
+            keys = (keys,) if isinstance(keys, str) else keys
+            t = sum(v[2] for k, v in stats.stats.items() if any(s in k[0] for s in keys))
+            print(f"    {label:42s} {100 * t / total:5.1f} %")
+    ok = sim_s / cpu >= TARGET
+    print(f"target >= {TARGET:.0f}x real time (per core): {'met' if ok else 'MISSED'}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
