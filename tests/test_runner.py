@@ -133,3 +133,17 @@ def test_sigterm_puts_bench_safe_and_file_aborted(tmp_path):
         assert [float(sp[c][-1]) for c in ("engine_speed", "clutch_torque", "clutch_open", "load_torque")] == \
             [IDLE, 0.0, 1.0, 0.0]
     assert b"run aborted" in stdout
+
+
+def test_instrument_faults_are_events_and_gaps_only_while_they_last(tmp_path):
+    faults = [Fault(10.0, "instrument_error", -310.0, target="System error"),
+              Fault(20.0, "instrument_disconnect"), Fault(30.0, "instrument_reconnect")]
+    code, summary, keep, events = _run_with(tmp_path, faults, action="wait")
+    assert code == 0
+    kinds = [(t, k, d) for t, k, d in events if k == "instrument_error"]
+    assert any("-310" in d for _, _, d in kinds)  # the error queue entry, read and reported
+    assert any(20.0 <= t < 31.0 and "disconnected" in d for t, _, d in kinds)
+    run = load_run(tmp_path / "run.h5")
+    t, air = run["time"].to_numpy(), run["T_air"].to_numpy()
+    assert np.isnan(air[(t > 21.6) & (t < 30.0)]).all()  # nothing invented while disconnected
+    assert np.isfinite(air[(t > 2.0) & (t < 20.0)]).all() and np.isfinite(air[(t > 33.0) & (t < 100.0)]).all()
