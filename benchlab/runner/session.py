@@ -192,6 +192,13 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                 previous[sig] = signal.signal(sig, lambda s, f, c=code: runner.request_stop(signal.Signals(s).name, c))
         try:
             summary = runner.run(resume_state["start"] if resume_state else 0)
+        except Exception as exc:  # an unexpected failure: bench safe, file closed as aborted, then report it
+            try:
+                bench.safe_state()
+                writer.event(clock(), "run_aborted", runner.cycle, f"failure: {type(exc).__name__}: {exc}")
+                writer.close("aborted")
+            finally:
+                raise
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
