@@ -4,7 +4,7 @@ Each run is cut into two halves; a model is fitted on one half of every run and 
 other, and the other way round (blocked cross-validation: the scored samples were never fitted).
 Candidates are first screened by an in-sample fit from the current model; the most promising
 are cross-validated. An extension is accepted when its held-out error is lower by at least
-MIN_GAIN_PCT and a paired t-test over 10-minute blocks of held-out data rejects "no gain" at
+MIN_GAIN_PCT and a paired t-test over 5-minute blocks of held-out data rejects "no gain" at
 the 1 % level (blocks, not samples, are the units, so autocorrelated residuals do not inflate
 the evidence). Accepted extensions are combined greedily and the rest re-checked on top.
 """
@@ -24,10 +24,11 @@ from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outpu
 from benchlab.identify.spec import ModelSpec, clutch_spec
 
 STEP_S = 1.0
-BLOCK_S = 600.0
+BLOCK_S = 300.0
 MIN_GAIN_PCT = 5.0
 ALPHA = 0.01
-SCREEN_NFEV = 30
+SCREEN_NFEV = 15
+HELD_OUT_NFEV = 60
 CROSS_VALIDATED = 3
 MAX_ROUNDS = 3
 
@@ -76,7 +77,7 @@ def _held_out(spec: ModelSpec, start: dict[str, float], datasets: Sequence[FitDa
     block_len = max(1, int(BLOCK_S / datasets[0].dt))
     offset = 0
     for train, test in _halves(datasets):
-        result = fit(spec, train, start={p.name: start[p.name] for p in spec.free})
+        result = fit(spec, train, max_nfev=HELD_OUT_NFEV, start={p.name: start[p.name] for p in spec.free})
         params.append(result.params)
         for run_index, d in enumerate(test):
             sim = simulate_outputs(spec.network, result.params, d)
@@ -99,21 +100,25 @@ def _block_test(before: HeldOut, after: HeldOut) -> float:
 
 def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[FitData],
             channels: dict[str, np.ndarray]) -> list[tuple[float, Candidate, FitResult]]:
-    """In-sample fit of each candidate from the current model; sorted by cost, best first."""
+    """In-sample fit of each candidate's new parameters, the current model held; sorted by cost, best first."""
     scored = []
+    known = {p.name for p in current.spec.free}
     for cand in cands:
         spec = cand.build(current.spec, channels)
-        known = {p.name for p in current.spec.free}
-        result = fit(spec, datasets, max_nfev=SCREEN_NFEV,
-                     start={p.name: current.params[p.name] if p.name in known else p.initial for p in spec.free})
+        screening = spec.with_fixed({k: current.params[k] for k in known if k not in cand.touches})
+        screening = screening.starting_point({k: current.params[k] for k in known})
+        result = fit(screening, datasets, max_nfev=SCREEN_NFEV)
         if result.cost < current.cost:
-            scored.append((result.cost, cand, result))
+            scored.append((result.cost, cand, FitResult(spec, result.params, result.cost, result.rmse_k,
+                                                        result.n_residuals, result.jacobian, result.residuals)))
     return sorted(scored, key=lambda item: item[0])
 
 
 def _try(scored, current_held: HeldOut, datasets) -> Finding | None:
     best: Finding | None = None
-    for _, cand, result in scored[:CROSS_VALIDATED]:
+    for _, cand, screened in scored[:CROSS_VALIDATED]:
+        result = fit(screened.spec, datasets, max_nfev=HELD_OUT_NFEV,
+                     start={p.name: screened.params[p.name] for p in screened.spec.free})
         held = _held_out(result.spec, result.params, datasets)
         finding = Finding(cand, result.spec, result.params, current_held, held, _block_test(current_held, held))
         if finding.gain_pct >= MIN_GAIN_PCT and finding.p_value < ALPHA:

@@ -31,6 +31,7 @@ class Candidate:
     summary: str
     build: Callable[[ModelSpec, Channels], ModelSpec]
     physical: bool = True
+    touches: tuple[str, ...] = ()  # existing parameters the edit acts on: refitted when screening
 
 
 def signal_values(name: str, ch: Channels) -> np.ndarray:
@@ -119,7 +120,7 @@ def sensor_lag(spec: ModelSpec, ch: Channels) -> ModelSpec:
 def radiation(spec: ModelSpec, ch: Channels) -> ModelSpec:
     """Grey-body exchange linearised about the measured temperatures: ε·A·σ·4·T̄³ per kelvin of difference."""
     def law(p: Params, c: Channels):
-        mean_k = 0.5 * (c["T_flywheel_filled"] + c["T_housing_filled"]) + 273.15
+        mean_k = np.round(c["T_flywheel_filled"] + c["T_housing_filled"]) / 2 + 273.15  # 0.5 K steps
         return 1.0 / (p["eps_area"] * STEFAN_BOLTZMANN * 4 * mean_k ** 3)
     net = spec.network.with_link(Link("F", "T", law, "radiation F")).with_link(Link("P", "T", law, "radiation P"))
     return spec.extended(spec.name + "+radiation", net, (ParamSpec("eps_area", 0.02, 1e-4, 2.0),))
@@ -151,18 +152,19 @@ def candidates(baseline_is_linear: bool) -> list[Candidate]:
     if baseline_is_linear:
         out.append(Candidate("speed_convection", "engine_speed", "convection", "R_FA = R_PA = a*exp(b*engine_speed) + R0",
                              "cool-down rate depends on engine speed: convection grows with engine speed",
-                             engine_speed_convection))
+                             engine_speed_convection, touches=("R0",)))
     out += [
         Candidate("state_convection", "clutch_state", "convection", "R_FA = R_PA = f_R * (k_open if S = 0)",
-                  "convection differs between clamped and open clutch", state_convection),
+                  "convection differs between clamped and open clutch", state_convection, touches=("R0",)),
         Candidate("slip_convection", "slip_speed", "convection", "R_FA = R_PA = f_R / (1 + g*|slip_speed|/1000)",
-                  "heat leaves faster while slipping: convection grows with slip speed", slip_convection),
+                  "heat leaves faster while slipping: convection grows with slip speed", slip_convection,
+                  touches=("R0",)),
         Candidate("clamped_conduction", "clutch_state", "conduction", "R_PF between plate and flywheel when S = 1",
                   "plate and flywheel exchange heat through the clamped disc", clamped_conduction),
         Candidate("heat_split", "friction_power", "heat_split", "P_plate = s*P, P_flywheel = (1-s)*P",
                   "friction heat is not split half and half between plate and flywheel", unequal_split),
         Candidate("extra_mass", None, "capacity", "extra node X: C_X linked to the flywheel by R_FX",
-                  "a thermal mass the model lacks stores and returns heat slowly", extra_mass),
+                  "a thermal mass the model lacks stores and returns heat slowly", extra_mass, touches=("C_F",)),
         Candidate("sensor_lag", "T_flywheel", "sensor", "T_flywheel measured = first-order lag tau_F of the flywheel",
                   "the flywheel sensor lags the flywheel temperature", sensor_lag),
         Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",

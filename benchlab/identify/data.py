@@ -19,6 +19,7 @@ from benchlab.simulation import input_channels
 
 FIT_STEP_S = 0.5
 SPEED_QUANTUM_RPM = 0.5
+TEMPERATURE_QUANTUM_K = 0.1
 OPERATING_CHANNELS = ("engine_speed", "clutch_speed")
 
 
@@ -69,6 +70,8 @@ def prepare(run: pd.DataFrame, step_s: float = FIT_STEP_S, name: str | None = No
         if key in channels:
             channels[key] = np.round(channels[key] / SPEED_QUANTUM_RPM) * SPEED_QUANTUM_RPM
     channels["clutch_state"] = np.round(channels["clutch_state"])
+    for key in [k for k in channels if k.endswith("_filled")]:  # temperatures as law signals: 0.1 K steps
+        channels[key] = np.round(channels[key] / TEMPERATURE_QUANTUM_K) * TEMPERATURE_QUANTUM_K
     measured = [c for c in PREDICTED_CHANNELS if c in full]
     targets = {c: _centred_mean(full[c], block, n_blocks) for c in measured}
     first_valid = {}
