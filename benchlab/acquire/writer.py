@@ -2,9 +2,11 @@
 
 Crash safety without trusting HDF5 to survive a kill mid-write: every dataset is created at its full
 planned capacity when the file is made (contiguous, allocated and filled with NaN, `/aligned/time` with
-the whole grid). While the run goes, the file's structure (its metadata) never changes: the writer only
-overwrites raw bytes inside allocated space, calls `flush()`, and then writes the progress record
-(`/acquire/progress`, one 8-byte word per counter) and flushes again. A process killed at any moment
+the whole grid). While the run goes, the file's structure (its metadata) never changes and HDF5 is not
+even open: the writer only overwrites the datasets' bytes inside allocated space through a shared memory
+mapping of the file (the page cache, which outlives a killed process), then writes the progress record
+(`/acquire/progress`, one 8-byte word per counter); with `durable=True` (hardware) it msyncs and fsyncs
+before and after the progress record, so a power loss keeps the same order. A process killed at any moment
 therefore leaves a file whose structure was complete and flushed before the run started: it opens, its
 `/aligned` grid is uniform, samples not yet written are NaN ("not measured"), and the progress record says
 how far the data is valid (at most `flush_every_s` of data behind the kill). Growing beyond the capacity,
@@ -171,6 +173,8 @@ class RunWriter:
         self.flushes = 0
         self.durable = durable
         self._fd: int | None = None
+        self._mm: np.memmap | None = None
+        self._views: dict[str, np.ndarray] = {}
         if _resume:
             return
         capacity = self._capacities(planned_s)
@@ -226,10 +230,12 @@ class RunWriter:
             self._put("events/detail", a, _str_array([e[3] for e in ev], EVENT_DETAIL_LEN))
             self._event_rows = a + len(ev)
             self._events = []
-        if self.durable:
+        if self.durable:  # power loss too: data on disk before the progress record that covers it
+            self._mm.flush()
             os.fsync(self._fd)
         self._put("acquire/progress", 0, self._progress_vector(now))
         if self.durable:
+            self._mm.flush()
             os.fsync(self._fd)
         self._last_flush_t = now
         self.flushes += 1
@@ -307,9 +313,17 @@ class RunWriter:
                     self._where[name] = (offset, obj.dtype.newbyteorder("<"), obj.shape[0])
             f.visititems(visit)
         self._fd = os.open(self.path, os.O_RDWR)
+        self._mm = np.memmap(self.path, dtype=np.uint8, mode="r+")
+        self._views = {name: self._mm[off:off + cap * dt.itemsize].view(dt)
+                       for name, (off, dt, cap) in self._where.items()}
 
     def _close_fd(self) -> None:
         if self._fd is not None:
+            self._views = {}
+            if self._mm is not None:
+                self._mm.flush()
+                self._mm._mmap.close()  # noqa: SLF001 - unmap now, not at garbage collection
+                self._mm = None
             os.close(self._fd)
             self._fd = None
 
@@ -317,11 +331,11 @@ class RunWriter:
         return self._where[name][2]
 
     def _put(self, name: str, start: int, values: np.ndarray) -> None:
-        offset, dtype, capacity = self._where[name]
-        if start + len(values) > capacity:
-            raise RuntimeError(f"{name}: capacity {capacity} exceeded")
-        data = np.ascontiguousarray(values, dtype=dtype)
-        os.pwrite(self._fd, data.tobytes(), offset + start * dtype.itemsize)
+        """Store into the dataset's bytes through the shared mapping (the page cache: survives a killed process)."""
+        view = self._views[name]
+        if start + len(values) > len(view):
+            raise RuntimeError(f"{name}: capacity {len(view)} exceeded")
+        view[start:start + len(values)] = values
 
     def _progress_fields(self) -> list[str]:
         return (["aligned_rows", "event_rows", "t_data", "flushes"] + [f"rows/{s.name}" for s in self.layout.streams]
