@@ -183,6 +183,7 @@ class Runner:
                     while i < len(self.steps) and self.steps[i].cycle == cycle:
                         i += 1
                     self.writer.event(self.clock(), "cycle_skipped", cycle, "after an interlock")
+                    self.summary.events["cycle_skipped"] += 1
             self.bench.safe_state()
             self._tick()
             self.writer.event(self.clock(), "run_complete", self.cycle)
@@ -240,9 +241,11 @@ class Runner:
                     self.synced = False
                     self.writer.event(now, "slip_time_limit", step.cycle,
                                       f"not synchronous after {step.duration_s:g} s: clutch opened")
+                    self.summary.events["slip_time_limit"] += 1
                 elif step.until:
                     self.writer.event(now, "timeout", step.cycle, "condition not reached: " +
                                       " or ".join(c.describe() for c in step.until))
+                    self.summary.events["timeout"] += 1
                 break
             if heat is not None and heat.update(now, st, self._target(step)):
                 self._apply(step, heat)
