@@ -25,6 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
     parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
                         "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`)")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -39,6 +40,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("command line", "--out", "a run file to write")
     else:
         out = Path(args.out or "dry-run.h5")
+    if not args.resume and not args.dry_run and out.exists() and not args.force:
+        raise InputError(out, "--out", "a new run file (it exists: --resume to continue it, --force to overwrite)")
     if not args.resume and args.protocol not in NAMES:
         raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)}, got {args.protocol!r}")
     if args.cycles is not None and args.cycles <= 0:
