@@ -147,3 +147,41 @@ def test_instrument_faults_are_events_and_gaps_only_while_they_last(tmp_path):
     t, air = run["time"].to_numpy(), run["T_air"].to_numpy()
     assert np.isnan(air[(t > 21.6) & (t < 30.0)]).all()  # nothing invented while disconnected
     assert np.isfinite(air[(t > 2.0) & (t < 20.0)]).all() and np.isfinite(air[(t > 33.0) & (t < 100.0)]).all()
+
+
+def test_validation_protocol_runs(tmp_path):
+    code, summary = execute(RunRequest("validation", tmp_path / "v.h5", seed=3, cycles=1, install_signals=False))
+    assert code == 0 and summary.cycles_done == 4
+    run = load_run(tmp_path / "v.h5")
+    events = _events(tmp_path / "v.h5")
+    starts = [t for t, k, d in events if k == "step_start" and "validation_cooldown" in d]
+    assert len(starts) >= 9
+    assert np.nanmax(run["T_flywheel"]) > 69.0  # each long cool-down starts hot
+
+
+def test_real_time_loop_on_emulated_devices(tmp_path):
+    """The hardware path (real clock, durable writes) against the emulators running on wall-clock time."""
+    from benchlab.acquire import RunWriter
+    from benchlab.runner.devices import BenchConfig, DriverBench
+    from benchlab.runner.engine import STATE_FIELDS, Runner
+    from sim_bench.bench import SimBench, SimBenchConfig
+    from sim_bench.clock import RealClock
+
+    clock = RealClock()
+    sim = SimBench(SimBenchConfig(seed=1, dropouts=False), clock=clock)
+    cfg = BenchConfig(sim.urls["instrument"], sim.urls["node"], {"interface": "sim"}, instrument_timeout_s=0.5,
+                      tick_s=0.1, fast_tick_s=0.02)
+    bench = DriverBench(cfg, clock, bus=sim.driver_bus, service=sim.service)
+    steps = (Step("launch", 2.0, 2000.0, 65.0, 100.0, 0), Step("open", 1.0, 2000.0, 0.0, 100.0, 0))
+    writer = RunWriter(tmp_path / "rt.h5", bench.layout, protocol="rt", planned_s=5, state_fields=STATE_FIELDS,
+                       durable=True)
+    try:
+        t0 = time.monotonic()
+        summary = Runner(bench, clock, steps, writer, BenchLimits(), tick_s=0.1, fast_tick_s=0.02).run()
+        writer.close(summary.status)
+        assert summary.status == "complete" and 1.5 < time.monotonic() - t0 < 8.0  # launch syncs in ~1.1 s
+    finally:
+        bench.close()
+        sim.close()
+    run = load_run(tmp_path / "rt.h5")
+    assert np.nanmax(run["clutch_speed"]) > 1900 and np.nanmax(run["friction_power"]) > 5000
