@@ -27,7 +27,7 @@ import numpy as np
 from drivers import cvd
 from drivers.can_signals import CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING
 from sim_bench.clock import SimClock
-from sim_bench.drivetrain import RPM, Drivetrain, DrivetrainConfig
+from sim_bench.drivetrain import Drivetrain, DrivetrainConfig
 from sim_bench.emulators import registry
 from sim_bench.emulators.can_controllers import CanBenchEmulator
 from sim_bench.emulators.clutch_node import ClutchNodeEmulator
@@ -71,25 +71,6 @@ class SimBenchConfig:
                 "dmm_channels": {str(k): v for k, v in self.dmm_channels.items()}, "dropouts": self.dropouts}
 
 
-class StallSafeDrivetrain(Drivetrain):
-    """`Drivetrain` that keeps slipping while stalled against the load.
-
-    `Drivetrain.advance` treats zero acceleration while slipping as synchronisation and snaps the shaft to
-    engine speed at the end of the call (its sync test `(end - engine) * accel >= 0` holds for accel = 0).
-    A clamped clutch whose torque cannot overcome the load (a stalled launch, a heat pulse with the output
-    held) must keep slipping at constant speeds: handled here, everything else is the parent's.
-    """
-
-    def advance(self, n: int, dt: float, stop_at_sync: bool = False) -> dict[str, np.ndarray]:
-        transmitted, accel = self._acceleration()
-        if not (self.slipping and accel == 0.0):
-            return super().advance(n, dt, stop_at_sync)
-        slip = (self.engine_rpm - self.clutch_rpm) * RPM
-        return {"engine_speed": np.full(n, self.engine_rpm), "clutch_speed": np.full(n, self.clutch_rpm),
-                "clutch_torque": np.full(n, transmitted), "clutch_state": np.ones(n),
-                "friction_power": np.full(n, abs(transmitted * slip)), "load_torque": np.full(n, self.load_torque_nm)}
-
-
 def fault_heater_effects() -> tuple[Effect, ...]:
     """Zero heat sources on flywheel and air, driven by the channels `fault_heat_F`/`fault_heat_A` (W)."""
     return (custom_source("fault heater F", "F", "fault", "heat_source", lambda ch: ch["fault_heat_F"]),
@@ -108,7 +89,7 @@ class SimPhysics:
         seed = config.seed
         self.rng_sensor = np.random.default_rng([seed, 1])
         self.rng_dropout = np.random.default_rng([seed, 2])
-        self.drivetrain = StallSafeDrivetrain(config.drivetrain)
+        self.drivetrain = Drivetrain(config.drivetrain)
         self.gear = config.drivetrain.gear_ratio
         k0 = self._index(config.t0)
         amb0 = self._ambient(np.array([k0]))[0]

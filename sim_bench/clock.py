@@ -9,27 +9,16 @@ from __future__ import annotations
 
 import time
 
+from sim_bench.emulators.clock import ManualClock
 
-class SimClock:
-    """Simulated time: moves only when told to, so a 2-hour protocol runs in seconds and is deterministic.
 
-    Compatible with `sim_bench.emulators.ManualClock` (callable, `advance`).
-    """
+class SimClock(ManualClock):
+    """Simulated time: moves only when told to, so a 2-hour protocol runs in seconds and is deterministic."""
 
     realtime = False
 
     def __init__(self, t0: float = 0.0) -> None:
-        self.t = float(t0)
-
-    def __call__(self) -> float:
-        return self.t
-
-    def advance(self, dt: float) -> float:
-        """Move forward by `dt` seconds and return the new time."""
-        if dt < 0:
-            raise ValueError("time does not go backwards")
-        self.t += dt
-        return self.t
+        super().__init__(float(t0))
 
     def sleep_until(self, t: float) -> float:
         """Jump to `t` (never backwards) and return the new time."""

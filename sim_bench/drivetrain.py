@@ -73,8 +73,8 @@ class Drivetrain:
             m = n - k
             if self.slipping and accel != 0.0:
                 gap = (self.engine_rpm - self.clutch_rpm) * RPM
-                t_event = gap / accel if gap * accel > 0 else np.inf
-                m = min(m, max(1, int(np.ceil(t_event / dt))))
+                if gap * accel > 0:  # moving towards synchronism: stop the piece there
+                    m = min(m, max(1, int(np.ceil(gap / accel / dt))))
             elif not self.clamped and self.clutch_rpm > 0 and accel < 0:
                 m = min(m, max(1, int(np.ceil(self.clutch_rpm * RPM / -accel / dt))))
             t = np.arange(m) * dt
@@ -94,7 +94,7 @@ class Drivetrain:
             columns["load_torque"][sl] = self.load_torque_nm
             was_slipping = self.slipping
             end_omega = self.clutch_rpm * RPM + accel * m * dt
-            if was_slipping and (end_omega - self.engine_rpm * RPM) * accel >= 0:
+            if was_slipping and accel != 0.0 and (end_omega - self.engine_rpm * RPM) * accel >= 0:
                 end_omega = self.engine_rpm * RPM  # synchronised: the clutch locks
             self.clutch_rpm = max(end_omega, 0.0) / RPM
             k += m

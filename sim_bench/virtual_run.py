@@ -52,9 +52,10 @@ def drive_schedule(steps: Sequence[Step], dt: float, config: DrivetrainConfig = 
     pieces: list[dict[str, np.ndarray]] = []
     events: list[dict[str, object]] = []
     t = 0
+    stalled_cycle = None
     for step in steps:
         n = int(round(step.duration_s / dt))
-        clamped = step.phase in ("launch", "drive")
+        clamped = step.phase in ("launch", "drive") and step.cycle != stalled_cycle
         drivetrain.set_points(step.engine_speed_rpm, clamped, step.clutch_torque_nm, step.load_torque_nm)
         events.append({"time": t * dt, "event": f"{step.phase}_start", "cycle": step.cycle})
         piece = drivetrain.advance(n, dt, stop_at_sync=step.phase == "launch")
@@ -62,6 +63,7 @@ def drive_schedule(steps: Sequence[Step], dt: float, config: DrivetrainConfig = 
         t += len(piece["engine_speed"])
         if step.phase == "launch":
             synced = not drivetrain.slipping
+            stalled_cycle = None if synced else step.cycle  # the slip-time limit opens the clutch
             events.append({"time": t * dt, "event": "synchronised" if synced else "slip_time_limit",
                            "cycle": step.cycle})
     return {name: np.concatenate([p[name] for p in pieces]) for name in CHANNELS}, events
