@@ -9,6 +9,7 @@ import pandas as pd
 
 from benchlab.diagnose.engine import ALPHA, MIN_GAIN_PCT, STEP_S, Finding, HeldOut, diagnose_runs
 from benchlab.diagnose.regimes import regime_errors
+from benchlab.clutch import NONLINEAR_PARAMS as CLUTCH_PARAMS
 from benchlab.identify.data import prepare
 
 
@@ -22,12 +23,7 @@ def _finding_json(f: Finding) -> dict:
     return {"signal": c.signal, "mechanism": c.mechanism, "summary": c.summary, "extension": c.extension,
             "rmse_before_K": f.before.rmse, "rmse_after_K": f.after.rmse, "gain_pct": f.gain_pct,
             "p_value": f.p_value, "candidate": c.key,
-            "params": {p.name: f.params[p.name] for p in f.spec.free if p.name not in _base_names(f)}}
-
-
-def _base_names(f: Finding) -> set[str]:
-    from benchlab.identify.spec import clutch_spec
-    return {p.name for p in clutch_spec("nonlinear").free}
+            "params": {p.name: f.params[p.name] for p in f.spec.free if p.name not in CLUTCH_PARAMS}}
 
 
 def diagnose(runs: Sequence[pd.DataFrame], baseline: str = "linear", seed: int = 0) -> dict:
