@@ -1,8 +1,16 @@
 """benchlab: dry-clutch test-bench acquisition and grey-box thermal modelling (contract section 4)."""
 
-from benchlab.params import load_params
-from benchlab.runfile import load_run
-from benchlab.simulation import simulate
+import os
+
+# Single-threaded BLAS, set before numpy loads (here, since `benchlab` and the `benchlab` command both pass through
+# this file first): threaded OpenBLAS on a busy 2-core machine took 15 ms for a tiny matrix exponential, 0.01 ms
+# without threads. setdefault: a value the user set wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+from benchlab.params import load_params  # noqa: E402
+from benchlab.runfile import load_run  # noqa: E402
+from benchlab.simulation import simulate  # noqa: E402
 
 __all__ = ["load_run", "load_params", "simulate"]
 __version__ = "0.1.0"

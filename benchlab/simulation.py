@@ -15,6 +15,13 @@ from benchlab.solver import run_network
 INPUT_CHANNELS = ("engine_speed", "clutch_state", "friction_power", "T_ambient")
 
 
+def _held(values: np.ndarray) -> np.ndarray:
+    """Drop-outs (NaN) held at the last valid value, leading ones at the first; untouched if there are none."""
+    if not np.isnan(values).any():
+        return values
+    return pd.Series(values).ffill().bfill().to_numpy()
+
+
 def input_channels(run: pd.DataFrame) -> dict[str, np.ndarray]:
     """All channels as arrays, the model's inputs with drop-outs held at the last valid value.
 
@@ -28,7 +35,7 @@ def input_channels(run: pd.DataFrame) -> dict[str, np.ndarray]:
             if name == "T_engine":
                 continue
             raise InputError(source, f"/aligned/{name}", "a model input channel (missing)")
-        values = pd.Series(channels[name]).ffill().bfill().to_numpy()
+        values = _held(channels[name])
         if np.isnan(values).all():
             if name == "T_engine":
                 continue
@@ -36,7 +43,7 @@ def input_channels(run: pd.DataFrame) -> dict[str, np.ndarray]:
         channels[name] = values
     for name in PREDICTED_CHANNELS:  # measured temperatures as signals for laws (radiation, learned terms)
         if name in channels:
-            channels[f"{name}_filled"] = pd.Series(channels[name]).ffill().bfill().to_numpy()
+            channels[f"{name}_filled"] = _held(channels[name])
     return channels
 
 

@@ -5,11 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+import scipy.linalg
 from scipy.integrate import solve_ivp
 
 import benchlab
 from benchlab.clutch import clutch_network, convection_resistance
 from benchlab.params import paper_params
+from benchlab.solver import Discretised, _propagate, _propagate4, _zoh
 
 
 def _reference(run: pd.DataFrame, params, x0: np.ndarray) -> np.ndarray:
@@ -98,3 +100,43 @@ def test_network_rejects_unknown_node():
     broken = net.with_link(net.links[0].__class__("P", "nowhere", lambda p, c: 1.0, "bad"))
     with pytest.raises(ValueError, match="nowhere"):
         broken.validate()
+
+
+def _thermal_systems(n: int, m: int, points: int, capacity: tuple[float, float], seed: int):
+    """Random conductance networks (symmetric, grounded) over random capacities; the last state a sensor lag."""
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(0.1, 20.0, size=(points, n, n))
+    g = (g + g.transpose(0, 2, 1)) / 2
+    a = g.copy()
+    idx = np.arange(n)
+    a[:, idx, idx] = -(g.sum(axis=2) - g[:, idx, idx]) - rng.uniform(0.0, 1.0, size=(points, n))
+    c = rng.uniform(*capacity, size=(points, n, 1))
+    a /= c
+    a[:, -1, :] = 0.0
+    a[:, -1, 0], a[:, -1, -1] = 1 / 3.0, -1 / 3.0
+    return a, rng.uniform(0.0, 1.0, size=(points, n, m)) / c
+
+
+@pytest.mark.parametrize("n, m, capacity, dt", [(4, 4, (1e3, 2e4), 0.01), (4, 4, (1e3, 2e4), 0.5),
+                                                 (7, 5, (1e3, 2e4), 0.5), (6, 4, (1.0, 10.0), 1.0)])
+def test_batched_zoh_matches_scipy_expm(n, m, capacity, dt):
+    """The compiled Taylor/squaring ZOH equals scipy's expm of the augmented matrix to 1e-9 relative."""
+    a, b = _thermal_systems(n, m, 200, capacity, seed=n + m)
+    ad, bd = _zoh(a, b, dt)
+    aug = np.zeros((len(a), n + m, n + m))
+    aug[:, :n, :n], aug[:, :n, n:] = a * dt, b * dt
+    ref = scipy.linalg.expm(aug)
+    for got, want in ((ad, ref[:, :n, :n]), (bd, ref[:, :n, n:])):
+        scale = np.max(np.abs(want), axis=(1, 2), keepdims=True)
+        assert np.max(np.abs(got - want) / scale) < 1e-9
+
+
+def test_four_state_kernel_equals_general_kernel():
+    a, b = _thermal_systems(4, 4, 50, (1e3, 2e4), seed=1)
+    rng = np.random.default_rng(2)
+    disc = Discretised(rng.integers(0, 50, size=3000), *_zoh(a, b, 0.5), rng.uniform(0, 100, size=(3000, 4)))
+    x0 = np.array([60.0, 55.0, 40.0, 30.0])
+    out4, out = np.empty((3001, 4)), np.empty((3001, 4))
+    _propagate4(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out4)
+    _propagate(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out)
+    assert np.allclose(out4, out, rtol=1e-13, atol=1e-10)
