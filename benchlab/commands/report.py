@@ -1,0 +1,39 @@
+"""`benchlab report RUN.h5 --params P.json --out DIR [--compare P2.json] [--validate V.h5 …] [--sweep SWEEP.h5]`."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from benchlab.errors import InputError
+from benchlab.params import load_params
+from benchlab.runfile import load_run
+
+NAME = "report"
+HELP = "figures of the paper (Fig. 3, 4, 5), residual analysis and a Markdown page of error figures"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run", help="run file (HDF5, benchlab-run/1) the model is shown on (Fig. 4, residuals)")
+    parser.add_argument("--params", required=True, help="parameter file (JSON) of the model to report")
+    parser.add_argument("--out", required=True, help="directory for report.md and the PNG figures")
+    parser.add_argument("--compare", help="second parameter file (typically linear against nonlinear) for Fig. 3 and 5")
+    parser.add_argument("--validate", nargs="*", default=[], help="validation run files for Fig. 5 (default: RUN)")
+    parser.add_argument("--sweep", help="cooldown-sweep run file: per-cool-down R with error bars in Fig. 3")
+
+
+def run(args: argparse.Namespace) -> int:
+    from benchlab.report import write_report  # matplotlib only when the command runs
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "--out", "a directory (a file of that name exists)")
+    measured = load_run(args.run)
+    params = load_params(args.params)
+    compare = load_params(args.compare) if args.compare else None
+    validation = [load_run(p) for p in args.validate]
+    if args.sweep:
+        load_run(args.sweep)  # a run file at all (the events it needs are checked by the analysis)
+    page = write_report(measured, params, out, compare, validation, args.sweep)
+    print(page)
+    return 0

@@ -1,0 +1,141 @@
+"""The report page: Markdown tables of error figures, parameters, cool-downs and residual tests, figures embedded."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+import benchlab
+from benchlab.clutch import PREDICTED_CHANNELS
+from benchlab.cooldown import COVERAGE_K, CooldownResult
+from benchlab.params import ModelParams
+from benchlab.report.plotting import run_name
+from benchlab.report.resistance import resistance, standard_errors
+from benchlab.report.residuals import Residuals
+from benchlab.report.scores import Estimate
+
+SYMBOLS = {"T_flywheel": "ϑ_F", "T_air": "ϑ_A", "T_housing": "ϑ_T"}
+
+
+@dataclass(frozen=True)
+class Figures:
+    """The report's PNGs, all in the page's directory."""
+
+    fit: Path
+    validation: list[Path]
+    resistance: Path
+    residuals: Path
+
+
+def number(value: float, digits: int) -> str:
+    """A table cell: the value with `digits` decimals, or an em dash where it is not a finite number."""
+    return f"{value:.{digits}f}" if isinstance(value, (int, float)) and math.isfinite(value) else "—"
+
+
+def table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    """A Markdown table."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])
+
+
+def unit(name: str) -> str:
+    """The unit of a parameter of the contract (section 2); extension parameters carry their model's own."""
+    if name.startswith("C_"):
+        return "J/K"
+    if name.startswith("R") or name in ("a1", "a2"):
+        return "K/W"
+    return "1/rpm" if name in ("b1", "b2") else "(extension)"
+
+
+def scores_table(rows: Sequence[tuple[pd.DataFrame, Estimate]]) -> str:
+    """RMSE (K) and NRMSE (%) per run, model and channel, then over all channels (contract section 5)."""
+    cells = []
+    for run, est in rows:
+        s = est.scores
+        for c in PREDICTED_CHANNELS:
+            cells.append((run_name(run), est.label, f"{SYMBOLS[c]} `{c}`", number(s.channel_rmse_k[c], 4),
+                          number(s.channel_nrmse_pct[c], 3)))
+        cells.append((run_name(run), est.label, "**all** (§5)", number(s.rmse_k, 4), number(s.nrmse_pct, 3)))
+    return table(("run", "model", "channel", "RMSE (K)", "NRMSE (%)"), cells)
+
+
+def params_table(models: Sequence[tuple[str, ModelParams]]) -> str:
+    """Each model's parameter values with their standard errors where the file holds them."""
+    names = list(dict.fromkeys(name for _, params in models for name in params))
+    header = ["parameter", "unit"] + [h for label, _ in models for h in (label, "± SE")]
+    cells = []
+    for name in names:
+        row = [f"`{name}`", unit(name)]
+        for _, params in models:
+            se = standard_errors(params).get(name, math.nan)
+            row += [f"{params[name]:.6g}" if name in params else "—", f"{se:.2g}" if math.isfinite(se) else "—"]
+        cells.append(row)
+    return table(header, cells)
+
+
+def cooldown_table(cooldowns: Sequence[CooldownResult], models: Sequence[tuple[str, ModelParams]]) -> str:
+    """Per cool-down: operating point, fitted R ± U and each model's eq. (11) at that point."""
+    header = ["cycle", "ω_e (rpm)", "S", "R fitted (K/W)", f"± U, k = {COVERAGE_K:g} (K/W)"]
+    header += [f"R {label} (K/W)" for label, _ in models]
+    cells = []
+    for r in cooldowns:
+        row = [str(r.cycle), number(r.engine_speed, 0), str(r.clutch_state), number(r.R, 4), number(r.R_u, 4)]
+        row += [number(float(resistance(p, np.array([r.engine_speed]), r.clutch_state)[0][0]), 4) for _, p in models]
+        cells.append(row)
+    return table(header, cells)
+
+
+def residual_table(res: Residuals) -> str:
+    """Identify's residual tests: share of autocorrelations outside the 99 % bound, strongest input correlations."""
+    inputs = list(res.inputs)
+    header = ["channel", "samples", "ACF outside ±2.58/√N, lags 1–50 (%)", "white"] + [f"corr. with `{k}`" for k in inputs]
+    cells = []
+    for c, t in res.tests.items():
+        row = [f"{SYMBOLS[c]} `{c}`", str(t["samples"]), number(t["whiteness_outside_pct"], 1),
+               "yes" if t["white"] else "no"]
+        cells.append(row + [number(t["input_correlation"][k], 2) for k in inputs])
+    return table(header, cells)
+
+
+def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
+           rows: Sequence[tuple[pd.DataFrame, Estimate]], figures: Figures,
+           cooldowns: Sequence[CooldownResult], res: Residuals) -> str:
+    """The whole page: error figures, parameters, Fig. 4, Fig. 5, Fig. 3 (with the sweep's cool-downs), residuals."""
+    duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
+    models_text = ", ".join(f"**{label}** (`{params.model}`)" for label, params in models)
+    parts = [
+        f"# benchlab report – {run_name(run)}",
+        f"Run `{run.attrs.get('source', '')}`: protocol `{run.attrs.get('protocol', '')}`, {duration:.0f} s at a "
+        f"step of {float(run.attrs['dt']):g} s, {len(run)} samples. Models: {models_text}. "
+        f"Written by benchlab {benchlab.__version__}.",
+        "## Error figures (contract §5)",
+        "RMSE in K over the valid samples; NRMSE = 100 · RMSE / (max − min of the measured channel), "
+        "for **all** averaged over ϑ_F, ϑ_A, ϑ_T. The model is driven by the run's measured inputs from the "
+        "first valid measured temperatures (`benchlab simulate`).",
+        scores_table(rows),
+        "## Parameters",
+        "Standard errors as the parameter file's `uncertainty` holds them (from `benchlab identify`).",
+        params_table(models),
+        "## Fig. 4 – measured and estimated temperatures",
+        f"![Fig. 4]({figures.fit.name})",
+        "## Fig. 5 – validation: " + " against ".join(label for label, _ in models),
+        *[f"![Fig. 5]({p.name})" for p in figures.validation],
+        "## Fig. 3 – convection resistance against engine speed",
+        f"![Fig. 3]({figures.resistance.name})",
+    ]
+    if cooldowns:
+        parts += ["Cool-downs of the sweep, fitted with the other parameters of the first model "
+                  "(`benchlab cooldown`):", cooldown_table(cooldowns, models)]
+    parts += [
+        f"## Residual analysis – {res.label} model on {res.run}",
+        f"Residual = measured − model at the identification step of {res.step_s:g} s (`benchlab identify`'s "
+        "residual tests: a white residual has at most 5 % of its autocorrelations outside ±2.58/√N).",
+        f"![Residuals]({figures.residuals.name})",
+        residual_table(res),
+    ]
+    return "\n\n".join(parts) + "\n"

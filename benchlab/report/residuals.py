@@ -1,0 +1,75 @@
+"""Residual analysis of a system-identification toolbox: residual over time, its autocorrelation, and the
+residual against engine speed and friction power, with the whiteness and input-correlation tests.
+
+Residuals are measured − model at identification's step (benchlab.identify.data.prepare: measured
+temperatures as centred block means, inputs as block means), so the tests read as identify's own do.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchlab.identify.api import RESIDUAL_INPUTS
+from benchlab.identify.data import prepare
+from benchlab.identify.residuals import autocorrelation, residual_tests
+from benchlab.report.plotting import COLOURS, SYMBOLS, new_figure, run_name, save
+from benchlab.report.scores import Estimate
+
+#: Longest autocorrelation lag drawn: longer than a Table 1 cycle's cool-down (30-120 s).
+ACF_LAG_S = 180.0
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """Measured − model per predicted channel at the identification step, the inputs beside it, the tests."""
+
+    label: str
+    run: str
+    step_s: float
+    time_s: np.ndarray
+    residual: dict[str, np.ndarray]
+    inputs: dict[str, np.ndarray]
+    tests: dict[str, dict]
+
+
+def residuals(run: pd.DataFrame, est: Estimate) -> Residuals:
+    """Residuals of `est` on `run` at the identification step, with identify's residual tests on each channel."""
+    data = prepare(run)
+    picks = slice(0, len(data) * data.block, data.block)
+    residual = {c: target - est.simulated[c].to_numpy()[picks] for c, target in data.targets.items()}
+    inputs = {k: data.channels[k] for k in RESIDUAL_INPUTS if k in data.channels}
+    return Residuals(est.label, run_name(run), data.dt, run["time"].to_numpy()[picks], residual, inputs,
+                     {c: residual_tests(r, inputs) for c, r in residual.items()})
+
+
+def plot_residuals(res: Residuals, path: "str | os.PathLike[str]") -> Path:
+    """Four panels: residual vs time, autocorrelation with the 99 % white-noise bound, vs engine speed, vs friction power."""
+    fig = new_figure(11, 8)
+    (over_time, acf), (vs_speed, vs_power) = fig.subplots(2, 2)
+    max_lag = int(round(ACF_LAG_S / res.step_s))
+    lags = np.arange(max_lag + 1) * res.step_s
+    for c, r in res.residual.items():
+        style = {"color": COLOURS[c], "label": SYMBOLS[c]}
+        over_time.plot(res.time_s / 60.0, r, lw=0.6, **style)
+        acf.plot(lags, autocorrelation(r, max_lag), lw=1.0, **style)
+        dots = {"s": 2, "alpha": 0.25, "rasterized": True, **style}
+        vs_speed.scatter(res.inputs["engine_speed"], r, **dots)
+        vs_power.scatter(res.inputs["friction_power"] / 1e3, r, **dots)
+    bound = max(t["confidence_bound"] for t in res.tests.values())
+    acf.axhspan(-bound, bound, color="0.85", label=r"$\pm 2.58/\sqrt{N}$ (99 %, white noise)")
+    over_time.set(xlabel="time (min)", ylabel="measured − model (K)", title="residual over time")
+    acf.set(xlabel="lag (s)", ylabel="autocorrelation (1)", title="whiteness: residual autocorrelation")
+    vs_speed.set(xlabel=r"engine speed $\omega_e$ (rpm)", ylabel="measured − model (K)",
+                 title="residual vs engine speed")
+    vs_power.set(xlabel="friction power P (kW)", ylabel="measured − model (K)", title="residual vs friction power")
+    for ax in (over_time, acf, vs_speed, vs_power):
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.legend(loc="best", fontsize=8, markerscale=4)
+    fig.suptitle(f"Residual analysis – {res.run}, {res.label} model, at the identification step of "
+                 f"{res.step_s:g} s")
+    return save(fig, path)

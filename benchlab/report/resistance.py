@@ -1,0 +1,75 @@
+"""Fig. 3 of the paper: convection resistance R_FA = R_PA (eq. 11) against engine speed for both clutch states,
+with the per-cool-down estimates of a cooldown-sweep run (benchlab.cooldown) where one is given."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from benchlab.clutch import convection_resistance
+from benchlab.cooldown import COVERAGE_K, CooldownResult
+from benchlab.params import ModelParams
+from benchlab.report.plotting import MODEL_STYLES, new_figure, save
+
+SPEED_MAX_RPM = 3000.0
+#: clutch state -> (legend text, colour, the eq. (11) parameters of that state)
+STATES = {1: ("clutch closed (S = 1)", "tab:red", ("a1", "b1")), 0: ("clutch open (S = 0)", "tab:blue", ("a2", "b2"))}
+
+
+def standard_errors(params: ModelParams) -> dict[str, float]:
+    """The parameter file's "uncertainty" object (name -> standard error, as identify writes it); numbers only."""
+    found = params.extra.get("uncertainty")
+    if not isinstance(found, dict):
+        return {}
+    return {k: float(v) for k, v in found.items()
+            if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
+
+
+def resistance(params: ModelParams, speed_rpm: np.ndarray, state: int) -> tuple[np.ndarray, np.ndarray]:
+    """R (K/W) of eq. (11) at the engine speeds and its standard error (parameter correlations ignored)."""
+    speed = np.asarray(speed_rpm, dtype=float)
+    channels = {"engine_speed": speed, "clutch_state": np.full_like(speed, float(state))}
+    value = np.broadcast_to(convection_resistance(params, channels), speed.shape)
+    se = standard_errors(params)
+    a, b = STATES[state][2]
+    growth = np.exp(params[b] * speed)
+    terms = ((growth, se.get(a, 0.0)), (params[a] * speed * growth, se.get(b, 0.0)), (1.0, se.get("R0", 0.0)))
+    return value, np.sqrt(sum((slope * sigma) ** 2 for slope, sigma in terms))
+
+
+def plot_resistance(models: Sequence[tuple[str, ModelParams]], cooldowns: Sequence[CooldownResult],
+                    path: "str | os.PathLike[str]") -> Path:
+    """Eq. (11) of each model for S = 1 and S = 0 (±2 SE band where the file has standard errors), sweep points on top."""
+    top = max([SPEED_MAX_RPM] + [1.1 * r.engine_speed for r in cooldowns])
+    speed = np.linspace(0.0, top, 301)
+    fig = new_figure(9, 6)
+    ax = fig.subplots()
+    for (label, params), (_, style) in zip(models, MODEL_STYLES):
+        curves = {state: resistance(params, speed, state) for state in STATES}
+        if np.allclose(curves[0], curves[1]):  # one law for both states (a linear model: R0 alone)
+            curves = {None: curves[1]}
+        for state, (value, sigma) in curves.items():
+            text, colour, _ = STATES[state] if state is not None else ("both clutch states", "k", ())
+            ax.plot(speed, value, color=colour, ls=style, lw=1.4, label=f"{label} model, {text}")
+            if np.any(sigma > 0):
+                ax.fill_between(speed, value - 2 * sigma, value + 2 * sigma, color=colour, alpha=0.12,
+                                label=f"{label} model ±2 SE (correlations ignored)" if state != 0 else None)
+    for state, (text, colour, _) in STATES.items():
+        points = [r for r in cooldowns if r.clutch_state == state]
+        if points:
+            ax.errorbar([r.engine_speed for r in points], [r.R for r in points], yerr=[r.R_u for r in points],
+                        fmt="o", color=colour, capsize=3, label=f"cool-down fit, {text} (±U, k = {COVERAGE_K:g})")
+    truth = [r for r in cooldowns if math.isfinite(r.R_true)]
+    if truth:
+        ax.scatter([r.engine_speed for r in truth], [r.R_true for r in truth], marker="x", color="k", zorder=5,
+                   label="simulated bench's true R")
+    ax.set(xlabel=r"engine speed $\omega_e$ (rpm)", ylabel=r"$R_{FA} = R_{PA}$ (K/W)", xlim=(0.0, top))
+    ax.set_ylim(bottom=0.0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Fig. 3 – convection resistance inside the clutch chamber, eq. (11), against engine speed")
+    return save(fig, path)
