@@ -58,9 +58,9 @@ def scores_table(rows: Sequence[tuple[pd.DataFrame, Estimate]]) -> str:
     for run, est in rows:
         s = est.scores
         for c in PREDICTED_CHANNELS:
-            cells.append((run_name(run), est.label, f"{SYMBOLS[c]} `{c}`", number(s.channel_rmse_k[c], 4),
+            cells.append((f"`{run_name(run)}`", est.label, f"{SYMBOLS[c]} `{c}`", number(s.channel_rmse_k[c], 4),
                           number(s.channel_nrmse_pct[c], 3)))
-        cells.append((run_name(run), est.label, "**all** (§5)", number(s.rmse_k, 4), number(s.nrmse_pct, 3)))
+        cells.append((f"`{run_name(run)}`", est.label, "**all** (§5)", number(s.rmse_k, 4), number(s.nrmse_pct, 3)))
     return table(("run", "model", "channel", "RMSE (K)", "NRMSE (%)"), cells)
 
 
@@ -109,7 +109,7 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
     duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
     models_text = ", ".join(f"**{label}** (`{params.model}`)" for label, params in models)
     parts = [
-        f"# benchlab report – {run_name(run)}",
+        f"# benchlab report – `{run_name(run)}`",
         f"Run `{run.attrs.get('source', '')}`: protocol `{run.attrs.get('protocol', '')}`, {duration:.0f} s at a "
         f"step of {float(run.attrs['dt']):g} s, {len(run)} samples. Models: {models_text}. "
         f"Written by benchlab {benchlab.__version__}.",
@@ -132,7 +132,7 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
         parts += ["Cool-downs of the sweep, fitted with the other parameters of the first model "
                   "(`benchlab cooldown`):", cooldown_table(cooldowns, models)]
     parts += [
-        f"## Residual analysis – {res.label} model on {res.run}",
+        f"## Residual analysis – {res.label} model on `{res.run}`",
         f"Residual = measured − model at the identification step of {res.step_s:g} s (`benchlab identify`'s "
         "residual tests: a white residual has at most 5 % of its autocorrelations outside ±2.58/√N).",
         f"![Residuals]({figures.residuals.name})",

@@ -1,0 +1,142 @@
+"""benchlab report: figures and page written, the page's error figures are benchlab.metrics', Fig. 5 tells the
+linear model from the nonlinear one on a validation run, Fig. 3 shows the sweep's cool-downs, bad input exits 2."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+import benchlab
+from benchlab.cli import main
+from benchlab.clutch import PREDICTED_CHANNELS
+from benchlab.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
+from benchlab.params import paper_params, save_params
+from benchlab.report import write_report
+from benchlab.report.resistance import resistance
+from benchlab.runfile import write_run
+from benchlab.runner.session import RunRequest, execute
+
+FIGURES = ("fig4_fit.png", "fig5_validation_1.png", "fig3_resistance.png", "residuals.png")
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory, short_run):
+    """A Table 1 run, a validation run, a two-point cooldown sweep and the paper's two parameter files."""
+    d = tmp_path_factory.mktemp("report")
+    write_run(d / "run.h5", short_run, short_run.attrs["dt"], protocol="table1")
+    for protocol, name, options in (("validation", "validation.h5", {"seed": 3, "cycles": 0}),
+                                    ("cooldown-sweep", "sweep.h5", {"seed": 2, "grid": "800:1,2000:0"})):
+        code, _ = execute(RunRequest(protocol, d / name, install_signals=False, **options))
+        assert code == 0
+    save_params(d / "linear.json", paper_params("linear"), {"uncertainty": {"R0": 0.004}})
+    save_params(d / "nonlinear.json", paper_params("nonlinear"))
+    return d
+
+
+@pytest.fixture(scope="module")
+def report(bench):
+    out = bench / "out"
+    code = main(["report", str(bench / "run.h5"), "--params", str(bench / "linear.json"),
+                 "--compare", str(bench / "nonlinear.json"), "--out", str(out),
+                 "--validate", str(bench / "validation.h5"), "--sweep", str(bench / "sweep.h5")])
+    assert code == 0
+    return out
+
+
+def page_scores(page) -> dict[tuple[str, str, str], tuple[float, float]]:
+    """(run, model, channel or "all") -> (RMSE K, NRMSE %) from the page's error-figure table."""
+    rows = {}
+    for line in page.read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 5 and ("`T_" in cells[2] or "**all**" in cells[2]):
+            channel = re.search(r"`(\w+)`", cells[2])
+            rows[(cells[0].strip("`"), cells[1], channel.group(1) if channel else "all")] = (float(cells[3]),
+                                                                                           float(cells[4]))
+    return rows
+
+
+def test_command_writes_the_figures_and_the_page(report):
+    page = (report / "report.md").read_text()
+    for name in FIGURES:
+        data = (report / name).read_bytes()
+        assert data.startswith(PNG_SIGNATURE) and len(data) > 20_000, name
+        assert f"]({name})" in page
+    assert "| `a1` | K/W | 0 | — | 0.35 | — |" in page  # the parameters of both files, with units
+    assert "| `R0` | K/W | 0.15 | 0.004 | 0.15 | — |" in page  # and the standard error the file holds
+
+
+@pytest.mark.parametrize("name", ["run.h5", "validation.h5"])
+def test_page_error_figures_are_benchlab_metrics(bench, report, name):
+    scores = page_scores(report / "report.md")
+    run = benchlab.load_run(bench / name)
+    for model in ("linear", "nonlinear"):
+        sim = benchlab.simulate(run, benchlab.load_params(bench / f"{model}.json"))
+        expected = {"all": (rmse_k(run, sim), nrmse_pct(run, sim))}
+        expected |= {c: (channel_rmse_k(run, sim)[c], channel_nrmse_pct(run, sim)[c]) for c in PREDICTED_CHANNELS}
+        for channel, (rmse, nrmse) in expected.items():
+            page_rmse, page_nrmse = scores[(name, model, channel)]
+            assert page_rmse == pytest.approx(rmse, abs=5.1e-5), (model, channel)
+            assert page_nrmse == pytest.approx(nrmse, abs=5.1e-4), (model, channel)
+
+
+def test_fig5_linear_model_misses_the_varying_cooldowns(report):
+    scores = page_scores(report / "report.md")
+    linear, nonlinear = scores[("validation.h5", "linear", "all")], scores[("validation.h5", "nonlinear", "all")]
+    assert linear[0] > 3 * nonlinear[0] and linear[0] > 0.5  # RMSE, K
+    assert linear[1] > 3 * nonlinear[1]  # NRMSE, %
+
+
+def test_fig3_table_has_the_sweeps_cooldowns_near_the_true_law(report):
+    page = (report / "report.md").read_text()
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in page.splitlines()
+            if re.match(r"\| \d+ \| \d+ \| [01] \|", line)]
+    assert [(float(r[1]), int(r[2])) for r in rows] == [(800.0, 1), (2000.0, 0)]
+    truth = paper_params("nonlinear")
+    for r in rows:
+        true_r = float(resistance(truth, np.array([float(r[1])]), int(r[2]))[0][0])
+        assert float(r[3]) == pytest.approx(true_r, rel=0.02)
+        assert float(r[6]) == pytest.approx(true_r, abs=1e-4)  # the nonlinear file's eq. (11) at that point
+
+
+def test_python_api_without_validation_shows_fig5_on_the_run(tmp_path, short_run):
+    page = write_report(short_run, paper_params("nonlinear"), tmp_path / "out")
+    assert page == tmp_path / "out" / "report.md"
+    assert {p.name for p in page.parent.glob("*.png")} == set(FIGURES)
+    scores = page_scores(page)
+    assert {(run, model) for run, model, _ in scores} == {(short_run.attrs["source"], "nonlinear")}
+
+
+def _bad_params(bench):
+    path = bench / "bad.json"
+    path.write_text(json.dumps({"model": "nonlinear", "params": {"C_P": 1800.0}}))
+    return ["--params", str(path)], "bad.json: params.C_F"
+
+
+@pytest.mark.parametrize("case", ["missing run", "params field", "validation not hdf5", "sweep without events",
+                                  "out is a file"])
+def test_bad_input_is_one_line_and_exit_2(bench, tmp_path, capsys, case):
+    run, params = str(bench / "run.h5"), ["--params", str(bench / "nonlinear.json")]
+    extra: list[str] = []
+    out = tmp_path / "out"
+    if case == "missing run":
+        run, expected = str(tmp_path / "nothing.h5"), "nothing.h5: file: an existing run file"
+    elif case == "params field":
+        params, expected = _bad_params(bench)
+    elif case == "validation not hdf5":
+        text = tmp_path / "v.h5"
+        text.write_text("time,T_air\n0,20\n")
+        extra, expected = ["--validate", str(text)], "v.h5: file: an HDF5 run file"
+    elif case == "sweep without events":
+        extra, expected = ["--sweep", run], "run.h5: /events:"
+    else:
+        out.write_text("")
+        expected = "out: --out: a directory"
+    code = main(["report", run, *params, "--out", str(out), *extra])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("benchlab report: ") and expected in err, err
+    assert "Traceback" not in err
