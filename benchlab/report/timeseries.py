@@ -68,6 +68,6 @@ def plot_comparison(run: pd.DataFrame, estimates: Sequence[Estimate], path: "str
     speed.set_xlabel("time (min)")
     speed.legend(loc="best", fontsize=8)
     overall = "; ".join(f"{e.label} RMSE {e.scores.rmse_k:.2f} K ({e.scores.nrmse_pct:.1f} %)" for e in estimates)
-    fig.suptitle(f"Fig. 5 – validation on {run_name(run)} ({SYMBOLS['T_flywheel']}, {SYMBOLS['T_air']}, "
+    fig.suptitle(f"Fig. 5 – models compared on {run_name(run)} ({SYMBOLS['T_flywheel']}, {SYMBOLS['T_air']}, "
                  f"{SYMBOLS['T_housing']}): {overall}")
     return save(fig, path)
