@@ -58,8 +58,10 @@ def _bounds(spec: ModelSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 def initial_state(network: ThermalNetwork, data: FitData, params: Mapping[str, float]) -> np.ndarray:
-    """States start at the first valid measurement of their channel; an `init_<state>` parameter overrides."""
-    return np.array([params.get(f"init_{s}", data.first_valid[network.initial[s]]) for s in network.state_names])
+    """States start at the first valid measurement of their channel; `init_<state>@<run name>` (one run's
+    estimated initial state) or `init_<state>` (every run's) overrides."""
+    return np.array([params.get(f"init_{s}@{data.name}", params.get(f"init_{s}", data.first_valid[network.initial[s]]))
+                     for s in network.state_names])
 
 
 def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
@@ -79,6 +81,12 @@ def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datase
             use = data.mask & np.isfinite(target)
             parts.append(sim[c][use] - target[use])
     return np.concatenate(parts)
+
+
+def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
+    """Per run, the fitting-step sample of each entry of that run's part of `residual_vector` (same order)."""
+    return [np.concatenate([np.flatnonzero(data.mask & np.isfinite(target)) for target in data.targets.values()])
+            for data in datasets]
 
 
 def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = None,
