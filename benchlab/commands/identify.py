@@ -7,7 +7,7 @@ import argparse
 from benchlab.errors import InputError
 from benchlab.identify.api import identify, parse_fixed
 from benchlab.identify.spec import clutch_spec
-from benchlab.params import check_params, save_params
+from benchlab.params import save_params
 from benchlab.runfile import load_run
 
 NAME = "identify"
@@ -29,11 +29,13 @@ def run(args: argparse.Namespace) -> int:
         fixed = parse_fixed(args.fix)
     except ValueError as exc:
         raise InputError("--fix", str(exc).split(":")[0].removeprefix("--fix "), "NAME=NUMBER") from None
-    known = {p.name for p in clutch_spec(args.model).free}
-    for name in fixed:
+    known = {p.name: p for p in clutch_spec(args.model).free}
+    for name, value in fixed.items():
         if name not in known:
             raise InputError("--fix", name, f"a free parameter of the {args.model} model ({', '.join(sorted(known))})")
-    check_params("nonlinear", {**{k: 1.0 for k in known}, **fixed, "b1": -1e-3, "b2": -1e-3}, "--fix")
+        spec = known[name]
+        if not spec.lower <= value <= spec.upper:
+            raise InputError("--fix", name, f"a value in [{spec.lower:g}, {spec.upper:g}] {spec.unit}, got {value:g}")
     runs = [load_run(p) for p in args.runs]
     validate = [load_run(p) for p in args.validate]
     result = identify(runs, args.model, fixed, validate, starts=args.starts, seed=args.seed)
@@ -43,6 +45,9 @@ def run(args: argparse.Namespace) -> int:
     for name, value in result.params.items():
         if name in se:
             print(f"  {name:7s} = {value:12.6g} ± {se[name]:.3g}")
+    for path, states in result.initial_states.items():
+        fitted = ", ".join(f"{s} {v['value']:.2f}" for s, v in states.items())
+        print(f"  initial    {path}: {fitted} degC (fitted start values)")
     for label, group in (("fit", result.fitting), ("validation", result.validation)):
         for path, figures in group.items():
             print(f"  {label:10s} {path}: RMSE {figures['rmse_K']:.3f} K, NRMSE {figures['nrmse_pct']:.2f} %")

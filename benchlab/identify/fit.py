@@ -58,10 +58,11 @@ def _bounds(spec: ModelSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 def initial_state(network: ThermalNetwork, data: FitData, params: Mapping[str, float]) -> np.ndarray:
-    """States start at the first valid measurement of their channel; `init_<state>@<run name>` (one run's
-    estimated initial state) or `init_<state>` (every run's) overrides."""
-    return np.array([params.get(f"init_{s}@{data.name}", params.get(f"init_{s}", data.first_valid[network.initial[s]]))
-                     for s in network.state_names])
+    """States start at the first valid measurement of their channel, or at its fitted value for this run
+    (`init_<channel>@<run name>`); an `init_<state>` parameter overrides either."""
+    def first(channel: str) -> float:
+        return params.get(f"init_{channel}@{data.name}", data.first_valid[channel])
+    return np.array([params.get(f"init_{s}", first(network.initial[s])) for s in network.state_names])
 
 
 def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:

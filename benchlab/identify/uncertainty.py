@@ -1,67 +1,198 @@
-"""Standard errors, correlations and identifiability warnings from the fit's Jacobian.
+"""Standard errors, correlations and identifiability warnings that hold on bench data.
 
-Residuals of a thermal fit are autocorrelated (slow model error, held sensor readings), so the
-plain (JᵀJ)⁻¹s² understates the spread; the variance is inflated by the effective number of
-independent residuals, estimated from their lag-1 autocorrelation (AR(1) approximation).
+An output-error fit treats the measured inputs as exact and the residuals as white noise; on a bench
+neither holds, and the plain (JᵀJ)⁻¹s² was 3–25× too small against the true error:
+
+- the friction power is measured torque times measured slip speed; its noise is small per sample but
+  the thermal masses integrate it into a slow temperature error, which the fit absorbs into the slow
+  parameters (C_T, R_Feng, R_AT, R_Tamb) and which therefore barely shows in the residuals: no
+  residual-based estimator (HAC, residual bootstrap) can see it;
+- residuals are autocorrelated (held sensor readings, model error).
+
+So the covariance is the sandwich A⁻¹ (S_res + S_in) A⁻¹ with A = JᵀJ, where S_res is the Newey–West
+(Bartlett) long-run covariance of the per-step scores Jₜᵀrₜ of each run, bandwidth by Andrews' AR(1)
+rule, and S_in the covariance of the score Jᵀe that the friction-power noise e causes: its level at each
+fitting step is estimated from the run's own full-rate record (`power_noise`) and pushed through the
+fitted network by Monte Carlo (the temperatures respond linearly to a heat input, so this is exact up
+to sampling). A is inverted with its columns scaled to unit norm: in physical units its entries span
+sixteen decades and a plain pseudo-inverse truncates the weakest direction (C_T's error came out 10×
+too small). Initial states are fitted per run (api.py) rather than taken from one noisy reading, which
+otherwise biases the slow parameters far beyond any error bar.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
+import pandas as pd
 
-from benchlab.identify.fit import FitResult
+from benchlab.identify.data import FitData
+from benchlab.identify.fit import FitResult, residual_index, simulate_outputs
 
 CORRELATION_LIMIT = 0.95
 RELATIVE_SE_LIMIT = 0.5
+INPUT_NOISE_DRAWS = 200
+MIN_NOISE_SAMPLES = 8  # slipping samples a fitting step needs for its own noise estimate (else the run's)
+MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True)
 class Uncertainty:
-    """Standard errors (physical units), correlation matrix, and plain-language warnings."""
+    """Standard errors (physical units), correlation matrix, the error sources' shares, and warnings."""
 
     names: list[str]
     standard_errors: dict[str, float]
     correlation: np.ndarray
-    inflation: float
+    sources: dict[str, dict[str, float]]  # "residuals" / "input_noise": the standard error each alone gives
+    bandwidths: list[int]  # Newey–West bandwidth per run, in fitting steps
     warnings: list[str]
 
 
-def lag1_autocorrelation(residuals: np.ndarray) -> float:
-    r = residuals - residuals.mean()
-    denom = float(np.dot(r, r))
-    return float(np.dot(r[1:], r[:-1]) / denom) if denom > 0 else 0.0
+def power_noise(run: pd.DataFrame, block: int, steps: int) -> np.ndarray:
+    """Standard deviation (W) of the noise in each fitting step's mean friction power, from the full-rate record.
+
+    While slipping, the measured power is smooth (torque held, slip ramping), so second differences of three
+    slipping samples are noise of variance 6σ² (σ from their median, robust to engagement edges); samples are
+    taken as independent, so a step's mean over n slipping samples of `block` carries √n·σ/block.
+    """
+    p = np.nan_to_num(run["friction_power"].to_numpy(np.float64)[: steps * block])
+    slipping = p != 0
+    d2 = np.full(p.shape, np.nan)
+    usable = slipping[2:] & slipping[1:-1] & slipping[:-2]
+    d2[1:-1] = np.where(usable, np.abs(p[2:] - 2 * p[1:-1] + p[:-2]), np.nan)
+    per_step = d2.reshape(steps, block)
+    counts = np.sum(np.isfinite(per_step), axis=1)
+    overall = float(np.nanmedian(d2)) if np.any(np.isfinite(d2)) else 0.0
+    medians = np.full(steps, overall)
+    enough = counts >= MIN_NOISE_SAMPLES
+    if np.any(enough):
+        medians[enough] = np.nanmedian(per_step[enough], axis=1)
+    sigma = MAD_TO_SIGMA * medians / np.sqrt(6.0)
+    return np.sqrt(slipping.reshape(steps, block).sum(axis=1)) * sigma / block
 
 
-def estimate_uncertainty(result: FitResult) -> Uncertainty:
-    """Covariance from the Jacobian, corrected for residual autocorrelation; flag what the data cannot tell."""
-    J, r = result.jacobian, result.residuals
+def run_scores(result: FitResult, datasets: Sequence[FitData]) -> list[np.ndarray]:
+    """Per run, the score Jₜᵀrₜ of each fitting step (channels of the same step summed): steps × parameters."""
+    out, offset = [], 0
+    for data, index in zip(datasets, residual_index(datasets)):
+        rows = slice(offset, offset + len(index))
+        scores = np.zeros((len(data), result.jacobian.shape[1]))
+        np.add.at(scores, index, result.jacobian[rows] * result.residuals[rows, None])
+        out.append(scores)
+        offset += len(index)
+    return out
+
+
+def bartlett_bandwidth(scores: np.ndarray) -> int:
+    """Andrews' (1991) AR(1) plug-in bandwidth of the Bartlett kernel for a score series."""
+    num = den = 0.0
+    for column in scores.T:
+        x = column - column.mean()
+        lagged = float(np.dot(x[:-1], x[:-1]))
+        if lagged <= 0:
+            continue
+        rho = min(max(float(np.dot(x[1:], x[:-1])) / lagged, -0.97), 0.97)
+        s4 = float(np.mean((x[1:] - rho * x[:-1]) ** 2)) ** 2
+        num += 4 * rho ** 2 * s4 / ((1 - rho) ** 6 * (1 + rho) ** 2)
+        den += s4 / (1 - rho) ** 4
+    if den <= 0:
+        return 1
+    return int(min(max(1, np.ceil(1.1447 * (num / den * len(scores)) ** (1 / 3))), max(1, len(scores) // 4)))
+
+
+def long_run_covariance(scores: np.ndarray, bandwidth: int) -> np.ndarray:
+    """Newey–West covariance of the score sum: lag covariances with Bartlett weights 1 − l/bandwidth."""
+    cov = scores.T @ scores
+    for lag in range(1, bandwidth):
+        gamma = scores[lag:].T @ scores[:-lag]
+        cov += (1 - lag / bandwidth) * (gamma + gamma.T)
+    return cov
+
+
+def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise: Sequence[np.ndarray],
+                           draws: int = INPUT_NOISE_DRAWS, seed: int = 0) -> np.ndarray:
+    """Covariance of the score Jᵀe caused by friction-power noise of the given level per step (Monte Carlo)."""
+    rng = np.random.default_rng(seed)
+    p = result.jacobian.shape[1]
+    cov, offset = np.zeros((p, p)), 0
+    network, params = result.spec.network, result.params
+    for data, sigma, index in zip(datasets, noise, residual_index(datasets)):
+        jac = result.jacobian[offset: offset + len(index)]
+        offset += len(index)
+        if not np.any(sigma > 0):
+            continue
+        use = [data.mask & np.isfinite(target) for target in data.targets.values()]
+        base = simulate_outputs(network, params, data)
+        for _ in range(draws):
+            channels = dict(data.channels)
+            channels["friction_power"] = channels["friction_power"] + sigma * rng.standard_normal(len(sigma))
+            sim = simulate_outputs(network, params, replace(data, channels=channels))
+            error = np.concatenate([sim[c][u] - base[c][u] for c, u in zip(data.targets, use)])
+            score = jac.T @ error
+            cov += np.outer(score, score) / draws
+    return cov
+
+
+def scaled_inverse(matrix: np.ndarray) -> np.ndarray:
+    """Pseudo-inverse after scaling to unit diagonal, so that parameters of any unit keep their weak directions."""
+    d = np.sqrt(np.clip(np.diag(matrix), 0, None))
+    d[d == 0] = 1.0
+    return np.linalg.pinv(matrix / np.outer(d, d)) / np.outer(d, d)
+
+
+def _errors(inverse: np.ndarray, middle: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.clip(np.diag(inverse @ middle @ inverse), 0, None))
+
+
+def identifiability_warnings(names: Sequence[str], values: Sequence[float], errors: Sequence[float],
+                             correlation: np.ndarray, effect: Sequence[float]) -> list[str]:
+    """Pairs the data cannot tell apart (|corr| > 0.95), poorly excited parameters, parameters without effect."""
+    warnings = []
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if abs(correlation[i, j]) > CORRELATION_LIMIT:
+                warnings.append(f"{names[i]} and {names[j]} are hard to tell apart "
+                                f"(correlation {correlation[i, j]:+.3f})")
+    largest = max(effect, default=0.0)
+    for name, value, error, size in zip(names, values, errors, effect):
+        if value != 0 and error / abs(value) > RELATIVE_SE_LIMIT:
+            warnings.append(f"{name} is poorly excited by the data (standard error {100 * error / abs(value):.0f} %)")
+        elif size < 1e-6 * largest:
+            warnings.append(f"{name} has no visible effect on the measured channels")
+    return warnings
+
+
+def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: Sequence[np.ndarray],
+                         model_names: Sequence[str] | None = None) -> Uncertainty:
+    """Sandwich covariance (autocorrelated residuals + friction-power noise); warn about what the data cannot tell.
+
+    `noise`: per run, the friction-power noise per fitting step (`power_noise`). `model_names`: the free
+    parameters the warnings speak of (default all; initial states are better left out).
+    """
+    J = result.jacobian
     n, p = J.shape
-    rho = min(max(lag1_autocorrelation(r), 0.0), 0.999)
-    inflation = (1 + rho) / (1 - rho)
-    sigma2 = float(np.dot(r, r)) / max(n - p, 1)
-    JtJ = J.T @ J
-    cov = np.linalg.pinv(JtJ) * sigma2 * inflation
+    inverse = scaled_inverse(J.T @ J)
+    scores = run_scores(result, datasets)
+    bandwidths = [bartlett_bandwidth(s) for s in scores]
+    residual_part = sum(long_run_covariance(s, b) for s, b in zip(scores, bandwidths)) * n / max(n - p, 1)
+    input_part = input_noise_covariance(result, datasets, noise)
+    cov = inverse @ (residual_part + input_part) @ inverse
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se, se)
     names = result.free_names
-    warnings = []
-    for i in range(p):
-        for j in range(i + 1, p):
-            if abs(corr[i, j]) > CORRELATION_LIMIT:
-                warnings.append(f"{names[i]} and {names[j]} are hard to tell apart (correlation {corr[i, j]:+.3f})")
-    column_norm = np.sqrt(np.diag(JtJ)) * np.abs([result.params[k] for k in names])
-    for i, name in enumerate(names):
-        value = abs(result.params[name])
-        if value > 0 and se[i] / value > RELATIVE_SE_LIMIT:
-            warnings.append(f"{name} is poorly excited by the data (standard error {100 * se[i] / value:.0f} %)")
-        elif column_norm[i] < 1e-6 * np.max(column_norm):
-            warnings.append(f"{name} has no visible effect on the measured channels")
+    sources = {"residuals": dict(zip(names, map(float, _errors(inverse, residual_part)))),
+               "input_noise": dict(zip(names, map(float, _errors(inverse, input_part))))}
+    keep = [i for i, name in enumerate(names) if model_names is None or name in model_names]
+    values = [result.params[names[i]] for i in keep]
+    effect = np.sqrt(np.diag(J.T @ J))[keep] * np.abs(values)
+    warnings = identifiability_warnings([names[i] for i in keep], values, se[keep], corr[np.ix_(keep, keep)],
+                                        effect)
     if "C_P" in names:
         i = names.index("C_P")
         warnings.append(f"C_P is seen only through the flywheel and air temperatures (the pressure plate is not "
                         f"measured): its standard error is {100 * se[i] / result.params['C_P']:.1f} % and ϑ_P is "
                         f"an estimate, not a measurement")
-    return Uncertainty(names, dict(zip(names, map(float, se))), corr, inflation, warnings)
+    return Uncertainty(names, dict(zip(names, map(float, se))), corr, sources, bandwidths, warnings)
