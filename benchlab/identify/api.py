@@ -56,11 +56,12 @@ def initial_channels(spec: ModelSpec) -> list[str]:
     return list(dict.fromkeys(spec.network.initial[s] for s in spec.network.state_names))
 
 
-def with_initial_states(spec: ModelSpec, datasets: Sequence[FitData]) -> ModelSpec:
-    """The spec plus each run's initial temperature of each such channel as a free parameter, from its first reading."""
+def with_initial_states(spec: ModelSpec, datasets: Sequence[FitData], channels: Sequence[str] = ()) -> ModelSpec:
+    """The spec plus each run's initial temperature of each such channel (or of `channels`) as a free parameter,
+    from its first reading."""
     extra = []
     for data in datasets:
-        for channel in initial_channels(spec):
+        for channel in channels or initial_channels(spec):
             first = data.first_valid[channel]
             extra.append(ParamSpec(f"init_{channel}@{data.name}", first, first - INITIAL_STATE_RANGE_K,
                                    first + INITIAL_STATE_RANGE_K, log=False, unit="degC", scale=1.0))
