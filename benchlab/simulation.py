@@ -29,7 +29,8 @@ def input_channels(run: pd.DataFrame) -> dict[str, np.ndarray]:
     predicts stay as they are, NaN included, because they only set the initial state.
     """
     source = run.attrs.get("source", "<run>")
-    channels = {name: run[name].to_numpy(np.float64) for name in run.columns}
+    bare = pd.DataFrame(run, copy=False)  # same columns without attrs: pandas deep-copies attrs on every run[name]
+    channels = {name: bare[name].to_numpy(np.float64) for name in bare.columns}
     for name in INPUT_CHANNELS + ("T_engine",):
         if name not in channels:
             if name == "T_engine":

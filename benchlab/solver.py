@@ -33,12 +33,19 @@ class Discretised:
 
 
 def _conductances(network: ThermalNetwork, params: Params, channels: Channels, n: int) -> list[np.ndarray | float]:
+    """1/R of every link; links that share one law object (R_PA, R_FA) get the same array, evaluated once."""
     out: list[np.ndarray | float] = []
+    by_law: dict[int, np.ndarray | float] = {}
     for link in network.links:
+        if id(link.resistance) in by_law:
+            out.append(by_law[id(link.resistance)])
+            continue
         r = np.asarray(link.resistance(params, channels), dtype=np.float64)
         if np.any(~np.isfinite(r)) or np.any(r <= 0):
             raise ValueError(f"resistance of link {link.label or (link.a, link.b)} is not positive and finite")
-        out.append(float(1.0 / r) if r.ndim == 0 else 1.0 / r)
+        g = float(1.0 / r) if r.ndim == 0 else 1.0 / r
+        by_law[id(link.resistance)] = g
+        out.append(g)
     return out
 
 
@@ -173,6 +180,23 @@ def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     return Ad, Bd
 
 
+def _combined_key(columns: list[np.ndarray], n: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Index per sample of the distinct combinations of the key columns, and each column's value per combination."""
+    code = np.zeros(n, dtype=np.int64)
+    uniques = []
+    for col in columns:
+        col_codes, col_uniques = pd.factorize(col)
+        uniques.append(col_uniques)
+        code = code * len(col_uniques) + col_codes
+    op_index, op_codes = pd.factorize(code)
+    per_column = []
+    for col_uniques in reversed(uniques):
+        per_column.append(col_uniques[op_codes % len(col_uniques)])
+        op_codes = op_codes // len(col_uniques)
+    per_column.reverse()
+    return op_index.astype(np.int64), per_column
+
+
 def _operating_points(conductances: list, n: int, resolution: float) -> tuple[np.ndarray, list[np.ndarray]]:
     """Group samples by quantised varying conductances; return index per sample and per-point values.
 
@@ -183,33 +207,27 @@ def _operating_points(conductances: list, n: int, resolution: float) -> tuple[np
     if not varying:
         return np.zeros(n, dtype=np.int64), [np.array([g]) for g in conductances]
     columns: list[np.ndarray] = []
+    keyed: list[np.ndarray] = []  # the conductances each column was made from
     column_of: dict[int, int] = {}
     for i in varying:
-        same = next((j for j, c in enumerate(columns) if conductances[varying[j]] is conductances[i]
-                     or np.array_equal(conductances[varying[j]], conductances[i])), None)
+        g = conductances[i]
+        same = next((j for j, k in enumerate(keyed) if k is g or np.array_equal(k, g)), None)
         if same is None:
-            columns.append(np.rint(np.log(conductances[i]) / resolution).astype(np.int64))
+            columns.append(np.rint(np.log(g) / resolution).astype(np.int64))
+            keyed.append(g)
             same = len(columns) - 1
         column_of[i] = same
-    code = np.zeros(n, dtype=np.int64)
-    uniques = []
-    for col in columns:
-        col_codes, col_uniques = pd.factorize(col)
-        uniques.append(col_uniques)
-        code = code * len(col_uniques) + col_codes
-    op_index, op_codes = pd.factorize(code)
-    op_index = op_index.astype(np.int64)
-    per_column = []
-    for col_uniques in reversed(uniques):
-        per_column.append(col_uniques[op_codes % len(col_uniques)])
-        op_codes = op_codes // len(col_uniques)
-    per_column.reverse()
+    if len(columns) == 1:  # one key column (the paper's clutch): its codes are the operating points
+        op_index, col_uniques = pd.factorize(columns[0])
+        op_index, per_column = op_index.astype(np.int64), [col_uniques]
+    else:
+        op_index, per_column = _combined_key(columns, n)
     per_op: list[np.ndarray] = []
     for i, g in enumerate(conductances):
         if i in column_of:
             per_op.append(np.exp(per_column[column_of[i]] * resolution))
         else:
-            per_op.append(np.full(len(op_codes), g))
+            per_op.append(np.full(len(per_column[0]), g))
     return op_index, per_op
 
 

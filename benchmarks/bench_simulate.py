@@ -14,7 +14,13 @@
    with a stage breakdown; peers scipy.signal.lsim (linear model, same samples) and
    solve_ivp (nonlinear, on a slice, extrapolated per sample); floor = a tight numba loop
    of a fixed 4x4 state matrix and 4x4 input matrix.
-3. --quick: smaller sizes (runs in well under 30 s).
+3. Discretisation of many operating points (ZOH: Ad = exp(A dt), Bd = int exp(A s) ds B), what
+   extended networks (diagnose: extra node, sensor lag, radiation keyed on temperatures) spend
+   their time on: benchlab's compiled Taylor/squaring kernel against scipy.linalg.expm of the
+   augmented matrices (batched, the previous implementation) and a numpy-batched
+   eigendecomposition, on the networks' own operating points from the speed run; accuracy
+   relative to expm (target 1e-9).
+4. --quick: smaller sizes (runs in well under 30 s).
 
 Exit code 1 if any target is missed (after printing everything).
 """
@@ -36,6 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+import scipy.linalg  # noqa: E402
 import scipy.signal  # noqa: E402
 from numba import njit  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
@@ -43,7 +50,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 import benchlab  # noqa: E402
 from benchlab import solver  # noqa: E402
 from benchlab.clutch import SIMULATED_CHANNELS, clutch_network  # noqa: E402
-from benchlab.network import as_samples  # noqa: E402
+from benchlab.network import Lag, Link, Node, ThermalNetwork, as_samples  # noqa: E402
 from benchlab.params import paper_params  # noqa: E402
 from benchlab.simulation import initial_state, input_channels  # noqa: E402
 from protocols.table1 import table1_schedule  # noqa: E402
@@ -56,6 +63,7 @@ TARGET_ERROR_K = 0.01
 TARGET_ABS_RATE = 5e6
 TARGET_VS_LSIM = 10.0
 TARGET_VS_IVP = 100.0
+TARGET_ZOH_REL = 1e-9
 COOLDOWN_SPEEDS_RPM = (800.0, 1000.0, 1500.0, 2000.0, 2500.0, 3000.0)
 
 
@@ -212,7 +220,7 @@ def breakdown(run: pd.DataFrame, p, repeats: int) -> tuple[dict[str, float], int
     g = stage("disc: laws -> conductances", lambda: solver._conductances(network, p, channels, n))
     op_index, per_op = stage("disc: operating-point keying", lambda: solver._operating_points(g, n, res))
     m = len(per_op[0])
-    ad, bd = stage(f"disc: matrices + expm ({m} ops)",
+    ad, bd = stage(f"disc: matrices + ZOH ({m} ops)",
                    lambda: solver._zoh(*solver._system_matrices(network, p, per_op, m), dt))
     disc = solver.Discretised(op_index, ad, bd, inputs)
     states = stage("propagate (numba loop)", lambda: solver.propagate(disc, x0))
@@ -225,6 +233,9 @@ def breakdown(run: pd.DataFrame, p, repeats: int) -> tuple[dict[str, float], int
     stage("output DataFrame", frame)
     one_op = solver.Discretised(np.zeros(n, dtype=np.int64), ad[:1].copy(), bd[:1].copy(), inputs)
     times["(diag) propagate, 1 op only"], _ = best_of(lambda: solver.propagate(one_op, x0), repeats)
+    general = np.empty((n + 1, 4))
+    times["(diag) propagate, general-n kernel"], _ = best_of(
+        lambda: solver._propagate(op_index, ad, bd, inputs, x0, general), repeats)
     return times, m
 
 
@@ -270,6 +281,63 @@ def linear_state_space(p) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
         [0.0, 0.0, 1 / r_tamb / ct],
     ])
     return a, b, np.eye(4), np.zeros((4, 3))
+
+
+# ----------------------------------------------------------------------------- ZOH of many operating points
+
+def extended_networks() -> dict[str, ThermalNetwork]:
+    """The clutch plus what diagnose adds: an extra mass (n=5), a sensor lag (n=6), radiation keyed on temperatures."""
+    base = clutch_network()
+    mass = base.with_node(Node("X", "C_X"), "T_flywheel").with_link(Link("F", "X", lambda p, c: p["R_FX"], "R_FX"))
+    lag = mass.with_lag(Lag("F_meas", "F", "tau_F"), "T_flywheel")
+
+    def radiation(p, c):  # linearised grey-body exchange, keyed on the measured temperatures in 0.5 K steps
+        mean_k = np.round(c["T_flywheel_filled"] + c["T_housing_filled"]) / 2 + 273.15
+        return 1.0 / (p["eps_area"] * 5.670374419e-8 * 4 * mean_k ** 3)
+    rad = lag.with_link(Link("F", "T", radiation, "radiation F")).with_link(Link("P", "T", radiation, "radiation P"))
+    lag2 = rad.with_lag(Lag("A_meas", "A", "tau_A"), "T_air")
+    return {"clutch (n=4)": base, "+ mass (n=5)": mass, "+ mass, lag (n=6)": lag,
+            "+ mass, lag, radiation (n=6)": rad, "+ mass, 2 lags, radiation (n=7)": lag2}
+
+
+def zoh_expm(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The previous implementation: scipy.linalg.expm of the stacked augmented matrices."""
+    n, m = a.shape[1], b.shape[2]
+    aug = np.zeros((a.shape[0], n + m, n + m))
+    aug[:, :n, :n], aug[:, :n, n:] = a * dt, b * dt
+    e = scipy.linalg.expm(aug)
+    return e[:, :n, :n], e[:, :n, n:]
+
+
+def zoh_eig(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Batched eigendecomposition: Ad = V e^(L dt) V^-1, Bd = V diag((e^(l dt) - 1) / l) V^-1 B."""
+    lam, v = np.linalg.eig(a)
+    v_inv = np.linalg.inv(v)
+    z = lam * dt
+    small = np.abs(z) < 1e-5
+    phi = np.where(small, dt * (1 + z / 2 + z * z / 6), (np.exp(z) - 1) / np.where(small, 1.0, lam))
+    return ((v * np.exp(z)[:, None, :]) @ v_inv).real, ((v * phi[:, None, :]) @ (v_inv @ b)).real
+
+
+def zoh_comparison(run: pd.DataFrame, dt: float, repeats: int) -> list[tuple[str, int, int, dict[str, tuple[float, float]]]]:
+    """Per extended network: (name, n, ops, {method: (seconds per op, max relative error vs expm)})."""
+    p = dict(paper_params("nonlinear"), C_X=3000.0, R_FX=0.2, tau_F=4.0, tau_A=2.0, eps_area=0.05)
+    channels = input_channels(run)
+    n_samples = len(run)
+    rows = []
+    for name, net in extended_networks().items():
+        g = solver._conductances(net, p, channels, n_samples)
+        _, per_op = solver._operating_points(g, n_samples, solver.DEFAULT_RESOLUTION)
+        a, b = solver._system_matrices(net, p, per_op, len(per_op[0]))
+        ref_s, (ref_a, ref_b) = best_of(lambda: zoh_expm(a, b, dt), repeats)
+        result = {"scipy expm (previous)": (ref_s / len(a), 0.0)}
+        for label, fn in (("benchlab kernel", solver._zoh), ("numpy batched eig", zoh_eig)):
+            secs, (got_a, got_b) = best_of(lambda: fn(a, b, dt), repeats)
+            err = max(float(np.max(np.abs(got - want) / np.max(np.abs(want), axis=(1, 2), keepdims=True)))
+                      for got, want in ((got_a, ref_a), (got_b, ref_b)))
+            result[label] = (secs / len(a), err)
+        rows.append((name, a.shape[1], len(a), result))
+    return rows
 
 
 # ----------------------------------------------------------------------------- main
@@ -390,6 +458,22 @@ def main(argv: list[str] | None = None) -> int:
         print(f"   {name:<30}{text:<28}{'ok' if ok else 'MISSED'}")
     print(f"   {'benchlab / floor':<30}{rate / floor_rate:.1%} of {floor_rate / 1e6:.1f} M/s "
           f"(propagate alone: {n / stages['propagate (numba loop)'] / floor_rate:.0%})")
+
+    zoh_run = cut(speed, 0, 50_000 if args.quick else 360_000)
+    print(f"\n3. ZOH OF MANY OPERATING POINTS  the networks' own points on the first {len(zoh_run):,} samples of the speed "
+          f"run, best of {repeats}; error = max |X - expm| / max |expm| per point")
+    for step in (dt, 0.5):
+        rows = zoh_comparison(zoh_run, step, repeats)
+        print(f"   {f'dt = {step:g} s':<40}{'n':>3}{'points':>9}  " + "".join(f"{m:>21}   " for m in rows[0][3]))
+        for name, n_states, ops, result in rows:
+            cells = "".join(f"{1e6 * sec:>9.2f} us {err:>8.1e}   " for sec, err in result.values())
+            print(f"   {name:<40}{n_states:>3}{ops:>9,}  {cells}")
+            kernel_s, kernel_err = result["benchlab kernel"]
+            expm_s = result["scipy expm (previous)"][0]
+            ok = kernel_err <= TARGET_ZOH_REL and kernel_s < expm_s
+            targets.append((f"ZOH {name}, dt {step:g}", f"{expm_s / kernel_s:.1f}x expm, err {kernel_err:.0e}", ok))
+        speedups = [r[3]["scipy expm (previous)"][0] / r[3]["benchlab kernel"][0] for r in rows]
+        print(f"   benchlab kernel vs expm: {min(speedups):.1f}x - {max(speedups):.1f}x faster")
 
     load = os.getloadavg()[0]
     if load > 0.5 * (os.cpu_count() or 1):

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -140,3 +145,12 @@ def test_four_state_kernel_equals_general_kernel():
     _propagate4(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out4)
     _propagate(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out)
     assert np.allclose(out4, out, rtol=1e-13, atol=1e-10)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads through /proc (Linux)")
+def test_import_benchlab_keeps_blas_single_threaded():
+    """`import benchlab` before numpy leaves OpenBLAS without worker threads (tiny expm: 15 ms threaded, 0.01 ms not)."""
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    code = "import benchlab, os, numpy, scipy.linalg; print(len(os.listdir('/proc/self/task')))"
+    threads = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert int(threads) == 1
