@@ -1,7 +1,11 @@
 """Find what the model gets wrong, name the cause, extend the model, measure the gain on held-out data.
 
-Each run is cut into two halves; a model is fitted on one half of every run and scored on the
-other, and the other way round (blocked cross-validation: the scored samples were never fitted).
+Each run is cut into 10-minute blocks dealt alternately to two folds; a model is fitted on one
+fold of every run and scored on the other, and the other way round (blocked cross-validation:
+the scored samples were never fitted). Interleaving, not halves, so that each fit sees the whole
+temperature range: a fit on one half extrapolates the slow housing dynamics into the other, and
+its error then swamps the effects looked for (measured: held-out RMSE of the true model 0.028 K
+with halves, 0.014 K interleaved, against 0.014 K in-sample).
 Candidates are first screened by an in-sample fit from the current model; the most promising
 are cross-validated. An extension is accepted when its held-out error is lower by at least
 MIN_GAIN_PCT and a paired t-test over 5-minute blocks of held-out data rejects "no gain" at
@@ -13,33 +17,65 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
 from benchlab.diagnose.library import Candidate, candidates
+from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
 from benchlab.identify.spec import ModelSpec, clutch_spec
 
 STEP_S = 1.0
+FOLD_S = 600.0
 BLOCK_S = 300.0
 MIN_GAIN_PCT = 5.0
 ALPHA = 0.01
 SCREEN_NFEV = 15
 HELD_OUT_NFEV = 60
+POLISH_NFEV = 200  # the all-data fit of a screened candidate: near convergence, so its gain is not underrated
 CROSS_VALIDATED = 3
 MAX_ROUNDS = 3
+# The flywheel's temperature at t = 0 is fitted per run: a run that starts with a launch leaves one
+# noisy reading to start from, and the fit then bends parameters (and spurious extensions gain
+# 5-10 %) to absorb that start error. Air and housing start from a 10 s line fit (identify.data).
+FITTED_STARTS = ("T_flywheel",)
 
 
 @dataclass
 class HeldOut:
-    """Held-out squared errors of one model, with the 10-minute block each belongs to."""
+    """Held-out predictions of one model: each sample simulated with the parameters of the fold that did not see it."""
 
-    squared: np.ndarray
-    blocks: np.ndarray
-    params: list[dict[str, float]]
+    datasets: Sequence[FitData]
+    predictions: list[dict[str, np.ndarray]]  # per run: channel -> simulated value at the fitting step
+    params: list[dict[str, float]]  # per fold
+
+    def residuals(self) -> list[dict[str, np.ndarray]]:
+        """Simulated minus measured per run and channel; NaN where the sample has no valid target."""
+        return [{c: pred[c] - d.targets[c] for c in pred} for d, pred in zip(self.datasets, self.predictions)]
+
+    @cached_property
+    def _scored(self) -> tuple[np.ndarray, np.ndarray]:
+        squared, blocks = [], []
+        for run_index, (d, res) in enumerate(zip(self.datasets, self.residuals())):
+            block_len = max(1, int(BLOCK_S / d.dt))
+            for r in res.values():
+                use = d.mask & np.isfinite(r)
+                squared.append(r[use] ** 2)
+                blocks.append(run_index * 10 ** 9 + np.flatnonzero(use) // block_len)
+        return np.concatenate(squared), np.concatenate(blocks)
+
+    @property
+    def squared(self) -> np.ndarray:
+        return self._scored[0]
+
+    @property
+    def blocks(self) -> np.ndarray:
+        """The BLOCK_S block (of its run) each squared error belongs to: the units of the paired test."""
+        return self._scored[1]
 
     @property
     def rmse(self) -> float:
@@ -48,9 +84,12 @@ class HeldOut:
 
 @dataclass
 class Finding:
+    """An accepted extension, with the held-out errors of the model without it (before) and with it (after)."""
+
     candidate: Candidate
     spec: ModelSpec
     params: dict[str, float]
+    added: tuple[str, ...]  # the parameters this extension brings
     before: HeldOut
     after: HeldOut
     p_value: float
@@ -59,53 +98,73 @@ class Finding:
     def gain_pct(self) -> float:
         return 100.0 * (1.0 - self.after.rmse / self.before.rmse)
 
+    @property
+    def significant(self) -> bool:
+        """Held-out gain of at least MIN_GAIN_PCT, and "no gain" rejected at ALPHA."""
+        return self.gain_pct >= MIN_GAIN_PCT and self.p_value < ALPHA
 
-def _halves(datasets: Sequence[FitData]) -> list[tuple[list[FitData], list[FitData]]]:
+
+@dataclass
+class Diagnosis:
+    """The baseline, the accepted findings (largest gain first) and the final model, each with held-out predictions."""
+
+    baseline: FitResult
+    baseline_held: HeldOut
+    findings: list[Finding]
+    final: FitResult
+    final_held: HeldOut
+
+
+def _folds(datasets: Sequence[FitData]) -> list[tuple[list[FitData], list[FitData]]]:
+    """Two (train, test) splits: FOLD_S blocks of every run dealt alternately to one fold and the other."""
     folds = []
-    for first in (True, False):
+    for fold in (0, 1):
         train, test = [], []
         for d in datasets:
-            in_first = np.arange(len(d)) < len(d) // 2
-            train.append(d.with_mask(in_first if first else ~in_first))
-            test.append(d.with_mask(~in_first if first else in_first))
+            in_fold = (np.arange(len(d)) * d.dt // FOLD_S).astype(int) % 2 == fold
+            train.append(d.with_mask(~in_fold))
+            test.append(d.with_mask(in_fold))
         folds.append((train, test))
     return folds
 
 
 def _held_out(spec: ModelSpec, start: dict[str, float], datasets: Sequence[FitData]) -> HeldOut:
-    squared, blocks, params = [], [], []
-    block_len = max(1, int(BLOCK_S / datasets[0].dt))
-    offset = 0
-    for train, test in _halves(datasets):
+    """Fit on each fold's training blocks (warm-started at `start`) and predict its test blocks."""
+    predictions = [{c: np.full(len(d), np.nan) for c in d.targets} for d in datasets]
+    params = []
+    for train, test in _folds(datasets):
         result = fit(spec, train, max_nfev=HELD_OUT_NFEV, start={p.name: start[p.name] for p in spec.free})
         params.append(result.params)
-        for run_index, d in enumerate(test):
-            sim = simulate_outputs(spec.network, result.params, d)
-            for c, target in d.targets.items():
-                use = d.mask & np.isfinite(target)
-                squared.append((sim[c][use] - target[use]) ** 2)
-                blocks.append(offset + run_index * 10 ** 6 + np.flatnonzero(use) // block_len)
-        offset += 10 ** 9
-    return HeldOut(np.concatenate(squared), np.concatenate(blocks), params)
+        for pred, d in zip(predictions, test):
+            for c, values in simulate_outputs(spec.network, result.params, d).items():
+                pred[c][d.mask] = values[d.mask]
+    return HeldOut(datasets, predictions, params)
 
 
 def _block_test(before: HeldOut, after: HeldOut) -> float:
-    """One-sided p-value that the extension does not lower the held-out error, blocks as units."""
-    labels, inverse = np.unique(before.blocks, return_inverse=True)
-    diff = np.bincount(inverse, before.squared - after.squared) / np.bincount(inverse)
-    if len(diff) < 3 or np.allclose(diff, 0):
+    """One-sided p-value that the extension does not lower the held-out error, blocks as units.
+
+    The t-test is on each block's log ratio of mean squared errors: scale-free, so a few blocks
+    where the error was large (a missed heat source after every launch) do not swamp the rest.
+    """
+    _, inverse = np.unique(before.blocks, return_inverse=True)
+    count = np.bincount(inverse)
+    log_ratio = np.log(np.bincount(inverse, before.squared) / count) - np.log(np.bincount(inverse, after.squared) / count)
+    if len(log_ratio) < 3 or np.allclose(log_ratio, 0):
         return 1.0
-    return float(stats.ttest_1samp(diff, 0.0, alternative="greater").pvalue)
+    return float(stats.ttest_1samp(log_ratio, 0.0, alternative="greater").pvalue)
 
 
 def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[FitData],
             channels: dict[str, np.ndarray]) -> list[tuple[float, Candidate, FitResult]]:
-    """In-sample fit of each candidate's new parameters, the current model held; sorted by cost, best first."""
+    """In-sample fit of each candidate's new parameters, the parameters it touches and the fitted start
+    temperatures (which a misfit model bends to absorb what it lacks), the rest held; by cost, best first."""
     scored = []
     known = {p.name for p in current.spec.free}
     for cand in cands:
         spec = cand.build(current.spec, channels)
-        screening = spec.with_fixed({k: current.params[k] for k in known if k not in cand.touches})
+        screening = spec.with_fixed({k: current.params[k] for k in known
+                                     if k not in cand.touches and not k.startswith("init_")})
         screening = screening.starting_point({k: current.params[k] for k in known})
         result = fit(screening, datasets, max_nfev=SCREEN_NFEV)
         if result.cost < current.cost:
@@ -114,25 +173,60 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     return sorted(scored, key=lambda item: item[0])
 
 
-def _try(scored, current_held: HeldOut, datasets) -> Finding | None:
+def _try(scored: Sequence[tuple[float, Candidate, FitResult]], current: FitResult, current_held: HeldOut,
+         datasets: Sequence[FitData]) -> Finding | None:
+    """Polish and cross-validate the best-screened candidates; the significant one with the largest gain, if any."""
+    start_names = set(current.free_names)
     best: Finding | None = None
     for _, cand, screened in scored[:CROSS_VALIDATED]:
-        result = fit(screened.spec, datasets, max_nfev=HELD_OUT_NFEV,
+        result = fit(screened.spec, datasets, max_nfev=POLISH_NFEV,
                      start={p.name: screened.params[p.name] for p in screened.spec.free})
         held = _held_out(result.spec, result.params, datasets)
-        finding = Finding(cand, result.spec, result.params, current_held, held, _block_test(current_held, held))
-        if finding.gain_pct >= MIN_GAIN_PCT and finding.p_value < ALPHA:
+        added = tuple(p.name for p in result.spec.free if p.name not in start_names)
+        finding = Finding(cand, result.spec, result.params, added, current_held, held, _block_test(current_held, held))
+        if finding.significant:
             if best is None or finding.gain_pct > best.gain_pct:
                 best = finding
     return best
 
 
+def _combined(base: ModelSpec, cands: Sequence[Candidate], channels: dict[str, np.ndarray]) -> ModelSpec:
+    """The baseline with the given extensions applied in order."""
+    spec = base
+    for cand in cands:
+        spec = cand.build(spec, channels)
+    return spec
+
+
+def _recheck(base_spec: ModelSpec, base_held: HeldOut, findings: Sequence[Finding], final: FitResult,
+             final_held: HeldOut, datasets: Sequence[FitData], channels: dict[str, np.ndarray]) -> list[Finding]:
+    """Each accepted extension measured against the final model without it (drop-one, held out).
+
+    The greedy steps measured each gain on top of the ones found before it; with several findings
+    the fair figure is what the combined model loses without it.
+    """
+    out = []
+    for f in findings:
+        others = [g.candidate for g in findings if g is not f]
+        if others:
+            spec = _combined(base_spec, others, channels)
+            without = fit(spec, datasets, max_nfev=HELD_OUT_NFEV,
+                          start={p.name: final.params[p.name] for p in spec.free})
+            held = _held_out(spec, without.params, datasets)
+        else:
+            held = base_held
+        out.append(Finding(f.candidate, final.spec, final.params, f.added, held, final_held,
+                           _block_test(held, final_held)))
+    return out
+
+
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts: int = 4,
-                  seed: int = 0) -> tuple[FitResult, HeldOut, list[Finding], FitResult]:
-    """Baseline fit, then greedy accepted extensions; returns (baseline, its held-out error, findings, final)."""
+                  seed: int = 0) -> Diagnosis:
+    """Baseline fit, greedy accepted extensions, then a drop-one re-check of each against the combination."""
     datasets = [prepare(run, STEP_S, name=str(i)) for i, run in enumerate(runs)]
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels}
-    base = fit_multistart(clutch_spec(baseline), datasets, starts=starts, seed=seed)
+    base = fit_multistart(with_initial_states(clutch_spec(baseline), datasets, FITTED_STARTS), datasets,
+                          starts=starts, seed=seed)
     base_held = _held_out(base.spec, base.params, datasets)
     library = candidates(baseline_is_linear=baseline == "linear")
     current, current_held, findings = base, base_held, []
@@ -140,13 +234,21 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts
         used = {f.candidate.key for f in findings}
         remaining = [c for c in library if c.key not in used]
         finding = _try(_screen([c for c in remaining if c.physical], current, datasets, channels),
-                       current_held, datasets)
+                       current, current_held, datasets)
         if finding is None:
             finding = _try(_screen([c for c in remaining if not c.physical], current, datasets, channels),
-                           current_held, datasets)
+                           current, current_held, datasets)
         if finding is None:
             break
         findings.append(finding)
         current = fit(finding.spec, datasets, start={p.name: finding.params[p.name] for p in finding.spec.free})
         current_held = finding.after
-    return base, base_held, findings, current
+    if len(findings) > 1:
+        findings = _recheck(base.spec, base_held, findings, current, current_held, datasets, channels)
+        kept = [f for f in findings if f.significant]
+        if len(kept) < len(findings):  # another finding covered what this one fixed: drop it, measure again
+            spec = _combined(base.spec, [f.candidate for f in kept], channels)
+            current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
+            current_held = _held_out(spec, current.params, datasets) if kept else base_held
+            findings = _recheck(base.spec, base_held, kept, current, current_held, datasets, channels)
+    return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held)

@@ -12,12 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from benchlab.clutch import convection_resistance
 from benchlab.identify.spec import CONVECTION_FREE, ModelSpec, ParamSpec
 from benchlab.network import Channels, Lag, Link, Node, Params, Source, ThermalNetwork
 
 STEFAN_BOLTZMANN = 5.670374419e-8
 FALLBACK_KNOTS = 5
+FALLBACK_RANGE = (0.005, 0.995)  # quantiles spanned by the knots: outliers do not stretch them
 
 
 @dataclass(frozen=True)
@@ -127,10 +127,14 @@ def radiation(spec: ModelSpec, ch: Channels) -> ModelSpec:
 
 
 def fallback_source(signal: str, node: str) -> Callable[[ModelSpec, Channels], ModelSpec]:
-    """A learned heat flow into `node`: piecewise linear in the signal, knots at its quantiles."""
+    """A learned heat flow into `node`: piecewise linear in the signal, knots evenly spread over its range.
+
+    Even spacing, not quantiles: a signal that is mostly zero (torque, power, slip) would put most
+    quantile knots at zero and leave the range where the effect lives with one segment.
+    """
     def build(spec: ModelSpec, ch: Channels) -> ModelSpec:
-        values = signal_values(signal, ch)
-        knots = np.unique(np.nanquantile(values, np.linspace(0, 1, FALLBACK_KNOTS)))
+        low, high = np.nanquantile(signal_values(signal, ch), FALLBACK_RANGE)
+        knots = np.unique(np.linspace(low, high, FALLBACK_KNOTS))
         names = [f"g_{signal}_{node}_{i}" for i in range(len(knots))]
 
         def flow(p: Params, c: Channels):
