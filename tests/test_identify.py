@@ -1,0 +1,241 @@
+"""Identification on the simulated bench, where the truth is known (the paper's nonlinear clutch).
+
+The fitting data is a 1 h Table 1 run with the bench's sensor noise, held readings and radio drop-outs;
+validation data comes from other seeds. Runs and fits are shared by module fixtures.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from benchlab.cli import main
+from benchlab.clutch import convection_resistance
+from benchlab.identify.api import identify
+from benchlab.identify.data import prepare
+from benchlab.identify.evaluate import evaluate
+from benchlab.identify.fit import residual_index
+from benchlab.identify.uncertainty import CORRELATION_LIMIT, identifiability_warnings
+from benchlab.metrics import rmse_k
+from benchlab.params import load_params, paper_params
+from benchlab.runfile import load_run, write_run
+from benchlab.runner.session import RunRequest, execute
+from benchlab.simulation import simulate
+from protocols.table1 import table1_schedule
+from protocols.validation import validation_schedule
+from sim_bench.plant import ThermalPlant
+from sim_bench.virtual_run import run_schedule
+
+TRUTH = paper_params("nonlinear")
+SPEEDS_RPM = np.linspace(700.0, 3000.0, 47)
+# 12 parameters checked at once: under the normal law |z| > 3.5 somewhere has a chance of 0.5 %.
+Z_LIMIT = 3.5
+LONG_COOLDOWN_S = 300.0
+
+
+def table1_run(seed: int, hours: float):
+    return run_schedule(table1_schedule(seed, duration_s=3600 * hours), ThermalPlant(), seed=seed)
+
+
+def resistance_error(params) -> float:
+    """Largest relative error of R(ω_e), eq. (11), over 700–3000 rpm for both clutch states."""
+    worst = 0.0
+    for state in (0.0, 1.0):
+        channels = {"engine_speed": SPEEDS_RPM, "clutch_state": np.full_like(SPEEDS_RPM, state)}
+        true = convection_resistance(TRUTH, channels)
+        worst = max(worst, float(np.max(np.abs(convection_resistance(params, channels) / true - 1))))
+    return worst
+
+
+def z_scores(result) -> dict[str, float]:
+    se = result.uncertainty.standard_errors
+    return {k: (result.params[k] - TRUTH[k]) / se[k] for k in result.params if k in se}
+
+
+@pytest.fixture(scope="module")
+def fitting_run():
+    return table1_run(11, 1.0)
+
+
+@pytest.fixture(scope="module")
+def nonlinear(fitting_run):
+    return identify([fitting_run], "nonlinear", starts=4)
+
+
+@pytest.fixture(scope="module")
+def linear(fitting_run):
+    return identify([fitting_run], "linear", starts=4)
+
+
+@pytest.fixture(scope="module")
+def validation_run():
+    """The validation protocol on the virtual bench (another seed): its Table 1 draws and quiet cool-downs."""
+    return run_schedule(validation_schedule(21), ThermalPlant(), seed=21)
+
+
+@pytest.fixture(scope="module")
+def hot_cooldowns(tmp_path_factory):
+    """The validation protocol on the closed-loop simulated bench: each long cool-down starts at 70 °C."""
+    path = tmp_path_factory.mktemp("validation") / "validation.h5"
+    code, _ = execute(RunRequest("validation", path, seed=5, cycles=0, install_signals=False))
+    assert code == 0
+    return load_run(path)
+
+
+def test_fitting_run_has_dropouts(fitting_run, nonlinear):
+    assert np.isnan(fitting_run["T_flywheel"]).any()
+    assert nonlinear.fit.n_residuals < 3 * len(fitting_run) // 50  # drop-outs skipped, not filled
+
+
+def test_nonlinear_recovers_the_convection_resistance(nonlinear):
+    assert resistance_error(nonlinear.params) < 0.03
+
+
+def test_truth_within_reported_standard_errors(nonlinear):
+    z = z_scores(nonlinear)
+    assert len(z) == 12
+    assert max(abs(v) for v in z.values()) < Z_LIMIT, z
+
+
+def test_standard_errors_are_calibrated_over_seeds(nonlinear):
+    """Pooled over four 1 h runs, z = (estimate − truth) / SE has an rms near 1: neither too small nor padded.
+
+    (The plain Jacobian gave 3–25; the residual part alone, what a HAC sandwich sees, about 2.)
+    """
+    z = list(z_scores(nonlinear).values())
+    for seed in (12, 13, 14):
+        z += list(z_scores(identify([table1_run(seed, 1.0)], "nonlinear", starts=2)).values())
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.6 < rms < 1.6, rms
+
+
+def test_initial_states_are_fitted_per_run(nonlinear):
+    (states,) = nonlinear.initial_states.values()
+    assert set(states) == {"T_flywheel", "T_air", "T_housing"}
+    for value in states.values():  # the simulated bench starts everything at 22.0 °C
+        assert abs(value["value"] - 22.0) < max(4 * value["standard_error"], 0.01)
+
+
+def test_validation_rmse_at_the_noise_floor(nonlinear, validation_run):
+    floor = evaluate(validation_run, TRUTH)["rmse_K"]
+    assert evaluate(validation_run, nonlinear.params)["rmse_K"] < 1.2 * floor
+
+
+def test_nonlinear_beats_linear_on_long_varying_cooldowns(nonlinear, linear, hot_cooldowns):
+    """Paper, Fig. 5: with the engine speed or clutch state changing, a constant R misjudges the cool-down."""
+    dt = hot_cooldowns.attrs["dt"]
+    quiet = np.concatenate([[0], (np.nan_to_num(hot_cooldowns["friction_power"].to_numpy()) == 0).astype(int), [0]])
+    edges = np.flatnonzero(np.diff(quiet))
+    spans = [(a, b) for a, b in zip(edges[::2], edges[1::2]) if (b - a) * dt >= LONG_COOLDOWN_S]
+    assert len(spans) >= 2
+    keep = np.zeros(len(hot_cooldowns), dtype=bool)
+    for a, b in spans:
+        keep[a:b] = True
+    assert np.nanmax(hot_cooldowns["T_flywheel"].to_numpy()[keep]) > 60.0
+    measured = hot_cooldowns[keep]
+    errors = {name: rmse_k(measured, simulate(hot_cooldowns, result.params)[keep])
+              for name, result in (("linear", linear), ("nonlinear", nonlinear))}
+    assert errors["nonlinear"] * 2 <= errors["linear"], errors
+
+
+def test_fixed_parameter_is_held(fitting_run):
+    result = identify([fitting_run], "nonlinear", fixed={"C_T": 12000.0}, starts=2)
+    assert result.params["C_T"] == 12000.0
+    assert "C_T" not in result.uncertainty.standard_errors
+    assert result.params["C_F"] == pytest.approx(TRUTH["C_F"], rel=0.05)
+
+
+def test_two_runs_fitted_at_once():
+    runs = [table1_run(31, 0.5), table1_run(32, 0.5)]
+    result = identify(runs, "nonlinear", starts=2)
+    assert len(result.fitting) == 2 and len(result.initial_states) == 2
+    per_run = residual_index([prepare(run, name=f"run{i}") for i, run in enumerate(runs)])
+    assert result.fit.n_residuals == sum(len(index) for index in per_run)
+    assert resistance_error(result.params) < 0.03
+    assert max(abs(v) for v in z_scores(result).values()) < Z_LIMIT
+
+
+def test_blanked_air_sensor_block_is_skipped(fitting_run, nonlinear):
+    run = fitting_run.copy()
+    run.attrs.update(fitting_run.attrs)
+    t = run["time"].to_numpy()
+    run.loc[(t >= 1200.0) & (t < 1800.0), "T_air"] = np.nan
+    result = identify([run], "nonlinear", starts=4)
+    assert result.fit.n_residuals < nonlinear.fit.n_residuals - 1000
+    assert resistance_error(result.params) < 0.03
+    assert max(abs(v) for v in z_scores(result).values()) < Z_LIMIT
+
+
+def test_correlation_warnings_name_exactly_the_close_pairs(nonlinear):
+    u = nonlinear.uncertainty
+    names = list(nonlinear.params.keys() & u.standard_errors.keys())
+    index = {n: u.names.index(n) for n in names}
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            close = abs(u.correlation[index[a], index[b]]) > CORRELATION_LIMIT
+            named = any(f"{a} and {b} are hard" in w or f"{b} and {a} are hard" in w for w in u.warnings)
+            assert close == named, (a, b)
+    assert any(w.startswith("C_P is seen only through") for w in u.warnings)
+
+
+def test_identifiability_warnings_on_a_known_matrix():
+    corr = np.array([[1.0, 0.97, 0.2], [0.97, 1.0, -0.94], [0.2, -0.94, 1.0]])
+    warnings = identifiability_warnings(["x", "y", "w"], [1.0, 2.0, 3.0], [0.1, 1.5, 0.1], corr, [1.0, 1.0, 1e-9])
+    assert warnings == ["x and y are hard to tell apart (correlation +0.970)",
+                        "y is poorly excited by the data (standard error 75 %)",
+                        "w has no visible effect on the measured channels"]
+
+
+@pytest.fixture(scope="module")
+def run_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("identify")
+    for name, seed in (("run.h5", 41), ("val.h5", 42)):
+        run = table1_run(seed, 0.5)
+        write_run(d / name, run, run.attrs["dt"], protocol="table1")
+    return d
+
+
+def test_cli_writes_a_contract_parameter_file(run_files, capsys):
+    out = run_files / "P.json"
+    code = main(["identify", str(run_files / "run.h5"), "--model", "nonlinear", "--out", str(out),
+                 "--validate", str(run_files / "val.h5"), "--starts", "2", "--fix", "C_T=13000"])
+    assert code == 0
+    params = load_params(out)
+    assert params.model == "nonlinear" and params["C_T"] == 13000.0
+    assert set(params) >= {"C_P", "C_F", "C_A", "C_T", "R_AT", "R_Feng", "R_Tamb", "R0", "a1", "b1", "a2", "b2"}
+    doc = json.loads(out.read_text())
+    assert list(doc)[:3] == ["model", "params", "units"]
+    assert set(doc["uncertainty"]) == set(params) - {"C_T"}
+    assert set(doc["fit"]["validation"]) == {str(run_files / "val.h5")}
+    assert doc["fit"]["validation"][str(run_files / "val.h5")]["rmse_K"] < 0.1
+    assert "validation" in capsys.readouterr().out
+
+
+def _without_channel(run_files, channel: str):
+    run = load_run(run_files / "run.h5")
+    path = run_files / f"no_{channel}.h5"
+    write_run(path, run.drop(columns=[channel]), run.attrs["dt"], protocol="table1")
+    return path
+
+
+@pytest.mark.parametrize("case", ["missing file", "fix not a number", "fix unknown name", "fix out of bounds",
+                                  "missing channel"])
+def test_cli_bad_input_exits_2_with_one_line(run_files, tmp_path, capsys, case):
+    run, extra = str(run_files / "run.h5"), []
+    if case == "missing file":
+        run = str(tmp_path / "nowhere.h5")
+    elif case == "fix not a number":
+        extra = ["--fix", "C_T=warm"]
+    elif case == "fix unknown name":
+        extra = ["--fix", "C_X=1"]
+    elif case == "fix out of bounds":
+        extra = ["--fix", "C_T=-5"]
+    else:
+        run = str(_without_channel(run_files, "T_air"))
+    code = main(["identify", run, "--out", str(tmp_path / "P.json"), *extra])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "P.json").exists()
