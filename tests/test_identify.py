@@ -210,6 +210,7 @@ def test_cli_writes_a_contract_parameter_file(run_files, capsys):
     assert set(doc["uncertainty"]) == set(params) - {"C_T"}
     assert set(doc["fit"]["validation"]) == {str(run_files / "val.h5")}
     assert doc["fit"]["validation"][str(run_files / "val.h5")]["rmse_K"] < 0.1
+    assert set(doc["fit"]["residuals"][str(run_files / "run.h5")]) == {"T_flywheel", "T_air", "T_housing"}
     assert "validation" in capsys.readouterr().out
 
 

@@ -51,6 +51,12 @@ def run(args: argparse.Namespace) -> int:
     for label, group in (("fit", result.fitting), ("validation", result.validation)):
         for path, figures in group.items():
             print(f"  {label:10s} {path}: RMSE {figures['rmse_K']:.3f} K, NRMSE {figures['nrmse_pct']:.2f} %")
+    for path, channels in result.residuals.items():
+        for channel, tests in channels.items():
+            signal, corr = max(tests["input_correlation"].items(), key=lambda item: abs(item[1]), default=("-", 0.0))
+            print(f"  residuals  {path} {channel}: {'white' if tests['white'] else 'not white'} "
+                  f"({tests['whiteness_outside_pct']:.0f} % of lags outside), lag-1 autocorrelation "
+                  f"{tests['autocorrelation'][1]:+.2f}, strongest input correlation {signal} {corr:+.2f}")
     for warning in result.uncertainty.warnings:
         print(f"  warning: {warning}")
     return 0

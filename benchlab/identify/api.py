@@ -36,7 +36,7 @@ class Identification:
     uncertainty: Uncertainty
     fitting: dict[str, dict]
     validation: dict[str, dict]
-    residuals: dict[str, dict]
+    residuals: dict[str, dict]  # run -> channel -> residual tests
     initial_states: dict[str, dict[str, dict[str, float]]]  # run -> channel -> value, standard_error
 
     def summary(self) -> dict:
@@ -68,13 +68,13 @@ def with_initial_states(spec: ModelSpec, datasets: Sequence[FitData], channels: 
     return spec.extended(spec.name, spec.network, tuple(extra))
 
 
-def _residual_analysis(result: FitResult, datasets: Sequence[FitData]) -> dict[str, dict]:
-    out = {}
-    data = datasets[0]
-    sim = simulate_outputs(result.spec.network, result.params, data)
-    for c, target in data.targets.items():
+def _residual_analysis(result: FitResult, datasets: Sequence[FitData], labels: Sequence[str]) -> dict[str, dict]:
+    """Per run and measured channel: whiteness and input correlation of the residuals at the fitting step."""
+    out: dict[str, dict] = {}
+    for label, data in zip(labels, datasets):
+        sim = simulate_outputs(result.spec.network, result.params, data)
         inputs = {k: data.channels[k] for k in RESIDUAL_INPUTS if k in data.channels}
-        out[c] = residual_tests(sim[c] - target, inputs)
+        out[label] = {c: residual_tests(sim[c] - target, inputs) for c, target in data.targets.items()}
     return out
 
 
@@ -103,8 +103,8 @@ def identify(runs: Sequence[pd.DataFrame], model: str = "nonlinear", fixed: Mapp
                        for c in initial_channels(spec)} for label, data in zip(labels, datasets)}
     fitting = {label: evaluate(r, params) for label, r in zip(labels, runs)}
     validation = {label: evaluate(r, params) for label, r in zip(_labels(validate, "validation"), validate)}
-    return Identification(params, result, uncertainty, fitting, validation, _residual_analysis(result, datasets),
-                          initial)
+    return Identification(params, result, uncertainty, fitting, validation,
+                          _residual_analysis(result, datasets, labels), initial)
 
 
 def parse_fixed(items: Sequence[str], source: str = "--fix") -> dict[str, float]:
