@@ -208,6 +208,8 @@ def test_cli_writes_a_contract_parameter_file(run_files, capsys):
     doc = json.loads(out.read_text())
     assert list(doc)[:3] == ["model", "params", "units"]
     assert set(doc["uncertainty"]) == set(params) - {"C_T"}
+    corr = np.array(doc["correlation"]["matrix"])
+    assert doc["correlation"]["names"] == list(doc["uncertainty"]) and np.allclose(np.diag(corr), 1.0)
     assert set(doc["fit"]["validation"]) == {str(run_files / "val.h5")}
     assert doc["fit"]["validation"][str(run_files / "val.h5")]["rmse_K"] < 0.1
     assert set(doc["fit"]["residuals"][str(run_files / "run.h5")]) == {"T_flywheel", "T_air", "T_housing"}

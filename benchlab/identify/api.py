@@ -41,10 +41,13 @@ class Identification:
 
     def summary(self) -> dict:
         """The parameter file's extra keys: uncertainties, fit figures, residual tests, warnings."""
-        se = self.uncertainty.standard_errors
-        return {"uncertainty": {k: se[k] for k in self.params if k in se},
-                "uncertainty_sources": {source: {k: v[k] for k in self.params if k in v}
-                                        for source, v in self.uncertainty.sources.items()},
+        u = self.uncertainty
+        names = [k for k in self.params if k in u.standard_errors]
+        index = [u.names.index(k) for k in names]
+        return {"uncertainty": {k: u.standard_errors[k] for k in names},
+                "uncertainty_sources": {source: {k: v[k] for k in names} for source, v in u.sources.items()},
+                "correlation": {"names": names,
+                                "matrix": np.round(u.correlation[np.ix_(index, index)], 4).tolist()},
                 "initial_states": self.initial_states,
                 "fit": {"fitting": self.fitting, "validation": self.validation, "starts": self.fit.starts,
                         "start_costs": self.fit.start_costs, "residuals": self.residuals},
