@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from benchlab.cli import main
@@ -17,7 +18,8 @@ from benchlab.identify.api import identify
 from benchlab.identify.data import prepare
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import residual_index
-from benchlab.identify.uncertainty import CORRELATION_LIMIT, identifiability_warnings
+from benchlab.identify.uncertainty import (CORRELATION_LIMIT, identifiability_warnings, long_run_covariance,
+                                           power_noise)
 from benchlab.metrics import rmse_k
 from benchlab.params import load_params, paper_params
 from benchlab.runfile import load_run, write_run
@@ -186,6 +188,27 @@ def test_identifiability_warnings_on_a_known_matrix():
     assert warnings == ["x and y are hard to tell apart (correlation +0.970)",
                         "y is poorly excited by the data (standard error 75 %)",
                         "w has no visible effect on the measured channels"]
+
+
+def test_newey_west_matches_its_definition():
+    rng = np.random.default_rng(1)
+    scores = rng.standard_normal((500, 3)).cumsum(axis=0) * 0.1 + rng.standard_normal((500, 3))
+    bandwidth = 17
+    expected = scores.T @ scores
+    for lag in range(1, bandwidth):
+        gamma = scores[lag:].T @ scores[:-lag]
+        expected += (1 - lag / bandwidth) * (gamma + gamma.T)
+    assert np.allclose(long_run_covariance(scores, bandwidth), expected)
+
+
+def test_power_noise_from_the_full_rate_record():
+    """A slipping ramp with 20 W of white noise per 10 ms sample: each 0.5 s mean carries 20/√50 W."""
+    rng = np.random.default_rng(2)
+    power = np.zeros(50 * 400)
+    power[5000:15000] = np.linspace(8000.0, 100.0, 10000) + rng.normal(0.0, 20.0, 10000)
+    sigma = power_noise(pd.DataFrame({"friction_power": power}), 50, 400)
+    assert np.all(sigma[:100] == 0) and np.all(sigma[300:] == 0)
+    assert np.median(sigma[100:300]) == pytest.approx(20.0 / np.sqrt(50), rel=0.1)
 
 
 @pytest.fixture(scope="module")

@@ -103,12 +103,16 @@ def bartlett_bandwidth(scores: np.ndarray) -> int:
 
 
 def long_run_covariance(scores: np.ndarray, bandwidth: int) -> np.ndarray:
-    """Newey–West covariance of the score sum: lag covariances with Bartlett weights 1 − l/bandwidth."""
-    cov = scores.T @ scores
-    for lag in range(1, bandwidth):
-        gamma = scores[lag:].T @ scores[:-lag]
-        cov += (1 - lag / bandwidth) * (gamma + gamma.T)
-    return cov
+    """Newey–West covariance of the score sum: lag covariances with Bartlett weights 1 − l/bandwidth.
+
+    Computed as the sum of the outer products of window sums over `bandwidth` steps (the series padded with
+    zeros, so each pair of steps l apart shares bandwidth − l windows, exactly the Bartlett weight): one pass
+    whatever the bandwidth.
+    """
+    pad = np.zeros((bandwidth - 1, scores.shape[1]))
+    cumulative = np.cumsum(np.vstack([np.zeros((1, scores.shape[1])), pad, scores, pad]), axis=0)
+    windows = cumulative[bandwidth:] - cumulative[:-bandwidth]
+    return windows.T @ windows / bandwidth
 
 
 def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise: Sequence[np.ndarray],
