@@ -1,7 +1,7 @@
 """Standard errors, correlations and identifiability warnings that hold on bench data.
 
 An output-error fit treats the measured inputs as exact and the residuals as white noise; on a bench
-neither holds, and the plain (JᵀJ)⁻¹s² was 3–25× too small against the true error:
+neither holds, and the plain (JᵀJ)⁻¹s² was 3–100× too small against the true error (benchmarks/README.md):
 
 - the friction power is measured torque times measured slip speed; its noise is small per sample but
   the thermal masses integrate it into a slow temperature error, which the fit absorbs into the slow
@@ -15,8 +15,8 @@ rule, and S_in the covariance of the score Jᵀe that the friction-power noise e
 fitting step is estimated from the run's own full-rate record (`power_noise`) and pushed through the
 fitted network by Monte Carlo (the temperatures respond linearly to a heat input, so this is exact up
 to sampling). A is inverted with its columns scaled to unit norm: in physical units its entries span
-sixteen decades and a plain pseudo-inverse truncates the weakest direction (C_T's error came out 10×
-too small). Initial states are fitted per run (api.py) rather than taken from one noisy reading, which
+sixteen decades and a plain pseudo-inverse truncates the weakest direction (C_T's error came out up
+to 14× too small). Initial states are fitted per run (api.py) rather than taken from one noisy reading, which
 otherwise biases the slow parameters far beyond any error bar.
 """
 
