@@ -31,7 +31,6 @@ class Candidate:
     summary: str
     build: Callable[[ModelSpec, Channels], ModelSpec]
     physical: bool = True
-    touches: tuple[str, ...] = ()  # existing parameters the edit acts on: refitted when screening
 
 
 def signal_values(name: str, ch: Channels) -> np.ndarray:
@@ -156,19 +155,18 @@ def candidates(baseline_is_linear: bool) -> list[Candidate]:
     if baseline_is_linear:
         out.append(Candidate("speed_convection", "engine_speed", "convection", "R_FA = R_PA = a*exp(b*engine_speed) + R0",
                              "cool-down rate depends on engine speed: convection grows with engine speed",
-                             engine_speed_convection, touches=("R0",)))
+                             engine_speed_convection))
     out += [
         Candidate("state_convection", "clutch_state", "convection", "R_FA = R_PA = f_R * (k_open if S = 0)",
-                  "convection differs between clamped and open clutch", state_convection, touches=("R0",)),
+                  "convection differs between clamped and open clutch", state_convection),
         Candidate("slip_convection", "slip_speed", "convection", "R_FA = R_PA = f_R / (1 + g*|slip_speed|/1000)",
-                  "heat leaves faster while slipping: convection grows with slip speed", slip_convection,
-                  touches=("R0",)),
+                  "heat leaves faster while slipping: convection grows with slip speed", slip_convection),
         Candidate("clamped_conduction", "clutch_state", "conduction", "R_PF between plate and flywheel when S = 1",
                   "plate and flywheel exchange heat through the clamped disc", clamped_conduction),
         Candidate("heat_split", "friction_power", "heat_split", "P_plate = s*P, P_flywheel = (1-s)*P",
                   "friction heat is not split half and half between plate and flywheel", unequal_split),
         Candidate("extra_mass", None, "capacity", "extra node X: C_X linked to the flywheel by R_FX",
-                  "a thermal mass the model lacks stores and returns heat slowly", extra_mass, touches=("C_F",)),
+                  "a thermal mass the model lacks stores and returns heat slowly", extra_mass),
         Candidate("sensor_lag", "T_flywheel", "sensor", "T_flywheel measured = first-order lag tau_F of the flywheel",
                   "the flywheel sensor lags the flywheel temperature", sensor_lag),
         Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",

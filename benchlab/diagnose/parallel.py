@@ -1,0 +1,39 @@
+"""Independent candidate fits on every core the process may use.
+
+Fork-based: a worker inherits the networks, whose laws are closures that cannot be pickled, so
+only an index goes out and plain numbers and arrays come back.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable
+from typing import TypeVar
+
+T = TypeVar("T")
+
+_task: Callable[[int], object] | None = None
+
+
+def _run(index: int) -> object:
+    return _task(index)
+
+
+def workers() -> int:
+    """Cores this process may run on (CI: 2)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def map_indices(task: Callable[[int], T], count: int) -> list[T]:
+    """[task(0), …, task(count - 1)], spread over forked workers where there is more than one core and task."""
+    global _task
+    n = min(count, workers())
+    if n <= 1 or "fork" not in multiprocessing.get_all_start_methods():
+        return [task(i) for i in range(count)]
+    _task = task
+    try:
+        with multiprocessing.get_context("fork").Pool(n) as pool:
+            return pool.map(_run, range(count), chunksize=1)
+    finally:
+        _task = None
