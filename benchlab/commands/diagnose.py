@@ -1,15 +1,22 @@
-"""`benchlab diagnose RUN.h5 [RUN2.h5 …] [--baseline linear|nonlinear] [--json]`."""
+"""`benchlab diagnose RUN.h5 [RUN2.h5 …] [--baseline linear|nonlinear] [--json] [--report DIR]`."""
 
 from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
-from benchlab.diagnose import diagnose
+import pandas as pd
+
+from benchlab.diagnose.engine import FOLD_S, diagnose_runs
+from benchlab.diagnose.regimes import worst_regimes
+from benchlab.diagnose.report import summarise
+from benchlab.errors import InputError
 from benchlab.runfile import load_run
 
 NAME = "diagnose"
 HELP = "find what the model gets wrong, name the cause, extend the model and measure the gain"
+MIN_DURATION_S = 2 * FOLD_S  # one held-out block in each fold
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -17,15 +24,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--baseline", choices=("linear", "nonlinear"), default="linear")
     parser.add_argument("--json", action="store_true", help="print the contract's JSON object on stdout")
     parser.add_argument("--seed", type=int, default=0, help="seed of the baseline's starting points")
+    parser.add_argument("--report", metavar="DIR", help="write diagnose.md and its PNG figures into DIR")
 
 
 def print_report(result: dict) -> None:
-    """The human-readable summary: baseline, each finding with its gain, the best model."""
+    """The human-readable summary: baseline, worst held-out regime, strongest evidence, each finding, the best model."""
     base = result["baseline"]
     print(f"baseline {base['model']}: held-out RMSE {base['rmse_K']:.3f} K ({base['nrmse_pct']:.2f} %)")
-    worst = max(((k, v, e["rmse_K"]) for k, group in result["regimes"]["baseline"].items()
-                 for v, e in group.items()), key=lambda item: item[2])
-    print(f"  worst regime: {worst[0]} = {worst[1]}, flywheel RMSE {worst[2]:.3f} K")
+    worst = worst_regimes(result["regimes"]["baseline"], 1)
+    if worst:
+        group, label, channel, rmse, samples = worst[0]
+        print(f"  worst regime (held-out residuals): {group} = {label}, {channel} RMSE {rmse:.3f} K "
+              f"over {samples} samples")
+    top = result["evidence"][0]
+    print(f"  strongest evidence: {top['signal']} explains {top['explained_pct']:.0f} % of the {top['channel']} "
+          f"residual {top['form']} (circular shifts: {top['shifted_pct']:.0f} %, p = {top['p_value']:.3f})")
     if not result["findings"]:
         print("no finding: no extension lowers the held-out error significantly; the model is kept as it is")
     for f in result["findings"]:
@@ -36,10 +49,38 @@ def print_report(result: dict) -> None:
     print(f"best {best['model']}: held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
 
 
+def check_report_dir(path: str) -> Path:
+    """The --report directory: refused where a file of that name exists (bad input, exit 2)."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "--report", "a directory (a file of that name exists)")
+    return out
+
+
+def load_runs(paths: list[str]) -> list[pd.DataFrame]:
+    """The run files, each long enough for the blocked cross-validation (two FOLD_S blocks)."""
+    runs = [load_run(p) for p in paths]
+    for path, run in zip(paths, runs):
+        duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
+        if duration < MIN_DURATION_S:
+            raise InputError(path, "/aligned/time", f"a run of at least {MIN_DURATION_S:.0f} s for held-out "
+                                                    f"scoring, got {duration:.0f} s")
+    return runs
+
+
 def run(args: argparse.Namespace) -> int:
-    result = diagnose([load_run(p) for p in args.runs], args.baseline, seed=args.seed)
+    out = check_report_dir(args.report) if args.report else None
+    runs = load_runs(args.runs)
+    diagnosis = diagnose_runs(runs, args.baseline, seed=args.seed)
+    result = summarise(diagnosis, runs, args.baseline)
     if args.json:
         print(json.dumps(result, default=float))
     else:
         print_report(result)
+    if out is not None:
+        from benchlab.diagnose.page import write_page  # matplotlib only when a page is asked for
+
+        page = write_page(diagnosis, result, runs, out)
+        if not args.json:
+            print(f"report: {page}")
     return 0

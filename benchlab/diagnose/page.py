@@ -1,0 +1,163 @@
+"""The diagnosis as a readable page: what is wrong, where, why, what was added and how much better (diagnose.md + PNGs)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import pandas as pd
+
+import benchlab
+from benchlab.diagnose.engine import ALPHA, Diagnosis
+from benchlab.diagnose.evidence import has_signal
+from benchlab.diagnose.figures import (CHANNELS, WINDOW_S, plot_binned, plot_evidence, plot_gains, plot_regimes,
+                                       plot_window, worst_window)
+from benchlab.diagnose.regimes import MIN_REGIME_SAMPLES, worst_regimes
+from benchlab.report.page import SYMBOLS, number, table, unit
+from benchlab.report.plotting import run_name
+
+PAGE = "diagnose.md"
+EVIDENCE_ROWS = 15
+#: Units of the extension library's parameters (benchlab.diagnose.library); prefixes end with "_".
+EXTENSION_UNITS = {"k_open": "1 (factor on R when open)", "slip_gain": "1 per 1000 rpm of slip",
+                   "split": "1 (plate share of P)", "tau_F": "s", "eps_area": "m² (emissivity × area)",
+                   "q_": "W (at the signal's maximum)", "n_": "1 (exponent)", "g_": "W (at the knot)",
+                   "init_": "degC (fitted start)"}
+
+
+def param_unit(name: str) -> str:
+    """Unit of a fitted parameter: the extension library's, else the contract's (C in J/K, R in K/W, b in 1/rpm)."""
+    if name in EXTENSION_UNITS:
+        return EXTENSION_UNITS[name]
+    prefix = next((p for p in EXTENSION_UNITS if p.endswith("_") and name.startswith(p)), None)
+    return EXTENSION_UNITS[prefix] if prefix else unit(name)
+
+
+def _channel(c: str) -> str:
+    return f"{SYMBOLS[c]} `{c}`"
+
+
+def _rmse(entry: dict, channel: str) -> str:
+    return number(entry["channels"][channel]["rmse_K"], 4)
+
+
+def _what_is_wrong(summary: dict, regimes_png: Path) -> list[str]:
+    base, best, reg = summary["baseline"], summary["best"], summary["regimes"]
+    per_channel = [(_channel(c), str(reg["baseline"]["all"]["all"]["channels"][c]["samples"]),
+                    _rmse(reg["baseline"]["all"]["all"], c), _rmse(reg["best"]["all"]["all"], c)) for c in CHANNELS]
+    overall = reg["baseline"]["all"]["all"]["channels"]
+    worst = [(g, f"`{label}`", _channel(c), number(rmse, 4), number(rmse / overall[c]["rmse_K"], 2),
+              _rmse(reg["best"][g][label], c), str(n)) for g, label, c, rmse, n in worst_regimes(reg["baseline"], 6)]
+    full = [(g, f"`{label}`", _channel(c), _rmse(entry, c), _rmse(reg["best"][g][label], c),
+             str(entry["channels"][c]["samples"]))
+            for g, labels in reg["baseline"].items() if g != "all" for label, entry in labels.items() for c in CHANNELS]
+    return [
+        "## What is wrong",
+        f"The baseline model (`{base['model']}`) misses the measured temperatures by a held-out RMSE of "
+        f"**{base['rmse_K']:.4f} K** ({base['nrmse_pct']:.2f} % NRMSE); the final model (`{best['model']}`) by "
+        f"**{best['rmse_K']:.4f} K** ({best['nrmse_pct']:.2f} %). Held-out: {summary['method']['validation']}.",
+        table(("channel", "samples", "baseline RMSE (K)", "final RMSE (K)"), per_channel),
+        f"Worst regimes of the baseline (held-out residuals, regimes of at least {MIN_REGIME_SAMPLES} samples):",
+        table(("group", "regime", "channel", "baseline RMSE (K)", "× channel's whole RMSE", "final RMSE (K)",
+               "samples"), worst),
+        f"Regimes: {summary['method']['regimes']}. `phase`: slipping (friction power > 0), locked (clamped, not "
+        "slipping), open; slipping samples are in no cool-down; the flywheel has few samples while slipping (its "
+        "1 s targets are skipped where their window holds slipping). — where a regime has no sample.",
+        f"![Held-out RMSE by regime]({regimes_png.name})",
+        "<details><summary>All regimes</summary>\n\n"
+        + table(("group", "regime", "channel", "baseline RMSE (K)", "final RMSE (K)", "samples"), full)
+        + "\n\n</details>",
+    ]
+
+
+def _where(result: Diagnosis, names: Sequence[str], window_png: Path) -> list[str]:
+    run, start, stop = worst_window(result.baseline_held)
+    dt = result.baseline_held.datasets[run].dt
+    return [
+        "## Where",
+        f"The {WINDOW_S / 60:.0f} minutes with the largest baseline held-out error: run `{names[run]}`, "
+        f"minutes {start * dt / 60:.1f}–{stop * dt / 60:.1f}. Dots: measured; dashed: baseline, solid: final "
+        "model, each sample predicted by the fold fit that did not see it.",
+        f"![Worst window]({window_png.name})",
+    ]
+
+
+def _why(summary: dict, evidence_png: Path, finding_pngs: Sequence[tuple[dict, str, Path]]) -> list[str]:
+    rows = summary["evidence"]
+    significant = sum(r["p_value"] < ALPHA for r in rows)
+    cells = [(str(i), f"`{r['signal']}`", r["kind"], _channel(r["channel"]), r["form"], number(r["explained_pct"], 1),
+              number(r["shifted_pct"], 1), f"{r['p_value']:.3f}", str(r["samples"]))
+             for i, r in enumerate(rows[:EVIDENCE_ROWS], 1)]
+    parts = [
+        "## Why",
+        f"Evidence: {summary['method']['evidence']}. {significant} of {len(rows)} tests have p < {ALPHA:g} "
+        f"(about {ALPHA * len(rows):.1f} would by chance alone). Signals that move together (engine and clutch "
+        "speed while driving, temperatures and time) share the evidence: the table says what the residual "
+        "follows, the extensions' held-out fits below decide the cause.",
+        table(("rank", "signal", "kind", "channel", "form", "explained (%)", "shifted median (%)", "p", "samples"),
+              cells),
+        f"![Evidence]({evidence_png.name})",
+    ]
+    for f, signal, png in finding_pngs:
+        parts += [f"### {f['summary']}",
+                  f"Baseline residual against `{signal}` before (without the extension) and after (with it): "
+                  "binned means with 95 % intervals from block-robust standard errors (5-minute blocks).",
+                  f"![{f['candidate']}]({png.name})"]
+    return parts
+
+
+def _added(summary: dict) -> list[str]:
+    parts = ["## What was added"]
+    if not summary["findings"]:
+        return parts + ["Nothing: no extension lowers the held-out error significantly, so the model is kept as it is."]
+    for f in summary["findings"]:
+        params = [(f"`{k}`", f"{v:.6g}", param_unit(k)) for k, v in f["params"].items()]
+        parts += [f"**{f['candidate']}** – {f['summary']}. Signal `{f['signal']}`, mechanism `{f['mechanism']}`: "
+                  f"`{f['extension']}`", table(("parameter", "value", "unit"), params)]
+    return parts
+
+
+def _better(summary: dict, gains_png: Path) -> list[str]:
+    cells = [(f"`{f['candidate']}`", f"`{f['signal']}`", number(f["rmse_before_K"], 4), number(f["rmse_after_K"], 4),
+              number(f["gain_pct"], 1), f"{f['p_value']:.2g}") for f in summary["findings"]]
+    base, best = summary["baseline"], summary["best"]
+    return [
+        "## How much better",
+        f"Gain: {summary['method']['gain']}. Accepted at a gain of at least {summary['method']['min_gain_pct']:g} % and "
+        f"p < {summary['method']['alpha']:g} (paired test over 5-minute blocks).",
+        table(("finding", "signal", "RMSE before (K)", "RMSE after (K)", "gain (%)", "p"), cells) if cells else "",
+        f"All together: {base['rmse_K']:.4f} K → {best['rmse_K']:.4f} K held-out "
+        f"({100 * (1 - best['rmse_K'] / base['rmse_K']):.1f} % lower).",
+        f"![Gains]({gains_png.name})",
+    ]
+
+
+def write_page(result: Diagnosis, summary: dict, runs: Sequence[pd.DataFrame],
+               out_dir: "str | os.PathLike[str]") -> Path:
+    """Write the figures and diagnose.md for a diagnosis and its summary (benchlab.diagnose.report.summarise)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    names = [run_name(r) for r in runs]
+    finding_pngs = []
+    for i, (finding, f) in enumerate(zip(result.findings, summary["findings"]), 1):
+        signal = f["signal"] or next(r["signal"] for r in summary["evidence"] if r["kind"] != "model")
+        if has_signal(signal, finding.before.datasets[0].channels):
+            finding_pngs.append((f, signal, plot_binned(finding.before, finding.after, signal,
+                                                        out / f"finding_{i}_{signal}.png", f["summary"])))
+    regimes_png = plot_regimes(summary["regimes"], out / "regimes.png")
+    window_png = plot_window(result, names, out / "worst_window.png")
+    evidence_png = plot_evidence(summary["evidence"], out / "evidence.png")
+    gains_png = plot_gains(summary["regimes"], summary["findings"], out / "gains.png")
+    parts = ["# benchlab diagnose – " + ", ".join(f"`{n}`" for n in names),
+             f"{len(runs)} run(s), {sum(len(d) for d in result.baseline_held.datasets)} samples at the fitting step "
+             f"of {summary['method']['step_s']:g} s; baseline `{summary['baseline']['model']}`. "
+             f"Written by benchlab {benchlab.__version__}."]
+    parts += _what_is_wrong(summary, regimes_png)
+    parts += _where(result, names, window_png)
+    parts += _why(summary, evidence_png, finding_pngs)
+    parts += _added(summary)
+    parts += _better(summary, gains_png)
+    page = out / PAGE
+    page.write_text("\n\n".join(p for p in parts if p) + "\n")
+    return page

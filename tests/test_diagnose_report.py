@@ -1,0 +1,165 @@
+"""diagnose's report: held-out regimes, residual evidence, the page and its figures, the CLI.
+
+One 30-minute Table 1 run whose plant hides gearbox churning (a housing heat source growing with the
+clutch speed squared) is diagnosed once for the module; the CLI test diagnoses its run file again.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from benchlab.cli import main
+from benchlab.diagnose.engine import diagnose_runs
+from benchlab.diagnose.evidence import bin_labels, residual_evidence, shift_offsets, shift_test, column_spectrum
+from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors, regime_labels
+from benchlab.diagnose.report import summarise
+from benchlab.identify.fit import simulate_outputs
+from benchlab.params import paper_params
+from benchlab.runfile import write_run
+from protocols.table1 import table1_schedule
+from sim_bench import plant as P
+from sim_bench.virtual_run import run_schedule
+
+UNRELATED = ("T_ambient", "load_torque", "time")
+
+
+def _churn_run(duration_s: float, seed: int = 7):
+    plant = P.ThermalPlant(paper_params("nonlinear"), [P.gearbox_churning(40)])
+    return run_schedule(table1_schedule(seed, duration_s=duration_s), plant, seed=seed)
+
+
+@pytest.fixture(scope="module")
+def churn():
+    run = _churn_run(1800)
+    diagnosis = diagnose_runs([run], "nonlinear", seed=0)
+    return run, diagnosis, summarise(diagnosis, [run], "nonlinear")
+
+
+def test_regimes_are_computed_on_held_out_residuals(churn):
+    _, diagnosis, summary = churn
+    held = diagnosis.baseline_held
+    assert summary["regimes"]["baseline"] == regime_errors(held)
+    residuals, labels = held.residuals()[0], regime_labels(held.datasets[0])
+    in_sample = simulate_outputs(diagnosis.baseline.spec.network, diagnosis.baseline.params, held.datasets[0])
+    for group, label in (("phase", "open"), ("engine_speed_rpm", ">=1750"), ("cooldown", f"<{COOLDOWN_SPLIT_S:g} s")):
+        for channel in ("T_flywheel", "T_air", "T_housing"):
+            err = residuals[channel][(labels[group] == label) & np.isfinite(residuals[channel])]
+            entry = summary["regimes"]["baseline"][group][label]["channels"][channel]
+            assert entry["samples"] == err.size > 0
+            assert entry["rmse_K"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-12)
+            fitted = (in_sample[channel] - held.datasets[0].targets[channel])[(labels[group] == label)]
+            assert entry["rmse_K"] != pytest.approx(np.sqrt(np.nanmean(fitted ** 2)), rel=1e-3)  # not in-sample
+    # the final model's regimes are its own held-out errors, and the hidden source's fix shows in the housing
+    whole = summary["regimes"]
+    assert whole["best"]["all"]["all"]["rmse_K"] == pytest.approx(diagnosis.final_held.rmse, rel=1e-12)
+    assert (whole["best"]["all"]["all"]["channels"]["T_housing"]["rmse_K"]
+            < 0.5 * whole["baseline"]["all"]["all"]["channels"]["T_housing"]["rmse_K"])
+
+
+def test_evidence_ranks_the_hidden_signal_above_unrelated_ones(churn):
+    _, _, summary = churn
+    rows = summary["evidence"]
+    top = rows[0]
+    assert (top["signal"], top["channel"], top["form"]) == ("clutch_speed", "T_housing", "rate")
+    assert top["p_value"] < 0.01 and top["explained_pct"] > 30 > top["shifted_pct"]
+    first = {name: next(i for i, r in enumerate(rows) if r["signal"] == name) for name in UNRELATED}
+    assert all(rank > 0 for rank in first.values())
+    assert {r["signal"] for r in rows} >= {"engine_speed", "slip_speed", "clutch_state", "clutch_torque",
+                                            "friction_power", "T_flywheel", "T_air", "T_housing", "time",
+                                            "model T_pressure_plate", "model T_housing"}
+
+
+def test_evidence_on_the_right_model_finds_nothing_strong(churn):
+    """The final model holds the churning: what is left of its residuals follows clutch speed no more."""
+    _, diagnosis, _ = churn
+    rows = residual_evidence(diagnosis.final_held, diagnosis.final.spec, diagnosis.final.params)
+    housing = next(r for r in rows if (r.signal, r.channel, r.form) == ("clutch_speed", "T_housing", "rate"))
+    assert housing.explained_pct < 10
+
+
+def test_shift_test_survives_autocorrelation_that_fools_a_sample_count():
+    """Slow residuals against unrelated slow signals: binned means explain a lot, yet the shift test stays calm;
+    a real dependence on an operating-point signal (levels held for 16 samples) is still found."""
+    rng = np.random.default_rng(3)
+    n, runs = 2048, 20
+    offsets = shift_offsets([n], rng)
+    p_unrelated, shares = [], []
+    for _ in range(runs):
+        residual = np.zeros(n)
+        for k in range(1, n):  # AR(1), time constant 300 samples
+            residual[k] = residual[k - 1] * (1 - 1 / 300) + rng.normal()
+        signal = np.cumsum(rng.normal(size=n))
+        labels = bin_labels(signal)
+        share, _, p = shift_test([column_spectrum(residual[:, None])], [labels], offsets)
+        p_unrelated.append(p[0])
+        shares.append(share[0])
+    assert np.median(shares) > 0.2  # an F-test with n samples would call nearly all of these significant
+    assert np.mean(np.array(p_unrelated) < 0.05) <= 0.15
+    signal = np.repeat(rng.normal(size=n // 16), 16)
+    related = 10.0 * signal + residual  # about the residual's own spread
+    _, _, p = shift_test([column_spectrum(related[:, None])], [bin_labels(signal)], offsets)
+    assert p[0] < 0.01
+
+
+def test_shift_test_share_is_the_correlation_ratio():
+    rng = np.random.default_rng(4)
+    residual = rng.normal(size=(500, 1))
+    residual[::9] = np.nan
+    labels = rng.integers(0, 3, 500)
+    share, _, _ = shift_test([column_spectrum(residual)], [labels], shift_offsets([500], rng, 9))
+    r, lab = residual[np.isfinite(residual[:, 0]), 0], labels[np.isfinite(residual[:, 0])]
+    between = sum((lab == b).sum() * (r[lab == b].mean() - r.mean()) ** 2 for b in range(3))
+    assert share[0] == pytest.approx(between / np.sum((r - r.mean()) ** 2), rel=1e-9)
+
+
+def test_cli_report_writes_the_page_and_figures_and_keeps_the_contract(churn, tmp_path, capsys):
+    run, _, _ = churn
+    path = tmp_path / "churn.h5"
+    write_run(path, run, run.attrs["dt"], protocol="table1")
+    out = tmp_path / "report"
+    assert main(["diagnose", str(path), "--baseline", "nonlinear", "--json", "--report", str(out)]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {"baseline", "findings", "best"} <= set(result)
+    assert set(result["baseline"]) >= {"model", "rmse_K", "nrmse_pct"}
+    assert set(result["best"]) >= {"model", "rmse_K", "nrmse_pct"}
+    for f in result["findings"]:
+        assert set(f) >= {"signal", "mechanism", "summary", "extension", "rmse_before_K", "rmse_after_K", "gain_pct"}
+    assert result["findings"][0]["signal"] == "clutch_speed"
+    assert result["evidence"][0]["signal"] == "clutch_speed"
+    page = (out / "diagnose.md").read_text()
+    for heading in ("## What is wrong", "## Where", "## Why", "## What was added", "## How much better"):
+        assert heading in page
+    figures = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", page)
+    assert {"regimes.png", "worst_window.png", "evidence.png", "gains.png"} <= set(figures)
+    assert any(name.startswith("finding_1_") for name in figures)
+    for name in figures:
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "q_clutch_speed_T" in page and "W (at the signal's maximum)" in page
+
+
+def test_human_report_names_the_worst_held_out_regime(churn, capsys):
+    from benchlab.commands.diagnose import print_report
+
+    _, _, summary = churn
+    print_report(summary)
+    line = next(line for line in capsys.readouterr().out.splitlines() if "worst regime" in line)
+    assert "held-out" in line and "T_housing" in line
+
+
+@pytest.mark.parametrize("case", ["missing", "short", "report_is_file"])
+def test_bad_input_exits_2_with_one_line(case, tmp_path, capsys):
+    path = tmp_path / "run.h5"
+    args = ["diagnose", str(path)]
+    if case == "short":
+        run = _churn_run(300)
+        write_run(path, run, run.attrs["dt"], protocol="table1")
+    elif case == "report_is_file":
+        (tmp_path / "taken").write_text("")
+        args += ["--report", str(tmp_path / "taken")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("benchlab diagnose:")
