@@ -171,7 +171,8 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
 
     def screen_one(i: int) -> tuple[float, dict[str, float]]:
         result = fit(specs[i], datasets, max_nfev=SCREEN_NFEV,
-                     start={**{p.name: p.initial for p in specs[i].free}, **current.params})
+                     start={**{p.name: p.initial for p in specs[i].free},
+                            **{k: current.params[k] for k in current.free_names}})
         return result.cost, result.params
 
     scored = [(cost, cand, spec, params) for cand, spec, (cost, params)

@@ -111,13 +111,17 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
 
 def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6, seed: int = 0,
                    spread: float = 3.0, scout_nfev: int = 25) -> FitResult:
-    """Scout fits from `starts` points (the priors, then log-uniform within ×/÷ spread), polish the best."""
+    """Scout fits from `starts` points (the priors, then log-uniform within ×/÷ spread), polish the best.
+
+    Only magnitudes are spread (log parameters and signed ones scaled by their own start value);
+    parameters with an absolute scale, such as start temperatures in °C, start at their prior.
+    """
     rng = np.random.default_rng(seed)
     scouts = []
     for i in range(starts):
         start = {p.name: p.initial for p in spec.free}
         if i:
-            for p in spec.free:
+            for p in (p for p in spec.free if p.log or not p.scale):  # magnitudes; offsets (°C starts) stay
                 factor = float(np.exp(rng.uniform(-np.log(spread), np.log(spread))))
                 start[p.name] = float(np.clip(p.initial * factor, p.lower, p.upper))
         scouts.append(fit(spec, datasets, max_nfev=scout_nfev, start=start))
