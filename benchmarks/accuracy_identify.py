@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -26,8 +28,9 @@ from benchlab.identify.api import identify
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.uncertainty import scaled_inverse
 from benchlab.params import paper_params
+from benchlab.runfile import load_run
+from benchlab.runner.session import RunRequest, execute
 from protocols.table1 import table1_schedule
-from protocols.validation import validation_schedule
 from sim_bench.plant import ThermalPlant
 from sim_bench.virtual_run import run_schedule
 
@@ -56,7 +59,10 @@ def main() -> int:
     truth = paper_params("nonlinear")
     z: dict[str, list[np.ndarray]] = {"reported": [], "residuals only": [], "plain Jacobian": []}
     rel_error, rel_se, seconds, r_error, v_ratio = [], [], [], [], []
-    validation = run_schedule(validation_schedule(1000), ThermalPlant(), seed=1000)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "validation.h5"
+        execute(RunRequest("validation", path, seed=1000, cycles=5, install_signals=False))
+        validation = load_run(path)
     floor = evaluate(validation, truth)["rmse_K"]
     names: list[str] = []
     for seed in range(1, args.seeds + 1):

@@ -47,7 +47,16 @@ class AmbientConfig:
 
 def drive_schedule(steps: Sequence[Step], dt: float, config: DrivetrainConfig = DrivetrainConfig(),
                    ) -> tuple[dict[str, np.ndarray], list[dict[str, object]]]:
-    """True drivetrain channels over the schedule, plus events (step starts, launch outcomes)."""
+    """True drivetrain channels over the schedule, plus events (step starts, launch outcomes).
+
+    Open loop only: a step that ends on a condition or heats in pulses needs the temperatures as it
+    runs, which the closed-loop bench (`benchlab.runner.session.execute`) provides.
+    """
+    closed = [s for s in steps if s.until or s.phase == "heat"]
+    if closed:
+        raise ValueError(f"run_schedule plays open-loop schedules only; step {closed[0].label or closed[0].phase!r} "
+                         f"of cycle {closed[0].cycle} ends on a condition or heats in pulses: run the protocol "
+                         "through benchlab.runner.session.execute (benchlab run) instead")
     drivetrain = Drivetrain(config, engine_rpm=steps[0].engine_speed_rpm if steps else 0.0)
     pieces: list[dict[str, np.ndarray]] = []
     events: list[dict[str, object]] = []

@@ -26,7 +26,6 @@ from benchlab.runfile import load_run, write_run
 from benchlab.runner.session import RunRequest, execute
 from benchlab.simulation import simulate
 from protocols.table1 import table1_schedule
-from protocols.validation import validation_schedule
 from sim_bench.plant import ThermalPlant
 from sim_bench.virtual_run import run_schedule
 
@@ -68,9 +67,12 @@ def linear(fitting_run):
 
 
 @pytest.fixture(scope="module")
-def validation_run():
-    """The validation protocol on the virtual bench (another seed): its Table 1 draws and quiet cool-downs."""
-    return run_schedule(validation_schedule(21), ThermalPlant(), seed=21)
+def validation_run(tmp_path_factory):
+    """The validation protocol on the closed-loop simulated bench (another seed): hot cool-downs and Table 1 draws."""
+    path = tmp_path_factory.mktemp("validation_cycles") / "validation.h5"
+    code, _ = execute(RunRequest("validation", path, seed=21, cycles=5, install_signals=False))
+    assert code == 0
+    return load_run(path)
 
 
 @pytest.fixture(scope="module")
