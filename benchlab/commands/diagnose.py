@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchlab.diagnose.engine import FOLD_S, diagnose_runs
+from benchlab.diagnose.engine import MIN_DURATION_S, diagnose_runs
 from benchlab.diagnose.regimes import worst_regimes
 from benchlab.diagnose.report import summarise
 from benchlab.errors import InputError
@@ -16,7 +16,6 @@ from benchlab.runfile import load_run
 
 NAME = "diagnose"
 HELP = "find what the model gets wrong, name the cause, extend the model and measure the gain"
-MIN_DURATION_S = 2 * FOLD_S  # one held-out block in each fold
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -32,6 +32,7 @@ from benchlab.identify.spec import ModelSpec, clutch_spec
 
 STEP_S = 1.0
 FOLD_S = 600.0
+MIN_DURATION_S = 2 * FOLD_S  # one block in each fold
 BLOCK_S = 300.0
 MIN_GAIN_PCT = 5.0
 ALPHA = 0.01
@@ -230,6 +231,10 @@ def _recheck(base_spec: ModelSpec, base_held: HeldOut, findings: Sequence[Findin
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts: int = 4,
                   seed: int = 0) -> Diagnosis:
     """Baseline fit, greedy accepted extensions, then a drop-one re-check of each against the combination."""
+    duration = sum(float(run["time"].iloc[-1] - run["time"].iloc[0]) for run in runs)
+    if duration < MIN_DURATION_S:
+        raise ValueError(f"diagnose needs at least {MIN_DURATION_S:.0f} s of runs for held-out scoring, "
+                         f"got {duration:.0f} s")
     datasets = [prepare(run, STEP_S, name=str(i)) for i, run in enumerate(runs)]
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels}
     base = fit_multistart(with_initial_states(clutch_spec(baseline), datasets, FITTED_STARTS), datasets,
