@@ -86,7 +86,7 @@ def main() -> None:
           f"truth's gain {100 * (1 - floor / base):.1f} %")
     for f in result["findings"]:
         print(f"  {f['signal']}/{f['mechanism']} ({f['candidate']}): {f['rmse_before_K']:.4f} -> "
-              f"{f['rmse_after_K']:.4f} K, gain {f['gain_pct']:.1f} %, p = {f['p_value']:.1e}")
+              f"{f['rmse_after_K']:.4f} K, gain {f['gain_pct']:.1f} %, p = {f['p_value']:.1e}, BIC change {f['bic_delta']:.0f}")
     slice_runs = [run.iloc[: int(PEER_SLICE_S / run.attrs["dt"])].copy() for run in runs]
     for piece, run in zip(slice_runs, runs):
         piece.attrs.update(run.attrs)

@@ -95,6 +95,7 @@ class Finding:
     before: HeldOut
     after: HeldOut
     p_value: float
+    bic_delta: float  # in-sample BIC with the extension minus without it, on the effective sample size
 
     @property
     def gain_pct(self) -> float:
@@ -143,6 +144,18 @@ def _held_out(spec: ModelSpec, start: dict[str, float], datasets: Sequence[FitDa
     return HeldOut(datasets, predictions, params)
 
 
+def _bic_delta(cost_before: float, cost_after: float, residuals_after: np.ndarray, added: int) -> float:
+    """In-sample BIC change of an extension (negative favours it), second to the held-out test.
+
+    The sample size is the effective one of the residuals, n (1 − ρ) / (1 + ρ) with ρ their lag-1
+    autocorrelation: 1 s residuals of a thermal model are far from independent.
+    """
+    r = residuals_after
+    rho = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.99)) if len(r) > 2 else 0.0
+    n_eff = max(2.0, len(r) * (1 - rho) / (1 + rho))
+    return float(n_eff * np.log(cost_after / cost_before) + added * np.log(n_eff))
+
+
 def _block_test(before: HeldOut, after: HeldOut) -> float:
     """One-sided p-value that the extension does not lower the held-out error, blocks as units.
 
@@ -187,15 +200,16 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut,
     start_names = set(current.free_names)
     top = scored[:CROSS_VALIDATED]
 
-    def validate(i: int) -> tuple[dict[str, float], HeldOut]:
+    def validate(i: int) -> tuple[dict[str, float], float, np.ndarray, HeldOut]:
         _, _, spec, params = top[i]
         result = fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: params[p.name] for p in spec.free})
-        return result.params, _held_out(spec, result.params, datasets)
+        return result.params, result.cost, result.residuals, _held_out(spec, result.params, datasets)
 
     best: Finding | None = None
-    for (_, cand, spec, _), (params, held) in zip(top, map_indices(validate, len(top))):
+    for (_, cand, spec, _), (params, cost, residuals, held) in zip(top, map_indices(validate, len(top))):
         added = tuple(p.name for p in spec.free if p.name not in start_names)
-        finding = Finding(cand, spec, params, added, current_held, held, _block_test(current_held, held))
+        finding = Finding(cand, spec, params, added, current_held, held, _block_test(current_held, held),
+                          _bic_delta(current.cost, cost, residuals, len(added)))
         if finding.significant and (best is None or finding.gain_pct > best.gain_pct):
             best = finding
     return best
@@ -209,23 +223,24 @@ def _combined(base: ModelSpec, cands: Sequence[Candidate], channels: dict[str, n
     return spec
 
 
-def _recheck(base_spec: ModelSpec, base_held: HeldOut, findings: Sequence[Finding], final: FitResult,
+def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], final: FitResult,
              final_held: HeldOut, datasets: Sequence[FitData], channels: dict[str, np.ndarray]) -> list[Finding]:
     """Each accepted extension measured against the final model without it (drop-one, held out).
 
     The greedy steps measured each gain on top of the ones found before it; with several findings
     the fair figure is what the combined model loses without it.
     """
-    def without(i: int) -> HeldOut:
+    def without(i: int) -> tuple[float, HeldOut]:
         others = [g.candidate for g in findings if g is not findings[i]]
         if not others:
-            return base_held
-        spec = _combined(base_spec, others, channels)
+            return base.cost, base_held
+        spec = _combined(base.spec, others, channels)
         refit = fit(spec, datasets, max_nfev=HELD_OUT_NFEV, start={p.name: final.params[p.name] for p in spec.free})
-        return _held_out(spec, refit.params, datasets)
+        return refit.cost, _held_out(spec, refit.params, datasets)
 
-    return [Finding(f.candidate, final.spec, final.params, f.added, held, final_held, _block_test(held, final_held))
-            for f, held in zip(findings, map_indices(without, len(findings)))]
+    return [Finding(f.candidate, final.spec, final.params, f.added, held, final_held, _block_test(held, final_held),
+                    _bic_delta(cost, final.cost, final.residuals, len(f.added)))
+            for f, (cost, held) in zip(findings, map_indices(without, len(findings)))]
 
 
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts: int = 4,
@@ -256,11 +271,11 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts
         current = fit(finding.spec, datasets, start={p.name: finding.params[p.name] for p in finding.spec.free})
         current_held = finding.after
     if len(findings) > 1:
-        findings = _recheck(base.spec, base_held, findings, current, current_held, datasets, channels)
+        findings = _recheck(base, base_held, findings, current, current_held, datasets, channels)
         kept = [f for f in findings if f.significant]
         if len(kept) < len(findings):  # another finding covered what this one fixed: drop it, measure again
             spec = _combined(base.spec, [f.candidate for f in kept], channels)
             current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
             current_held = _held_out(spec, current.params, datasets) if kept else base_held
-            findings = _recheck(base.spec, base_held, kept, current, current_held, datasets, channels)
+            findings = _recheck(base, base_held, kept, current, current_held, datasets, channels)
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held)

@@ -21,7 +21,7 @@ def _finding_json(f: Finding) -> dict:
     c = f.candidate
     return {"signal": c.signal, "mechanism": c.mechanism, "summary": c.summary, "extension": c.extension,
             "rmse_before_K": f.before.rmse, "rmse_after_K": f.after.rmse, "gain_pct": f.gain_pct,
-            "p_value": f.p_value, "candidate": c.key,
+            "p_value": f.p_value, "bic_delta": f.bic_delta, "candidate": c.key,
             "params": {name: f.params[name] for name in f.added}}
 
 
@@ -42,6 +42,9 @@ def summarise(result: Diagnosis, runs: Sequence[pd.DataFrame], baseline: str) ->
                    "step_s": STEP_S, "min_gain_pct": MIN_GAIN_PCT, "alpha": ALPHA,
                    "gain": "held-out RMSE without the extension vs with it; with several findings, "
                            "the combined model without it (drop-one) vs the combined model",
+                   "bic_delta": "second to the held-out test and reported, not decided on: in-sample BIC with the "
+                                "extension minus without it, n taken as the residuals' effective sample size "
+                                "n (1 - rho) / (1 + rho); negative favours the extension",
                    "regimes": "RMSE of the held-out residuals (simulated - measured, each sample predicted by the "
                               "fold fit that did not see it) per regime and measured channel; cooldown: samples not "
                               "slipping by the time since the last slipping sample (or the run's start), "
