@@ -26,6 +26,7 @@ GAIN_TOLERANCE_PCT = 10.0  # measured gain vs the truth's: held-out parameter no
 
 
 def _bench(effects, seed: int, truth: str = "nonlinear"):
+    """The simulated bench with `truth`'s clutch plus `effects`, and a 1 h Table 1 run on it."""
     plant = P.ThermalPlant(paper_params(truth), effects)
     return plant, run_schedule(table1_schedule(seed, duration_s=HOUR_S), plant, seed=seed)
 
@@ -87,6 +88,26 @@ def test_hidden_effect_is_named_first_with_the_true_gain(effect, seed, signal, m
     assert (first["signal"], first["mechanism"]) == (signal, mechanism)
     floor = _floor(plant, run)
     assert first["gain_pct"] == pytest.approx(_true_gain_pct(result, floor), abs=GAIN_TOLERANCE_PCT)
+
+
+@pytest.mark.parametrize("effect,seed", [(P.gearbox_churning(50.0), 151), (P.heat_split(0.6), 152),
+                                         (P.sensor_lag(15.0), 153)], ids=["churning", "split", "lag"])
+def test_default_linear_baseline_on_a_linear_clutch_names_the_hidden_effect(effect, seed):
+    plant, run = _bench([effect], seed, truth="linear")
+    result = diagnose([run])
+    assert [(f["signal"], f["mechanism"]) for f in result["findings"]] == [(effect.signal, effect.mechanism)]
+    assert result["findings"][0]["gain_pct"] == pytest.approx(_true_gain_pct(result, _floor(plant, run)),
+                                                              abs=GAIN_TOLERANCE_PCT)
+
+
+@pytest.mark.parametrize("effect,seed", [(P.gearbox_churning(50.0), 161), (P.extra_mass(2500.0, 0.25), 162)],
+                         ids=["churning", "mass"])
+def test_linear_baseline_finds_the_convection_and_the_hidden_effect_and_reaches_the_floor(effect, seed):
+    plant, run = _bench([effect], seed)
+    result = diagnose([run], baseline="linear")
+    named = {(f["signal"], f["mechanism"]) for f in result["findings"]}
+    assert named == {("engine_speed", "convection"), (effect.signal, effect.mechanism)}
+    assert result["best"]["rmse_K"] < 1.25 * _floor(plant, run)
 
 
 def test_convection_hidden_from_the_linear_model_is_found_with_its_gain():
