@@ -76,7 +76,7 @@ def _diagnose(fitting: pd.DataFrame, out: Path) -> None:
     (out / "diagnose.json").write_text(json.dumps(summary, indent=2, default=float))
     page = write_page(diagnosis, summary, [fitting], out / "diagnose")
     base, best = summary["baseline"], summary["best"]
-    found = ", ".join(f"{f['candidate']} ({f['signal']}, -{f['gain_pct']:.0f} %)" for f in summary["findings"]) or "none"
+    found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, gain {f['gain_pct']:.0f} %)" for f in summary["findings"]) or "none"
     print(f"diagnose  linear baseline: held-out RMSE {base['rmse_K']:.3f} K -> best {best['model']} "
           f"{best['rmse_K']:.3f} K; findings: {found}")
     worst = worst_regimes(summary["regimes"]["baseline"], 1)
