@@ -140,3 +140,20 @@ def test_bad_input_is_one_line_and_exit_2(bench, tmp_path, capsys, case):
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("benchlab report: ") and expected in err, err
     assert "Traceback" not in err
+
+
+def test_resistance_band_uses_the_parameter_correlations():
+    """The delta-method SE of eq. (11) matches Monte Carlo draws of correlated parameters (and not the uncorrelated sum)."""
+    from benchlab.report.resistance import resistance
+    names = ["a1", "b1", "R0"]
+    se = np.array([0.01, 2e-5, 0.004])
+    corr = np.array([[1.0, 0.3, -0.9], [0.3, 1.0, -0.2], [-0.9, -0.2, 1.0]])
+    params = paper_params("nonlinear")
+    params.extra = {"uncertainty": dict(zip(names, se)), "correlation": {"names": names, "matrix": corr.tolist()}}
+    speed = np.array([700.0, 1500.0, 3000.0])
+    _, sigma = resistance(params, speed, state=1)
+    draws = np.random.default_rng(0).multivariate_normal([params[n] for n in names], corr * np.outer(se, se), 20000)
+    r = draws[:, 0:1] * np.exp(draws[:, 1:2] * speed) + draws[:, 2:3]
+    assert sigma == pytest.approx(r.std(axis=0), rel=0.05)
+    params.extra.pop("correlation")  # without it, a1 and R0 (correlation -0.9) add up where both matter
+    assert resistance(params, speed, state=1)[1][0] > 1.5 * r.std(axis=0)[0]

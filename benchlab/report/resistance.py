@@ -29,16 +29,35 @@ def standard_errors(params: ModelParams) -> dict[str, float]:
             if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
 
 
+def correlations(params: ModelParams) -> dict[tuple[str, str], float]:
+    """The parameter file's "correlation" object (names and matrix, as identify writes it) as pairs; {} if absent."""
+    found = params.extra.get("correlation")
+    try:
+        names, matrix = list(found["names"]), np.asarray(found["matrix"], dtype=float)
+    except (TypeError, KeyError, ValueError):
+        return {}
+    if matrix.shape != (len(names), len(names)) or not np.all(np.isfinite(matrix)):
+        return {}
+    return {(a, b): float(matrix[i, j]) for i, a in enumerate(names) for j, b in enumerate(names)}
+
+
 def resistance(params: ModelParams, speed_rpm: np.ndarray, state: int) -> tuple[np.ndarray, np.ndarray]:
-    """R (K/W) of eq. (11) at the engine speeds and its standard error (parameter correlations ignored)."""
+    """R (K/W) of eq. (11) at the engine speeds and its standard error by the delta method, with the file's
+    parameter correlations where it holds them (a1 and R0 are strongly anti-correlated: ignoring that
+    widens the band several times)."""
     speed = np.asarray(speed_rpm, dtype=float)
     channels = {"engine_speed": speed, "clutch_state": np.full_like(speed, float(state))}
     value = np.broadcast_to(convection_resistance(params, channels), speed.shape)
-    se = standard_errors(params)
+    se, corr = standard_errors(params), correlations(params)
     a, b = STATES[state][2]
     growth = np.exp(params[b] * speed)
-    terms = ((growth, se.get(a, 0.0)), (params[a] * speed * growth, se.get(b, 0.0)), (1.0, se.get("R0", 0.0)))
-    return value, np.sqrt(sum((slope * sigma) ** 2 for slope, sigma in terms))
+    slopes = {a: growth, b: params[a] * speed * growth, "R0": np.ones_like(speed)}
+    variance = np.zeros_like(speed)
+    for i, slope_i in slopes.items():
+        for j, slope_j in slopes.items():
+            rho = 1.0 if i == j else corr.get((i, j), 0.0)
+            variance = variance + slope_i * slope_j * rho * se.get(i, 0.0) * se.get(j, 0.0)
+    return value, np.sqrt(np.maximum(variance, 0.0))
 
 
 def plot_resistance(models: Sequence[tuple[str, ModelParams]], cooldowns: Sequence[CooldownResult],
@@ -57,7 +76,8 @@ def plot_resistance(models: Sequence[tuple[str, ModelParams]], cooldowns: Sequen
             ax.plot(speed, value, color=colour, ls=style, lw=1.4, label=f"{label} model, {text}")
             if np.any(sigma > 0):
                 ax.fill_between(speed, value - 2 * sigma, value + 2 * sigma, color=colour, alpha=0.12,
-                                label=f"{label} model ±2 SE (correlations ignored)" if state != 0 else None)
+                                label=f"{label} model ±2 SE{'' if correlations(params) else ' (correlations ignored)'}"
+                                if state != 0 else None)
     for state, (text, colour, _) in STATES.items():
         points = [r for r in cooldowns if r.clutch_state == state]
         if points:
