@@ -66,22 +66,24 @@ def linear(fitting_run):
     return identify([fitting_run], "linear", starts=4)
 
 
-@pytest.fixture(scope="module")
-def validation_run(tmp_path_factory):
-    """The validation protocol on the closed-loop simulated bench (another seed): hot cool-downs and Table 1 draws."""
-    path = tmp_path_factory.mktemp("validation_cycles") / "validation.h5"
-    code, _ = execute(RunRequest("validation", path, seed=21, cycles=5, install_signals=False))
+def closed_loop_validation(tmp_path_factory, seed: int, cycles: int):
+    """The validation protocol on the closed-loop simulated bench: each long cool-down starts at 70 °C."""
+    path = tmp_path_factory.mktemp(f"validation_{seed}") / "validation.h5"
+    code, _ = execute(RunRequest("validation", path, seed=seed, cycles=cycles, install_signals=False))
     assert code == 0
     return load_run(path)
+
+
+@pytest.fixture(scope="module")
+def validation_run(tmp_path_factory):
+    """Another seed's hot cool-downs and Table 1 draws."""
+    return closed_loop_validation(tmp_path_factory, seed=21, cycles=5)
 
 
 @pytest.fixture(scope="module")
 def hot_cooldowns(tmp_path_factory):
-    """The validation protocol on the closed-loop simulated bench: each long cool-down starts at 70 °C."""
-    path = tmp_path_factory.mktemp("validation") / "validation.h5"
-    code, _ = execute(RunRequest("validation", path, seed=5, cycles=0, install_signals=False))
-    assert code == 0
-    return load_run(path)
+    """The long varying cool-downs alone."""
+    return closed_loop_validation(tmp_path_factory, seed=5, cycles=0)
 
 
 def test_fitting_run_has_dropouts(fitting_run, nonlinear):
