@@ -149,3 +149,14 @@ def test_two_hidden_effects_are_both_found_the_larger_first(effects, seed):
     assert named == [expected[larger], expected[1 - larger]]
     gains = [f["gain_pct"] for f in result["findings"]]
     assert gains == sorted(gains, reverse=True)
+
+
+def test_two_runs_are_diagnosed_together():
+    """Two 40-minute runs of one bench, neither enough alone for many held-out blocks, diagnosed at once."""
+    effect = P.gearbox_churning(40.0)
+    plant = P.ThermalPlant(paper_params("nonlinear"), [effect])
+    runs = [run_schedule(table1_schedule(seed, duration_s=2400), plant, seed=seed) for seed in (171, 172)]
+    result = diagnose(runs, baseline="nonlinear")
+    assert [(f["signal"], f["mechanism"]) for f in result["findings"]] == [(effect.signal, effect.mechanism)]
+    floor = np.sqrt(np.mean([_floor(plant, run) ** 2 for run in runs]))
+    assert result["best"]["rmse_K"] < 1.25 * floor
