@@ -23,7 +23,6 @@ from benchlab.acquire import RunWriter, read_progress
 from benchlab.errors import InputError
 from benchlab.runner.devices import BenchConfig, DriverBench
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
-from benchlab.runner.threads import limit_blas_threads
 from protocols import catalog
 from protocols.limits import BenchLimits, check_schedule
 from protocols.schedule import Step, describe, duration_s, step_from_dict
@@ -124,7 +123,6 @@ def _last_valid(f: h5py.File, name: str, rows: int) -> float:
 
 def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     """Run (or resume) and return (exit code, summary)."""
-    limit_blas_threads(1)
     if request.dry_run:
         return dry_run(request), None
     resume_state: dict[str, Any] | None = None
