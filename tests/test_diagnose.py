@@ -160,3 +160,12 @@ def test_two_runs_are_diagnosed_together():
     assert [(f["signal"], f["mechanism"]) for f in result["findings"]] == [(effect.signal, effect.mechanism)]
     floor = np.sqrt(np.mean([_floor(plant, run) ** 2 for run in runs]))
     assert result["best"]["rmse_K"] < 1.25 * floor
+
+
+def test_a_run_without_the_optional_channels_is_diagnosed():
+    """No load_torque and no individual flywheel sensors (contract: optional): the library leaves them out."""
+    effect = P.gearbox_churning(50.0)
+    _, run = _bench([effect], seed=181)
+    run = run.drop(columns=["load_torque", "T_flywheel_1", "T_flywheel_2"])
+    result = diagnose([run], baseline="nonlinear")
+    assert [(f["signal"], f["mechanism"]) for f in result["findings"]] == [(effect.signal, effect.mechanism)]

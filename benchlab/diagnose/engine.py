@@ -255,7 +255,7 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts
     base = fit_multistart(with_initial_states(clutch_spec(baseline), datasets, FITTED_STARTS), datasets,
                           starts=starts, seed=seed)
     base_held = _held_out(base.spec, base.params, datasets)
-    library = candidates(baseline_is_linear=baseline == "linear")
+    library = candidates(baseline == "linear", channels)
     current, current_held, findings = base, base_held, []
     for _ in range(MAX_ROUNDS):
         used = {f.candidate.key for f in findings}

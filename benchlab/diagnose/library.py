@@ -149,8 +149,9 @@ FALLBACK_SIGNALS = ("engine_speed", "slip_speed", "clutch_speed", "clutch_torque
                     "friction_power", "load_torque", "T_flywheel_filled")
 
 
-def candidates(baseline_is_linear: bool) -> list[Candidate]:
-    """The library: physical extensions first, then the generic fallbacks."""
+def candidates(baseline_is_linear: bool, channels: Channels) -> list[Candidate]:
+    """The library: physical extensions first, then the generic fallbacks; none on a channel the runs lack
+    (`load_torque` is optional in a run file)."""
     out = []
     if baseline_is_linear:
         out.append(Candidate("speed_convection", "engine_speed", "convection", "R_FA = R_PA = a*exp(b*engine_speed) + R0",
@@ -172,12 +173,12 @@ def candidates(baseline_is_linear: bool) -> list[Candidate]:
         Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",
                   "hot plate and flywheel lose heat by radiation to the housing", radiation),
     ]
-    for signal in SOURCE_SIGNALS:
+    for signal in (s for s in SOURCE_SIGNALS if s in channels):
         for node, where in (("F", "flywheel"), ("T", "housing")):
             out.append(Candidate(f"source_{signal}_{node}", signal, "heat_source",
                                  f"heat into {where} = q*({signal}/max)^n",
                                  f"a heat source driven by {signal} warms the {where}", channel_source(signal, node)))
-    for signal in FALLBACK_SIGNALS:
+    for signal in (s for s in FALLBACK_SIGNALS if s == "slip_speed" or s in channels):
         for node, where in (("F", "flywheel"), ("A", "air")):
             name = signal.removesuffix("_filled")
             out.append(Candidate(f"learned_{name}_{node}", name, "other",
