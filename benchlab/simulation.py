@@ -13,6 +13,7 @@ from benchlab.network import Params, ThermalNetwork
 from benchlab.solver import run_network
 
 INPUT_CHANNELS = ("engine_speed", "clutch_state", "friction_power", "T_ambient")
+SIGNAL_CHANNELS = ("clutch_speed", "clutch_torque", "load_torque")  # not model inputs; signals of extensions' laws
 
 
 def _held(values: np.ndarray) -> np.ndarray:
@@ -42,6 +43,11 @@ def input_channels(run: pd.DataFrame) -> dict[str, np.ndarray]:
                 continue
             raise InputError(source, f"/aligned/{name}", "at least one valid sample")
         channels[name] = values
+    for name in SIGNAL_CHANNELS:  # held like inputs where present; left out where never measured
+        if name in channels:
+            channels[name] = _held(channels[name])
+            if np.isnan(channels[name]).all():
+                del channels[name]
     for name in PREDICTED_CHANNELS:  # measured temperatures as signals for laws (radiation, learned terms)
         if name in channels:
             channels[f"{name}_filled"] = _held(channels[name])

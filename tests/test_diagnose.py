@@ -163,9 +163,11 @@ def test_two_runs_are_diagnosed_together():
 
 
 def test_a_run_without_the_optional_channels_is_diagnosed():
-    """No load_torque and no individual flywheel sensors (contract: optional): the library leaves them out."""
+    """No load_torque and no individual flywheel sensors (contract: optional): the library leaves them out.
+    The first second of clutch speed and torque is missing too, as before a controller's first CAN frame."""
     effect = P.gearbox_churning(50.0)
     _, run = _bench([effect], seed=181)
     run = run.drop(columns=["load_torque", "T_flywheel_1", "T_flywheel_2"])
+    run.loc[:99, ["clutch_speed", "clutch_torque"]] = np.nan
     result = diagnose([run], baseline="nonlinear")
     assert [(f["signal"], f["mechanism"]) for f in result["findings"]] == [(effect.signal, effect.mechanism)]

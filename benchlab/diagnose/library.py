@@ -149,6 +149,15 @@ FALLBACK_SIGNALS = ("engine_speed", "slip_speed", "clutch_speed", "clutch_torque
                     "friction_power", "load_torque", "T_flywheel_filled")
 
 
+def _available(signal: str | None, channels: Channels) -> bool:
+    """Whether the runs hold the signal a candidate depends on."""
+    if signal is None:
+        return True
+    if signal == "slip_speed":
+        return "engine_speed" in channels and "clutch_speed" in channels
+    return signal in channels or f"{signal}_filled" in channels
+
+
 def candidates(baseline_is_linear: bool, channels: Channels) -> list[Candidate]:
     """The library: physical extensions first, then the generic fallbacks; none on a channel the runs lack
     (`load_torque` is optional in a run file)."""
@@ -173,16 +182,16 @@ def candidates(baseline_is_linear: bool, channels: Channels) -> list[Candidate]:
         Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",
                   "hot plate and flywheel lose heat by radiation to the housing", radiation),
     ]
-    for signal in (s for s in SOURCE_SIGNALS if s in channels):
+    for signal in SOURCE_SIGNALS:
         for node, where in (("F", "flywheel"), ("T", "housing")):
             out.append(Candidate(f"source_{signal}_{node}", signal, "heat_source",
                                  f"heat into {where} = q*({signal}/max)^n",
                                  f"a heat source driven by {signal} warms the {where}", channel_source(signal, node)))
-    for signal in (s for s in FALLBACK_SIGNALS if s == "slip_speed" or s in channels):
+    for signal in FALLBACK_SIGNALS:
         for node, where in (("F", "flywheel"), ("A", "air")):
             name = signal.removesuffix("_filled")
             out.append(Candidate(f"learned_{name}_{node}", name, "other",
                                  f"learned heat flow into {where} = g({name}), piecewise linear",
                                  f"a heat flow into the {where} that depends on {name}; no physical term fits it",
                                  fallback_source(signal, node), physical=False))
-    return out
+    return [c for c in out if _available(c.signal, channels)]
