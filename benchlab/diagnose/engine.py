@@ -6,11 +6,12 @@ the scored samples were never fitted). Interleaving, not halves, so that each fi
 temperature range: a fit on one half extrapolates the slow housing dynamics into the other, and
 its error then swamps the effects looked for (measured: held-out RMSE of the true model 0.028 K
 with halves, 0.014 K interleaved, against 0.014 K in-sample).
-Candidates are first screened by an in-sample fit from the current model; the most promising
-are cross-validated. An extension is accepted when its held-out error is lower by at least
-MIN_GAIN_PCT and a paired t-test over 5-minute blocks of held-out data rejects "no gain" at
-the 1 % level (blocks, not samples, are the units, so autocorrelated residuals do not inflate
-the evidence). Accepted extensions are combined greedily and the rest re-checked on top.
+Every candidate is screened by a short in-sample fit with all parameters free; the three best are
+polished and cross-validated. An extension is accepted when its held-out error is lower by at
+least MIN_GAIN_PCT and a t-test on the per-block log ratio of held-out errors (5-minute blocks,
+not samples, are the units, so autocorrelated residuals do not inflate the evidence) rejects
+"no gain" at ALPHA. Accepted extensions are combined greedily; with several, each is measured
+again against the combination without it and dropped if it no longer gains.
 """
 
 from __future__ import annotations
