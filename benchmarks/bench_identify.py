@@ -47,6 +47,7 @@ from benchlab.params import paper_params  # noqa: E402
 from protocols.table1 import table1_schedule  # noqa: E402
 from sim_bench.plant import ThermalPlant  # noqa: E402
 from sim_bench.virtual_run import run_schedule  # noqa: E402
+from targets import load, print_target, summarise_targets  # noqa: E402 - benchmarks/targets.py, beside this script
 
 DT = 0.01
 TARGET_TOTAL_S = 20.0  # for the 2 h run
@@ -156,11 +157,6 @@ def param_errors(params: dict[str, float], truth: dict[str, float]) -> dict[str,
     return {k: 100.0 * (params[k] / truth[k] - 1.0) for k in NAMES}
 
 
-def load() -> str:
-    one, five, _ = os.getloadavg()
-    return f"load avg {one:.2f} (1 min) {five:.2f} (5 min) on {os.cpu_count()} CPUs"
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="20 min run, 1 min peer slice (about a minute)")
@@ -208,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
         worst = max(errors[name], key=lambda k: abs(errors[name][k]))
         print(f"   {name:<14}{data:<12}{rmse[name]:>9.4f}{fl:>9.4f}{rmse[name] / fl:>7.3f}   "
               f"{abs(errors[name][worst]):.1f} % ({worst})")
-    print(f"\n   parameter errors, % of the truth (paper_params('nonlinear')):")
+    print("\n   parameter errors, % of the truth (paper_params('nonlinear')):")
     print(f"   {'':<8}{'truth':>10}" + "".join(f"{name:>14}" for name in errors))
     for k in NAMES:
         print(f"   {k:<8}{truth[k]:>10.4g}" + "".join(f"{errors[name][k]:>+13.1f}%" for name in errors))
@@ -219,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     peer_time = peer["to_floor_s"] if peer["to_floor_s"] is not None else peer["seconds"]
     peer_per = peer_time / n_part
     ratio = peer_per / ours_per
-    print(f"\n2. SPEED  (same process; ours timed end to end from the DataFrame, after a warm-up)")
+    print("\n2. SPEED  (same process; ours timed end to end from the DataFrame, after a warm-up)")
     print(f"   {'':<44}{'seconds':>9}{'samples':>10}{'us/sample':>11}")
     print(f"   {'ours: identify(), 6 starts + polish, full run':<44}{ours_s:>9.2f}{n:>10,}{1e6 * ours_per:>11.1f}"
           f"   [{load_ours}]")
@@ -238,13 +234,9 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quick:
         targets.append(("ours: 2 h run", f"{ours_s:.1f} s < {TARGET_TOTAL_S:.0f} s", ours_s < TARGET_TOTAL_S))
     targets.append(("per sample: peer / ours", f"{ratio:,.0f}x >= {TARGET_VS_PEER:.0f}x", ratio >= TARGET_VS_PEER))
-    for name, text, ok in targets:
-        print(f"   {name:<30}{text:<28}{'ok' if ok else 'MISSED'}")
-    missed = [t for t in targets if not t[2]]
-    print(f"\nTARGETS: {len(targets) - len(missed)}/{len(targets)} reached"
-          + ("" if not missed else "; missed: " + ", ".join(f"{name} ({text})" for name, text, _ in missed))
-          + f"   [{time.perf_counter() - t_start:.0f} s, {load()}]")
-    return 1 if missed else 0
+    for target in targets:
+        print_target(*target)
+    return summarise_targets(targets, t_start)
 
 
 if __name__ == "__main__":

@@ -28,7 +28,6 @@ from pathlib import Path  # noqa: E402
 
 import h5py  # noqa: E402
 
-from benchlab.acquire import read_progress  # noqa: E402
 from benchlab.runner.session import RunRequest, execute  # noqa: E402
 
 TARGET = 500.0

@@ -56,6 +56,7 @@ from benchlab.simulation import initial_state, input_channels  # noqa: E402
 from protocols.table1 import table1_schedule  # noqa: E402
 from sim_bench.plant import ThermalPlant  # noqa: E402
 from sim_bench.virtual_run import drive_schedule, run_schedule  # noqa: E402
+from targets import print_target, summarise_targets  # noqa: E402 - benchmarks/targets.py, beside this script
 
 NODES = ("P", "F", "A", "T")
 NODE_COLUMNS = ("T_pressure_plate", "T_flywheel", "T_air", "T_housing")
@@ -382,7 +383,7 @@ def main(argv: list[str] | None = None) -> int:
     run = accuracy_run(args.seed, acc_duration, dt)
     ref, segments, ref_s = reference(run, p_nl)
     err_max, err_rms = node_errors(run, p_nl, ref)
-    print(f"\n1. ACCURACY  benchlab.simulate(nonlinear) vs solve_ivp DOP853 rtol=atol=1e-10, ZOH segments")
+    print("\n1. ACCURACY  benchlab.simulate(nonlinear) vs solve_ivp DOP853 rtol=atol=1e-10, ZOH segments")
     print(f"   input A: Table 1 + engine speed re-drawn mid open cool-down {COOLDOWN_SPEEDS_RPM} rpm, noise-free speed,")
     print(f"            {len(run):,} samples at dt = {dt * 1000:.0f} ms ({len(run) * dt / 3600:.2f} h), "
           f"{segments:,} held-input segments, reference took {ref_s:.1f} s")
@@ -455,7 +456,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, value, target, text in checks:
         ok = value >= target
         targets.append((name, text, ok))
-        print(f"   {name:<30}{text:<28}{'ok' if ok else 'MISSED'}")
+        print_target(name, text, ok)
     print(f"   {'benchlab / floor':<30}{rate / floor_rate:.1%} of {floor_rate / 1e6:.1f} M/s "
           f"(propagate alone: {n / stages['propagate (numba loop)'] / floor_rate:.0%})")
 
@@ -479,11 +480,7 @@ def main(argv: list[str] | None = None) -> int:
     if load > 0.5 * (os.cpu_count() or 1):
         print(f"\n   NOTE: load average {load:.2f} on {os.cpu_count()} CPUs at the end: other processes share the pinned "
               "core, so timings (and stage shares, timed separately) may be off by up to ~2x; rerun when idle.")
-    missed = [t for t in targets if not t[2]]
-    print(f"\nTARGETS: {len(targets) - len(missed)}/{len(targets)} reached"
-          + ("" if not missed else "; missed: " + ", ".join(f"{name} ({text})" for name, text, _ in missed))
-          + f"   [{time.perf_counter() - t_start:.0f} s]")
-    return 1 if missed else 0
+    return summarise_targets(targets, t_start)
 
 
 if __name__ == "__main__":
