@@ -36,7 +36,18 @@ def _churn_run(duration_s: float, seed: int = 7):
 def churn():
     run = _churn_run(1800)
     diagnosis = diagnose_runs([run], "nonlinear", seed=0)
-    return run, diagnosis, summarise(diagnosis, [run], "nonlinear")
+    return run, diagnosis, summarise(diagnosis, "nonlinear")
+
+
+def test_nrmse_is_per_channel_then_averaged(churn):
+    """Contract §5: 100 · RMSE / (max − min of the measured signal) for each channel, then the mean."""
+    _, diagnosis, summary = churn
+    held = diagnosis.baseline_held
+    per_channel = []
+    for channel, residual in held.residuals()[0].items():
+        target = held.datasets[0].targets[channel]
+        per_channel.append(100 * np.sqrt(np.nanmean(residual ** 2)) / (np.nanmax(target) - np.nanmin(target)))
+    assert summary["baseline"]["nrmse_pct"] == pytest.approx(np.mean(per_channel), rel=1e-12)
 
 
 def test_regimes_are_computed_on_held_out_residuals(churn):

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     out = check_report_dir(args.report) if args.report else None
     runs = load_runs(args.runs)
     diagnosis = diagnose_runs(runs, args.baseline, seed=args.seed)
-    result = summarise(diagnosis, runs, args.baseline)
+    result = summarise(diagnosis, args.baseline)
     if args.json:
         print(json.dumps(result, default=float))
     else:

@@ -61,14 +61,15 @@ def _table1_run(path: Path, seed: int, duration: float) -> pd.DataFrame:
     return run
 
 
-def _bench_run(label: str, path: Path, request: RunRequest) -> pd.DataFrame:
-    """A protocol on the simulated bench through the runner and the real drivers (sim:// serial, CAN)."""
-    code, summary = execute(request)
+def _validation_run(path: Path, seed: int) -> pd.DataFrame:
+    """The validation protocol on the simulated bench through the runner and the real drivers (closed-loop heat-ups)."""
+    code, summary = execute(RunRequest(protocol="validation", out=path, seed=seed, cycles=VALIDATION_CYCLES,
+                                       plant=ThermalPlant(), install_signals=False))
     if code != 0 or summary is None or summary.status != "complete":
-        raise RuntimeError(f"{label} run {path} ended {summary.status if summary else 'without a summary'} "
+        raise RuntimeError(f"validation run {path} ended {summary.status if summary else 'without a summary'} "
                            f"(exit {code})")
     run = load_run(path)
-    _describe(label, path, run)
+    _describe("validation", path, run)
     return run
 
 
@@ -77,11 +78,12 @@ def _diagnose(fitting: pd.DataFrame, out: Path) -> None:
     from benchlab.diagnose.page import write_page  # matplotlib only when the command runs
 
     diagnosis = diagnose_runs([fitting], "linear")
-    summary = summarise(diagnosis, [fitting], "linear")
+    summary = summarise(diagnosis, "linear")
     (out / "diagnose.json").write_text(json.dumps(summary, indent=2, default=float))
     page = write_page(diagnosis, summary, [fitting], out / "diagnose")
     base, best = summary["baseline"], summary["best"]
-    found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, gain {f['gain_pct']:.0f} %)" for f in summary["findings"]) or "none"
+    found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, gain {f['gain_pct']:.0f} %)"
+                      for f in summary["findings"]) or "none"
     print(f"diagnose  linear baseline: held-out RMSE {base['rmse_K']:.3f} K -> best {best['model']} "
           f"{best['rmse_K']:.3f} K; findings: {found}")
     worst = worst_regimes(summary["regimes"]["baseline"], 1)
@@ -96,9 +98,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     fitting = _table1_run(out / "table1.h5", args.seed, args.duration)
-    validation = _bench_run("validation", out / "validation.h5", RunRequest(
-        protocol="validation", out=out / "validation.h5", seed=args.seed + 1, cycles=VALIDATION_CYCLES,
-        plant=ThermalPlant(), install_signals=False))
+    validation = _validation_run(out / "validation.h5", args.seed + 1)
     for model in ("linear", "nonlinear"):
         result = identify([fitting], model, validate=[validation], starts=4)
         save_params(out / f"{model}.json", result.params, result.summary())

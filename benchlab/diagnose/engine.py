@@ -30,6 +30,7 @@ from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
 from benchlab.identify.spec import ModelSpec, clutch_spec
+from benchlab.metrics import nrmse_pct
 
 STEP_S = 1.0
 FOLD_S = 600.0
@@ -83,6 +84,14 @@ class HeldOut:
     @property
     def rmse(self) -> float:
         return float(np.sqrt(np.mean(self.squared)))
+
+    @property
+    def nrmse_pct(self) -> float:
+        """Contract §5: 100 · RMSE / (max − min of the measured signal) per channel, then averaged."""
+        channels = list(self.predictions[0])
+        measured = pd.DataFrame({c: np.concatenate([d.targets[c] for d in self.datasets]) for c in channels})
+        simulated = pd.DataFrame({c: np.concatenate([p[c] for p in self.predictions]) for c in channels})
+        return nrmse_pct(measured, simulated, channels)
 
 
 @dataclass

@@ -4,17 +4,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import numpy as np
 import pandas as pd
 
-from benchlab.diagnose.engine import ALPHA, FOLD_S, MIN_GAIN_PCT, STEP_S, Diagnosis, Finding, HeldOut, diagnose_runs
+from benchlab.diagnose.engine import ALPHA, FOLD_S, MIN_GAIN_PCT, STEP_S, Diagnosis, Finding, diagnose_runs
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
-
-
-def _nrmse_pct(held: HeldOut, runs: Sequence[pd.DataFrame]) -> float:
-    span = np.mean([np.nanmax(r[c]) - np.nanmin(r[c]) for r in runs for c in ("T_flywheel", "T_air", "T_housing")])
-    return float(100 * held.rmse / span)
 
 
 def _finding_json(f: Finding) -> dict:
@@ -25,15 +19,15 @@ def _finding_json(f: Finding) -> dict:
             "params": {name: f.params[name] for name in f.added}}
 
 
-def summarise(result: Diagnosis, runs: Sequence[pd.DataFrame], baseline: str) -> dict:
+def summarise(result: Diagnosis, baseline: str) -> dict:
     """Contract JSON of a diagnosis: baseline held-out error, findings by gain, best model, regimes, evidence."""
     final = result.final
     return {
         "baseline": {"model": baseline, "rmse_K": result.baseline_held.rmse,
-                     "nrmse_pct": _nrmse_pct(result.baseline_held, runs)},
+                     "nrmse_pct": result.baseline_held.nrmse_pct},
         "findings": [_finding_json(f) for f in result.findings],
         "best": {"model": final.spec.name, "rmse_K": result.final_held.rmse,
-                 "nrmse_pct": _nrmse_pct(result.final_held, runs), "params": final.params},
+                 "nrmse_pct": result.final_held.nrmse_pct, "params": final.params},
         "regimes": {"baseline": regime_errors(result.baseline_held), "best": regime_errors(result.final_held)},
         "evidence": [e.as_dict() for e in residual_evidence(result.baseline_held, result.baseline.spec,
                                                              result.baseline.params)],
@@ -59,4 +53,4 @@ def summarise(result: Diagnosis, runs: Sequence[pd.DataFrame], baseline: str) ->
 
 def diagnose(runs: Sequence[pd.DataFrame], baseline: str = "linear", seed: int = 0) -> dict:
     """Contract JSON: baseline held-out error, findings ordered by gain, best combined model, regimes, evidence."""
-    return summarise(diagnose_runs(runs, baseline, seed=seed), runs, baseline)
+    return summarise(diagnose_runs(runs, baseline, seed=seed), baseline)
