@@ -6,7 +6,6 @@ closes the file as aborted.
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys

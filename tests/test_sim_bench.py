@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from sim_bench.bench import SimBenchConfig, SimPhysics
 from sim_bench.clock import SimClock
