@@ -44,16 +44,30 @@ def channel_list(channels: Sequence[int]) -> str:
     return "(@" + ",".join(parts) + ")"
 
 
-def parse_channel_list(text: str) -> list[int]:
-    """Channels of a SCPI channel list `(@101:104,106)`, in instrument (ascending) order; ValueError if malformed."""
+def parse_channel_list(text: str, max_channels: int | None = None) -> list[int]:
+    """Channels of a SCPI channel list `(@101:104,106)`, in instrument (ascending) order; ValueError if malformed
+    or, with `max_channels`, naming more channels than that (counted before any range is expanded)."""
     match = re.fullmatch(r"\(@([0-9:,\s]+)\)", text.strip())
     if match is None:
         raise ValueError(f"not a channel list: {text!r}")
-    channels: set[int] = set()
+    ranges: list[tuple[int, int]] = []
     for part in match.group(1).replace(" ", "").split(","):
         lo, _, hi = part.partition(":")
         first, last = int(lo), int(hi or lo)
         if last < first:
             raise ValueError(f"descending channel range: {part!r}")
-        channels.update(range(first, last + 1))
-    return sorted(channels)
+        ranges.append((first, last))
+    if max_channels is not None and (count := _distinct_channels(ranges)) > max_channels:
+        raise ValueError(f"{count} channels, more than the {max_channels} a scan can hold")
+    return sorted({ch for first, last in ranges for ch in range(first, last + 1)})
+
+
+def _distinct_channels(ranges: Sequence[tuple[int, int]]) -> int:
+    """How many distinct channels inclusive ranges name, overlaps counted once, without expanding them."""
+    total, covered_to = 0, None
+    for first, last in sorted(ranges):
+        start = first if covered_to is None else max(first, covered_to + 1)
+        if last >= start:
+            total += last - start + 1
+            covered_to = last
+    return total

@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
-from protocols.schedule import OPERATORS, PHASES, Step
+from protocols.schedule import OPERATORS, PHASES, Step, duration_s
 
 RPM = math.pi / 30.0
 ACTIONS = ("wait", "abort")
@@ -126,4 +126,10 @@ def check_schedule(steps: Sequence[Step], limits: BenchLimits) -> list[str]:
             limit = {"T_flywheel": limits.max_flywheel_c, "T_air": limits.max_air_c}.get(c.channel)
             if limit is not None and c.op in (">=", "steady") and c.value + c.band_k > limit - limits.clear_margin_k:
                 problems.append(f"{where}: target {c.channel} {c.value:g} too close to its interlock at {limit:g}")
+    from benchlab.bounds import MAX_RUN_DURATION_S
+
+    planned = duration_s(tuple(steps))
+    if planned > MAX_RUN_DURATION_S:
+        problems.append(f"planned duration {planned:.0f} s beyond the longest run a bench does, "
+                        f"{MAX_RUN_DURATION_S:.0f} s (benchlab.bounds)")
     return problems

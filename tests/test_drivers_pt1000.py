@@ -106,6 +106,14 @@ def test_channel_lists() -> None:
             scpi.parse_channel_list(bad)
 
 
+def test_channel_list_size_is_checked_before_expanding() -> None:
+    assert scpi.parse_channel_list("(@101:120,110:140)", max_channels=40) == list(range(101, 141))
+    with pytest.raises(ValueError, match="41 channels"):
+        scpi.parse_channel_list("(@101:120,110:141)", max_channels=40)
+    with pytest.raises(ValueError, match="99999999 channels"):  # counted, not expanded: returns at once
+        scpi.parse_channel_list("(@1:99999999)", max_channels=60)
+
+
 # -- against the emulator ----------------------------------------------------------------------------------
 
 @pytest.fixture

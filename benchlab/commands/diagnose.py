@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from benchlab import cliargs
 from benchlab.diagnose.engine import MIN_DURATION_S, diagnose_runs
 from benchlab.diagnose.regimes import worst_regimes
 from benchlab.diagnose.report import summarise
@@ -22,7 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", help="run files")
     parser.add_argument("--baseline", choices=("linear", "nonlinear"), default="linear")
     parser.add_argument("--json", action="store_true", help="print the contract's JSON object on stdout")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the baseline's starting points")
+    parser.add_argument("--seed", type=cliargs.seed, default=0, help="seed of the baseline's starting points")
     parser.add_argument("--report", metavar="DIR", help="write diagnose.md and its PNG figures into DIR")
 
 

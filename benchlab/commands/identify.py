@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from benchlab import cliargs
+from benchlab.bounds import MAX_FIT_STARTS
 from benchlab.errors import InputError
 from benchlab.identify.api import identify, parse_fixed
 from benchlab.identify.spec import clutch_spec
@@ -17,11 +19,12 @@ HELP = "grey-box identification of the clutch model from one or more run files"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", help="run files to fit together")
     parser.add_argument("--model", choices=("linear", "nonlinear"), default="nonlinear")
-    parser.add_argument("--out", required=True, help="parameter file to write (JSON)")
+    parser.add_argument("--out", required=True, type=cliargs.output_file, help="parameter file to write (JSON)")
     parser.add_argument("--validate", nargs="*", default=[], help="run files to validate on (not fitted)")
     parser.add_argument("--fix", nargs="*", default=[], metavar="NAME=VALUE", help="hold parameters fixed")
-    parser.add_argument("--starts", type=int, default=6, help="number of starting points (local minima exist)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the starting points")
+    parser.add_argument("--starts", type=cliargs.count("a number of starting points", MAX_FIT_STARTS), default=6,
+                        help="number of starting points (local minima exist)")
+    parser.add_argument("--seed", type=cliargs.seed, default=0, help="seed of the starting points")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from benchlab import cliargs
 from benchlab.errors import InputError
 from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, write_run
 
@@ -17,7 +18,7 @@ HELP = "convert a CSV with the /aligned column names (contract units) into a run
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("csv", help="CSV file, one column per channel, header = channel names")
-    parser.add_argument("--out", required=True, help="run file to write")
+    parser.add_argument("--out", required=True, type=cliargs.output_file, help="run file to write")
 
 
 def read_csv(path: Path) -> tuple[pd.DataFrame, float]:

@@ -14,8 +14,9 @@ from typing import Any
 
 import can
 
+from benchlab import cliargs
+from benchlab.bounds import MAX_PROBE_READINGS, MAX_TIMEOUT_S
 from benchlab.errors import InputError
-from drivers import scpi
 from drivers.can_bench import CanBench
 from drivers.clutch_node import ClutchNodeGateway
 from drivers.errors import ConnectionLost
@@ -30,18 +31,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--url", required=True,
                         help="pyserial URL (/dev/ttyUSB0, socket://host:5025, sim://instrument) or, for can, "
                              "INTERFACE:CHANNEL (socketcan:can0, virtual:bench)")
-    parser.add_argument("--count", type=int, default=None,
+    parser.add_argument("--count", type=cliargs.count("a number of readings", MAX_PROBE_READINGS), default=None,
                         help="scans (pt1000, default 1) or frames (node/can, default 10) to read")
-    parser.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for data (default 2)")
-    parser.add_argument("--channels", default="(@101:104)", help="pt1000 channel list (default (@101:104))")
+    parser.add_argument("--timeout", type=cliargs.positive_float("a time-out in s", MAX_TIMEOUT_S), default=2.0,
+                        help="seconds to wait for data (default 2)")
+    parser.add_argument("--channels", type=cliargs.channel_list, default="(@101:104)",
+                        help="pt1000 channel list (default (@101:104))")
     parser.add_argument("--mode", choices=("fres", "frtd"), default="fres",
                         help="pt1000: 4-wire resistance + CVD in software, or the instrument's RTD conversion")
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of text lines")
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.count is not None and args.count < 1:
-        raise InputError("--count", str(args.count), "a positive integer")
     if args.url.startswith("sim://"):
         import sim_bench.emulators  # noqa: F401 - registers the sim:// pyserial handler
     report = {"pt1000": _probe_pt1000, "node": _probe_node, "can": _probe_can}[args.device](args)
@@ -51,11 +52,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _probe_pt1000(args: argparse.Namespace) -> dict[str, Any]:
-    try:
-        channels = scpi.parse_channel_list(args.channels)
-    except ValueError:
-        raise InputError("--channels", args.channels, "a SCPI channel list like (@101:104)") from None
-    scanner = _open(lambda: Pt1000Scanner.open(args.url, channels, mode=args.mode, timeout=args.timeout), args.url)
+    scanner = _open(lambda: Pt1000Scanner.open(args.url, args.channels, mode=args.mode, timeout=args.timeout), args.url)
     try:
         idn = scanner.identify()
         scanner.reset()

@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from benchlab import cliargs
+from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
 from benchlab.errors import InputError
 from protocols.catalog import NAMES
 
@@ -16,11 +18,13 @@ HELP = "run a protocol (table1, cooldown-sweep, validation) on the simulated ben
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("protocol", nargs="?", help=f"protocol: {', '.join(NAMES)} (taken from the file with --resume)")
     parser.add_argument("--bench", default="sim", help="'sim' (simulated bench) or a BENCH.toml for hardware")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the schedule and the simulated bench")
-    parser.add_argument("--cycles", type=int, help="number of cycles (cooldown-sweep: grid points)")
-    parser.add_argument("--duration", type=float, help="planned duration in s (table1)")
+    parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the simulated bench")
+    parser.add_argument("--cycles", type=cliargs.count("a number of cycles", MAX_CYCLES),
+                        help="number of cycles (cooldown-sweep: grid points)")
+    parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
+                        help="planned duration in s (table1)")
     parser.add_argument("--grid", help="cooldown-sweep grid: RPM:S[:SLIP_RPM],... e.g. 1000:1,1000:0,2000:0:500")
-    parser.add_argument("--out", help="run file to write (HDF5)")
+    parser.add_argument("--out", type=cliargs.output_file, help="run file to write (HDF5)")
     parser.add_argument("--dry-run", action="store_true", help="print the schedule, check limits, estimate duration")
     parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
     parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
@@ -44,10 +48,6 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(out, "--out", "a new run file (it exists: --resume to continue it, --force to overwrite)")
     if not args.resume and args.protocol not in NAMES:
         raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)}, got {args.protocol!r}")
-    if args.cycles is not None and args.cycles <= 0:
-        raise InputError("command line", "--cycles", "a positive number of cycles")
-    if args.duration is not None and not args.duration > 0:
-        raise InputError("command line", "--duration", "a positive duration in s")
     if args.bench != "sim" and not Path(args.bench).exists():
         raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
     tty = sys.stderr.isatty()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from benchlab import cliargs
 from benchlab.metrics import nrmse_pct, rmse_k
 from benchlab.params import load_params
 from benchlab.runfile import load_run, write_simulated
@@ -16,7 +17,7 @@ HELP = "drive the model with a run's measured inputs and write /simulated"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
     parser.add_argument("--params", required=True, help="parameter file (JSON)")
-    parser.add_argument("--out", required=True, help="output HDF5 file with /simulated")
+    parser.add_argument("--out", required=True, type=cliargs.output_file, help="output HDF5 file with /simulated")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 
+from benchlab import cliargs
 from benchlab.errors import InputError
 from benchlab.params import load_params
 from benchlab.runfile import load_run
@@ -24,9 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--predict", type=int, default=DEFAULT_HORIZON, metavar="N_ENGAGEMENTS",
                         help=f"horizon for the failure probability and expected wear (default {DEFAULT_HORIZON})")
     parser.add_argument("--paths", type=int, default=DEFAULT_PATHS, help="Monte Carlo paths for the remaining life")
-    parser.add_argument("--seed", type=int, default=0, help="Monte Carlo seed")
+    parser.add_argument("--seed", type=cliargs.seed, default=0, help="Monte Carlo seed")
     parser.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    parser.add_argument("--plot", metavar="OUT.png", help="write a figure of energy, temperature, wear and life")
+    parser.add_argument("--plot", metavar="OUT.png", type=cliargs.output_file,
+                        help="write a figure of energy, temperature, wear and life")
 
 
 def _finite(value: object) -> object:

@@ -1,0 +1,25 @@
+"""What a bench (and a fit) can do at all: the bounds on numbers the command line and a schedule may ask for.
+
+One home for these numbers. The command line refuses anything beyond them at parse time (benchlab.cliargs),
+`protocols.limits.check_schedule` refuses a schedule planned longer than a run may last. They are not the
+bench's set-point limits (protocols.limits.BenchLimits, per bench): they stop a typo such as
+`--duration 1e12` or `(@1:99999999)` from allocating memory until the machine gives up.
+"""
+
+from __future__ import annotations
+
+#: Longest run: a week unattended. The run file is allocated for the planned duration when the run starts
+#: (about 1.6 GB per day with the simulated bench's streams and the 10 ms grid), so this also bounds the file.
+MAX_RUN_DURATION_S = 7 * 24 * 3600.0
+#: Most cycles one run may plan: 10 000 Table 1 cycles (40-130 s each) are 5-15 days, so a run this long is
+#: refused by MAX_RUN_DURATION_S first for all but the shortest cycles.
+MAX_CYCLES = 10_000
+#: Channels one scan of the PT1000 scanner can hold: three slots of a 20-channel multiplexer
+#: (34970A/34972A/DAQ970A with 34901A/DAQM901A cards).
+MAX_SCAN_CHANNELS = 60
+#: Longest wait for a device to answer: a longer time-out is a typo, not a slow device.
+MAX_TIMEOUT_S = 600.0
+#: Most readings `benchlab probe` takes (scans or frames): a probe looks at a device, it does not log.
+MAX_PROBE_READINGS = 10_000
+#: Most starting points of a grey-box fit (each is a full least-squares fit).
+MAX_FIT_STARTS = 1_000

@@ -1,0 +1,66 @@
+"""argparse types that check command-line values at parse time: bounded numbers, channel lists, output files.
+
+A value they refuse is argparse's usage error: one line `benchlab CMD: argument --NAME: what was expected,
+got ...` and exit 2, before anything is read, opened or moved. The bounds live in benchlab.bounds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from benchlab.bounds import MAX_SCAN_CHANNELS
+from drivers import scpi
+
+
+def positive_float(what: str, maximum: float) -> Callable[[str], float]:
+    """A finite number in (0, maximum]; `what` says what it is, e.g. "a duration in s"."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and 0 < value <= maximum):
+            raise argparse.ArgumentTypeError(f"{what}: a number in (0, {maximum:g}], got {text!r}")
+        return value
+    return parse
+
+
+def count(what: str, maximum: int | None, minimum: int = 1) -> Callable[[str], int]:
+    """An integer in [minimum, maximum] (no upper bound for None); `what` says what it counts, e.g. "cycles"."""
+    expected = f"an integer in [{minimum}, {maximum}]" if maximum is not None else f"an integer >= {minimum}"
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = minimum - 1
+        if not (minimum <= value and (maximum is None or value <= maximum)):
+            raise argparse.ArgumentTypeError(f"{what}: {expected}, got {text!r}")
+        return value
+    return parse
+
+
+#: A random seed: numpy takes any non-negative integer.
+seed = count("a seed", None, minimum=0)
+
+
+def channel_list(text: str) -> list[int]:
+    """A SCPI channel list such as (@101:104), at most MAX_SCAN_CHANNELS channels (counted before expanding)."""
+    try:
+        return scpi.parse_channel_list(text, max_channels=MAX_SCAN_CHANNELS)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"a SCPI channel list like (@101:104) of at most {MAX_SCAN_CHANNELS} "
+                                         f"channels, got {text!r} ({exc})") from None
+
+
+def output_file(text: str) -> str:
+    """A file to write: in a directory that exists, and not itself a directory."""
+    path = Path(text)
+    if not path.parent.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: a file in an existing directory ({path.parent} not found)")
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: a file to write, not a directory")
+    return text
