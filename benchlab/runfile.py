@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import h5py
@@ -22,6 +22,12 @@ ALIGNED_UNITS: dict[str, str] = {
 }
 REQUIRED = tuple(list(ALIGNED_UNITS)[:10])
 TIME_TOLERANCE = 1e-6  # relative to dt
+#: Values a dry-clutch bench can measure, per unit: anything beyond (1e300, inf) is a corrupt number, not a
+#: measurement. Channels in other units are only checked for infinities.
+MEASURABLE_RANGE: dict[str, tuple[float, float]] = {
+    "rpm": (-1e5, 1e5), "N*m": (-1e5, 1e5), "W": (-1e8, 1e8), "degC": (-273.15, 1e4)}
+#: How far clutch_state (1 clamped, 0 open) may read from 0 or 1: measurement noise, not a third state.
+CLUTCH_STATE_NOISE = 0.05
 
 
 def _text(value: object) -> str:
@@ -37,8 +43,12 @@ def _open(path: Path) -> h5py.File:
         raise InputError(path, "file", "an HDF5 run file (cannot be opened as HDF5)") from None
 
 
-def load_run(path: "str | os.PathLike[str]") -> pd.DataFrame:
-    """The /aligned channels as a DataFrame; attrs hold dt, units, source and the root attributes."""
+def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = ()) -> pd.DataFrame:
+    """The /aligned channels as a DataFrame; attrs hold dt, units, source and the root attributes.
+
+    `measured`: channels that must hold at least one measured (not NaN) sample, e.g. the temperatures a model
+    is fitted to and started from; a file where one of them is NaN throughout is bad input for that use.
+    """
     path = Path(path)
     with _open(path) as f:
         attrs = {k: _text(v) for k, v in f.attrs.items() if k in ("schema", "status", "protocol")}
@@ -48,12 +58,16 @@ def load_run(path: "str | os.PathLike[str]") -> pd.DataFrame:
             raise InputError(path, "/aligned", "a group of channels on one time grid")
         group = f["aligned"]
         dt = group.attrs.get("dt")
-        if dt is None or not np.isscalar(dt) or not np.isfinite(dt) or float(dt) <= 0:
-            raise InputError(path, "/aligned.dt", f"a positive time step in seconds, got {dt!r}")
+        if not _is_number(dt) or not np.isfinite(dt) or float(dt) <= 0:
+            shown = _text(dt) if isinstance(dt, bytes) else dt
+            raise InputError(path, "/aligned.dt", f"a positive time step in seconds (a number), got {shown!r}")
         columns, units = _read_channels(path, group)
         time_dtype = group["time"].dtype
     frame = pd.DataFrame(columns)
     _check_time(path, frame["time"].to_numpy(), float(dt), time_dtype)
+    for name in measured:
+        if np.isnan(frame[name].to_numpy()).all():
+            raise InputError(path, f"/aligned/{name}", f"at least one measured sample (all {len(frame)} are NaN)")
     frame.attrs.update(attrs, dt=float(dt), units=units, source=str(path))
     return frame
 
@@ -78,9 +92,32 @@ def _read_channels(path: Path, group: h5py.Group) -> tuple[dict[str, np.ndarray]
         length = ds.shape[0]
         columns[name] = ds[()].astype(np.float64)
         units[name] = unit
+        if name != "time":
+            _check_values(path, name, unit, columns[name])
     ordered = {k: columns[k] for k in ALIGNED_UNITS if k in columns}
     ordered.update({k: v for k, v in columns.items() if k not in ordered})
     return ordered, units
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def _check_values(path: Path, name: str, unit: str, values: np.ndarray) -> None:
+    """Every sample is NaN (not measured) or a value the bench can measure in its unit; clutch_state 0 or 1."""
+    if name == "clutch_state":
+        near = np.minimum(np.abs(values), np.abs(values - 1.0)) <= CLUTCH_STATE_NOISE
+        expected = f"0 (open) or 1 (clamped) within ±{CLUTCH_STATE_NOISE:g}, or NaN"
+    elif unit in MEASURABLE_RANGE:
+        low, high = MEASURABLE_RANGE[unit]
+        near = (values >= low) & (values <= high)
+        expected = f"values in [{low:g}, {high:g}] {unit} or NaN (not measured)"
+    else:
+        near = np.isfinite(values)
+        expected = "finite values or NaN (not measured)"
+    bad = np.flatnonzero(~near & ~np.isnan(values))
+    if bad.size:
+        raise InputError(path, f"/aligned/{name}", f"{expected}, got {float(values[bad[0]])!r} at sample {bad[0]}")
 
 
 def time_step_tolerance(time: np.ndarray, dt: float, stored: np.dtype) -> float:

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import h5py
+import numpy as np
 import pytest
 
-from benchlab.runfile import write_run
+from benchlab.params import paper_params, save_params
+from benchlab.runfile import ALIGNED_UNITS, REQUIRED, write_run
 from protocols.table1 import table1_schedule
 from sim_bench.plant import ThermalPlant
 from sim_bench.virtual_run import run_schedule
@@ -20,4 +23,30 @@ def short_run():
 def run_file(tmp_path, short_run):
     path = tmp_path / "run.h5"
     write_run(path, short_run, short_run.attrs["dt"], protocol="table1")
+    return path
+
+
+@pytest.fixture()
+def foreign_run(tmp_path):
+    """A 30 s contract-conforming file written with h5py alone, the way another tool would (float32, 0.1 s)."""
+    path, n, dt = tmp_path / "f.h5", 300, 0.1
+    with h5py.File(path, "w") as f:
+        f.attrs["schema"], f.attrs["status"], f.attrs["protocol"] = "benchlab-run/1", "complete", "imported"
+        g = f.create_group("aligned")
+        g.attrs["dt"] = dt
+        for name in REQUIRED:
+            values = np.arange(n) * dt if name == "time" else np.full(n, 30.0)
+            if name == "friction_power":
+                values = np.where(np.arange(n) < 100, 4000.0, 0.0)
+            if name == "clutch_state":
+                values = np.ones(n)
+            g.create_dataset(name, data=values.astype(np.float32)).attrs["units"] = np.bytes_(ALIGNED_UNITS[name])
+    return path
+
+
+@pytest.fixture()
+def params_file(tmp_path):
+    """The paper's nonlinear parameters as a parameter file."""
+    path = tmp_path / "p.json"
+    save_params(path, paper_params("nonlinear"))
     return path

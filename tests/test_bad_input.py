@@ -6,10 +6,19 @@ inputs that used to end in exit 1 with a Python error name what was expected ins
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import h5py
+import numpy as np
 import pytest
 
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S, MAX_SCAN_CHANNELS, MAX_TIMEOUT_S
 from benchlab.cli import main
+from benchlab.runfile import load_run
+from benchlab.runner.config import load_bench_config
+from drivers.can_signals import BENCH_DBC
+
+EXAMPLE_BENCH = Path(__file__).resolve().parents[1] / "examples" / "bench.toml"
 
 
 def _cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
@@ -68,3 +77,116 @@ def test_probe_reading_count_is_bounded(capsys):
 def test_counts_and_seeds_are_checked(argv, field, tmp_path, capsys):
     argv = [str(tmp_path / "run.h5") if a == "RUN" else a for a in argv]
     _refused(argv + (["--out", str(tmp_path / "r.h5")] if argv[0] == "run" else []), field, capsys)
+
+
+# -- run files: checked once, where they are read (benchlab.runfile.load_run) --------------------------------
+
+def _edit_channel(path, name: str, index, value: float) -> None:
+    """Set samples of one /aligned channel, rewritten as float64 (1e300 does not fit the fixture's float32)."""
+    with h5py.File(path, "a") as f:
+        values = f["aligned"][name][()].astype(np.float64)
+        values[index] = value
+        units = f["aligned"][name].attrs["units"]
+        del f["aligned"][name]
+        f["aligned"].create_dataset(name, data=values).attrs["units"] = units
+
+
+BAD_VALUES = {  # case: (channel, samples, value, field named)
+    "inf engine speed": ("engine_speed", 100, np.inf, "/aligned/engine_speed"),
+    "-inf clutch speed": ("clutch_speed", 5, -np.inf, "/aligned/clutch_speed"),
+    "1e300 friction power": ("friction_power", 7, 1e300, "/aligned/friction_power"),
+    "1e30 clutch torque": ("clutch_torque", 9, 1e30, "/aligned/clutch_torque"),
+    "inf ambient": ("T_ambient", 3, np.inf, "/aligned/T_ambient"),
+    "clutch state 3": ("clutch_state", 50, 3.0, "/aligned/clutch_state"),
+    "clutch state 0.5": ("clutch_state", 51, 0.5, "/aligned/clutch_state"),
+    "clutch state -0.2": ("clutch_state", 52, -0.2, "/aligned/clutch_state"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_VALUES))
+@pytest.mark.parametrize("command", ["simulate", "identify", "wear"])
+def test_unmeasurable_values_in_a_run_file_are_refused(case, command, foreign_run, params_file, tmp_path, capsys):
+    channel, index, value, field = BAD_VALUES[case]
+    _edit_channel(foreign_run, channel, index, value)
+    argv = {"simulate": ["simulate", str(foreign_run), "--params", str(params_file), "--out", str(tmp_path / "s.h5")],
+            "identify": ["identify", str(foreign_run), "--model", "linear", "--out", str(tmp_path / "fit.json")],
+            "wear": ["wear", str(foreign_run), "--params", str(params_file)]}[command]
+    err = _refused(argv, field, capsys)
+    assert str(foreign_run) in err and f"at sample {index}" in err
+
+
+def test_clutch_state_noise_is_not_a_third_state(foreign_run, params_file, tmp_path, capsys):
+    _edit_channel(foreign_run, "clutch_state", [10, 11, 12], [1.04, -0.03, np.nan])
+    code, err = _cli(["simulate", str(foreign_run), "--params", str(params_file), "--out", str(tmp_path / "s.h5")],
+                     capsys)
+    assert code == 0, err
+
+
+@pytest.mark.parametrize("dt", ["0.1", np.bytes_(b"0.1"), True, np.array([0.1, 0.1])])
+def test_dt_that_is_not_a_number_is_refused(dt, foreign_run, params_file, tmp_path, capsys):
+    with h5py.File(foreign_run, "a") as f:
+        f["aligned"].attrs["dt"] = dt
+    err = _refused(["simulate", str(foreign_run), "--params", str(params_file), "--out", str(tmp_path / "s.h5")],
+                   "/aligned.dt", capsys)
+    assert str(foreign_run) in err and "a positive time step" in err
+
+
+@pytest.mark.parametrize("channel", ["T_flywheel", "T_air", "T_housing"])
+@pytest.mark.parametrize("command", ["identify", "diagnose", "simulate"])
+def test_all_nan_target_channel_is_refused(channel, command, foreign_run, params_file, tmp_path, capsys):
+    _edit_channel(foreign_run, channel, slice(None), np.nan)
+    argv = {"simulate": ["simulate", str(foreign_run), "--params", str(params_file), "--out", str(tmp_path / "s.h5")],
+            "identify": ["identify", str(foreign_run), "--model", "linear", "--out", str(tmp_path / "fit.json")],
+            "diagnose": ["diagnose", str(foreign_run)]}[command]
+    err = _refused(argv, f"/aligned/{channel}", capsys)
+    assert str(foreign_run) in err and "all 300 are NaN" in err
+    assert not (tmp_path / "s.h5").exists() and not (tmp_path / "fit.json").exists()
+
+
+def test_a_dead_sensor_is_still_a_readable_run_file(foreign_run):
+    _edit_channel(foreign_run, "T_air", slice(None), np.nan)  # a run that lost its air sensor: the file is fine
+    assert load_run(foreign_run)["T_air"].isna().all()
+
+
+# -- output files ------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("command", ["run", "simulate", "identify", "import", "wear"])
+def test_output_file_in_a_missing_directory_is_refused(command, foreign_run, params_file, tmp_path, capsys):
+    out = str(tmp_path / "missing" / "out.x")
+    argv = {"run": ["run", "table1", "--cycles", "1", "--out", out],
+            "simulate": ["simulate", str(foreign_run), "--params", str(params_file), "--out", out],
+            "identify": ["identify", str(foreign_run), "--out", out],
+            "import": ["import", str(tmp_path / "d.csv"), "--out", out],
+            "wear": ["wear", str(foreign_run), "--params", str(params_file), "--plot", out]}[command]
+    err = _refused(argv, "--out" if command != "wear" else "--plot", capsys)
+    assert "missing" in err and "existing directory" in err
+    assert not (tmp_path / "missing").exists()
+
+
+# -- BENCH.toml ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("dbc_text, expected", [
+    ("not a dbc at all\n", "cantools can load"),
+    ('VERSION ""\n\nBO_ 5 Foo: 8 PC\n SG_ X : 0|8@1+ (1,0) [0|255] "" PC\n', "DriveMotor_Cmd"),
+])
+def test_bench_file_dbc_that_is_not_the_bench_dbc_is_refused(dbc_text, expected, tmp_path, capsys):
+    (tmp_path / "vendor.dbc").write_text(dbc_text)
+    bench = tmp_path / "bench.toml"
+    bench.write_text(EXAMPLE_BENCH.read_text().replace('bitrate = 500000', 'bitrate = 500000\ndbc = "vendor.dbc"'))
+    err = _refused(["run", "table1", "--bench", str(bench), "--cycles", "1", "--out", str(tmp_path / "r.h5")],
+                   "can.dbc", capsys)
+    assert str(bench) in err and expected in err and not (tmp_path / "r.h5").exists()
+
+
+def test_bench_file_with_the_bench_dbc_passes_the_check(tmp_path):
+    bench = tmp_path / "bench.toml"
+    bench.write_text(EXAMPLE_BENCH.read_text().replace('bitrate = 500000', f'bitrate = 500000\ndbc = "{BENCH_DBC}"'))
+    assert load_bench_config(bench).dbc == str(BENCH_DBC)
+
+
+@pytest.mark.parametrize("value", ["1e12", "700.0"])
+def test_bench_file_absurd_timeout_is_refused(value, tmp_path, capsys):
+    bench = tmp_path / "bench.toml"
+    bench.write_text(EXAMPLE_BENCH.read_text().replace("timeout_s = 2.0", f"timeout_s = {value}"))
+    _refused(["run", "table1", "--bench", str(bench), "--cycles", "1", "--out", str(tmp_path / "r.h5")],
+             "instrument.timeout_s", capsys)

@@ -10,30 +10,8 @@ import pytest
 
 import benchlab
 from benchlab.cli import main
-from benchlab.params import paper_params, save_params
-from benchlab.runfile import ALIGNED_UNITS, REQUIRED
-
-
-@pytest.fixture()
-def params_file(tmp_path):
-    path = tmp_path / "p.json"
-    save_params(path, paper_params("nonlinear"))
-    return path
-
-
-def _foreign_run(path, n=300, dt=0.1):
-    """A contract-conforming file written with h5py alone, the way another tool would."""
-    with h5py.File(path, "w") as f:
-        f.attrs["schema"], f.attrs["status"], f.attrs["protocol"] = "benchlab-run/1", "complete", "imported"
-        g = f.create_group("aligned")
-        g.attrs["dt"] = dt
-        for name in REQUIRED:
-            values = np.arange(n) * dt if name == "time" else np.full(n, 30.0)
-            if name == "friction_power":
-                values = np.where(np.arange(n) < 100, 4000.0, 0.0)
-            if name == "clutch_state":
-                values = np.ones(n)
-            g.create_dataset(name, data=values.astype(np.float32)).attrs["units"] = np.bytes_(ALIGNED_UNITS[name])
+from benchlab.params import paper_params
+from benchlab.runfile import REQUIRED
 
 
 def test_round_trip_and_api(run_file, short_run):
@@ -44,9 +22,8 @@ def test_round_trip_and_api(run_file, short_run):
     np.testing.assert_array_equal(run["T_flywheel"].to_numpy(), short_run["T_flywheel"].to_numpy())
 
 
-def test_simulate_cli_on_foreign_file(tmp_path, params_file, capsys):
-    _foreign_run(tmp_path / "f.h5")
-    assert main(["simulate", str(tmp_path / "f.h5"), "--params", str(params_file), "--out", str(tmp_path / "s.h5")]) == 0
+def test_simulate_cli_on_foreign_file(tmp_path, foreign_run, params_file, capsys):
+    assert main(["simulate", str(foreign_run), "--params", str(params_file), "--out", str(tmp_path / "s.h5")]) == 0
     with h5py.File(tmp_path / "s.h5") as f:
         g = f["simulated"]
         assert set(g) == {"time", "T_pressure_plate", "T_flywheel", "T_air", "T_housing"}

@@ -9,6 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from benchlab import cliargs
+from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.diagnose.engine import MIN_DURATION_S, diagnose_runs
 from benchlab.diagnose.regimes import worst_regimes
 from benchlab.diagnose.report import summarise
@@ -59,7 +60,7 @@ def check_report_dir(path: str) -> Path:
 
 def load_runs(paths: list[str]) -> list[pd.DataFrame]:
     """The run files, each long enough for the blocked cross-validation (two FOLD_S blocks)."""
-    runs = [load_run(p) for p in paths]
+    runs = [load_run(p, measured=PREDICTED_CHANNELS) for p in paths]
     for path, run in zip(paths, runs):
         duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
         if duration < MIN_DURATION_S:

@@ -6,6 +6,7 @@ import argparse
 
 from benchlab import cliargs
 from benchlab.bounds import MAX_FIT_STARTS
+from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.errors import InputError
 from benchlab.identify.api import identify, parse_fixed
 from benchlab.identify.spec import clutch_spec
@@ -39,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
         spec = known[name]
         if not spec.lower <= value <= spec.upper:
             raise InputError("--fix", name, f"a value in [{spec.lower:g}, {spec.upper:g}] {spec.unit}, got {value:g}")
-    runs = [load_run(p) for p in args.runs]
-    validate = [load_run(p) for p in args.validate]
+    runs = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.runs]
+    validate = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.validate]
     result = identify(runs, args.model, fixed, validate, starts=args.starts, seed=args.seed)
     save_params(args.out, result.params, result.summary())
     se = result.uncertainty.standard_errors

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.errors import InputError
 from benchlab.params import load_params
 from benchlab.runfile import load_run
@@ -28,10 +29,10 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(out, "--out", "a directory (a file of that name exists)")
-    measured = load_run(args.run)
+    measured = load_run(args.run, measured=PREDICTED_CHANNELS)
     params = load_params(args.params)
     compare = load_params(args.compare) if args.compare else None
-    validation = [load_run(p) for p in args.validate]
+    validation = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.validate]
     if args.sweep:
         load_run(args.sweep)  # a run file at all (the events it needs are checked by the analysis)
     page = write_report(measured, params, out, compare, validation, args.sweep)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from benchlab import cliargs
+from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.metrics import nrmse_pct, rmse_k
 from benchlab.params import load_params
 from benchlab.runfile import load_run, write_simulated
@@ -21,7 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    measured = load_run(args.run)
+    measured = load_run(args.run, measured=PREDICTED_CHANNELS)
     params = load_params(args.params)
     simulated = simulate(measured, params)
     write_simulated(args.out, measured["time"].to_numpy(), simulated,

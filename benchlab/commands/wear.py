@@ -7,6 +7,7 @@ import json
 import math
 
 from benchlab import cliargs
+from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.errors import InputError
 from benchlab.params import load_params
 from benchlab.runfile import load_run
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     if args.paths < 1:
         raise InputError("--paths", "paths", f"a positive number of Monte Carlo paths, got {args.paths}")
     spec = load_clutch(args.clutch) if args.clutch else default_clutch()
-    measured = load_run(args.run)
+    measured = load_run(args.run, measured=PREDICTED_CHANNELS)
     params = load_params(args.params)
     report = analyse_wear(measured, params, spec, horizon=args.predict, paths=args.paths, seed=args.seed,
                           params_source=str(args.params))

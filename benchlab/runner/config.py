@@ -13,9 +13,13 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import cantools
+
+from benchlab.bounds import MAX_TIMEOUT_S
 from benchlab.errors import InputError
 from benchlab.runner.devices import BenchConfig
 from drivers import cvd
+from drivers.can_signals import BENCH_SIGNALS
 from protocols.limits import BenchLimits
 
 ALIGNED_TEMPERATURES = ("T_air", "T_housing", "T_ambient", "T_engine")
@@ -38,10 +42,13 @@ def _str(t: Mapping[str, Any], key: str, field: str, src: str, default: str | No
     return value
 
 
-def _num(t: Mapping[str, Any], key: str, field: str, src: str, default: float, integer: bool = False) -> float:
+def _num(t: Mapping[str, Any], key: str, field: str, src: str, default: float, integer: bool = False,
+         maximum: float = math.inf) -> float:
     value = t.get(key, default)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
         raise InputError(src, field, f"a positive number, got {value!r}")
+    if value > maximum:
+        raise InputError(src, field, f"at most {maximum:g}, got {value!r}")
     if integer and int(value) != value:
         raise InputError(src, field, f"an integer, got {value!r}")
     return int(value) if integer else float(value)
@@ -61,6 +68,20 @@ def _coefficients(t: Any, field: str, src: str) -> cvd.CvdCoefficients:
     if values.get("r0", 1000.0) <= 0:
         raise InputError(src, f"{field}.r0", "a positive resistance in ohm")
     return cvd.CvdCoefficients(**values)
+
+
+def _check_dbc(dbc_path: Path, src: str) -> None:
+    """The DBC loads with cantools and defines every message and signal the CAN driver uses (BENCH_SIGNALS)."""
+    try:
+        db = cantools.database.load_file(str(dbc_path))
+    except (cantools.database.Error, ValueError, OSError, UnicodeDecodeError) as exc:
+        detail = (str(exc).splitlines() or [""])[0][:120].encode("ascii", "backslashreplace").decode()
+        raise InputError(src, "can.dbc", f"a DBC file cantools can load ({dbc_path}: {detail})") from None
+    names = {m.name: {s.name for s in m.signals} for m in db.messages}
+    for message, signal in BENCH_SIGNALS.values():
+        if signal not in names.get(message, ()):
+            raise InputError(src, "can.dbc", f"a DBC defining {message}.{signal} like drivers/bench.dbc "
+                                             f"({dbc_path} has no such {'signal' if message in names else 'message'})")
 
 
 def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
@@ -115,6 +136,7 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         dbc_path = Path(path).parent / _str(can_t, "dbc", "can.dbc", src)
         if not dbc_path.exists():
             raise InputError(src, "can.dbc", f"an existing DBC file ({dbc_path} not found)")
+        _check_dbc(dbc_path, src)
         dbc = str(dbc_path)
     drive = _table(doc, "drivetrain", src, required=False)
     acq = _table(doc, "acquisition", src, required=False)
@@ -123,7 +145,7 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         instrument_url=_str(inst, "url", "instrument.url", src), node_url=_str(node, "url", "node.url", src),
         can=can_cfg, instrument_channels=channels, instrument_mode=mode,
         instrument_baudrate=int(_num(inst, "baudrate", "instrument.baudrate", src, 115200, True)),
-        instrument_timeout_s=_num(inst, "timeout_s", "instrument.timeout_s", src, 2.0),
+        instrument_timeout_s=_num(inst, "timeout_s", "instrument.timeout_s", src, 2.0, maximum=MAX_TIMEOUT_S),
         instrument_period_s=_num(inst, "period_s", "instrument.period_s", src, 0.2),
         instrument_calibration=calibration,
         node_baudrate=int(_num(node, "baudrate", "node.baudrate", src, 921600, True)),
