@@ -15,9 +15,19 @@ if os.environ["OPENBLAS_NUM_THREADS"] == "1":
 
     threadpool_limits(limits=1, user_api="blas")
 
-from benchlab.params import load_params  # noqa: E402
-from benchlab.runfile import load_run  # noqa: E402
-from benchlab.simulation import simulate  # noqa: E402
-
 __all__ = ["load_run", "load_params", "simulate"]
 __version__ = "0.1.0"
+
+# The API (contract section 4) is imported when first used, not here: the `benchlab` command passes through
+# this file first, and importing numpy, pandas and numba here took 1.4 s during which Ctrl-C could not be
+# answered cleanly (the command catches it only once benchlab.cli.main runs).
+_API = {"load_run": "benchlab.runfile", "load_params": "benchlab.params", "simulate": "benchlab.simulation"}
+
+
+def __getattr__(name: str) -> object:
+    """`benchlab.load_run`, `benchlab.load_params`, `benchlab.simulate`, imported on first use."""
+    if name in _API:
+        import importlib
+
+        return getattr(importlib.import_module(_API[name]), name)
+    raise AttributeError(f"module 'benchlab' has no attribute {name!r}")

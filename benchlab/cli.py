@@ -1,7 +1,8 @@
 """`benchlab` console script: one module per command in benchlab.commands, discovered at start.
 
 A command module defines NAME, HELP, add_arguments(parser) and run(args) -> int. Bad input
-(InputError) is one line on stderr and exit 2; any other failure is one line and exit 1.
+(InputError) is one line on stderr and exit 2; any other failure is one line and exit 1; Ctrl-C, from the
+moment `main` runs (imports of the commands included), is one line and exit 130.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from collections.abc import Sequence
 
 import benchlab.commands
 from benchlab.errors import InputError
+from benchlab.interrupts import RedeliverInterrupts
 
 
 class _Parser(argparse.ArgumentParser):
@@ -33,18 +35,47 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether Ctrl-C is behind `exc` (its cause or the exception being handled when it was raised)."""
+    seen: set[int] = set()
+    link: BaseException | None = exc
+    while link is not None and id(link) not in seen:
+        if isinstance(link, KeyboardInterrupt):
+            return True
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return False
+
+
+def _interrupted(args: argparse.Namespace | None) -> int:
+    print(f"benchlab{'' if args is None else ' ' + args.command}: interrupted", file=sys.stderr)
+    return 130
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run one command; the exit code (0, 1 failure, 2 bad input, 130 Ctrl-C)."""
     try:
+        with RedeliverInterrupts() as guard:
+            code = _dispatch(argv)
+    except KeyboardInterrupt:  # a Ctrl-C sent again (see benchlab.interrupts) just as the command ended
+        return _interrupted(None)
+    return _interrupted(None) if guard.swallowed else code
+
+
+def _dispatch(argv: Sequence[str] | None) -> int:
+    args = None
+    try:
+        args = build_parser().parse_args(argv)  # imports every command module: Ctrl-C may land here too
         return int(args.handler(args) or 0)
     except InputError as exc:
         print(f"benchlab {args.command}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"benchlab {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted(args)
     except Exception as exc:  # noqa: BLE001 - the CLI's last line of defence
-        if args.debug:
+        if _caused_by_interrupt(exc):  # Ctrl-C while a class is being created: Python 3.11 wraps it (__set_name__)
+            return _interrupted(args)
+        if args is None or args.debug:  # a failure while building the parser is a bug: show it
             raise
         print(f"benchlab {args.command}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1

@@ -20,6 +20,11 @@ from benchlab.runfile import ALIGNED_UNITS, load_run
 CHANNELS = {k: v for k, v in ALIGNED_UNITS.items() if k not in ("time", "T_engine")}
 
 
+def _row(t: float) -> list[float]:
+    """One reading at time t: every channel reads t, but clutch_state stays a state (0 or 1, as load_run checks)."""
+    return [float(int(t) % 2) if k == "clutch_state" else t for k in CHANNELS]
+
+
 def _layout(dt: float = 0.01, hold: float = 0.075) -> Layout:
     cols = tuple(CHANNELS.items())
     return Layout((StreamSpec("s", cols, 20.0, hold),), tuple(AlignedSource(k, "s", k) for k in CHANNELS),
@@ -66,7 +71,7 @@ def test_run_file_layout_units_status_and_events(tmp_path):
     t = 0.0
     while t < 5.0:  # beyond the planned capacity: the file grows
         t = round(t + 0.05, 10)
-        w.add("s", t, [t] * len(CHANNELS))
+        w.add("s", t, _row(t))
         w.advance(t)
     w.event(1.0, "cycle_start", 0, "x")
     with h5py.File(path, "r") as f:
@@ -87,13 +92,13 @@ def test_run_file_layout_units_status_and_events(tmp_path):
 WRITER = textwrap.dedent("""
     import sys
     sys.path.insert(0, {root!r})
-    from tests.test_acquire import _layout, CHANNELS
+    from tests.test_acquire import _layout, _row
     from benchlab.acquire import RunWriter
     w = RunWriter(sys.argv[1], _layout(), protocol="table1", planned_s=600.0, state_fields=("cycle",))
     t = 0.0
     while True:
         t = round(t + 0.05, 10)
-        w.add("s", t, [t] * len(CHANNELS))
+        w.add("s", t, _row(t))
         if w.advance(t):
             w.state["cycle"] = t
             if t > 2:
@@ -125,7 +130,7 @@ def test_sigkill_leaves_a_readable_file_missing_at_most_one_second(tmp_path, del
     w = RunWriter.resume(path, _layout(), extra_s=2.0)
     t0 = t_valid
     for k in range(1, 21):
-        w.add("s", t0 + 0.05 * k, [t0 + 0.05 * k] * len(CHANNELS))
+        w.add("s", t0 + 0.05 * k, _row(t0 + 0.05 * k))
         w.advance(t0 + 0.05 * k)
     w.close("complete")
     run2 = load_run(path)

@@ -11,7 +11,8 @@ therefore leaves a file whose structure was complete and flushed before the run 
 `/aligned` grid is uniform, samples not yet written are NaN ("not measured"), and the progress record says
 how far the data is valid (at most `flush_every_s` of data behind the kill). Growing beyond the capacity,
 resuming, and closing build a new file next to the old one and `os.replace` it in one step, so there is
-always exactly one complete file under the run's name. Closing also compacts (exact lengths, compressed).
+always exactly one complete file under the run's name; an interrupted rebuild removes its half-made copy.
+Closing also compacts (exact lengths, compressed). One run per file is the caller's lock (acquire/lock.py).
 """
 
 from __future__ import annotations
@@ -246,10 +247,7 @@ class RunWriter:
             return
         self.flush()
         self._close_fd()
-        tmp = self._tmp()
-        with h5py.File(self.path, "r") as src:
-            self._copy(src, tmp, None, compact=True, status=status, attrs=attrs)
-        os.replace(tmp, self.path)
+        self._rebuild(None, compact=True, status=status, attrs=attrs)
 
     def abandon(self) -> None:
         """Close the handle without compacting (the file stays 'running', valid up to its progress)."""
@@ -284,9 +282,7 @@ class RunWriter:
             t_end = (rows - 1) * layout.dt if rows else 0.0
             writer._now = writer._last_flush_t = t_end
             capacity = writer._capacities(t_end + extra_s)
-            tmp = writer._tmp()
-            writer._copy(src, tmp, capacity, compact=False, status="running", attrs=None)
-        os.replace(tmp, path)
+        writer._rebuild(capacity, compact=False, status="running", attrs=None)
         writer._open()
         return writer
 
@@ -298,8 +294,16 @@ class RunWriter:
             caps[f"raw/{s.name}"] = int(np.ceil(seconds * s.rate_hz)) + 100
         return caps
 
-    def _tmp(self) -> Path:
-        return self.path.with_name(self.path.name + ".tmp")
+    def _rebuild(self, capacity: Mapping[str, int] | None, *, compact: bool, status: str,
+                 attrs: Mapping[str, Any] | None) -> None:
+        """Replace the file by a rebuilt copy of its valid data (see _copy): built next to it, then os.replace."""
+        tmp = _tmp(self.path)
+        try:
+            with h5py.File(self.path, "r") as src:
+                self._copy(src, tmp, capacity, compact=compact, status=status, attrs=attrs)
+            os.replace(tmp, self.path)
+        finally:  # interrupted (Ctrl-C, a full disk): no half-made copy is left beside the run file
+            tmp.unlink(missing_ok=True)
 
     def _open(self) -> None:
         """Note where each dataset's bytes live, close HDF5, and keep a plain file descriptor for writing."""
@@ -358,10 +362,7 @@ class RunWriter:
             return
         capacity = {k: max(have[k], 2 * need[k]) for k in have}
         self._close_fd()
-        tmp = self._tmp()
-        with h5py.File(self.path, "r") as src:
-            self._copy(src, tmp, capacity, compact=False, status="running", attrs=None)
-        os.replace(tmp, self.path)
+        self._rebuild(capacity, compact=False, status="running", attrs=None)
         self._open()
 
     def _build(self, path: Path, capacity: Mapping[str, int], meta: Mapping[str, Any],
@@ -369,7 +370,16 @@ class RunWriter:
         """Create a file with every dataset at `capacity` (None: exact length of `data`)."""
         data = data or {}
         compact = capacity is None
-        tmp = path.with_name(path.name + ".tmp")
+        tmp = _tmp(path)
+        try:
+            self._write_file(tmp, capacity, meta, data, compact)
+            os.replace(tmp, path)
+        finally:  # interrupted: no half-made file left
+            tmp.unlink(missing_ok=True)
+
+    def _write_file(self, tmp: Path, capacity: Mapping[str, int] | None, meta: Mapping[str, Any],
+                    data: Mapping[str, np.ndarray], compact: bool) -> None:
+        """Write the whole file at `tmp`: attributes, /aligned, /raw, /events, /schedule, /acquire."""
         with h5py.File(tmp, "w", locking=False) as f:
             f.attrs.update({k: v for k, v in meta["attrs"].items() if v is not None})
             self._write_group(f, "aligned", {"time": "s", **self.layout.aligned_units},
@@ -401,7 +411,6 @@ class RunWriter:
             ds.attrs["units"] = "1"
             acq.attrs["layout"] = json.dumps(describe_layout(self.layout))
             f.flush()
-        os.replace(tmp, path)
 
     def _write_group(self, parent: h5py.Group, name: str, columns: Mapping[str, str], capacity, data,
                      compact: bool, prefix: str) -> None:
@@ -465,6 +474,11 @@ class RunWriter:
         meta = {"attrs": meta_attrs, "schedule": schedule, "schedule_units": units,
                 "progress": [by_name[k] for k in self._progress_fields()]}
         self._build(dest, capacity, meta, data)
+
+
+def _tmp(path: Path) -> Path:
+    """Where a new version of `path` is built before it replaces it."""
+    return path.with_name(path.name + ".tmp")
 
 
 def _compression(compact: bool, arr: np.ndarray) -> dict[str, Any]:

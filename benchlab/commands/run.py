@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from benchlab import cliargs
+from benchlab.acquire.lock import RunFileLock
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
 from benchlab.errors import InputError
 from protocols.catalog import NAMES
@@ -34,8 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from benchlab.runner.session import RunRequest, execute
-
+    """The run file is locked before anything else (RunFileLock), so a second run on it is refused."""
     if args.resume:
         out = Path(args.resume)
         if args.out and Path(args.out) != out:
@@ -44,12 +44,22 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("command line", "--out", "a run file to write")
     else:
         out = Path(args.out or "dry-run.h5")
-    if not args.resume and not args.dry_run and out.exists() and not args.force:
-        raise InputError(out, "--out", "a new run file (it exists: --resume to continue it, --force to overwrite)")
+    if args.dry_run:
+        return _run(args, out)
+    with RunFileLock(out, "--resume" if args.resume else "--out"):  # before anything else: one run per file
+        if not args.resume and out.exists() and not args.force:
+            raise InputError(out, "--out", "a new run file (it exists: --resume to continue it, --force to overwrite)")
+        return _run(args, out)
+
+
+def _run(args: argparse.Namespace, out: Path) -> int:
+    """Check the rest of the command line, run (or dry-run) the protocol, print the summary."""
     if not args.resume and args.protocol not in NAMES:
         raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)}, got {args.protocol!r}")
     if args.bench != "sim" and not Path(args.bench).exists():
         raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
+    from benchlab.runner.session import RunRequest, execute
+
     tty = sys.stderr.isatty()
 
     def progress(line: str) -> None:

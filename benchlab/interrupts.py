@@ -1,0 +1,60 @@
+"""Ctrl-C that Python swallowed, delivered again: `benchlab` always answers Ctrl-C (exit 130).
+
+Python raises KeyboardInterrupt wherever the main thread is when SIGINT arrives. Inside a finaliser or a
+weakref callback (h5py releases its objects through them) it can only print "Exception ignored ..." with
+a traceback and carry on: a run interrupted during start-up then ran to its end and said "run complete".
+While RedeliverInterrupts is active, such an interrupt is not printed but raised again a moment later,
+when the main thread is back in ordinary code (and again, should it land in a callback once more).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from types import TracebackType
+from typing import Any
+
+
+class RedeliverInterrupts:
+    """Context manager: a swallowed Ctrl-C is sent again after `delay_s`; `swallowed` says one was still pending
+    when the block ended (the caller then reports the interrupt itself)."""
+
+    def __init__(self, delay_s: float = 0.05) -> None:
+        self.delay_s = delay_s
+        self.swallowed = False
+        self._timer: threading.Timer | None = None
+        self._lock = threading.Lock()
+        self._previous_hook = sys.unraisablehook
+
+    def __enter__(self) -> "RedeliverInterrupts":
+        self._previous_hook = sys.unraisablehook
+        sys.unraisablehook = self._hook
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        sys.unraisablehook = self._previous_hook
+        with self._lock:
+            timer, self._timer = self._timer, None
+        if timer is not None:
+            timer.cancel()
+            self.swallowed = True
+
+    def _hook(self, unraisable: Any) -> None:
+        if unraisable.exc_type is None or not issubclass(unraisable.exc_type, KeyboardInterrupt):
+            self._previous_hook(unraisable)
+            return
+        with self._lock:
+            if self._timer is None:
+                self._timer = threading.Timer(self.delay_s, self._deliver)
+                self._timer.daemon = True
+                self._timer.start()
+
+    def _deliver(self) -> None:
+        with self._lock:  # sent under the lock: __exit__ either cancels it or finds it sent (and raised)
+            if self._timer is None:  # the block has ended: nothing to interrupt any more
+                return
+            self._timer = None
+            os.kill(os.getpid(), signal.SIGINT)
