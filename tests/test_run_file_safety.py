@@ -18,6 +18,7 @@ import pytest
 from benchlab.acquire.lock import RunFileLock
 from benchlab.cli import main
 from benchlab.errors import InputError
+from benchlab.interrupts import RedeliverInterrupts
 from benchlab.runfile import load_run
 
 WAIT_S = 120.0  # upper bound on any wait for a subprocess; never reached on a working machine
@@ -104,3 +105,28 @@ def test_a_lock_file_left_by_a_killed_run_is_taken_over(tmp_path):
         with pytest.raises(InputError, match="no other run"):
             RunFileLock(out).acquire()
     assert not stale.exists() and lock.lock_path == stale
+
+
+class _RaisesInFinaliser:
+    """An object whose finaliser is hit by Ctrl-C: Python can only report that as unraisable."""
+
+    def __del__(self) -> None:
+        raise KeyboardInterrupt
+
+
+def test_a_ctrl_c_swallowed_by_a_finaliser_is_raised_again():
+    with pytest.raises(KeyboardInterrupt):
+        with RedeliverInterrupts(delay_s=0.01):
+            _RaisesInFinaliser()  # dropped at once: its __del__ raises, Python reports it and carries on
+            deadline = time.monotonic() + WAIT_S
+            while time.monotonic() < deadline:  # ordinary code, where the interrupt arrives again
+                time.sleep(0.001)
+
+
+def test_a_swallowed_ctrl_c_still_pending_at_the_end_is_reported():
+    with RedeliverInterrupts(delay_s=WAIT_S) as guard:
+        _RaisesInFinaliser()
+    assert guard.swallowed  # main() then exits 130; the pending signal was cancelled, never sent
+    with RedeliverInterrupts() as quiet:
+        pass
+    assert not quiet.swallowed
