@@ -93,7 +93,9 @@ def _read_channels(path: Path, group: h5py.Group) -> tuple[dict[str, np.ndarray]
         columns[name] = ds[()].astype(np.float64)
         units[name] = unit
         if name != "time":
-            _check_values(path, name, unit, columns[name])
+            problem = unmeasurable_sample(name, unit, columns[name])
+            if problem is not None:
+                raise InputError(path, f"/aligned/{name}", f"{problem[1]}, got {problem[2]!r} at sample {problem[0]}")
     ordered = {k: columns[k] for k in ALIGNED_UNITS if k in columns}
     ordered.update({k: v for k, v in columns.items() if k not in ordered})
     return ordered, units
@@ -103,8 +105,9 @@ def _is_number(value: object) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
-def _check_values(path: Path, name: str, unit: str, values: np.ndarray) -> None:
-    """Every sample is NaN (not measured) or a value the bench can measure in its unit; clutch_state 0 or 1."""
+def unmeasurable_sample(name: str, unit: str, values: np.ndarray) -> tuple[int, str, float] | None:
+    """The first sample that is neither NaN (not measured) nor a value the bench can measure in its unit
+    (clutch_state: 0 or 1), as (index, what was expected, value); None when every sample is fine."""
     if name == "clutch_state":
         near = np.minimum(np.abs(values), np.abs(values - 1.0)) <= CLUTCH_STATE_NOISE
         expected = f"0 (open) or 1 (clamped) within ±{CLUTCH_STATE_NOISE:g}, or NaN"
@@ -116,8 +119,7 @@ def _check_values(path: Path, name: str, unit: str, values: np.ndarray) -> None:
         near = np.isfinite(values)
         expected = "finite values or NaN (not measured)"
     bad = np.flatnonzero(~near & ~np.isnan(values))
-    if bad.size:
-        raise InputError(path, f"/aligned/{name}", f"{expected}, got {float(values[bad[0]])!r} at sample {bad[0]}")
+    return (int(bad[0]), expected, float(values[bad[0]])) if bad.size else None
 
 
 def time_step_tolerance(time: np.ndarray, dt: float, stored: np.dtype) -> float:

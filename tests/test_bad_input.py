@@ -190,3 +190,14 @@ def test_bench_file_absurd_timeout_is_refused(value, tmp_path, capsys):
     bench.write_text(EXAMPLE_BENCH.read_text().replace("timeout_s = 2.0", f"timeout_s = {value}"))
     _refused(["run", "table1", "--bench", str(bench), "--cycles", "1", "--out", str(tmp_path / "r.h5")],
              "instrument.timeout_s", capsys)
+
+
+@pytest.mark.parametrize("channel, value", [("engine_speed", "inf"), ("friction_power", "1e300"), ("clutch_state", "2")])
+def test_import_refuses_what_load_run_would_refuse(channel, value, foreign_run, tmp_path, capsys):
+    csv = tmp_path / "d.csv"
+    frame = load_run(foreign_run)
+    frame[channel] = frame[channel].astype(object)
+    frame.loc[4, channel] = value
+    frame.to_csv(csv, index=False)
+    err = _refused(["import", str(csv), "--out", str(tmp_path / "r.h5")], f"column {channel}, line 6", capsys)
+    assert str(csv) in err and not (tmp_path / "r.h5").exists()

@@ -10,7 +10,7 @@ import pandas as pd
 
 from benchlab import cliargs
 from benchlab.errors import InputError
-from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, write_run
+from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample, write_run
 
 NAME = "import"
 HELP = "convert a CSV with the /aligned column names (contract units) into a run file"
@@ -43,6 +43,8 @@ def read_csv(path: Path) -> tuple[pd.DataFrame, float]:
             row = int(np.flatnonzero(bad.to_numpy())[0]) + 2
             raise InputError(path, f"column {name}, line {row}", f"a number, got {frame[name].iloc[row - 2]!r}")
         frame[name] = values.astype(np.float64)
+        if name != "time" and (problem := unmeasurable_sample(name, ALIGNED_UNITS[name], frame[name].to_numpy())):
+            raise InputError(path, f"column {name}, line {problem[0] + 2}", f"{problem[1]}, got {problem[2]!r}")
     time = frame["time"].to_numpy()
     if len(time) < 2 or not np.all(np.isfinite(time)):
         raise InputError(path, "column time", "at least two finite time stamps")
