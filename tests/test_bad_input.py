@@ -192,7 +192,8 @@ def test_bench_file_absurd_timeout_is_refused(value, tmp_path, capsys):
              "instrument.timeout_s", capsys)
 
 
-@pytest.mark.parametrize("channel, value", [("engine_speed", "inf"), ("friction_power", "1e300"), ("clutch_state", "2")])
+@pytest.mark.parametrize("channel, value",
+                         [("engine_speed", "inf"), ("friction_power", "1e300"), ("clutch_state", "2")])
 def test_import_refuses_what_load_run_would_refuse(channel, value, foreign_run, tmp_path, capsys):
     csv = tmp_path / "d.csv"
     frame = load_run(foreign_run)
