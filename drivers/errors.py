@@ -22,3 +22,7 @@ class InstrumentError(DriverError):
         self.entries = entries
         detail = "; ".join(f"{code},{text}" for code, text in entries)
         super().__init__(f"{message}: {detail}" if detail else message)
+
+
+class CanLogError(DriverError):
+    """The raw CAN log could not be written (disk full, no permission): the run must stop."""
