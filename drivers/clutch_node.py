@@ -20,6 +20,7 @@ import serial
 from drivers import cvd, node_frame
 from drivers.errors import ConnectionLost, DriverConfigError, FrameError
 from drivers.node_frame import NodeFrame
+from drivers.timebase import ClockMap
 
 SensorStatus = Literal["ok", "open", "short", "range", "fault"]
 _MAX_CHUNK = 4 * node_frame.ENCODED_LEN
@@ -46,7 +47,8 @@ class NodeSample:
 
     seq: int
     node_time_ms: int
-    t_host: float
+    t_host: float  # run-clock time the gateway received the frame
+    t: float  # run-clock time the node measured it: its own clock mapped onto the run clock (drivers/timebase.py)
     resistance_ohm: tuple[float | None, float | None]
     temperature_c: tuple[float | None, float | None]
     sensor_status: tuple[SensorStatus, SensorStatus]
@@ -115,6 +117,8 @@ class ClutchNodeGateway:
         self._synced = False
         self._last: NodeFrame | None = None
         self._last_host = clock()
+        self.clock_map = ClockMap()  # the node's clock → run clock (anew after a node reboot)
+        self._node_s = 0.0  # the node's clock in s, unwrapped, at the newest accepted frame
         self._in_dropout = False
         self._errors: _ErrorWindow | None = None
 
@@ -159,11 +163,12 @@ class ClutchNodeGateway:
         if len(self._buf) > _MAX_CHUNK:
             self._buf, self._synced = b"", False
             self._count_corrupt("resyncs", now)
-        frames: list[tuple[NodeFrame, float]] = []
+        frames: list[tuple[NodeFrame, float, float, ClockMap]] = []
         for chunk in chunks:
             frame = self._decode(chunk, now)
             if frame is not None and self._accept(frame, now):
-                frames.append((frame, now))
+                frames.append((frame, now, self._node_s, self.clock_map))
+                self.clock_map.observe(self._node_s, now)
         self._report_errors(now)
         return self._samples(frames)
 
@@ -255,6 +260,8 @@ class ClutchNodeGateway:
                 stats.duplicates += 1
                 return False
             reset = bool(frame.flags & node_frame.NODE_RESET) or node_dt >= 1 << 31
+            if not reset:
+                self._node_s += node_dt / 1000
             if reset:
                 stats.node_resets += 1
                 lost = max(0, round(host_span / self.period_s) - 1)
@@ -265,6 +272,8 @@ class ClutchNodeGateway:
         stats.lost += lost
         if last is not None and span > self.dropout_s and not self._in_dropout:
             self._start_dropout(min(now, max(self._last_host, now - span) + self.dropout_s))
+        if reset or last is None:  # a new node clock: counted from this frame, mapped afresh
+            self._node_s, self.clock_map = frame.node_time_ms / 1000, ClockMap()
         if reset:
             self._events.append(LinkEvent("node_reset", now, last.seq if last else None, host_span, lost))
         if self._in_dropout:
@@ -274,14 +283,14 @@ class ClutchNodeGateway:
         self._last, self._last_host = frame, now
         return True
 
-    def _samples(self, frames: list[tuple[NodeFrame, float]]) -> list[NodeSample]:
+    def _samples(self, frames: list[tuple[NodeFrame, float, float, ClockMap]]) -> list[NodeSample]:
         samples = []
-        for f, t_host in frames:
+        for f, t_host, node_s, clock_map in frames:
             ohm = (f.r_mohm[0] / 1000.0, f.r_mohm[1] / 1000.0)
             deg = (cvd.temperature(ohm[0], self.coefficients[0]), cvd.temperature(ohm[1], self.coefficients[1]))
             s1, s2 = self._status(f, 0, ohm[0], deg[0]), self._status(f, 1, ohm[1], deg[1])
             samples.append(NodeSample(
-                f.seq, f.node_time_ms, t_host,
+                f.seq, f.node_time_ms, t_host, min(clock_map.to_run(node_s), t_host),
                 (ohm[0] if s1 in ("ok", "range") else None, ohm[1] if s2 in ("ok", "range") else None),
                 (deg[0] if s1 == "ok" else None, deg[1] if s2 == "ok" else None),
                 (s1, s2), f.supply_mv, f.rssi_dbm, f.lqi, f.flags))

@@ -326,22 +326,19 @@ class DriverBench:
         except DriverError as exc:
             self._error(now, "node_error", str(exc), self.gateway.reconnect)
             return
-        if samples:
-            last_ms = samples[-1].node_time_ms
-            for s in samples:
-                lag = ((last_ms - s.node_time_ms) & 0xFFFFFFFF) / 1000.0
-                t = s.t_host - (lag if lag < 10 * self.config.node_period_s * len(samples) else 0.0)
-                temps = tuple(math.nan if v is None else v for v in s.temperature_c)
-                ohms = tuple(math.nan if v is None else v for v in s.resistance_ohm)
-                row = (float(s.seq), s.node_time_ms / 1000.0, *temps, *ohms,
-                       STATUS_CODES.get(s.sensor_status[0], 4.0), STATUS_CODES.get(s.sensor_status[1], 4.0),
-                       s.supply_mv / 1000.0, float(s.rssi_dbm), float(s.lqi), float(s.flags))
-                self.readings.append(("node", t, row))
-                self.status.t_node = max(self.status.t_node, t)
-                valid = [v for v in temps if np.isfinite(v)]
-                if valid:
-                    self.status.T_flywheel = sum(valid) / len(valid)
-                    self.status.t_flywheel = t
+        for s in samples:  # each at the time the node measured it (the driver maps the node's clock)
+            t = s.t
+            temps = tuple(math.nan if v is None else v for v in s.temperature_c)
+            ohms = tuple(math.nan if v is None else v for v in s.resistance_ohm)
+            row = (float(s.seq), s.node_time_ms / 1000.0, *temps, *ohms,
+                   STATUS_CODES.get(s.sensor_status[0], 4.0), STATUS_CODES.get(s.sensor_status[1], 4.0),
+                   s.supply_mv / 1000.0, float(s.rssi_dbm), float(s.lqi), float(s.flags))
+            self.readings.append(("node", t, row))
+            self.status.t_node = max(self.status.t_node, t)
+            valid = [v for v in temps if np.isfinite(v)]
+            if valid:
+                self.status.T_flywheel = sum(valid) / len(valid)
+                self.status.t_flywheel = t
         for ev in self.gateway.pop_events():
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:
