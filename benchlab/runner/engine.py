@@ -276,9 +276,8 @@ class Runner:
         return step.until[0].value if step.until else math.inf
 
     def _conditions_met(self, conditions: Sequence[Condition], now: float) -> bool:
-        value = self.bench.status.T_flywheel
-        for c in conditions:
-            v = self.bench.status.T_flywheel if c.channel == "T_flywheel" else getattr(self.bench.status, c.channel, value)
+        for c in conditions:  # channels checked against CONDITION_CHANNELS before the run (check_schedule)
+            v = getattr(self.bench.status, c.channel)
             if not np.isfinite(v):
                 continue
             if c.op == ">=" and v >= c.value:
