@@ -11,6 +11,7 @@ shared clock's time before the drivers read).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Callable, Mapping
@@ -23,7 +24,7 @@ import numpy as np
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
-from drivers.errors import DriverError
+from drivers.errors import CanLogError, DriverError
 from protocols.limits import BenchLimits
 
 RPM = math.pi / 30.0
@@ -170,11 +171,21 @@ ALIGNED_UNITS = {"engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": 
 CAN_HOLD_CYCLES = 2.5  # a status value holds on the grid for one lost frame, not for two
 
 
-def status_cycle_s(config: BenchConfig, key: str) -> float:
-    """DBC cycle time (s) of the status message carrying logical signal `key`."""
+@functools.lru_cache(maxsize=8)
+def _load_dbc(path: str) -> Any:
     import cantools
 
-    message = cantools.database.load_file(config.dbc or str(BENCH_DBC)).get_message_by_name(BENCH_SIGNALS[key][0])
+    return cantools.database.load_file(path)
+
+
+def bench_dbc(config: BenchConfig) -> Any:
+    """The bench's CAN database (the configured DBC or drivers/bench.dbc), parsed once per file."""
+    return _load_dbc(config.dbc or str(BENCH_DBC))
+
+
+def status_cycle_s(config: BenchConfig, key: str) -> float:
+    """DBC cycle time (s) of the status message carrying logical signal `key`."""
+    message = bench_dbc(config).get_message_by_name(BENCH_SIGNALS[key][0])
     return (message.cycle_time or 100) / 1000
 
 
@@ -224,15 +235,11 @@ def open_can_log(path: "str | os.PathLike[str]", config: BenchConfig) -> Any:
     DBC's cycle times, that is the last second. Raises CanLogError (one line) if the file cannot be created.
     """
     import can
-    import cantools
-
-    from drivers.errors import CanLogError
 
     suffix = Path(path).suffix.lower()
     if suffix not in (".blf", ".asc"):
         raise CanLogError(f"{path}: a CAN log ends in .blf or .asc")
-    messages = cantools.database.load_file(config.dbc or str(BENCH_DBC)).messages
-    frames_per_s = sum(1000.0 / m.cycle_time for m in messages if m.cycle_time)
+    frames_per_s = sum(1000.0 / m.cycle_time for m in bench_dbc(config).messages if m.cycle_time)
     options = {"max_container_size": max(4096, int(frames_per_s * BLF_OBJECT_BYTES))} if suffix == ".blf" else {}
     try:
         return can.Logger(str(path), **options)
@@ -364,8 +371,6 @@ class DriverBench:
         self.scanner.error_log.clear()
 
     def _poll_can(self, now: float) -> None:
-        from drivers.errors import CanLogError
-
         try:
             samples = self.can.receive()
         except CanLogError:

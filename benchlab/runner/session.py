@@ -163,14 +163,12 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
 
             clock = RealClock(t0)
             bench = DriverBench(config, clock, can_log=can_log)
-    except CanLogError as exc:
+    except Exception as exc:  # noqa: BLE001 - no bench: the simulated one is closed, one line
         if sim is not None:
             sim.close()
-        raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
-    except Exception as exc:  # noqa: BLE001 - cannot reach the devices: one line, exit 1
-        if sim is not None:
-            sim.close()
-        raise RuntimeError(f"cannot open the bench: {exc}") from exc
+        if isinstance(exc, CanLogError):  # the log's path follows the user's --out: exit 2
+            raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
+        raise RuntimeError(f"cannot open the bench: {exc}") from exc  # cannot reach the devices: exit 1
     layout = bench.layout
     try:
         if resume_state:

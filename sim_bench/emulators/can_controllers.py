@@ -141,9 +141,15 @@ class CanBenchEmulator:
         return (sig.STATE_RUNNING if ctrl.setpoints.get(f"{controller}.enable") else sig.STATE_READY), 0
 
     # -- internals -----------------------------------------------------------------------------------
+    def _deadline(self, ctrl: _Controller) -> float | None:
+        """When an enabled controller times out without a further command (None: it cannot)."""
+        if ctrl.last_cmd is None or not ctrl.setpoints.get(f"{ctrl.name}.enable"):
+            return None
+        return ctrl.last_cmd + self.command_timeout_s
+
     def _timed_out(self, ctrl: _Controller, t: float) -> bool:
-        return bool(ctrl.setpoints.get(f"{ctrl.name}.enable") and ctrl.last_cmd is not None
-                    and t - ctrl.last_cmd > self.command_timeout_s + 1e-9)
+        deadline = self._deadline(ctrl)
+        return deadline is not None and t > deadline + 1e-9
 
     def _decode(self, msg: can.Message) -> tuple[str, dict[str, float]] | None:
         owner, codec = self._rx.get(msg.arbitration_id, (None, None))
@@ -185,9 +191,8 @@ class CanBenchEmulator:
     def _emit_until(self, t_end: float, inclusive: bool) -> None:
         """Send the frames due in [self._t, t_end) (or up to t_end inclusive), cut where a controller times out."""
         while True:
-            cut = min((c.last_cmd + self.command_timeout_s for c in self.controllers.values()
-                       if c.last_cmd is not None and c.setpoints.get(f"{c.name}.enable")
-                       and self._t < c.last_cmd + self.command_timeout_s < t_end), default=None)
+            deadlines = (self._deadline(c) for c in self.controllers.values())
+            cut = min((d for d in deadlines if d is not None and self._t < d < t_end), default=None)
             if cut is None:
                 self._emit_segment(t_end, inclusive)
                 return
