@@ -1,15 +1,21 @@
 """Bench controllers on CAN (drive motor, clutch actuator, load machine): set-points out, actual values in.
 
 The driver works on logical signal names (drivers/can_signals.py) so a vendor DBC plus a mapping replaces
-ours. `poll()` receives without blocking, decodes, watches every controller (silent: a watched message not
-seen within `silent_cycles` cycle times; faulted: fault code ≠ 0 or fault state; alive counter not +1) and
-sends the cyclic command frames, PC heartbeat and, while active, the emergency stop (not when opened
-`listen_only`, e.g. to probe a running bench). Frames with an unknown id or a wrong DLC are counted,
-never decoded.
+ours. Every received frame keeps the time it was measured: the interface's time stamp (`msg.timestamp`)
+mapped onto the run clock (`timestamps="interface"`, drivers/timebase.py), taken as it is where the bus
+already stamps on the run clock (`"run"`, the simulated bench), or the receive time where the interface
+gives none (`"receive"`). `poll()` = `send_due()` (every cyclic command frame, PC heartbeat and, while
+active, emergency stop that fell due since the last call, at its DBC cycle) + `receive()` (every waiting
+frame, none dropped, decoded and watched: silent = a watched message not seen within `silent_cycles` cycle
+times; faulted = fault code ≠ 0 or fault state; alive counter not +1). Frames with an unknown id or a wrong
+DLC are counted, never decoded. With a `log` (a python-can Listener such as `can.Logger("run.blf")`) every
+frame sent and received is logged, sorted by time at each `receive()`, in the bus's time base; a log that cannot be written
+raises CanLogError.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -21,15 +27,20 @@ import cantools
 
 from drivers import can_signals as sig
 from drivers.can_codec import MessageCodec, compile_codecs
+from drivers.errors import CanLogError
+from drivers.timebase import ClockMap
 
 EventKind = Literal["silent", "back", "fault", "fault_cleared", "alive_error", "estop", "estop_released"]
+TimestampSource = Literal["interface", "run", "receive"]
+LOG_SYNC_S = 1.0  # the log file is flushed to the OS this often
+MAX_CATCH_UP_S = 1.0  # a cyclic frame more than this late is skipped, not sent in a burst
 
 
 @dataclass(frozen=True, slots=True)
 class CanSample:
-    """One decoded frame: logical signal name → physical value (DBC scaling applied, units per the DBC)."""
+    """One decoded frame: run-clock time it was received by the interface, logical signal → physical value."""
 
-    t_host: float
+    t: float
     controller: str
     message: str
     values: dict[str, float]
@@ -37,9 +48,9 @@ class CanSample:
 
 @dataclass(frozen=True, slots=True)
 class ControllerEvent:
-    """Something the watchdog noticed about one controller (or an emergency stop seen on the bus)."""
+    """Something the watchdog noticed about one controller (or an emergency stop seen on the bus), run time."""
 
-    t_host: float
+    t: float
     controller: str
     kind: EventKind
     detail: str = ""
@@ -57,6 +68,7 @@ class CanStats:
     alive_errors: int = 0
     sent: int = 0
     send_errors: int = 0
+    late_skipped: int = 0
 
 
 @dataclass(slots=True)
@@ -76,14 +88,19 @@ class _Rx:
 
 @dataclass(slots=True)
 class _Tx:
-    """A message the PC sends: its current values (logical keys), alive key and schedule."""
+    """A message the PC sends: its current values (logical keys), alive key and cyclic schedule."""
 
     codec: MessageCodec
     values: dict[str, float]
     alive_key: str | None
     alive_modulo: int
     cycle_s: float
-    next_due: float = 0.0
+    origin: float
+    cycles: int = 0  # cyclic frames due so far: the next falls due at origin + cycles * cycle_s
+
+    @property
+    def next_due(self) -> float:
+        return self.origin + self.cycles * self.cycle_s
 
 
 class CanBench:
@@ -92,9 +109,13 @@ class CanBench:
     def __init__(self, bus: can.BusABC, *, dbc: str | Path = sig.BENCH_DBC,
                  signals: Mapping[str, tuple[str, str]] = sig.BENCH_SIGNALS,
                  clock: Callable[[], float] = time.monotonic, silent_cycles: float = 5,
-                 idle_rpm: float = 800.0, fault_state: int = sig.STATE_FAULT, listen_only: bool = False) -> None:
+                 idle_rpm: float = 800.0, fault_state: int = sig.STATE_FAULT, listen_only: bool = False,
+                 timestamps: TimestampSource = "interface", log: can.Listener | None = None) -> None:
+        if timestamps not in ("interface", "run", "receive"):
+            raise ValueError(f"timestamps: 'interface', 'run' or 'receive', got {timestamps!r}")
         self.bus, self.clock, self.idle_rpm, self.fault_state = bus, clock, idle_rpm, fault_state
-        self.listen_only = listen_only
+        self.listen_only, self.timestamps, self.log = listen_only, timestamps, log
+        self.clock_map = ClockMap()
         self.db = cantools.database.load_file(str(dbc))
         self.stats = CanStats()
         self.latest: dict[str, float] = {}
@@ -102,6 +123,8 @@ class CanBench:
         self._events: list[ControllerEvent] = []
         self._silent: dict[str, str] = {}
         self._faulted: dict[str, bool] = {}
+        self._to_log: list[can.Message] = []
+        self._log_synced = -math.inf
         now = clock()
         self._rx, self._tx = self._compile(signals, silent_cycles, now)
         self._tx_of = {key: tx for tx in self._tx.values() for key in tx.codec.names.values()}
@@ -136,6 +159,8 @@ class CanBench:
     def emergency_stop(self, source: int = sig.ESTOP_SOURCE_PC) -> None:
         """Send the emergency stop now and repeat it every cycle until `release_emergency_stop()`."""
         self.estop_active = True
+        tx = self._tx_of["estop.request"]
+        tx.origin, tx.cycles = self.clock() + tx.cycle_s, 0
         self._set({"estop.request": 1, "estop.source": source})
 
     def release_emergency_stop(self) -> None:
@@ -143,22 +168,51 @@ class CanBench:
         self._set({"estop.request": 0})
         self.estop_active = False
 
-    # -- receiving ---------------------------------------------------------------------------------
+    # -- the bus -----------------------------------------------------------------------------------
     def poll(self) -> list[CanSample]:
-        """Receive every waiting frame without blocking, watch the controllers, send what is due."""
+        """`send_due()`, then `receive()`."""
+        self.send_due()
+        return self.receive()
+
+    def send_due(self) -> None:
+        """Send every cyclic frame that fell due up to now, each stamped with its due time (not listen-only)."""
+        if self.listen_only:
+            return
+        now = self.clock()
+        for tx in self._tx.values():
+            if not tx.cycle_s or (tx is self._tx_of.get("estop.request") and not self.estop_active):
+                continue
+            if now - tx.next_due > MAX_CATCH_UP_S:
+                skipped = int((now - tx.next_due) // tx.cycle_s)
+                tx.cycles += skipped
+                self.stats.late_skipped += skipped
+            while tx.next_due <= now + 1e-9:
+                self._send(tx, min(tx.next_due, now))
+                tx.cycles += 1
+
+    def receive(self) -> list[CanSample]:
+        """Every waiting frame at its own time, decoded and watched; then the silence watchdog at now."""
+        now = self.clock()
+        frames = list(iter(lambda: self.bus.recv(timeout=0), None))
+        if self.log is not None:
+            self._to_log += frames
+        if self.timestamps == "interface":  # the whole batch first: its fastest frame shows the offset best
+            for msg in frames:
+                if msg.timestamp:
+                    self.clock_map.observe(msg.timestamp, now)
         samples = []
-        while (msg := self.bus.recv(timeout=0)) is not None:
-            sample = self.handle(msg, self.clock())
+        for msg in frames:
+            if not msg.is_rx:  # our own frame echoed by the interface: logged, not decoded
+                continue
+            sample = self.handle(msg, self._frame_time(msg, now))
             if sample is not None:
                 samples.append(sample)
-        now = self.clock()
         self._watch(now)
-        if not self.listen_only:
-            self._send_due(now)
+        self._flush_log()
         return samples
 
-    def handle(self, msg: can.Message, t_host: float) -> CanSample | None:
-        """Decode and watch one received frame; None (and a counter) for anything not decodable."""
+    def handle(self, msg: can.Message, t: float) -> CanSample | None:
+        """Decode and watch one received frame measured at run time `t`; None (and a counter) if not decodable."""
         stats = self.stats
         if msg.is_error_frame or msg.is_remote_frame:
             stats.error_frames += 1
@@ -176,16 +230,16 @@ class CanBench:
             stats.decode_errors += 1
             return None
         stats.frames_ok += 1
-        rx.last_seen = t_host
+        rx.last_seen = max(rx.last_seen, t)
         self.latest.update(values)
         if rx.alive_key is not None:
-            self._check_alive(rx, int(values[rx.alive_key]), t_host)
+            self._check_alive(rx, int(values[rx.alive_key]), t)
         if rx.controller == "estop":
-            self._event(t_host, "estop", "estop" if values.get("estop.request") else "estop_released",
+            self._event(t, "estop", "estop" if values.get("estop.request") else "estop_released",
                         f"source {values.get('estop.source')}")
         elif rx.fault_key or rx.state_key:
-            self._check_fault(rx, values, t_host)
-        return CanSample(t_host, rx.controller, rx.codec.message.name, values)
+            self._check_fault(rx, values, t)
+        return CanSample(t, rx.controller, rx.codec.message.name, values)
 
     def pop_events(self) -> list[ControllerEvent]:
         """Controller events since the last call, oldest first."""
@@ -193,10 +247,27 @@ class CanBench:
         return events
 
     def close(self) -> None:
-        """Shut the bus down."""
-        self.bus.shutdown()
+        """Shut the bus down and stop the log (it stays readable)."""
+        try:
+            self._flush_log()
+            self.bus.shutdown()
+        finally:
+            if self.log is not None:
+                log, self.log = self.log, None
+                log.stop()
 
     # -- internals ---------------------------------------------------------------------------------
+    def _frame_time(self, msg: can.Message, now: float) -> float:
+        if self.timestamps == "run":
+            return msg.timestamp
+        if self.timestamps == "interface" and msg.timestamp:
+            return min(self.clock_map.to_run(msg.timestamp), now)
+        return now
+
+    def _bus_time(self, t: float) -> float:
+        """A run time in the bus's time base (for the frames the PC sends, as logged)."""
+        return self.clock_map.to_device(t) if self.timestamps == "interface" else t
+
     def _compile(self, signals: Mapping[str, tuple[str, str]], silent_cycles: float,
                  now: float) -> tuple[dict[tuple[int, bool], _Rx], dict[str, _Tx]]:
         rx: dict[tuple[int, bool], _Rx] = {}
@@ -230,38 +301,55 @@ class CanBench:
         for tx in touched.values():
             self._send(tx, now)
 
-    def _send_due(self, now: float) -> None:
-        for tx in self._tx.values():
-            repeating = tx.cycle_s and (tx is not self._tx_of.get("estop.request") or self.estop_active)
-            if repeating and now >= tx.next_due:
-                self._send(tx, now)
-
-    def _send(self, tx: _Tx, now: float) -> None:
+    def _send(self, tx: _Tx, t: float) -> None:
         if tx.alive_key is not None:
             tx.values[tx.alive_key] = (int(tx.values[tx.alive_key]) + 1) % tx.alive_modulo
         message = tx.codec.message
+        msg = can.Message(timestamp=self._bus_time(t), arbitration_id=message.frame_id,
+                          data=tx.codec.encode(tx.values), is_extended_id=message.is_extended_frame, is_rx=False)
         try:
-            self.bus.send(can.Message(arbitration_id=message.frame_id, data=tx.codec.encode(tx.values),
-                                      is_extended_id=message.is_extended_frame))
+            self.bus.send(msg)
             self.stats.sent += 1
         except can.CanError:
             self.stats.send_errors += 1
-        tx.next_due = tx.next_due + tx.cycle_s if now - tx.next_due < tx.cycle_s else now + tx.cycle_s
+            return
+        if self.log is not None:
+            self._to_log.append(msg)
 
-    def _check_alive(self, rx: _Rx, alive: int, t_host: float) -> None:
+    def _flush_log(self) -> None:
+        if not self._to_log or self.log is None:
+            return
+        frames, self._to_log = sorted(self._to_log, key=_timestamp), []
+        try:
+            for msg in frames:
+                self.log.on_message_received(msg)
+            now = self.clock()
+            if now - self._log_synced >= LOG_SYNC_S:  # written containers leave the process: a kill keeps them
+                self._log_synced = now
+                file = getattr(self.log, "file", None)
+                if file is not None:
+                    file.flush()
+        except Exception as exc:  # noqa: BLE001 - any writer failure (OSError, ValueError on a closed file)
+            log, self.log = self.log, None
+            try:
+                log.stop()
+            except Exception:  # noqa: BLE001 - the log is already broken; the run stops on the error below
+                pass
+            raise CanLogError(f"CAN log cannot be written: {type(exc).__name__}: {exc}") from exc
+
+    def _check_alive(self, rx: _Rx, alive: int, t: float) -> None:
         if rx.last_alive is not None and alive != (rx.last_alive + 1) % rx.alive_modulo:
             self.stats.alive_errors += 1
-            self._event(t_host, rx.controller, "alive_error",
-                        f"{rx.codec.message.name}: {rx.last_alive} → {alive}")
+            self._event(t, rx.controller, "alive_error", f"{rx.codec.message.name}: {rx.last_alive} → {alive}")
         rx.last_alive = alive
 
-    def _check_fault(self, rx: _Rx, values: Mapping[str, float], t_host: float) -> None:
+    def _check_fault(self, rx: _Rx, values: Mapping[str, float], t: float) -> None:
         code = int(values.get(rx.fault_key, 0))
         state = values.get(rx.state_key)
         faulted = code != 0 or state == self.fault_state
         if faulted != self._faulted.get(rx.controller, False):
             self._faulted[rx.controller] = faulted
-            self._event(t_host, rx.controller, "fault" if faulted else "fault_cleared", f"state {state}, code {code}")
+            self._event(t, rx.controller, "fault" if faulted else "fault_cleared", f"state {state}, code {code}")
 
     def _watch(self, now: float) -> None:
         overdue: dict[str, str] = {}
@@ -280,8 +368,8 @@ class CanBench:
     def _timeout_of(self, message: str) -> float | None:
         return next(rx.timeout_s for rx in self._rx.values() if rx.codec.message.name == message)
 
-    def _event(self, t_host: float, controller: str, kind: EventKind, detail: str = "") -> None:
-        self._events.append(ControllerEvent(t_host, controller, kind, detail))
+    def _event(self, t: float, controller: str, kind: EventKind, detail: str = "") -> None:
+        self._events.append(ControllerEvent(t, controller, kind, detail))
 
     @property
     def silent(self) -> dict[str, str]:
@@ -292,3 +380,7 @@ class CanBench:
     def faulted(self) -> set[str]:
         """Controllers currently reporting a fault."""
         return {c for c, f in self._faulted.items() if f}
+
+
+def _timestamp(msg: can.Message) -> float:
+    return msg.timestamp

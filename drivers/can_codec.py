@@ -80,6 +80,25 @@ class MessageCodec:
         data = little.to_bytes(self.length, "little")
         return (int.from_bytes(data, "big") | big).to_bytes(self.length, "big") if big else data
 
+    def encode_array(self, columns: Mapping[str, "np.ndarray | float"], n: int) -> np.ndarray:
+        """Vectorised `encode` of n frames: key → column (or one value for all); an (n, length) uint8 array."""
+        if self._fallback:
+            rows = [{k: (v[i] if np.ndim(v) else v) for k, v in columns.items()} for i in range(n)]
+            return np.frombuffer(b"".join(self.encode(r) for r in rows), dtype=np.uint8).reshape(n, self.length)
+        little, big = np.zeros(n, dtype=np.uint64), np.zeros(n, dtype=np.uint64)
+        for (key, is_big, shift, mask, sign, scale, offset), (lo, hi) in zip(self._fields, self._limits):
+            value = np.broadcast_to(np.asarray(columns.get(key, 0), dtype=float), (n,))
+            raw = np.clip(np.round(value if scale is None else (value - offset) / scale), lo, hi).astype(np.int64)
+            field = (raw & mask).astype(np.uint64) << np.uint64(shift)
+            if is_big:
+                big |= field
+            else:
+                little |= field
+        data = little.astype("<u8").view(np.uint8).reshape(n, 8)[:, :self.length]
+        if self.length and big.any():
+            data = data | big.astype(">u8").view(np.uint8).reshape(n, 8)[:, 8 - self.length:]
+        return np.ascontiguousarray(data)
+
     def _field(self, s: cantools.database.Signal) -> tuple:
         if s.byte_order == "little_endian":
             is_big, shift = False, s.start

@@ -1,9 +1,11 @@
 """ClutchSensorNode gateway driver: COBS/CRC frames from the PC node's serial port → typed flywheel samples.
 
 Corrupt bytes never become numbers: chunks that fail COBS, length, CRC or version checks are counted and
-dropped. Sequence gaps (u16, wrapping; the node clock disambiguates multiple wraps) count lost frames;
-radio drop-outs (no frame for more than `dropout_periods` periods) are reported as events with their span,
-never filled in. A node that rebooted (clock went backwards or the NODE_RESET flag) is reported too.
+dropped, and reported as one `frame_errors` event per second with the counts (never one per frame).
+Sequence gaps (u16, wrapping; the node clock disambiguates multiple wraps) count lost frames; radio
+drop-outs (no frame for more than `dropout_periods` periods) are reported as a `dropout_start` and a
+`dropout_end` event with their span, never filled in. A node that rebooted (clock went backwards or the
+NODE_RESET flag) is reported too.
 """
 
 from __future__ import annotations
@@ -16,11 +18,14 @@ from typing import Any, Literal, Protocol
 import serial
 
 from drivers import cvd, node_frame
-from drivers.errors import ConnectionLost
+from drivers.errors import ConnectionLost, DriverConfigError, FrameError
 from drivers.node_frame import NodeFrame
+from drivers.timebase import ClockMap
 
 SensorStatus = Literal["ok", "open", "short", "range", "fault"]
 _MAX_CHUNK = 4 * node_frame.ENCODED_LEN
+ERROR_WINDOW_S = 1.0
+CorruptCounter = Literal["crc_errors", "malformed", "resyncs"]
 _OPEN_BITS = (node_frame.CH1_OPEN, node_frame.CH2_OPEN)
 _SHORT_BITS = (node_frame.CH1_SHORT, node_frame.CH2_SHORT)
 
@@ -42,7 +47,8 @@ class NodeSample:
 
     seq: int
     node_time_ms: int
-    t_host: float
+    t_host: float  # run-clock time the gateway received the frame
+    t: float  # run-clock time the node measured it: its own clock mapped onto the run clock (drivers/timebase.py)
     resistance_ohm: tuple[float | None, float | None]
     temperature_c: tuple[float | None, float | None]
     sensor_status: tuple[SensorStatus, SensorStatus]
@@ -54,13 +60,22 @@ class NodeSample:
 
 @dataclass(frozen=True, slots=True)
 class LinkEvent:
-    """A radio drop-out start/end or a node reboot; `span_s` is the gap between the frames around it (at end)."""
+    """A radio drop-out start/end, a node reboot, or the corrupt chunks of one counting window.
 
-    kind: Literal["dropout_start", "dropout_end", "node_reset"]
+    Drop-outs: `span_s` is the gap between the frames around it (at end). `frame_errors`: `span_s` is the
+    counting window (from its first corrupt chunk to the report, about `ERROR_WINDOW_S`), `lost_frames` the
+    chunks dropped in it as corrupt (`crc_errors` + `malformed`); `resyncs` counts the times the parser lost
+    frame sync in it (chunk before the first delimiter, or an over-long run without one).
+    """
+
+    kind: Literal["dropout_start", "dropout_end", "node_reset", "frame_errors"]
     t_host: float
     last_seq: int | None
     span_s: float | None = None
     lost_frames: int = 0
+    crc_errors: int = 0
+    malformed: int = 0
+    resyncs: int = 0
 
 
 @dataclass(slots=True)
@@ -75,6 +90,16 @@ class GatewayStats:
     dropouts: int = 0
     duplicates: int = 0
     node_resets: int = 0
+
+
+@dataclass(slots=True)
+class _ErrorWindow:
+    """Corrupt chunks counted since `t0`, reported together as one `frame_errors` event."""
+
+    t0: float
+    crc_errors: int = 0
+    malformed: int = 0
+    resyncs: int = 0
 
 
 class ClutchNodeGateway:
@@ -92,7 +117,10 @@ class ClutchNodeGateway:
         self._synced = False
         self._last: NodeFrame | None = None
         self._last_host = clock()
+        self.clock_map = ClockMap()  # the node's clock → run clock (anew after a node reboot)
+        self._node_s = 0.0  # the node's clock in s, unwrapped, at the newest accepted frame
         self._in_dropout = False
+        self._errors: _ErrorWindow | None = None
 
     @classmethod
     def open(cls, url: str, *, baudrate: int = 921600, **kwargs: Any) -> "ClutchNodeGateway":
@@ -105,7 +133,8 @@ class ClutchNodeGateway:
 
     def poll(self) -> list[NodeSample]:
         """Decode whatever bytes are waiting (never blocks) and check for radio silence."""
-        assert self.port is not None, "poll() needs a port; use feed() without one"
+        if self.port is None:
+            raise DriverConfigError("poll() needs a port; use feed() on a gateway without one")
         try:
             waiting = self.port.in_waiting
             data = self.port.read(waiting) if waiting else b""
@@ -128,21 +157,23 @@ class ClutchNodeGateway:
 
     def feed(self, data: bytes) -> list[NodeSample]:
         """Parse a piece of the byte stream (any split is fine) and return the samples it completed."""
+        now = self.clock()
         chunks = (self._buf + data).split(node_frame.DELIMITER)
         self._buf = chunks.pop()
         if len(self._buf) > _MAX_CHUNK:
             self._buf, self._synced = b"", False
-            self.stats.resyncs += 1
-        frames: list[tuple[NodeFrame, float]] = []
-        now = self.clock()
+            self._count_corrupt("resyncs", now)
+        frames: list[tuple[NodeFrame, float, float, ClockMap]] = []
         for chunk in chunks:
-            frame = self._decode(chunk)
+            frame = self._decode(chunk, now)
             if frame is not None and self._accept(frame, now):
-                frames.append((frame, now))
+                frames.append((frame, now, self._node_s, self.clock_map))
+                self.clock_map.observe(self._node_s, now)
+        self._report_errors(now)
         return self._samples(frames)
 
     def pop_events(self) -> list[LinkEvent]:
-        """Link events since the last call, oldest first."""
+        """Link events since the last call, in the order they were noticed."""
         events, self._events = self._events, []
         return events
 
@@ -150,13 +181,13 @@ class ClutchNodeGateway:
         """Report a drop-out once no frame arrived for longer than `dropout_periods` periods."""
         now = self.clock()
         if not self._in_dropout and now - self._last_host > self.dropout_s:
-            self._in_dropout = True
-            self.stats.dropouts += 1
-            self._events.append(LinkEvent("dropout_start", now, self._last.seq if self._last else None))
+            self._start_dropout(now)
+        self._report_errors(now)
 
     def reconnect(self) -> None:
         """Reopen the port; the partial frame in the buffer is dropped and the parser resynchronises."""
-        assert self.port is not None
+        if self.port is None:
+            raise DriverConfigError("reconnect() needs a port")
         try:
             self.port.close()
             self.port.open()
@@ -165,62 +196,101 @@ class ClutchNodeGateway:
         self._buf, self._synced = b"", False
 
     def close(self) -> None:
-        """Close the port."""
-        if self.port is not None:
+        """Close the port; corrupt chunks of the running counting window are reported (`pop_events`)."""
+        self._report_errors(self.clock(), final=True)
+        if self.port is None:
+            return
+        try:
             self.port.close()
+        except (serial.SerialException, OSError) as exc:
+            raise ConnectionLost(f"close failed: {exc}") from exc
 
-    def _decode(self, chunk: bytes) -> NodeFrame | None:
+    def _decode(self, chunk: bytes, now: float) -> NodeFrame | None:
         synced, self._synced = self._synced, True
         if not chunk:
             return None
         try:
             return node_frame.decode(chunk)
-        except node_frame.FrameError as exc:
+        except FrameError as exc:
             if not synced:
-                self.stats.resyncs += 1
+                self._count_corrupt("resyncs", now)
             elif isinstance(exc, node_frame.CrcMismatch):
-                self.stats.crc_errors += 1
+                self._count_corrupt("crc_errors", now)
             else:
-                self.stats.malformed += 1
+                self._count_corrupt("malformed", now)
             return None
 
+    def _count_corrupt(self, counter: CorruptCounter, now: float) -> None:
+        """Count a corrupt chunk in the gateway's counters and in the running counting window."""
+        setattr(self.stats, counter, getattr(self.stats, counter) + 1)
+        if self._errors is None:
+            self._errors = _ErrorWindow(now)
+        setattr(self._errors, counter, getattr(self._errors, counter) + 1)
+
+    def _report_errors(self, now: float, final: bool = False) -> None:
+        """One `frame_errors` event for the window once it is `ERROR_WINDOW_S` old (or `final`)."""
+        window = self._errors
+        if window is None or (not final and now - window.t0 < ERROR_WINDOW_S):
+            return
+        self._events.append(LinkEvent(
+            "frame_errors", now, self._last.seq if self._last else None, now - window.t0,
+            window.crc_errors + window.malformed, window.crc_errors, window.malformed, window.resyncs))
+        self._errors = None
+
+    def _start_dropout(self, t: float) -> None:
+        """The one place a drop-out begins, so that every `dropout_end` has exactly one `dropout_start`."""
+        self._in_dropout = True
+        self.stats.dropouts += 1
+        self._events.append(LinkEvent("dropout_start", t, self._last.seq if self._last else None))
+
     def _accept(self, frame: NodeFrame, now: float) -> bool:
-        """Sequence bookkeeping; False for a duplicate. Emits reset and drop-out-end events."""
+        """Sequence bookkeeping; False for a duplicate. Emits reset and drop-out events.
+
+        A gap longer than the drop-out limit that fell between two polls was never seen as silence by
+        `check_silence` (the host polls slower than the limit, e.g. 1 s ticks against 0.25 s): its
+        `dropout_start` is emitted here, dated when the silence passed the limit, before its end.
+        """
         last, stats = self._last, self.stats
         host_span = now - self._last_host
-        lost, span = 0, host_span
+        lost, span, reset = 0, host_span, False
         if last is not None:
             seq_gap = (frame.seq - last.seq) & 0xFFFF
             node_dt = (frame.node_time_ms - last.node_time_ms) & 0xFFFFFFFF
             if seq_gap == 0 and node_dt == 0:
                 stats.duplicates += 1
                 return False
-            if frame.flags & node_frame.NODE_RESET or node_dt >= 1 << 31:
+            reset = bool(frame.flags & node_frame.NODE_RESET) or node_dt >= 1 << 31
+            if not reset:
+                self._node_s += node_dt / 1000
+            if reset:
                 stats.node_resets += 1
                 lost = max(0, round(host_span / self.period_s) - 1)
-                self._events.append(LinkEvent("node_reset", now, last.seq, host_span, lost))
             else:
                 wraps = max(0, round((node_dt / (1000 * self.period_s) - seq_gap) / 65536))
                 lost = seq_gap - 1 + 65536 * wraps
                 span = node_dt / 1000
         stats.lost += lost
-        if self._in_dropout or (last is not None and span > self.dropout_s):
-            if not self._in_dropout:
-                stats.dropouts += 1
+        if last is not None and span > self.dropout_s and not self._in_dropout:
+            self._start_dropout(min(now, max(self._last_host, now - span) + self.dropout_s))
+        if reset or last is None:  # a new node clock: counted from this frame, mapped afresh
+            self._node_s, self.clock_map = frame.node_time_ms / 1000, ClockMap()
+        if reset:
+            self._events.append(LinkEvent("node_reset", now, last.seq if last else None, host_span, lost))
+        if self._in_dropout:
             self._events.append(LinkEvent("dropout_end", now, last.seq if last else None, span, lost))
             self._in_dropout = False
         stats.frames_ok += 1
         self._last, self._last_host = frame, now
         return True
 
-    def _samples(self, frames: list[tuple[NodeFrame, float]]) -> list[NodeSample]:
+    def _samples(self, frames: list[tuple[NodeFrame, float, float, ClockMap]]) -> list[NodeSample]:
         samples = []
-        for f, t_host in frames:
+        for f, t_host, node_s, clock_map in frames:
             ohm = (f.r_mohm[0] / 1000.0, f.r_mohm[1] / 1000.0)
             deg = (cvd.temperature(ohm[0], self.coefficients[0]), cvd.temperature(ohm[1], self.coefficients[1]))
             s1, s2 = self._status(f, 0, ohm[0], deg[0]), self._status(f, 1, ohm[1], deg[1])
             samples.append(NodeSample(
-                f.seq, f.node_time_ms, t_host,
+                f.seq, f.node_time_ms, t_host, min(clock_map.to_run(node_s), t_host),
                 (ohm[0] if s1 in ("ok", "range") else None, ohm[1] if s2 in ("ok", "range") else None),
                 (deg[0] if s1 == "ok" else None, deg[1] if s2 == "ok" else None),
                 (s1, s2), f.supply_mv, f.rssi_dbm, f.lqi, f.flags))

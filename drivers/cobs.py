@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-
-class CobsError(ValueError):
-    """The bytes are not a valid COBS encoding."""
+from drivers.errors import CobsError
 
 
 def encode(data: bytes) -> bytes:

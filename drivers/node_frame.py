@@ -10,6 +10,7 @@ import struct
 from dataclasses import dataclass
 
 from drivers import cobs
+from drivers.errors import CrcMismatch, MalformedFrame
 
 VERSION = 1
 DELIMITER = b"\x00"
@@ -25,18 +26,6 @@ CH2_SHORT = 0x08
 LOW_SUPPLY = 0x10
 ADC_FAULT = 0x20
 NODE_RESET = 0x40
-
-
-class FrameError(ValueError):
-    """A delimited chunk that is not a valid frame; never becomes a reading."""
-
-
-class MalformedFrame(FrameError):
-    """Bad COBS, wrong length or unknown version."""
-
-
-class CrcMismatch(FrameError):
-    """Well-formed but the CRC does not match: corrupted on the way."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,7 @@ from typing import Any, Literal, Protocol
 import serial
 
 from drivers import cvd, scpi
-from drivers.errors import ConnectionLost, DeviceTimeout, InstrumentError
+from drivers.errors import ConnectionLost, DeviceTimeout, DriverConfigError, InstrumentError
 
 Mode = Literal["fres", "frtd"]
 _MAX_ERRORS_DRAINED = 32
@@ -64,9 +64,9 @@ class Pt1000Scanner:
                  coefficients: Mapping[int, cvd.CvdCoefficients] | None = None,
                  clock: Callable[[], float] = time.monotonic, short_ohm: float = 150.0) -> None:
         if mode not in ("fres", "frtd"):
-            raise ValueError(f"mode must be 'fres' or 'frtd', not {mode!r}")
+            raise DriverConfigError(f"mode must be 'fres' or 'frtd', not {mode!r}")
         if not channels:
-            raise ValueError("at least one channel is needed")
+            raise DriverConfigError("at least one channel is needed")
         self.port, self.mode, self.clock, self.short_ohm = port, mode, clock, short_ohm
         self.channels = sorted(set(channels))
         self.coefficients = {ch: (coefficients or {}).get(ch, cvd.PT1000) for ch in self.channels}
@@ -133,10 +133,15 @@ class Pt1000Scanner:
 
     def close(self) -> None:
         """Close the transport."""
-        self.port.close()
+        try:
+            self.port.close()
+        except (serial.SerialException, OSError) as exc:
+            raise ConnectionLost(f"close failed: {exc}") from exc
 
     def convert(self, channel: int, value: float, t_host: float) -> Pt1000Reading:
         """Turn one raw instrument value (Ω in fres mode, °C in frtd mode) into a reading with its status."""
+        if channel not in self.coefficients:
+            raise DriverConfigError(f"channel {channel} is not in the scan list {self.channels}")
         if not math.isfinite(value) or abs(value) >= scpi.OVERLOAD:
             return Pt1000Reading(channel, t_host, None, None, "open")
         if self.mode == "fres":

@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
-from protocols.schedule import OPERATORS, PHASES, Step, duration_s
+from protocols.schedule import CONDITION_CHANNELS, OPERATORS, PHASES, Step, duration_s
 
 RPM = math.pi / 30.0
 ACTIONS = ("wait", "abort")
@@ -121,6 +121,8 @@ def check_schedule(steps: Sequence[Step], limits: BenchLimits) -> list[str]:
                 problems.append(f"{where}: load torque {s.load_torque_nm:g} N*m cannot hold the output against "
                                 f"{s.clutch_torque_nm:g} N*m clutch torque")
         for c in s.until:
+            if c.channel not in CONDITION_CHANNELS:
+                problems.append(f"{where}: condition channel {c.channel!r} not one of {', '.join(CONDITION_CHANNELS)}")
             if c.op not in OPERATORS:
                 problems.append(f"{where}: condition operator {c.op!r} not one of {', '.join(OPERATORS)}")
             limit = {"T_flywheel": limits.max_flywheel_c, "T_air": limits.max_air_c}.get(c.channel)

@@ -11,6 +11,8 @@ from dataclasses import asdict, dataclass, field
 
 #: Condition operators: a channel reaching a value, or settling at it.
 OPERATORS = (">=", "<=", "steady")
+#: Channels a condition may watch: what the runner knows while the bench runs (benchlab.runner.devices.BenchStatus).
+CONDITION_CHANNELS = ("T_flywheel", "T_air")
 
 
 @dataclass(frozen=True)

@@ -34,13 +34,10 @@ from sim_bench.emulators.clutch_node import ClutchNodeEmulator
 from sim_bench.emulators.drivetrain import DrivetrainActuals
 from sim_bench.emulators.providers import NodeInputs
 from sim_bench.emulators.scpi_instrument import ScpiInstrumentEmulator
+from sim_bench.emulators.sim_can_bus import SimCanBus
 from sim_bench.plant import Effect, ThermalPlant, custom_source
 from sim_bench.virtual_run import AmbientConfig, SensorConfig
 
-try:  # the fast in-process bus if the emulator package has it, else python-can's virtual bus
-    from sim_bench.emulators.sim_can_bus import SimCanBus
-except ImportError:  # pragma: no cover
-    SimCanBus = None  # type: ignore[assignment]
 
 _ids = itertools.count()
 DMM_CHANNELS = {101: "T_air", 102: "T_housing", 103: "T_ambient"}
@@ -102,6 +99,7 @@ class SimPhysics:
         self.fault_heat = {"F": 0.0, "A": 0.0}
         self.stuck: tuple[float, float] | None = None  # (clutch torque, until t): clutch clamped, output braked
         self._setpoints = (0.0, False, 0.0, 0.0)
+        self.t_setpoints = config.t0  # set-points given now hold from this time (the controllers' last advance)
         self.computed_s = 0.0
         self.solver_calls = 0
 
@@ -156,8 +154,8 @@ class SimPhysics:
         return cols, temps, 0
 
     def _cut(self, t: float) -> None:
-        """Set-points change at t: drop everything computed from t on, restore the state there."""
-        k = self._index(t)
+        """Set-points change at t: drop everything computed from the first grid point at or after t, restore the state there."""
+        k = int(math.ceil(t / self.dt - 1e-6))
         if k > self._end:
             self._ensure(k - 1)
         if k >= self._end:
@@ -177,7 +175,7 @@ class SimPhysics:
         new = (float(engine), bool(clamped), float(torque), float(load))
         if new == self._setpoints:
             return
-        t = self.clock()
+        t = self.t_setpoints
         self._cut(t)
         self._setpoints = new
         self._apply_stuck(t)
@@ -225,21 +223,32 @@ class SimPhysics:
             self.stuck = None
             self._apply_stuck(until)
         self._ensure(self._index(t))
+        self.t_setpoints = t
 
-    def actuals(self) -> DrivetrainActuals:
-        cols, temps, i = self._at(self.clock())
-        noise = temps["_noise_speed"][i]
-        engine = cols["engine_speed"][i] + noise[0]
-        shaft = max(0.0, cols["clutch_speed"][i] + noise[1])
-        torque = abs(cols["clutch_torque"][i])
-        clamped = cols["clutch_state"][i] >= 0.5
-        slipping = clamped and cols["friction_power"][i] > 0.0
-        clamp = CLAMP_SLIPPING if slipping else (CLAMP_CLAMPED if clamped else CLAMP_OPEN)
-        torque_meas = max(0.0, torque + temps["_noise_torque"][i]) if torque > 0 else 0.0
-        _, _, sp_torque, _ = self._setpoints
-        position = 0.0 if clamped else self.cfg.position_stroke_mm
-        return DrivetrainActuals(engine, cols["clutch_torque"][i], torque_meas, position, clamp,
-                                 shaft / self.gear, cols["load_torque"][i])
+    def actuals_at(self, times: np.ndarray) -> DrivetrainActuals:
+        """What the controllers measure at each of `times`: the drivetrain's values plus sensor noise."""
+        n = len(times)
+        engine, shaft, torque, friction, clamped, load = (np.empty(n) for _ in range(6))
+        noise_speed, noise_torque = np.empty((n, 2)), np.empty(n)
+        k = np.floor(np.asarray(times) / self.dt + 1e-6).astype(np.int64)
+        self._ensure(int(k[-1]))
+        for k0, cols, temps in self._chunks:
+            sel = (k >= k0) & (k < k0 + len(cols["engine_speed"]))
+            if not sel.any():
+                continue
+            i = k[sel] - k0
+            engine[sel], shaft[sel] = cols["engine_speed"][i], cols["clutch_speed"][i]
+            torque[sel], friction[sel] = cols["clutch_torque"][i], cols["friction_power"][i]
+            clamped[sel], load[sel] = cols["clutch_state"][i], cols["load_torque"][i]
+            noise_speed[sel], noise_torque[sel] = temps["_noise_speed"][i], temps["_noise_torque"][i]
+        is_clamped = clamped >= 0.5
+        clamp = np.where(is_clamped & (friction > 0.0), CLAMP_SLIPPING, np.where(is_clamped, CLAMP_CLAMPED, CLAMP_OPEN))
+        torque_abs = np.abs(torque)
+        torque_meas = np.where(torque_abs > 0, np.maximum(0.0, torque_abs + noise_torque), 0.0)
+        shaft_meas = np.maximum(0.0, shaft + noise_speed[:, 1])
+        position = np.where(is_clamped, 0.0, self.cfg.position_stroke_mm)
+        return DrivetrainActuals(engine + noise_speed[:, 0], torque, torque_meas, position, clamp.astype(float),
+                                 shaft_meas / self.gear, load)
 
     # -- ResistanceProvider (DMM) -----------------------------------------------------------------------
     def get_resistances(self) -> Mapping[int, float]:
@@ -275,13 +284,9 @@ class SimBench:
         self.node = ClutchNodeEmulator(self.physics, period_s=config.node_period_s, clock=self.clock)
         registry.register(f"{name}-dmm", self.dmm)
         registry.register(f"{name}-node", self.node)
-        if SimCanBus is not None:
-            self.emulator_bus = SimCanBus(f"{name}-can")
-            self.driver_bus = SimCanBus(f"{name}-can")
-        else:  # pragma: no cover
-            import can
-            self.emulator_bus = can.Bus(interface="virtual", channel=f"{name}-can")
-            self.driver_bus = can.Bus(interface="virtual", channel=f"{name}-can")
+        # the drivers' bus and the controllers' bus: one in-process channel stamped with the simulated clock
+        self.emulator_bus = SimCanBus(f"{name}-can", clock=self.clock)
+        self.driver_bus = SimCanBus(f"{name}-can", clock=self.clock)
         self.can = CanBenchEmulator(self.emulator_bus, self.physics, clock=self.clock)
         s = config.sensors
         self._dropout_rate = s.dropouts_per_hour / 3600.0 if config.dropouts else 0.0
@@ -299,6 +304,7 @@ class SimBench:
     def service(self) -> None:
         """Before the drivers poll: start due radio drop-outs, let the controllers take commands and report."""
         now = self.clock()
+        self.can.poll()  # first: the controllers take the commands sent since the last poll at their times
         while self.faults and now >= self.faults[0].at_s:
             fault = self.faults.pop(0)
             fault.apply(self)
@@ -308,7 +314,6 @@ class SimBench:
             length = min(float(self.physics.rng_dropout.exponential(mean)), MAX_DROPOUT_MEANS * mean)
             self.node.radio_silence(max(length, self.cfg.node_period_s) - (now - self._next_dropout))
             self._next_dropout = self._draw_next(self._next_dropout)
-        self.can.poll()
 
     def close(self) -> None:
         registry.unregister(f"{self.name}-dmm")

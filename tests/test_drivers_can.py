@@ -75,20 +75,60 @@ def test_command_frames_table(buses) -> None:
         assert sorted(frames(ctrl)) == sorted((i, bytes.fromhex(h)) for i, h in expected)
 
 
-def test_cyclic_sending(buses) -> None:
-    pc, ctrl = buses
-    clock = ManualClock()
-    bench = CanBench(pc, clock=clock)
+def test_cyclic_sending_every_frame_at_its_due_time() -> None:
+    name = f"cyc{next(_chan)}"
+    clock = ManualClock(5.0)
+    pc, ctrl = SimCanBus(name, clock=clock), SimCanBus(name, clock=clock)
+    bench = CanBench(pc, clock=clock, timestamps="run")
     bench.emergency_stop()
-    frames(ctrl)
-    for _ in range(10):
+    for _ in range(100):  # polled every 10 ms for 1 s
         clock.advance(0.01)
         bench.poll()
-    ids = [i for i, _ in frames(ctrl)]
-    assert ids.count(0x100) == ids.count(0x110) == ids.count(0x120) == 10
-    assert ids.count(0x010) in (4, 5) and ids.count(0x710) == 1  # 20 ms and 100 ms cycles (float time)
-    alive = [d[7] >> 4 for i, d in frames_after(bench, ctrl, clock, 20) if i == 0x100]
+    polled = list(iter(lambda: ctrl.recv(timeout=0), None))
+    cycle = {m.frame_id: m.cycle_time / 1000 for m in DB.messages}
+    for ident in (0x100, 0x110, 0x120, 0x710):  # due at 5 s, one cycle later, ... up to 6 s
+        stamps = [m.timestamp for m in polled if m.arbitration_id == ident]
+        assert stamps == pytest.approx(5.0 + np.arange(round(1 / cycle[ident]) + 1) * cycle[ident])
+    estop = [m.timestamp for m in polled if m.arbitration_id == 0x010]
+    assert estop == pytest.approx(5.0 + np.arange(51) * 0.02)  # sent at once, then repeated every 20 ms
+    alive = [m.data[7] >> 4 for m in polled if m.arbitration_id == 0x100]
     assert all((b - a) % 16 == 1 for a, b in zip(alive, alive[1:]))
+    pc.shutdown()
+    ctrl.shutdown()
+
+
+def test_one_late_poll_sends_the_same_frames_at_their_due_times() -> None:
+    stamps = []
+    for polls in (100, 1):
+        name = f"late{next(_chan)}"
+        clock = ManualClock(5.0)
+        pc, ctrl = SimCanBus(name, clock=clock), SimCanBus(name, clock=clock)
+        bench = CanBench(pc, clock=clock, timestamps="run")
+        for _ in range(polls):
+            clock.advance(1.0 / polls)
+            bench.poll()
+        stamps.append(sorted((m.arbitration_id, round(m.timestamp, 9)) for m in iter(lambda: ctrl.recv(timeout=0), None)))
+        pc.shutdown()
+        ctrl.shutdown()
+    assert stamps[0] == stamps[1] and len(stamps[0]) == 4 * 11
+
+
+def test_interface_time_stamps_are_mapped_onto_the_run_clock() -> None:
+    """Frames keep the time the interface stamped them, whatever the poll time; the offset is the fastest delivery."""
+    name = f"ts{next(_chan)}"
+    run_clock = ManualClock(100.0)
+    pc, ctrl = SimCanBus(name), SimCanBus(name)
+    bench = CanBench(pc, clock=run_clock, listen_only=True, timestamps="interface")
+    epoch = 1.7e9  # the interface's own time base, 1.7e9 - 100 s ahead of the run clock
+    sent = [(run_clock() + 0.01 * i) for i in range(50)]
+    for t in sent:
+        ctrl.send(can.Message(timestamp=t - 100.0 + epoch, arbitration_id=0x101, data=bytes(8), is_extended_id=False))
+    run_clock.advance(0.6)  # polled late: the frames waited up to 0.6 s in the queue
+    times = [s.t for s in bench.poll()]
+    assert times == pytest.approx([t + 0.6 - 0.49 for t in sent])  # shifted by the smallest delivery delay only
+    assert np.diff(times) == pytest.approx(np.full(49, 0.01), abs=1e-6)  # float64 at 1.7e9 s: 0.2 µs
+    pc.shutdown()
+    ctrl.shutdown()
 
 
 def frames_after(bench: CanBench, bus: can.BusABC, clock: ManualClock, steps: int) -> list[tuple[int, bytes]]:
@@ -102,7 +142,7 @@ def frames_after(bench: CanBench, bus: can.BusABC, clock: ManualClock, steps: in
 
 def test_decode_table(buses) -> None:
     pc, ctrl = buses
-    bench = CanBench(pc, clock=lambda: 3.0, listen_only=True)
+    bench = CanBench(pc, clock=lambda: 3.0, listen_only=True, timestamps="receive")
     table = [
         ((0x101, "b80bc201020000a0"), "drive", {"drive.speed": 1500.0, "drive.torque": 45.0, "drive.state": 2,
                                                 "drive.fault_code": 0, "drive.alive": 10}),
@@ -114,7 +154,7 @@ def test_decode_table(buses) -> None:
     for (ident, data), controller, values in table:
         ctrl.send(can.Message(arbitration_id=ident, data=bytes.fromhex(data), is_extended_id=False))
         (s,) = bench.poll()
-        assert (s.controller, s.t_host) == (controller, 3.0)
+        assert (s.controller, s.t) == (controller, 3.0)
         assert s.values == pytest.approx(values)
     assert bench.latest["clutch.position"] == pytest.approx(3.2)
 
@@ -165,8 +205,8 @@ def test_fuzz_driver_any_frame(ident: int, data: bytes, extended: bool) -> None:
 def loop():
     name = f"loop{next(_chan)}"
     clock = ManualClock()
-    pc, ctrl = SimCanBus(name), SimCanBus(name)
-    emu, bench = CanBenchEmulator(ctrl, clock=clock), CanBench(pc, clock=clock)
+    pc, ctrl = SimCanBus(name, clock=clock), SimCanBus(name, clock=clock)
+    emu, bench = CanBenchEmulator(ctrl, clock=clock), CanBench(pc, clock=clock, timestamps="run")
     yield clock, emu, bench
     pc.shutdown()
     ctrl.shutdown()
@@ -191,7 +231,8 @@ def test_set_points_are_tracked(loop) -> None:
     assert latest["drive.speed"] == pytest.approx(1500, abs=1) and latest["clutch.torque"] == pytest.approx(45, abs=0.1)
     assert latest["load.torque"] == pytest.approx(30, abs=0.1) and latest["load.speed"] > 0
     assert latest["drive.state"] == sig.STATE_RUNNING and latest["clutch.clamp_state"] == sig.CLAMP_SLIPPING
-    assert len(out) == 1500 + 150 and bench.stats.alive_errors == 0 and bench.pop_events() == []
+    assert len(out) == 3 * 501 + 3 * 51  # every status frame (10 ms) and heartbeat (100 ms) due in [0, 5] s
+    assert bench.stats.alive_errors == 0 and bench.pop_events() == []
     assert emu.stats.malformed == 0
 
 
@@ -201,7 +242,7 @@ def test_silent_controller_event_and_back(loop) -> None:
     emu.silence("clutch")
     step(clock, emu, bench, 0.2)
     (ev,) = bench.pop_events()
-    assert (ev.controller, ev.kind) == ("clutch", "silent") and 0.05 < ev.t_host - 0.5 <= 0.07
+    assert (ev.controller, ev.kind) == ("clutch", "silent") and 0.05 < ev.t - 0.5 <= 0.07
     emu.silence("clutch", False)
     step(clock, emu, bench, 1.0)
     assert [(e.controller, e.kind) for e in bench.pop_events()] == [("clutch", "back")]
@@ -244,7 +285,7 @@ def test_command_timeout_fault(loop) -> None:
     clock, emu, bench = loop
     bench.set_drive_speed(1000)
     step(clock, emu, bench, 0.5)
-    for _ in range(30):  # the PC stops sending; the controller notices
+    for _ in range(40):  # the PC stops sending; after 3 command cycles (0.3 s) the controller notices
         clock.advance(0.01)
         emu.poll()
     assert emu.state("drive") == (sig.STATE_FAULT, sig.FAULT_COMMAND_TIMEOUT)

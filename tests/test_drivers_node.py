@@ -2,6 +2,8 @@
 
 import itertools
 import math
+import random
+from contextlib import nullcontext
 
 import pytest
 from hypothesis import given, settings
@@ -9,7 +11,7 @@ from hypothesis import strategies as st
 
 from drivers import cobs, node_frame
 from drivers.clutch_node import ClutchNodeGateway
-from drivers.errors import ConnectionLost
+from drivers.errors import ConnectionLost, DriverConfigError, DriverError, FrameError
 from drivers.node_frame import NodeFrame
 from sim_bench.emulators import ClutchNodeEmulator, ConstantNodeInputs, ManualClock, NodeInputs, ScriptedSerial, registry
 
@@ -79,8 +81,9 @@ def test_multiple_wraps_use_node_clock() -> None:
     g.feed(node_frame.encode(frame(10, t_ms=0)))
     g.feed(node_frame.encode(frame(20, t_ms=(65536 + 10) * 10)))  # one full wrap plus 10 frames
     assert g.stats.lost == 65536 + 9
-    (e,) = g.pop_events()
-    assert e.kind == "dropout_end" and e.span_s == pytest.approx(655.46) and e.lost_frames == 65545
+    start, end = g.pop_events()  # the gap arrived in one piece: its start is reported with its end
+    assert start.kind == "dropout_start" and start.last_seq == 10
+    assert end.kind == "dropout_end" and end.span_s == pytest.approx(655.46) and end.lost_frames == 65545
 
 
 def test_duplicate_dropped() -> None:
@@ -241,6 +244,123 @@ def test_disconnect_and_reconnect(bench) -> None:
     g.reconnect()
     run(clock, g, 0.5)
     assert g.stats.frames_ok == emu.frames_sent and g.stats.lost == 0
+
+
+def test_dropout_between_two_polls_reports_start_and_end(bench) -> None:
+    """Polled every 1 s (the simulated bench's slow tick), a 0.6 s silence is never seen as silence at a
+    poll; the frames around it show it. It used to give a `dropout_end` without a `dropout_start`."""
+    clock, emu, g = bench
+    run(clock, g, 1.21)
+    emu.radio_silence(0.6)  # frames 101.25 … 101.80 s lost
+    out = run(clock, g, 2.0, step=1.0)
+    start, end = g.pop_events()
+    assert (start.kind, end.kind) == ("dropout_start", "dropout_end") and start.last_seq == end.last_seq == 24
+    assert start.t_host == pytest.approx(101.81) and end.t_host == pytest.approx(102.21)  # dated when it began
+    assert end.span_s == pytest.approx(0.65) and end.lost_frames == 12
+    assert g.stats.dropouts == 1 and g.stats.lost == emu.frames_suppressed == 12 and out[0].seq == 37
+
+
+def test_corrupt_frames_are_one_event_per_second(bench) -> None:
+    clock, emu, g = bench
+    run(clock, g, 1.0)
+    for how in ["flip"] * 30 + ["truncate"] * 10:  # every other frame for 4 s, polled every 10 ms
+        emu.corrupt_next(how)
+        run(clock, g, 0.1)
+    events = g.pop_events()
+    assert len(events) == 3 and all(b.t_host - a.t_host >= 1.0 for a, b in zip(events, events[1:]))
+    g.close()
+    events += g.pop_events()  # close() reports the window still running
+    assert {e.kind for e in events} == {"frame_errors"} and len(events) == 4
+    assert sum(e.crc_errors for e in events) == g.stats.crc_errors == 30
+    assert sum(e.malformed for e in events) == g.stats.malformed == 10
+    assert sum(e.lost_frames for e in events) == 40 and all(e.span_s < 1.0 + 0.011 for e in events)
+
+
+def _random_faults(rng: random.Random, clock: ManualClock, emu: ClutchNodeEmulator) -> None:
+    """One fault of the radio link or the node, as the bench meets them."""
+    fault = rng.choice(["silence", "silence", "silence", "corrupt", "corrupt", "noise", "restart", "power"])
+    if fault == "silence":
+        emu.radio_silence(rng.choice([rng.uniform(0.05, 0.3), rng.uniform(0.2, 1.2), rng.expovariate(1 / 2.0)]))
+    elif fault == "corrupt":
+        emu.corrupt_next(rng.choice(["flip", "truncate", "garbage"]), count=rng.randint(1, 30))
+    elif fault == "noise":
+        emu.inject_bytes(rng.randbytes(rng.randint(1, 300)))
+    elif fault == "restart":
+        emu.restart()
+    else:
+        emu.power_loss(rng.uniform(0.1, 3.0))
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_long_faulty_stream_dropouts_pair_up(bench, seed: int) -> None:
+    """An hour of random drop-outs, corruptions, noise, reboots and unplugged ports, polled at random
+    intervals (10 ms to 1.2 s): every dropout_end follows exactly one dropout_start, and the per-second
+    frame_errors events add up to the gateway's counters."""
+    clock, emu, g = bench
+    rng = random.Random(seed)
+    events, next_fault, unplugged_until = [], clock() + 5.0, -math.inf
+    while clock() < 100.0 + 3600.0:
+        clock.advance(rng.choice([0.01, 0.05, 0.1, 0.2, rng.uniform(0.01, 1.2)]))
+        if clock() >= next_fault:
+            if rng.random() < 0.05:
+                emu.connected, unplugged_until = False, clock() + rng.uniform(0.1, 5.0)
+            else:
+                _random_faults(rng, clock, emu)
+            next_fault = clock() + rng.expovariate(1 / 8.0)
+        if not emu.connected and clock() >= unplugged_until:
+            emu.connected = True
+        try:
+            g.poll()
+        except ConnectionLost:  # what the runner does: reconnect, which fails while the cable is out
+            try:
+                g.reconnect()
+            except ConnectionLost:
+                pass
+        events += g.pop_events()
+    errors = [e for e in events if e.kind == "frame_errors"]
+    assert all(b.t_host - a.t_host >= 1.0 for a, b in zip(errors, errors[1:]))
+    g.close()
+    events += g.pop_events()
+    in_dropout, starts, ends = False, 0, 0
+    for e in events:
+        if e.kind == "dropout_start":
+            assert not in_dropout, e
+            in_dropout, starts = True, starts + 1
+        elif e.kind == "dropout_end":
+            assert in_dropout, e
+            in_dropout, ends = False, ends + 1
+    assert starts == g.stats.dropouts and ends in (starts, starts - 1) and starts >= 100
+    errors = [e for e in events if e.kind == "frame_errors"]
+    for counter in ("crc_errors", "malformed", "resyncs"):
+        assert sum(getattr(e, counter) for e in errors) == getattr(g.stats, counter)
+    assert 0 < len(errors) < g.stats.crc_errors + g.stats.malformed
+
+
+def test_public_failures_are_driver_errors(bench) -> None:
+    """Each way the gateway fails raises its own DriverError subclass, never a bare OSError or AssertionError."""
+    clock, emu, g = bench
+    port_that_will_not_close = ScriptedSerial([], close_error=OSError(5, "Input/output error"))
+    cases = [
+        (ClutchNodeGateway.open, ("nonsense://x",), ConnectionLost, False),
+        (gateway().poll, (), DriverConfigError, False),
+        (gateway().reconnect, (), DriverConfigError, False),
+        (g.poll, (), ConnectionLost, True),
+        (g.reconnect, (), ConnectionLost, True),
+        (ClutchNodeGateway(port_that_will_not_close, clock=clock).close, (), ConnectionLost, False),
+    ]
+    for action, args, expected, unplug in cases:
+        with pytest.raises(DriverError) as exc, registry.unplugged(emu) if unplug else nullcontext():
+            action(*args)
+        assert type(exc.value) is expected, (action, exc.value)
+
+
+def test_frame_and_cobs_errors_are_driver_errors() -> None:
+    for bad in (b"", b"\x05\x01", EXAMPLE_WIRE[:-2] + b"\x01", EXAMPLE_WIRE[:5] + b"\x77" + EXAMPLE_WIRE[6:-1]):
+        with pytest.raises(FrameError):
+            node_frame.decode(bad)
+    with pytest.raises(cobs.CobsError) as exc:
+        cobs.decode(b"\x05\x01")
+    assert isinstance(exc.value, FrameError) and isinstance(exc.value, DriverError)
 
 
 def test_real_time_read_from_default_emulator() -> None:

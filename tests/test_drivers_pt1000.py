@@ -1,13 +1,14 @@
 """PT1000 scanner: byte-level SCPI tables, fault statuses, error policy, emulator faults, reply-parser fuzzing."""
 
 import math
+from contextlib import nullcontext
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers import cvd, scpi
-from drivers.errors import ConnectionLost, DeviceTimeout, InstrumentError
+from drivers.errors import ConnectionLost, DeviceTimeout, DriverConfigError, DriverError, InstrumentError
 from drivers.pt1000 import Pt1000Scanner
 from sim_bench.emulators import (ConstantResistances, ManualClock, ScpiInstrumentEmulator, ScriptedSerial,
                                  TemperatureResistances, registry)
@@ -190,6 +191,51 @@ def test_emulator_disconnect_and_reconnect(emulated) -> None:
 def test_open_bad_url() -> None:
     with pytest.raises(ConnectionLost):
         Pt1000Scanner.open("nonsense://x", [101])
+
+
+def test_public_failures_are_driver_errors(emulated) -> None:
+    """Each way the scanner fails raises its own DriverError subclass, never a bare ValueError or OSError."""
+    s, emu, _ = emulated
+
+    def muted() -> None:
+        emu.mute = True
+        try:
+            s.read()
+        finally:
+            emu.mute = False
+
+    def garbled() -> None:
+        emu.corrupt_next_reply("garbage")
+        s.read()
+
+    port_that_will_not_close = ScriptedSerial([], close_error=OSError(5, "Input/output error"))
+    cases = [
+        (lambda: Pt1000Scanner(ScriptedSerial([]), [101], mode="dcv"), DriverConfigError, False),
+        (lambda: Pt1000Scanner(ScriptedSerial([]), []), DriverConfigError, False),
+        (lambda: s.convert(999, 1000.0, 0.0), DriverConfigError, False),
+        (lambda: Pt1000Scanner.open("nonsense://x", [101]), ConnectionLost, False),
+        (muted, DeviceTimeout, False),
+        (garbled, InstrumentError, False),
+        (s.read, ConnectionLost, True),
+        (s.reconnect, ConnectionLost, True),
+        (Pt1000Scanner(port_that_will_not_close, [101]).close, ConnectionLost, False),
+    ]
+    for action, expected, unplug in cases:
+        with pytest.raises(DriverError) as exc, registry.unplugged(emu) if unplug else nullcontext():
+            action()
+        assert type(exc.value) is expected, (action, exc.value)
+    assert isinstance(DriverConfigError("x"), ValueError)  # callers that checked arguments with ValueError
+
+
+def test_device_timeout_is_caught_as_timeout_error(emulated) -> None:
+    s, emu, _ = emulated
+    emu.mute = True
+    caught: BaseException | None = None
+    try:
+        s.read()
+    except TimeoutError as exc:
+        caught = exc
+    assert isinstance(caught, DeviceTimeout)
 
 
 # -- fuzzing ---------------------------------------------------------------------------------------------------

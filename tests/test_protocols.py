@@ -102,3 +102,12 @@ def test_bad_bench_file_names_the_field(tmp_path, capsys, edit, field):
     assert main(["run", "table1", "--bench", str(path), "--out", str(tmp_path / "r.h5")]) == 2
     err = capsys.readouterr().err
     assert field in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "r.h5").exists()
+
+
+def test_unknown_condition_channel_is_a_problem_not_a_default():
+    from protocols.limits import BenchLimits, check_schedule
+    from protocols.schedule import Condition, Step
+
+    step = Step("open", 600.0, 1000.0, cycle=0, until=(Condition("T_flywheel_typo", "<=", 60.0),), estimate_s=300.0)
+    problems = check_schedule((step,), BenchLimits())
+    assert len(problems) == 1 and "T_flywheel_typo" in problems[0] and "T_flywheel, T_air" in problems[0]

@@ -20,6 +20,7 @@ def _trace(chunk_s: float, probes: np.ndarray, noop_every: float | None = None) 
         while script and script[0][0] <= t:
             t_set, what, value = script.pop(0)
             clock.sleep_until(t_set)
+            phys.advance(t_set)  # the controllers' set-points hold from the time the physics was advanced to
             {"drive": lambda v: phys.set_drive_speed(v), "load": lambda v: phys.set_load_torque(v),
              "clutch": lambda v: phys.set_clutch(*v)}[what](value)
         clock.sleep_until(t)
@@ -53,5 +54,7 @@ def test_same_seed_same_sensor_noise():
         clock = SimClock()
         phys = SimPhysics(SimBenchConfig(seed=4), clock)
         clock.sleep_until(3.0)
-        readings.append((phys.get_resistances(), phys.node_inputs(2.95), phys.actuals()))
+        actuals = phys.actuals_at(np.array([2.5, 3.0]))
+        readings.append((phys.get_resistances(), phys.node_inputs(2.95),
+                         [getattr(actuals, f).tolist() for f in actuals.__dataclass_fields__]))
     assert readings[0] == readings[1]

@@ -5,9 +5,9 @@ speed or the clutch state changing, then a few fresh Table 1 cycles), identifies
 nonlinear model, writes the report (Fig. 3, 4, 5, residuals: nonlinear against linear, validated on the
 validation run), diagnoses the linear baseline with its page, and estimates wear.
 
-The validation run goes through the bench runner (benchlab.runner) and the real drivers talking to the
-simulated bench's devices, as on hardware: its heat-ups are closed loop ("heat until the flywheel is at
-70 °C"). The Table 1 run comes from the batch simulator (see _table1_run for why).
+Both runs go through the bench runner (benchlab.runner) and the real drivers talking to the simulated
+bench's devices, as on hardware: every reading at the time it was measured, a raw CAN log (BLF) beside
+each run file, the validation's heat-ups closed loop ("heat until the flywheel is at 70 °C").
 """
 
 from __future__ import annotations
@@ -23,12 +23,10 @@ from benchlab.diagnose.regimes import worst_regimes
 from benchlab.diagnose.report import summarise
 from benchlab.identify.api import identify
 from benchlab.params import load_params, save_params
-from benchlab.runfile import load_run, write_run
+from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from benchlab.wear import analyse_wear
-from protocols.table1 import table1_schedule
 from sim_bench.plant import ThermalPlant
-from sim_bench.virtual_run import run_schedule
 
 NAME = "pipeline"
 HELP = "run Table 1 and the validation protocol on the simulated bench, identify, report, diagnose, estimate wear"
@@ -46,30 +44,15 @@ def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
           f"flywheel up to {run['T_flywheel'].max():.1f} degC")
 
 
-def _table1_run(path: Path, seed: int, duration: float) -> pd.DataFrame:
-    """Table 1 from the batch simulator (open loop, exact inputs).
-
-    Not yet through the runner: the runner's CAN drivers keep the newest status frame per poll, so
-    friction power is sampled at the 50 ms fast tick and held, over-counting a short launch's energy
-    by 3-7 % (+0.9 % over a run); the paper model at the true parameters then misses by 0.15 K and
-    identification bends R_Feng by +30 %. Frame time stamps in the CAN driver are the fix.
-    """
-    frame = run_schedule(table1_schedule(seed, duration_s=duration), ThermalPlant(), seed=seed)
-    write_run(path, frame, frame.attrs["dt"], protocol="table1")
-    run = load_run(path)
-    _describe("run", path, run)
-    return run
-
-
-def _validation_run(path: Path, seed: int) -> pd.DataFrame:
-    """The validation protocol on the simulated bench through the runner and the real drivers (closed-loop heat-ups)."""
-    code, summary = execute(RunRequest(protocol="validation", out=path, seed=seed, cycles=VALIDATION_CYCLES,
-                                       plant=ThermalPlant(), install_signals=False))
+def _bench_run(label: str, path: Path, protocol: str, seed: int, **options: float) -> pd.DataFrame:
+    """One protocol on the simulated bench through the runner and the real drivers; the run as loaded back."""
+    code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, plant=ThermalPlant(),
+                                       install_signals=False, **options))
     if code != 0 or summary is None or summary.status != "complete":
-        raise RuntimeError(f"validation run {path} ended {summary.status if summary else 'without a summary'} "
+        raise RuntimeError(f"{label} run {path} ended {summary.status if summary else 'without a summary'} "
                            f"(exit {code})")
     run = load_run(path)
-    _describe("validation", path, run)
+    _describe(label, path, run)
     return run
 
 
@@ -97,8 +80,10 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    fitting = _table1_run(out / "table1.h5", args.seed, args.duration)
-    validation = _validation_run(out / "validation.h5", args.seed + 1)
+    for stale in [out / "table1.h5", out / "validation.h5", *out.glob("table1*.blf"), *out.glob("validation*.blf")]:
+        stale.unlink(missing_ok=True)  # the job writes its runs anew each time
+    fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, duration_s=args.duration)
+    validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, cycles=VALIDATION_CYCLES)
     for model in ("linear", "nonlinear"):
         result = identify([fitting], model, validate=[validation], starts=4)
         save_params(out / f"{model}.json", result.params, result.summary())

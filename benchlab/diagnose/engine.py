@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from benchlab._blas import single_threaded_blas
 from benchlab.diagnose.library import Candidate, candidates
 from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
@@ -253,6 +254,7 @@ def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], f
             for f, (cost, held) in zip(findings, map_indices(without, len(findings)))]
 
 
+@single_threaded_blas
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts: int = 4,
                   seed: int = 0) -> Diagnosis:
     """Baseline fit, greedy accepted extensions, then a drop-one re-check of each against the combination."""

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from benchlab._blas import single_threaded_blas
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
@@ -87,6 +88,7 @@ def _labels(runs: Sequence[pd.DataFrame], prefix: str) -> list[str]:
     return [name if names.count(name) == 1 else f"{name} #{i}" for i, name in enumerate(names)]
 
 
+@single_threaded_blas
 def identify(runs: Sequence[pd.DataFrame], model: str = "nonlinear", fixed: Mapping[str, float] | None = None,
              validate: Sequence[pd.DataFrame] = (), starts: int = 6, seed: int = 0) -> Identification:
     """Fit the paper's model to all runs at once, then measure it on them and on validation runs."""

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from benchlab._blas import single_threaded_blas
 from benchlab.identify.data import FitData
 from benchlab.identify.spec import ModelSpec
 from benchlab.network import ThermalNetwork
@@ -90,6 +91,7 @@ def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
             for data in datasets]
 
 
+@single_threaded_blas
 def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = None,
         start: Mapping[str, float] | None = None) -> FitResult:
     """One local fit from the spec's starting values (or `start`)."""
@@ -109,6 +111,7 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
                      jac, sol.fun)
 
 
+@single_threaded_blas
 def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6, seed: int = 0,
                    spread: float = 3.0, scout_nfev: int = 25) -> FitResult:
     """Scout fits from `starts` points (the priors, then log-uniform within ×/÷ spread), polish the best.

@@ -1,25 +1,30 @@
 """The bench as the runner sees it: the three drivers behind one small interface, hardware or simulated.
 
 `DriverBench` opens the PT1000 scanner and the node gateway by pyserial URL and the controllers on a
-python-can bus, turns their typed readings into rows of the run file's raw streams (`layout()`), keeps
-the latest values the runner's conditions and interlocks need (`status`), and sends set-points. The
-simulated bench is only another set of URLs and another bus (plus a `service` hook that lets the
-emulators run up to the shared clock's time before the drivers poll).
+python-can bus, turns their typed readings into rows of the run file's raw streams (`layout()`), each at
+the time it was measured, keeps the latest values the runner's conditions and interlocks need (`status`),
+integrates the friction energy frame by frame, and sends set-points. With `can_log` every CAN frame sent
+and received goes to a python-can log (BLF or ASC by suffix) beside the run file. The simulated bench is
+only another set of URLs and another bus (plus a `service` hook that lets the emulators run up to the
+shared clock's time before the drivers read).
 """
 
 from __future__ import annotations
 
+import functools
 import math
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from drivers import cvd
-from drivers.can_signals import CLAMP_CLAMPED, CLAMP_SLIPPING
-from drivers.errors import DriverError
+from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
+from drivers.errors import CanLogError, DriverError
 from protocols.limits import BenchLimits
 
 RPM = math.pi / 30.0
@@ -44,6 +49,7 @@ class BenchConfig:
     node_period_s: float = 0.05
     node_calibration: tuple[cvd.CvdCoefficients, cvd.CvdCoefficients] = (cvd.PT1000, cvd.PT1000)
     dbc: str | None = None
+    can_timestamps: str = "interface"  # drivers.can_bench.TimestampSource: "run" for the simulated bus
     gear_ratio: float = 15.0
     dt: float = 0.01
     tick_s: float = 0.2
@@ -60,7 +66,8 @@ class BenchConfig:
                                 for k, c in self.instrument_calibration.items()}},
                 "node": {"url": self.node_url, "period_s": self.node_period_s,
                          "calibration": [_coef(c) for c in self.node_calibration]},
-                "can": {k: v for k, v in self.can.items()}, "dbc": self.dbc, "gear_ratio": self.gear_ratio,
+                "can": {k: v for k, v in self.can.items()}, "dbc": self.dbc, "can_timestamps": self.can_timestamps,
+                "gear_ratio": self.gear_ratio,
                 "acquisition": {"dt": self.dt, "tick_s": self.tick_s, "fast_tick_s": self.fast_tick_s,
                                 "flush_every_s": self.flush_every_s},
                 "limits": self.limits.as_dict()}
@@ -72,17 +79,20 @@ def _coef(c: cvd.CvdCoefficients) -> dict[str, float]:
 
 @dataclass
 class BenchStatus:
-    """Latest values the runner decides on (NaN/None while unknown)."""
+    """Latest values the runner decides on (NaN/None while unknown), and the friction energy so far."""
 
     t: float = 0.0
     T_flywheel: float = math.nan
-    t_flywheel: float = -math.inf  # host time of the last node frame with a valid temperature
-    t_node: float = 0.0  # host time of the last node frame of any kind
+    t_flywheel: float = -math.inf  # run time of the last node frame with a valid temperature
+    t_node: float = 0.0  # run time of the last node frame of any kind
     T_air: float = math.nan
     engine_speed: float = math.nan
     clutch_speed: float = math.nan
     clutch_torque: float = math.nan
     clamp_state: int = 0
+    friction_power: float = 0.0  # W, from the newest status frames (all of one instant)
+    friction_energy_j: float = 0.0  # ∫ friction power dt over the status frames at their own times
+    t_frame: float = math.nan  # run time of the newest status frame
     controllers_bad: dict[str, str] = field(default_factory=dict)
 
     @property
@@ -93,11 +103,32 @@ class BenchStatus:
     def locked(self) -> bool:
         return self.clamp_state == CLAMP_CLAMPED
 
-    @property
-    def friction_power(self) -> float:
-        if not self.slipping or not np.isfinite(self.clutch_torque):
-            return 0.0
-        return abs(self.clutch_torque * (self.engine_speed - self.clutch_speed) * RPM)
+    def take_frame(self, t: float, values: Mapping[str, float], gear_ratio: float) -> None:
+        """One status frame measured at run time `t`: the energy up to `t` at the power held so far, then the values."""
+        if t > self.t_frame:
+            self.friction_energy_j += self.friction_power * (t - self.t_frame)
+            self.t_frame = t
+        elif math.isnan(self.t_frame):
+            self.t_frame = t
+        if "drive.speed" in values:
+            self.engine_speed = values["drive.speed"]
+        if "load.speed" in values:
+            self.clutch_speed = values["load.speed"] * gear_ratio
+        if "clutch.torque" in values:
+            self.clutch_torque = values["clutch.torque"]
+            self.clamp_state = int(values["clutch.clamp_state"])
+        power = friction_power(self.clutch_torque, self.engine_speed, self.clutch_speed, self.clamp_state)
+        self.friction_power = power if power == power else 0.0  # unknown (NaN) counts as no power
+
+
+def friction_power(torque_nm: "float | np.ndarray", engine_rpm: "float | np.ndarray", clutch_rpm: "float | np.ndarray",
+                   clamp_state: "float | np.ndarray") -> "float | np.ndarray":
+    """P = T_c · |Δω| (eq. 4) while the actuator reports slipping, else 0; NaN where an input is unknown.
+
+    Plain arithmetic, so one frame (floats) and a whole grid (arrays) take the same formula.
+    """
+    slipping = clamp_state == CLAMP_SLIPPING
+    return abs(torque_nm * (engine_rpm - clutch_rpm) * RPM) * slipping + 0.0 * clamp_state
 
 
 Reading = tuple[str, float, tuple[float, ...]]
@@ -112,16 +143,19 @@ _CAN_STREAMS = {
     "can_load": (("torque", "load.torque", "N*m"), ("speed", "load.speed", "rpm"),
                  ("state", "load.state", "1"), ("fault_code", "load.fault_code", "1")),
 }
+_CAN_KEYS = {stream: tuple(key for _, key, _ in cols) for stream, cols in _CAN_STREAMS.items()}
 _STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_load"}
 
 
 def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Grid channels computed from held ones: clutch state, friction power, mean flywheel temperature."""
+    """Grid channels computed from held ones: clutch state, friction power, mean flywheel temperature.
+
+    Every CAN status frame sits on the grid point of the instant it was measured, so torque and slip at a grid
+    point belong to the same instant.
+    """
     clamp = out["_clamp_state"]
     state = np.where(np.isnan(clamp), np.nan, (clamp == CLAMP_SLIPPING) | (clamp == CLAMP_CLAMPED)).astype(float)
-    slip = (out["engine_speed"] - out["clutch_speed"]) * RPM
-    power = np.where(clamp == CLAMP_SLIPPING, np.abs(out["clutch_torque"] * slip), 0.0)
-    power[np.isnan(clamp) | np.isnan(slip) | np.isnan(out["clutch_torque"])] = np.nan
+    power = friction_power(out["clutch_torque"], out["engine_speed"], out["clutch_speed"], clamp)
     f1, f2 = out["T_flywheel_1"], out["T_flywheel_2"]
     both = np.column_stack([f1, f2])
     count = np.sum(np.isfinite(both), axis=1)
@@ -132,6 +166,27 @@ def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 ALIGNED_UNITS = {"engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": "N*m", "clutch_state": "1",
                  "friction_power": "W", "T_flywheel": "degC", "T_air": "degC", "T_housing": "degC",
                  "T_ambient": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC"}
+
+
+CAN_HOLD_CYCLES = 2.5  # a status value holds on the grid for one lost frame, not for two
+
+
+@functools.lru_cache(maxsize=8)
+def _load_dbc(path: str) -> Any:
+    import cantools
+
+    return cantools.database.load_file(path)
+
+
+def bench_dbc(config: BenchConfig) -> Any:
+    """The bench's CAN database (the configured DBC or drivers/bench.dbc), parsed once per file."""
+    return _load_dbc(config.dbc or str(BENCH_DBC))
+
+
+def status_cycle_s(config: BenchConfig, key: str) -> float:
+    """DBC cycle time (s) of the status message carrying logical signal `key`."""
+    message = bench_dbc(config).get_message_by_name(BENCH_SIGNALS[key][0])
+    return (message.cycle_time or 100) / 1000
 
 
 def bench_layout(config: BenchConfig) -> Layout:
@@ -149,7 +204,10 @@ def bench_layout(config: BenchConfig) -> Layout:
                    1.0 / config.node_period_s + 1.0, 1.5 * config.node_period_s),
     ]
     for stream, cols in _CAN_STREAMS.items():
-        streams.append(StreamSpec(stream, tuple((c, u) for c, _, u in cols), 1.0 / config.fast_tick_s, 1.5 * config.tick_s))
+        cycle = status_cycle_s(config, cols[0][1])
+        streams.append(StreamSpec(stream, tuple((c, u) for c, _, u in cols), 1.0 / cycle, CAN_HOLD_CYCLES * cycle))
+    if config.can_timestamps == "interface":  # run time = CAN interface time + offset (drivers/timebase.py)
+        streams.append(StreamSpec("can_clock", (("offset", "s"),), 1.0, math.inf))
     streams.append(StreamSpec("setpoints", (("engine_speed", "rpm"), ("clutch_torque", "N*m"), ("clutch_open", "1"),
                                             ("load_torque", "N*m")), 5.0, math.inf))
     sources = [AlignedSource("engine_speed", "can_drive", "speed"),
@@ -167,11 +225,33 @@ def bench_layout(config: BenchConfig) -> Layout:
     return Layout(tuple(streams), tuple(sources), units, derive_aligned, config.dt)
 
 
+BLF_OBJECT_BYTES = 48  # one classic CAN frame in a BLF container (object headers + CAN_MESSAGE)
+
+
+def open_can_log(path: "str | os.PathLike[str]", config: BenchConfig) -> Any:
+    """python-can's writer for `path` (.blf or .asc); a BLF container holds about one second of the bus's frames.
+
+    BLF compresses whole containers, so a killed run loses at most the container being filled: sized from the
+    DBC's cycle times, that is the last second. Raises CanLogError (one line) if the file cannot be created.
+    """
+    import can
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".blf", ".asc"):
+        raise CanLogError(f"{path}: a CAN log ends in .blf or .asc")
+    frames_per_s = sum(1000.0 / m.cycle_time for m in bench_dbc(config).messages if m.cycle_time)
+    options = {"max_container_size": max(4096, int(frames_per_s * BLF_OBJECT_BYTES))} if suffix == ".blf" else {}
+    try:
+        return can.Logger(str(path), **options)
+    except OSError as exc:
+        raise CanLogError(f"{path}: cannot be written ({exc.strerror or exc})") from None
+
+
 class DriverBench:
     """The drivers of a bench (real or simulated) behind `command`/`safe_state`/`poll`."""
 
     def __init__(self, config: BenchConfig, clock: Callable[[], float], *, bus: Any = None,
-                 service: Callable[[], None] | None = None) -> None:
+                 service: Callable[[], None] | None = None, can_log: "str | os.PathLike[str] | None" = None) -> None:
         import can as _can
 
         from drivers.can_bench import CanBench
@@ -192,14 +272,18 @@ class DriverBench:
         self.gateway = ClutchNodeGateway.open(config.node_url, baudrate=config.node_baudrate,
                                               period_s=config.node_period_s, clock=clock,
                                               coefficients=config.node_calibration)
-        kwargs: dict[str, Any] = {"clock": clock, "idle_rpm": config.limits.idle_speed_rpm}
+        kwargs: dict[str, Any] = {"clock": clock, "idle_rpm": config.limits.idle_speed_rpm,
+                                  "timestamps": config.can_timestamps}
         if config.dbc:
             kwargs["dbc"] = config.dbc
+        if can_log is not None:
+            kwargs["log"] = open_can_log(can_log, config)
         self.can = CanBench(bus if bus is not None else _can.Bus(**dict(config.can)), **kwargs)
         self._names = [config.instrument_channels[c] for c in self.scanner.channels]
         self._next_scan = clock()
         self._setpoints: tuple[float, ...] | None = None
         self._last_error_t = -math.inf
+        self._next_clock_row = -math.inf
 
     # -- commands ----------------------------------------------------------------------------------
     def command(self, engine_rpm: float, clutch_torque_nm: float, clutch_open: bool, load_nm: float) -> None:
@@ -224,7 +308,12 @@ class DriverBench:
 
     # -- polling -----------------------------------------------------------------------------------
     def poll(self) -> tuple[list[Reading], list[BenchEvent]]:
-        """Everything the devices delivered since the last poll, as raw-stream rows and events."""
+        """Everything the devices delivered since the last poll, as raw-stream rows and events.
+
+        The cyclic CAN frames due up to now go out first, so the controllers (hardware, or the simulated bench's
+        `service`) see the commands before they report.
+        """
+        self.can.send_due()
         if self.service is not None:
             self.service()
         now = self.clock()
@@ -244,22 +333,19 @@ class DriverBench:
         except DriverError as exc:
             self._error(now, "node_error", str(exc), self.gateway.reconnect)
             return
-        if samples:
-            last_ms = samples[-1].node_time_ms
-            for s in samples:
-                lag = ((last_ms - s.node_time_ms) & 0xFFFFFFFF) / 1000.0
-                t = s.t_host - (lag if lag < 10 * self.config.node_period_s * len(samples) else 0.0)
-                temps = tuple(math.nan if v is None else v for v in s.temperature_c)
-                ohms = tuple(math.nan if v is None else v for v in s.resistance_ohm)
-                row = (float(s.seq), s.node_time_ms / 1000.0, *temps, *ohms,
-                       STATUS_CODES.get(s.sensor_status[0], 4.0), STATUS_CODES.get(s.sensor_status[1], 4.0),
-                       s.supply_mv / 1000.0, float(s.rssi_dbm), float(s.lqi), float(s.flags))
-                self.readings.append(("node", t, row))
-                self.status.t_node = max(self.status.t_node, t)
-                valid = [v for v in temps if np.isfinite(v)]
-                if valid:
-                    self.status.T_flywheel = sum(valid) / len(valid)
-                    self.status.t_flywheel = t
+        for s in samples:  # each at the time the node measured it (the driver maps the node's clock)
+            t = s.t
+            temps = tuple(math.nan if v is None else v for v in s.temperature_c)
+            ohms = tuple(math.nan if v is None else v for v in s.resistance_ohm)
+            row = (float(s.seq), s.node_time_ms / 1000.0, *temps, *ohms,
+                   STATUS_CODES.get(s.sensor_status[0], 4.0), STATUS_CODES.get(s.sensor_status[1], 4.0),
+                   s.supply_mv / 1000.0, float(s.rssi_dbm), float(s.lqi), float(s.flags))
+            self.readings.append(("node", t, row))
+            self.status.t_node = max(self.status.t_node, t)
+            valid = [v for v in temps if np.isfinite(v)]
+            if valid:
+                self.status.T_flywheel = sum(valid) / len(valid)
+                self.status.t_flywheel = t
         for ev in self.gateway.pop_events():
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:
@@ -286,28 +372,26 @@ class DriverBench:
 
     def _poll_can(self, now: float) -> None:
         try:
-            samples = self.can.poll()
+            samples = self.can.receive()
+        except CanLogError:
+            raise
         except Exception as exc:  # noqa: BLE001 - a bus error is an event, the watchdog does the rest
             self._error(now, "can_error", str(exc), None)
             return
-        st = self.status
+        st, gear, nan = self.status, self.config.gear_ratio, math.nan
         for s in samples:
             stream = _STATUS_MESSAGE.get(s.controller)
             if stream is None or not s.message.endswith("_Status"):
                 continue
-            cols = _CAN_STREAMS[stream]
-            self.readings.append((stream, s.t_host, tuple(float(s.values.get(key, math.nan)) for _, key, _ in cols)))
-            v = s.values
-            if "drive.speed" in v:
-                st.engine_speed = v["drive.speed"]
-            if "load.speed" in v:
-                st.clutch_speed = v["load.speed"] * self.config.gear_ratio
-            if "clutch.torque" in v:
-                st.clutch_torque = v["clutch.torque"]
-                st.clamp_state = int(v["clutch.clamp_state"])
+            get = s.values.get
+            self.readings.append((stream, s.t, [get(key, nan) for key in _CAN_KEYS[stream]]))
+            st.take_frame(s.t, s.values, gear)
         for ev in self.can.pop_events():
-            self.events.append((ev.t_host, f"controller_{ev.kind}", f"{ev.controller}: {ev.detail}"))
+            self.events.append((ev.t, f"controller_{ev.kind}", f"{ev.controller}: {ev.detail}"))
         st.controllers_bad = {**{c: "silent" for c in self.can.silent}, **{c: "fault" for c in self.can.faulted}}
+        if self.can.timestamps == "interface" and math.isfinite(self.can.clock_map.offset) and now >= self._next_clock_row:
+            self.readings.append(("can_clock", now, (self.can.clock_map.offset,)))
+            self._next_clock_row = now + 1.0
 
     def _error(self, now: float, kind: str, detail: str, reconnect: Callable[[], None] | None) -> None:
         self.events.append((now, kind, detail))

@@ -64,19 +64,20 @@ class Interlocks:
     slip_energy: float = 0.0
     total_energy: float = 0.0
     engagements: int = 0
-    _last_t: float | None = None
+    _last_energy: float | None = None
 
     def update(self, st: BenchStatus, now: float, events: list[tuple[str, str]]) -> None:
-        dt = 0.0 if self._last_t is None else max(0.0, now - self._last_t)
-        self._last_t = now
+        """Engagement starts/ends at this tick; energy from the bench's frame-by-frame integral (not tick × power)."""
+        energy = st.friction_energy_j - (self._last_energy if self._last_energy is not None else st.friction_energy_j)
+        self._last_energy = st.friction_energy_j
+        self.total_energy += energy
+        if self.slip_start is not None:
+            self.slip_energy += energy
         if st.slipping:
             if self.slip_start is None:
-                self.slip_start, self.slip_energy = now, 0.0
+                self.slip_start, self.slip_energy = now, energy
                 self.engagements += 1
                 events.append(("engagement_start", ""))
-            power = st.friction_power * dt
-            self.slip_energy += power
-            self.total_energy += power
         elif self.slip_start is not None:
             events.append(("engagement_end", f"slip {now - self.slip_start:.2f} s, {self.slip_energy / 1e3:.1f} kJ"))
             self.slip_start = None
@@ -275,9 +276,8 @@ class Runner:
         return step.until[0].value if step.until else math.inf
 
     def _conditions_met(self, conditions: Sequence[Condition], now: float) -> bool:
-        value = self.bench.status.T_flywheel
-        for c in conditions:
-            v = self.bench.status.T_flywheel if c.channel == "T_flywheel" else getattr(self.bench.status, c.channel, value)
+        for c in conditions:  # channels checked against CONDITION_CHANNELS before the run (check_schedule)
+            v = getattr(self.bench.status, c.channel)
             if not np.isfinite(v):
                 continue
             if c.op == ">=" and v >= c.value:

@@ -23,6 +23,7 @@ from benchlab.acquire import RunWriter, read_progress
 from benchlab.errors import InputError
 from benchlab.runner.devices import BenchConfig, DriverBench
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
+from drivers.errors import CanLogError
 from protocols import catalog
 from protocols.limits import BenchLimits, check_schedule
 from protocols.schedule import Step, describe, duration_s, step_from_dict
@@ -65,8 +66,8 @@ def software_version() -> str:
 
 def _sim_bench_config(request: RunRequest, limits: BenchLimits) -> BenchConfig:
     return BenchConfig(instrument_url="sim://pending", node_url="sim://pending", can={"interface": "sim"},
-                       instrument_timeout_s=0.05, limits=limits, source="sim", tick_s=1.0, fast_tick_s=0.05,
-                       instrument_period_s=0.5)
+                       can_timestamps="run", instrument_timeout_s=0.05, limits=limits, source="sim", tick_s=1.0,
+                       fast_tick_s=0.05, instrument_period_s=0.5)
 
 
 def bench_config(request: RunRequest) -> BenchConfig:
@@ -115,6 +116,11 @@ def dry_run(request: RunRequest, out: Any = None) -> int:
     return 0
 
 
+def can_log_path(run_path: Path, resumes: int = 0) -> Path:
+    """The raw CAN log beside a run file: RUN.blf, and RUN.resumeN.blf for the N-th resume."""
+    return run_path.with_suffix(f".resume{resumes}.blf" if resumes else ".blf")
+
+
 def _last_valid(f: h5py.File, name: str, rows: int) -> float:
     values = f["aligned"][name][:rows]
     valid = values[np.isfinite(values)]
@@ -148,15 +154,21 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
         clock = sim.clock
         config = replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
                          can={"interface": "sim", "channel": sim.name + "-can"})
-        bench = DriverBench(config, clock, bus=sim.driver_bus, service=sim.service)
-    else:
-        from sim_bench.clock import RealClock
+    can_log = can_log_path(request.out, resume_state["resumes"] if resume_state else 0)
+    try:
+        if sim is not None:
+            bench = DriverBench(config, clock, bus=sim.driver_bus, service=sim.service, can_log=can_log)
+        else:
+            from sim_bench.clock import RealClock
 
-        clock = RealClock(t0)
-        try:
-            bench = DriverBench(config, clock)
-        except Exception as exc:  # noqa: BLE001 - cannot reach the devices: one line, exit 1
-            raise RuntimeError(f"cannot open the bench: {exc}") from exc
+            clock = RealClock(t0)
+            bench = DriverBench(config, clock, can_log=can_log)
+    except Exception as exc:  # noqa: BLE001 - no bench: the simulated one is closed, one line
+        if sim is not None:
+            sim.close()
+        if isinstance(exc, CanLogError):  # the log's path follows the user's --out: exit 2
+            raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
+        raise RuntimeError(f"cannot open the bench: {exc}") from exc  # cannot reach the devices: exit 1
     layout = bench.layout
     try:
         if resume_state:
@@ -164,12 +176,14 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                                       flush_every_s=config.flush_every_s)
             writer.state["resumes"] = resume_state["resumes"]
             writer.event(t0, "resume", int(resume_state["cycle"]),
-                         f"resume {resume_state['resumes']}: continuing with step {resume_state['start']}")
+                         f"resume {resume_state['resumes']}: continuing with step {resume_state['start']}; "
+                         f"CAN log {can_log.name}")
         else:
             attrs = {"seed": request.seed, "software_version": software_version(), "bench": request.bench,
                      "bench_config": json.dumps(config.as_dict(), default=str),
                      "protocol_options": json.dumps(options, default=str),
-                     "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "idn": bench.idn}
+                     "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "idn": bench.idn,
+                     "can_log": can_log.name, "can_log_time_base": config.can_timestamps}
             if sim is not None:
                 attrs["sim_bench"] = json.dumps(sim.cfg.as_dict(), default=str)
                 attrs["sim_truth"] = json.dumps({"params": dict(sim.physics.truth_params),

@@ -1,11 +1,13 @@
 """Emulated bench controllers (drive motor, clutch actuator, load machine) on any python-can bus.
 
 Speaks the frames of drivers/bench.dbc through the same logical signal map as the driver. `poll()` takes the
-waiting command frames without blocking, advances the provider to the clock's time and sends each status
-frame and heartbeat when its cycle time is due (at most one per poll, no backlog bursts). A controller that
-is disabled, faulted, without commands for `command_timeout_s` (fault 16 while it lasts) or under emergency
-stop gets safe set-points (drive 0 rpm, clutch open, load 0 N·m). Fault hooks: `silence`, `set_fault`,
-`clear_fault`, `freeze_alive`, `send_raw`.
+waiting command frames and, in time order, applies each at its time stamp, then sends every status frame and
+heartbeat that fell due up to now at its DBC cycle time, stamped with the instant it fell due and carrying
+the drivetrain's actual values at that instant (a controller samples and sends on its own cycle, whenever the
+PC reads the bus). A controller that is disabled, faulted, without commands for `command_timeout_s`
+(default 3 command cycles; fault 16 while it lasts) or under emergency stop gets safe set-points (drive
+0 rpm, clutch open, load 0 N·m). Fault hooks: `silence`, `set_fault`, `clear_fault`, `freeze_alive`,
+`send_raw`.
 """
 
 from __future__ import annotations
@@ -16,11 +18,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import can
+import numpy as np
 import cantools
 
 from drivers import can_signals as sig
 from drivers.can_codec import compile_codecs
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
+
+
+COMMAND_LATENCY_S = 1e-6  # a command takes effect this long after the newest frame already sent, at the earliest
 
 
 @dataclass(slots=True)
@@ -34,7 +40,7 @@ class _Controller:
     silent: bool = False
     alive_frozen: bool = False
     alive: dict[str, int] = field(default_factory=dict)
-    next_due: dict[str, float] = field(default_factory=dict)
+    sent_cycles: dict[str, int] = field(default_factory=dict)  # frames due so far per message (sent or silenced)
 
 
 @dataclass(slots=True)
@@ -51,12 +57,14 @@ class CanBenchEmulator:
 
     def __init__(self, bus: can.BusABC, provider: DrivetrainProvider | None = None, *,
                  dbc: str | Path = sig.BENCH_DBC, signals: Mapping[str, tuple[str, str]] = sig.BENCH_SIGNALS,
-                 clock: Callable[[], float] = time.monotonic, command_timeout_s: float = 0.1) -> None:
-        self.bus, self.clock, self.command_timeout_s = bus, clock, command_timeout_s
+                 clock: Callable[[], float] = time.monotonic, command_timeout_s: float | None = None) -> None:
+        self.bus, self.clock = bus, clock
         self.provider = provider or FirstOrderDrivetrain(t0=clock())
         self.db = cantools.database.load_file(str(dbc))
         self.codecs = compile_codecs(self.db, signals)
         self._codec_of = {key: codec for codec in self.codecs.values() for key in codec.names.values()}
+        self.command_timeout_s = (command_timeout_s if command_timeout_s is not None
+                                  else 3 * self._codec_of["drive.cmd_alive"].message.cycle_time / 1000)
         self._modulo = {key: 1 << self.db.get_message_by_name(m).get_signal_by_name(s).length
                         for key, (m, s) in signals.items() if key.endswith("alive")}
         self.stats = EmulatorStats()
@@ -64,10 +72,11 @@ class CanBenchEmulator:
         self.controllers = {name: _Controller(name) for name in sig.CONTROLLERS}
         self._rx = {self._codec_of[key].message.frame_id: (key.split(".")[0], self._codec_of[key])
                     for key in ("drive.cmd_alive", "clutch.cmd_alive", "load.cmd_alive", "estop.request", "pc.hb_alive")}
-        now = clock()
+        self.origin = clock()
+        self._t = self.origin  # frames due before this instant have been sent
         for ctrl in self.controllers.values():
             for key in (f"{ctrl.name}.alive", f"{ctrl.name}.hb_alive"):
-                ctrl.next_due[key] = now
+                ctrl.sent_cycles[key] = 0
                 ctrl.alive[key] = 0
 
     # -- fault hooks ---------------------------------------------------------------------------------
@@ -76,12 +85,14 @@ class CanBenchEmulator:
         self.controllers[controller].silent = on
 
     def set_fault(self, controller: str, code: int) -> None:
-        """The controller reports fault `code` (state Fault) and goes to its safe set-point until cleared."""
+        """From now on the controller reports fault `code` (state Fault) and holds its safe set-point until cleared."""
+        self._emit_until(self.clock(), inclusive=False)
         self.controllers[controller].injected_fault = code
+        self._apply(self.clock())
 
     def clear_fault(self, controller: str) -> None:
-        """Remove an injected fault."""
-        self.controllers[controller].injected_fault = 0
+        """Remove an injected fault (from now on)."""
+        self.set_fault(controller, 0)
 
     def freeze_alive(self, controller: str, on: bool = True) -> None:
         """The controller's alive counters stop counting (a hung task still sending old frames)."""
@@ -93,22 +104,36 @@ class CanBenchEmulator:
 
     # -- running -----------------------------------------------------------------------------------------
     def poll(self) -> None:
-        """Take commands, advance the physics to now, send what is due."""
-        while (msg := self.bus.recv(timeout=0)) is not None:
-            self._receive(msg)
-        now = self.clock()
-        self._apply(now)
-        self.provider.advance(now)
-        actuals = self.provider.actuals()
-        for ctrl in self.controllers.values():
-            self._send_due(ctrl, actuals, now)
+        """Apply the waiting commands at their times and send every frame due up to now, in time order.
 
-    def state(self, controller: str) -> tuple[int, int]:
-        """(state, fault code) the controller reports now."""
+        A command that changes nothing (same set-points, controller running) only refreshes the command
+        time-out; the frames are then sent in whole segments between the commands that change something.
+        """
+        now = self.clock()
+        commands = []
+        while (msg := self.bus.recv(timeout=0)) is not None:
+            commands.append(msg)
+        commands.sort(key=lambda m: m.timestamp)
+        for msg in commands:
+            # a command acts after the last frame already reported (a frame measured when it was sent is gone)
+            t = min(max(msg.timestamp or now, self._t + COMMAND_LATENCY_S), now)
+            decoded = self._decode(msg)
+            if decoded is None:
+                continue
+            owner, values = decoded
+            if self._changes(owner, values, t):
+                self._emit_until(t, inclusive=False)
+                self._take(owner, values, t)
+                self._apply(t)
+            elif owner in self.controllers:
+                self.controllers[owner].last_cmd = t
+        self._emit_until(now, inclusive=True)
+
+    def state(self, controller: str, t: float | None = None) -> tuple[int, int]:
+        """(state, fault code) the controller reports at `t` (default: now)."""
+        t = self.clock() if t is None else t
         ctrl = self.controllers[controller]
-        timed_out = (ctrl.setpoints.get(f"{controller}.enable") and ctrl.last_cmd is not None
-                     and self.clock() - ctrl.last_cmd > self.command_timeout_s)
-        code = ctrl.injected_fault or (sig.FAULT_COMMAND_TIMEOUT if timed_out else 0)
+        code = ctrl.injected_fault or (sig.FAULT_COMMAND_TIMEOUT if self._timed_out(ctrl, t) else 0)
         if self.estop:
             return sig.STATE_ESTOP, code
         if code:
@@ -116,51 +141,112 @@ class CanBenchEmulator:
         return (sig.STATE_RUNNING if ctrl.setpoints.get(f"{controller}.enable") else sig.STATE_READY), 0
 
     # -- internals -----------------------------------------------------------------------------------
-    def _receive(self, msg: can.Message) -> None:
+    def _deadline(self, ctrl: _Controller) -> float | None:
+        """When an enabled controller times out without a further command (None: it cannot)."""
+        if ctrl.last_cmd is None or not ctrl.setpoints.get(f"{ctrl.name}.enable"):
+            return None
+        return ctrl.last_cmd + self.command_timeout_s
+
+    def _timed_out(self, ctrl: _Controller, t: float) -> bool:
+        deadline = self._deadline(ctrl)
+        return deadline is not None and t > deadline + 1e-9
+
+    def _decode(self, msg: can.Message) -> tuple[str, dict[str, float]] | None:
         owner, codec = self._rx.get(msg.arbitration_id, (None, None))
         if codec is None or len(msg.data) != codec.length or msg.is_extended_id != codec.message.is_extended_frame:
             self.stats.malformed += 1
-            return
-        values = codec.decode(msg.data)
+            return None
         self.stats.commands_ok += 1
+        return owner, codec.decode(msg.data)
+
+    def _changes(self, owner: str, values: Mapping[str, float], t: float) -> bool:
+        """Whether a command changes what the controllers do (set-points, time-out ending, emergency stop)."""
+        if owner == "pc":
+            return False
+        if owner == "estop":
+            return bool(values["estop.request"]) != self.estop
+        ctrl = self.controllers[owner]
+        if ctrl.last_cmd is None or self._timed_out(ctrl, t):
+            return True
+        return any(ctrl.setpoints.get(k) != v for k, v in values.items() if not k.endswith("alive"))
+
+    def _take(self, owner: str, values: Mapping[str, float], t: float) -> None:
         if owner == "estop":
             self.estop = bool(values["estop.request"])
-        if owner in ("estop", "pc"):
             return
         ctrl = self.controllers[owner]
         ctrl.setpoints.update(values)
-        ctrl.last_cmd = self.clock()
+        ctrl.last_cmd = t
 
-    def _apply(self, now: float) -> None:
-        sp = {name: (c.setpoints if self.state(name)[0] == sig.STATE_RUNNING else {})
+    def _apply(self, t: float) -> None:
+        """Set-points the controllers hold from `t` on (safe ones where not running)."""
+        self.provider.advance(t)
+        sp = {name: (c.setpoints if self.state(name, t)[0] == sig.STATE_RUNNING else {})
               for name, c in self.controllers.items()}
         self.provider.set_drive_speed(sp["drive"].get("drive.speed_setpoint", 0.0))
         self.provider.set_clutch(sp["clutch"].get("clutch.torque_setpoint", 0.0),
                                  bool(sp["clutch"].get("clutch.open_request", 1)))
         self.provider.set_load_torque(sp["load"].get("load.torque_setpoint", 0.0))
 
-    def _send_due(self, ctrl: _Controller, actuals: DrivetrainActuals, now: float) -> None:
-        state, code = self.state(ctrl.name)
-        values = {
-            "drive": {"drive.speed": actuals.drive_speed_rpm, "drive.torque": actuals.drive_torque_nm},
-            "clutch": {"clutch.torque": actuals.clutch_torque_nm, "clutch.position": actuals.clutch_position_mm,
-                       "clutch.clamp_state": actuals.clamp_state},
-            "load": {"load.torque": actuals.load_torque_nm, "load.speed": actuals.load_speed_rpm},
-        }[ctrl.name]
-        n = ctrl.name
-        values |= {f"{n}.state": state, f"{n}.fault_code": code, f"{n}.hb_state": state}
-        for alive_key in (f"{n}.alive", f"{n}.hb_alive"):
-            codec = self._codec_of[alive_key]
-            due = ctrl.next_due[alive_key]
-            if now < due:
-                continue
-            cycle = codec.message.cycle_time / 1000
-            ctrl.next_due[alive_key] = due + cycle if now - due < cycle else now + cycle
+    def _emit_until(self, t_end: float, inclusive: bool) -> None:
+        """Send the frames due in [self._t, t_end) (or up to t_end inclusive), cut where a controller times out."""
+        while True:
+            deadlines = (self._deadline(c) for c in self.controllers.values())
+            cut = min((d for d in deadlines if d is not None and self._t < d < t_end), default=None)
+            if cut is None:
+                self._emit_segment(t_end, inclusive)
+                return
+            self._emit_segment(cut, True)
+            self._apply(cut + 1e-9)
+
+    def _emit_segment(self, t_end: float, inclusive: bool) -> None:
+        """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now."""
+        eps = 1e-9 if inclusive else -1e-9
+        plan: list[tuple[_Controller, str, np.ndarray]] = []
+        for ctrl in self.controllers.values():
+            for key in (f"{ctrl.name}.alive", f"{ctrl.name}.hb_alive"):
+                cycle = self._codec_of[key].message.cycle_time / 1000
+                k0 = ctrl.sent_cycles[key]
+                k1 = int(np.floor((t_end + eps - self.origin) / cycle)) + 1
+                if k1 > k0:
+                    plan.append((ctrl, key, self.origin + np.arange(k0, k1) * cycle))
+                    ctrl.sent_cycles[key] = k1
+        self._t = max(self._t, t_end)
+        if not plan:
+            return
+        times = np.unique(np.concatenate([due for *_, due in plan]))
+        actuals = self.provider.actuals_at(times)
+        frames: list[tuple[float, int, can.Message]] = []
+        for ctrl, key, due in plan:
             if ctrl.silent:
                 continue
-            if not ctrl.alive_frozen:
-                ctrl.alive[alive_key] = (ctrl.alive[alive_key] + 1) % self._modulo[alive_key]
-            values[alive_key] = ctrl.alive[alive_key]
-            self.bus.send(can.Message(arbitration_id=codec.message.frame_id, data=codec.encode(values),
-                                      is_extended_id=codec.message.is_extended_frame))
-            self.stats.sent += 1
+            frames += self._frames(ctrl, key, due, actuals, np.searchsorted(times, due))
+        frames.sort(key=lambda f: (f[0], f[1]))
+        for _, _, msg in frames:
+            self.bus.send(msg)
+        self.stats.sent += len(frames)
+
+    def _frames(self, ctrl: _Controller, key: str, due: np.ndarray, actuals: DrivetrainActuals,
+                rows: np.ndarray) -> list[tuple[float, int, can.Message]]:
+        n = ctrl.name
+        state, code = self.state(n, float(due[0]))
+        columns: dict[str, np.ndarray | float] = {f"{n}.state": state, f"{n}.fault_code": code, f"{n}.hb_state": state}
+        if n == "drive":
+            columns |= {"drive.speed": actuals.drive_speed_rpm[rows], "drive.torque": actuals.drive_torque_nm[rows]}
+        elif n == "clutch":
+            columns |= {"clutch.torque": actuals.clutch_torque_nm[rows], "clutch.position": actuals.clutch_position_mm[rows],
+                        "clutch.clamp_state": actuals.clamp_state[rows]}
+        else:
+            columns |= {"load.torque": actuals.load_torque_nm[rows], "load.speed": actuals.load_speed_rpm[rows]}
+        count, modulo = len(due), self._modulo[key]
+        if ctrl.alive_frozen:
+            columns[key] = np.full(count, ctrl.alive[key])
+        else:
+            columns[key] = (ctrl.alive[key] + 1 + np.arange(count)) % modulo
+            ctrl.alive[key] = int(columns[key][-1])
+        codec = self._codec_of[key]
+        payload = codec.encode_array(columns, count)
+        ident, extended = codec.message.frame_id, codec.message.is_extended_frame
+        return [(float(t), ident, can.Message(timestamp=float(t), arbitration_id=ident, data=payload[i].tobytes(),
+                                               is_extended_id=extended, check=False))
+                for i, t in enumerate(due)]

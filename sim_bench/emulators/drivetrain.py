@@ -10,6 +10,8 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
+
 from drivers.can_signals import CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING
 
 RPM = 2 * math.pi / 60  # rad/s per rpm
@@ -17,25 +19,30 @@ RPM = 2 * math.pi / 60  # rad/s per rpm
 
 @dataclass(frozen=True, slots=True)
 class DrivetrainActuals:
-    """Actual values the controllers report (rpm, N·m, mm; clamp state per drivers.can_signals)."""
+    """Actual values the controllers report (rpm, N·m, mm; clamp state per drivers.can_signals), one per frame."""
 
-    drive_speed_rpm: float
-    drive_torque_nm: float
-    clutch_torque_nm: float
-    clutch_position_mm: float
-    clamp_state: int
-    load_speed_rpm: float
-    load_torque_nm: float
+    drive_speed_rpm: np.ndarray
+    drive_torque_nm: np.ndarray
+    clutch_torque_nm: np.ndarray
+    clutch_position_mm: np.ndarray
+    clamp_state: np.ndarray
+    load_speed_rpm: np.ndarray
+    load_torque_nm: np.ndarray
 
 
 class DrivetrainProvider(Protocol):
-    """Set-points in from the controllers, state advanced to absolute time `t` (s), actual values out."""
+    """Set-points in from the controllers, actual values out.
+
+    `advance(t)` moves the state to absolute time `t` (s); set-points given after it hold from `t` on.
+    `actuals_at(times)` are the actual values at increasing times >= the last `advance`, as arrays
+    (one frame per time), computed with the set-points as they are.
+    """
 
     def set_drive_speed(self, rpm: float) -> None: ...
     def set_clutch(self, torque_nm: float, open_request: bool) -> None: ...
     def set_load_torque(self, torque_nm: float) -> None: ...
     def advance(self, t: float) -> None: ...
-    def actuals(self) -> DrivetrainActuals: ...
+    def actuals_at(self, times: np.ndarray) -> DrivetrainActuals: ...
 
 
 class FirstOrderDrivetrain:
@@ -69,14 +76,21 @@ class FirstOrderDrivetrain:
             self._step(dt)
             self.t += dt
 
-    def actuals(self) -> DrivetrainActuals:
+    def actuals_at(self, times: np.ndarray) -> DrivetrainActuals:
+        rows = []
+        for t in times:
+            self.advance(float(t))
+            rows.append(self._actuals())
+        return DrivetrainActuals(*(np.array(col, dtype=float) for col in zip(*rows)))
+
+    def _actuals(self) -> tuple[float, ...]:
         if self.open_request and self.t_clutch < 0.5:
             clamp = CLAMP_OPEN
         else:
             clamp = CLAMP_CLAMPED if self.locked else CLAMP_SLIPPING
         position = self.stroke_mm * max(0.0, 1.0 - self.t_clutch / self.full_torque_nm)
-        return DrivetrainActuals(self.w_drive / RPM, self.transmitted, abs(self.transmitted), position, clamp,
-                                 self.w_load / RPM, self.t_load)
+        return (self.w_drive / RPM, self.transmitted, abs(self.transmitted), position, clamp,
+                self.w_load / RPM, self.t_load)
 
     def _step(self, dt: float) -> None:
         a_speed = 1.0 - math.exp(-dt / self.tau_speed_s)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Protocol
 
 
@@ -39,3 +40,13 @@ def lookup(name: str) -> SerialEndpoint:
     if name not in _endpoints:
         _endpoints[name] = _defaults[name]()
     return _endpoints[name]
+
+
+@contextmanager
+def unplugged(endpoint: SerialEndpoint) -> Iterator[None]:
+    """The endpoint's cable is out for the duration of the block (its port's open/read/write raise)."""
+    endpoint.connected = False
+    try:
+        yield
+    finally:
+        endpoint.connected = True

@@ -12,9 +12,11 @@ from collections.abc import Sequence
 class ScriptedSerial:
     """pyserial-like port: a write that deviates from the script raises AssertionError naming both."""
 
-    def __init__(self, script: Sequence[tuple[bytes, bytes]], timeout: float | None = 0.0) -> None:
+    def __init__(self, script: Sequence[tuple[bytes, bytes]], timeout: float | None = 0.0,
+                 close_error: Exception | None = None) -> None:
         self.script = list(script)
         self.timeout = timeout
+        self.close_error = close_error  # raised by close(), as by a port whose USB device vanished
         self.is_open = True
         self._pending = b""
         self._rx = bytearray()
@@ -60,6 +62,8 @@ class ScriptedSerial:
         self.is_open = True
 
     def close(self) -> None:
+        if self.close_error is not None:
+            raise self.close_error
         self.is_open = False
 
     @property

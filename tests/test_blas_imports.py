@@ -1,0 +1,75 @@
+"""BLAS runs one thread during benchlab's fits whatever was imported or set first; `import benchlab` stays light."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+FIT_WITH_NUMPY_FIRST = """
+import json, sys
+import numpy, scipy, scipy.linalg  # both OpenBLAS builds loaded before benchlab, with their own threads
+import threadpoolctl
+from benchlab.runfile import load_run
+
+def blas_threads():
+    return max(i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas")
+
+import benchlab.identify.fit  # the module, not the function the package exports under that name
+from benchlab.identify.data import prepare
+from benchlab.identify.spec import clutch_spec
+fit_module = sys.modules["benchlab.identify.fit"]
+seen = []
+residual_vector = fit_module.residual_vector
+
+def spy(*args, **kwargs):  # called at every evaluation of the fit
+    if len(seen) < 3:
+        seen.append(blas_threads())
+    return residual_vector(*args, **kwargs)
+
+fit_module.residual_vector = spy
+before = blas_threads()
+fit_module.fit(clutch_spec("linear"), [prepare(load_run(sys.argv[1]))], max_nfev=2)
+print(json.dumps({"before": before, "during": seen, "after": blas_threads()}))
+"""
+
+
+def _clean_env(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    return env | extra
+
+
+@pytest.mark.parametrize("env, threads_before", [
+    ({}, None),                                # the issue's order with nothing set: BLAS has its default threads
+    ({"OPENBLAS_NUM_THREADS": "2"}, 2),        # a caller's own setting: kept outside the fit, not inside it
+])
+def test_fit_runs_single_threaded_blas_when_numpy_and_scipy_came_first(run_file, env, threads_before) -> None:
+    out = subprocess.run([sys.executable, "-c", FIT_WITH_NUMPY_FIRST, str(run_file)], env=_clean_env(**env),
+                         capture_output=True, text=True, check=True).stdout
+    seen = json.loads(out.splitlines()[-1])
+    assert seen["during"] and set(seen["during"]) == {1}
+    if threads_before is not None:
+        assert seen["before"] == seen["after"] == threads_before
+
+
+def test_import_benchlab_errors_is_light() -> None:
+    code = ("import sys, benchlab.errors, benchlab; "
+            "print(sorted(m for m in ('pandas', 'h5py', 'numba', 'numpy', 'scipy') if m in sys.modules)); "
+            "print(hasattr(benchlab, 'os'))")
+    heavy, has_os = subprocess.run([sys.executable, "-c", code], env=_clean_env(), capture_output=True, text=True,
+                                   check=True).stdout.split("\n")[:2]
+    assert heavy == "[]" and has_os == "False"
+
+
+def test_api_names_load_on_first_use() -> None:
+    code = ("import sys, benchlab; from benchlab import simulate; "
+            "print(callable(benchlab.load_run), callable(benchlab.load_params), 'pandas' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], env=_clean_env(), capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["True", "True", "True"]
+    with pytest.raises(AttributeError):
+        import benchlab
+        benchlab.no_such_name  # noqa: B018
