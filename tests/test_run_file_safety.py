@@ -58,7 +58,7 @@ def test_ctrl_c_during_start_up_is_exit_130_without_a_half_made_file(tmp_path, m
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr and "Exception ignored" not in stderr and len(stderr.splitlines()) <= 1, stderr
     left = sorted(p.name for p in tmp_path.iterdir())
-    assert left in ([], ["run.h5"]), left  # no .tmp, no .lock
+    assert left in ([], ["run.blf", "run.h5"]), left  # no .tmp, no .lock, no CAN log without its run file
     if left:
         assert load_run(out).attrs["status"] in ("running", "aborted")  # readable: resumable or closed
 
@@ -75,7 +75,7 @@ def test_two_runs_on_one_file_one_is_refused_and_the_other_keeps_its_data(tmp_pa
     err = results[loser][1].strip().splitlines()
     assert len(err) == 1 and "--out" in err[0] and str(out) in err[0] and "Traceback" not in results[loser][1]
     assert _seed(out) == winner and load_run(out).attrs["status"] == "complete"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["same.h5"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["same.blf", "same.h5"]  # the winner's run and CAN log
 
 
 def test_a_locked_run_file_is_refused_even_with_force_and_taken_once_free(tmp_path, capsys):
@@ -93,7 +93,7 @@ def test_a_locked_run_file_is_refused_even_with_force_and_taken_once_free(tmp_pa
         assert "--resume" in capsys.readouterr().err
     assert out.read_bytes() == before
     assert main(["run", "table1", "--cycles", "1", "--seed", "2", "--out", str(out), "--force", "--quiet"]) == 0
-    assert _seed(out) == 2 and sorted(p.name for p in tmp_path.iterdir()) == ["run.h5"]
+    assert _seed(out) == 2 and sorted(p.name for p in tmp_path.iterdir()) == ["run.blf", "run.h5"]
 
 
 def test_a_lock_file_left_by_a_killed_run_is_taken_over(tmp_path):

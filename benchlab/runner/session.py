@@ -219,6 +219,8 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
         bench.close()
         if sim is not None:
             sim.close()
+        if not request.out.exists():  # stopped before the run file was made: no CAN log without its run
+            can_log.unlink(missing_ok=True)
     code = 0 if summary.status == "complete" else getattr(summary, "exit_code", 1)
     return code, summary
 
