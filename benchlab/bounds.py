@@ -23,3 +23,5 @@ MAX_TIMEOUT_S = 600.0
 MAX_PROBE_READINGS = 10_000
 #: Most starting points of a grey-box fit (each is a full least-squares fit).
 MAX_FIT_STARTS = 1_000
+#: Longest fitting step: an hour (a thermal model of anything sampled faster is still fitted at this step).
+MAX_FIT_STEP_S = 3600.0

@@ -1,7 +1,7 @@
 """Cool-down analysis of a cooldown-sweep run: R_FA = R_PA per operating point, then the fit of eq. (11).
 
 Each cool-down segment (events `cooldown_start`/`cooldown_end`) is fitted with the paper's 4-state model
-(eq. 6-9, `benchlab.clutch.clutch_network`) driven by the measured inputs: the convection resistance R
+(eq. 6-9, the linear clutch model file: one resistance R0 = R) driven by the measured inputs: the convection resistance R
 (constant during the segment) and the unmeasured initial pressure-plate temperature ϑ_P(0) are free, every
 other parameter comes from a parameter file identified beforehand (e.g. from a Table 1 run). The initial
 flywheel, air and housing temperatures are free too (started at their first measured values): a single
@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 import scipy.optimize
 
-from benchlab.clutch import clutch_network
+from benchlab.clutch import clutch_network, convection_resistance
 from benchlab.errors import InputError
 from benchlab.runfile import load_run
 from benchlab.simulation import initial_state, input_channels
@@ -136,7 +136,7 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
     seg.attrs.update(run.attrs)
     if len(seg) < 100:
         raise ValueError(f"cool-down [{t_start:g}, {t_end:g}] s too short")
-    network = clutch_network()
+    network = clutch_network("linear")
     inputs = input_channels(seg)
     x0 = initial_state(network, inputs, str(run.attrs.get("source", "<run>")))
     names = network.state_names
@@ -154,7 +154,6 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
     sigma = {c: (s if np.isfinite(s) and s > 0 else 0.05) for c, s in sigma.items()}
     out_index = {c: names.index(network.outputs[c]) for c in channels}
     base = dict(params)
-    base.update(a1=0.0, a2=0.0)
 
     free = ["P"] + [s for s in ("F", "A", "T") if s in names]
     # what the first seconds of readings say about the measured initial states (a prior, not a constraint)
@@ -221,8 +220,6 @@ def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_
         fit = fit_segment(run, params, t0, t1, sample_s, engine_speed=rpm if math.isfinite(rpm) else None)
         r_true = math.nan
         if truth is not None:
-            from benchlab.clutch import convection_resistance
-
             r_true = float(np.asarray(convection_resistance(truth, {"engine_speed": np.array([rpm]),
                                                                      "clutch_state": np.array([float(state)])})).ravel()[0])
         results.append(CooldownResult(cycle, rpm, state, point.get("slip_speed", math.nan), t0, t1, fit["R"],
@@ -242,9 +239,11 @@ def fit_eq11(results: Sequence[CooldownResult]) -> dict[str, float]:
     y = np.array([r.R for r in rows])
     e = np.array([r.R_se for r in rows])
 
-    def model(th: np.ndarray) -> np.ndarray:
-        a1, b1, a2, b2, r0 = th
-        return np.where(s == 1, a1 * np.exp(b1 * w), a2 * np.exp(b2 * w)) + r0
+    names = ("a1", "b1", "a2", "b2", "R0")
+    operating_point = {"engine_speed": w, "clutch_state": s.astype(float)}
+
+    def model(th: np.ndarray) -> np.ndarray:  # eq. (11) of the model file, b in 1/krpm here
+        return convection_resistance(dict(zip(names, th)), operating_point)
 
     th0 = np.array([0.3, -1.0, 0.4, -1.0, max(1e-3, 0.8 * y.min())])
     fit = scipy.optimize.least_squares(lambda th: (model(th) - y) / e, th0,
@@ -254,7 +253,6 @@ def fit_eq11(results: Sequence[CooldownResult]) -> dict[str, float]:
     cov = np.linalg.pinv(fit.jac.T @ fit.jac) * (max(1.0, chi2) if np.isfinite(chi2) else 1.0)
     se = np.sqrt(np.diag(cov))
     scale = np.array([1.0, 1e-3, 1.0, 1e-3, 1.0])  # b in 1/rpm
-    names = ("a1", "b1", "a2", "b2", "R0")
     out = {k: float(v * c) for k, v, c in zip(names, fit.x, scale)}
     out.update({f"{k}_se": float(v * c) for k, v, c in zip(names, se, scale)})
     out["chi2_red"] = chi2

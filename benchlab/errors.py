@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 
 class InputError(Exception):
@@ -11,3 +14,18 @@ class InputError(Exception):
     def __init__(self, source: "str | os.PathLike[str]", field: str, expected: str) -> None:
         self.source, self.field, self.expected = str(source), field, expected
         super().__init__(f"{self.source}: {field}: {expected}")
+
+
+def read_document(path: "str | os.PathLike[str]", what: str, parse: Callable[[str], Any],
+                  malformed: tuple[type[Exception], ...], form: str) -> Any:
+    """A user's file parsed by `parse`; InputError on its `file` field where it is missing, a directory, not text
+    or (one of `malformed`) not `form`. `what` names the file for the message, e.g. "parameter file"."""
+    path = Path(path)
+    try:
+        return parse(path.read_text())
+    except FileNotFoundError:
+        raise InputError(path, "file", f"an existing {what} (not found)") from None
+    except IsADirectoryError:
+        raise InputError(path, "file", f"a {what}, not a directory") from None
+    except (UnicodeDecodeError, *malformed) as exc:
+        raise InputError(path, "file", f"{form} ({exc})") from None

@@ -46,11 +46,13 @@ class Link:
 
 @dataclass(frozen=True)
 class Source:
-    """Heat flow in W injected into one node."""
+    """Heat flow in W injected into one node: `heat_flow` plus, where it is affine in node temperatures,
+    Σ coefficient·ϑ_node (W/K each), which the solver puts into the state matrix."""
 
     node: str
     heat_flow: ParamChannelFunction
     label: str = ""
+    coefficients: tuple[tuple[str, ParamChannelFunction], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -73,6 +75,7 @@ class ThermalNetwork:
     outputs: Mapping[str, str]  # measured/simulated channel name -> state name
     lags: tuple[Lag, ...] = ()
     initial: Mapping[str, str] = field(default_factory=dict)  # state -> channel it starts from
+    measured: tuple[str, ...] = ()  # the outputs a run measures (fitted and scored); the rest are only simulated
 
     @property
     def state_names(self) -> list[str]:
@@ -107,8 +110,9 @@ class ThermalNetwork:
                 if end not in known:
                     raise ValueError(f"link {link.label or (link.a, link.b)} names unknown node {end!r}")
         for src in self.sources:
-            if src.node not in {n.name for n in self.nodes}:
-                raise ValueError(f"source {src.label} heats unknown node {src.node!r}")
+            for node in (src.node, *(name for name, _ in src.coefficients)):
+                if node not in {n.name for n in self.nodes}:
+                    raise ValueError(f"source {src.label} names unknown node {node!r}")
         for channel, state in self.outputs.items():
             if state not in self.state_names:
                 raise ValueError(f"output {channel} reads unknown state {state!r}")

@@ -1,4 +1,9 @@
-"""Parameter files (contract section 2): read, check, write."""
+"""Parameter files (contract sections 2 and 6): read, check, write.
+
+A parameter file names its model: `"model": "linear"` or `"nonlinear"` (the built-in clutch model files), or
+any model whole under `"network"` (the model file's tables as JSON), so one file is enough to simulate,
+report, diagnose from or estimate wear with.
+"""
 
 from __future__ import annotations
 
@@ -9,41 +14,70 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from benchlab.clutch import CAPACITIES, LINEAR_PARAMS, NONLINEAR_PARAMS, RESISTANCES
-from benchlab.errors import InputError
+from benchlab.errors import InputError, read_document
+from benchlab.model.build import build_network
+from benchlab.model.catalog import BUILTIN, builtin
+from benchlab.model.definition import ModelDefinition, parse_model
+from benchlab.network import ThermalNetwork
 
-UNITS = {"C_*": "J/K", "R_*, R0, a1, a2": "K/W", "b1, b2": "1/rpm"}
-MODELS = ("linear", "nonlinear")
+#: Contract section 2: a linear parameter file may omit eq. (11)'s terms and means a1 = a2 = 0.
+LINEAR_CONVECTION = {"a1": 0.0, "b1": 0.0, "a2": 0.0, "b2": 0.0}
 
 
 class ModelParams(dict):
-    """Parameter name -> value, plus the model kind and any extra keys of the file."""
+    """Parameter name -> value, plus the model (its definition and label) and any extra keys of the file."""
 
-    def __init__(self, model: str, values: Mapping[str, float], extra: Mapping[str, Any] | None = None) -> None:
+    def __init__(self, definition: ModelDefinition, values: Mapping[str, float],
+                 extra: Mapping[str, Any] | None = None) -> None:
         super().__init__(values)
-        self.model = model
+        self.definition = definition
         self.extra = dict(extra or {})
+        self._network: ThermalNetwork | None = None
+
+    @property
+    def model(self) -> str:
+        """The model's name as the file carries it: linear, nonlinear or the model file's name."""
+        return self.definition.label
+
+    @property
+    def network(self) -> ThermalNetwork:
+        """The model's thermal network, built once."""
+        if self._network is None:
+            self._network = build_network(self.definition)
+        return self._network
 
 
-def check_params(model: str, values: Mapping[str, Any], source: str = "<params>") -> ModelParams:
-    """Validate names, types and signs; fill a1 = a2 = 0 for a linear model."""
-    if model not in MODELS:
-        raise InputError(source, "model", f"one of {', '.join(MODELS)}, got {model!r}")
-    required = LINEAR_PARAMS if model == "linear" else NONLINEAR_PARAMS
+def _strictly_positive(model: ModelDefinition) -> set[str]:
+    """Parameters that divide: heat capacities, time constants and resistances that are one parameter alone."""
+    return (set(model.nodes.values()) | {g.time_constant for g in model.lags}
+            | {l.resistance.text.strip() for l in model.links if l.resistance.text.strip() in model.parameters})
+
+
+def check_params(model: "str | ModelDefinition", values: Mapping[str, Any], source: str = "<params>") -> ModelParams:
+    """Validate names, types and signs against the model; fixed parameters come from the model file; a linear
+    clutch gets a1 = a2 = 0."""
+    if not isinstance(model, ModelDefinition):
+        if not isinstance(model, str) or model not in BUILTIN:
+            raise InputError(source, "model", f"one of {', '.join(BUILTIN)} (or a \"network\"), got {model!r}")
+        model = builtin(model)
+    positive = _strictly_positive(model)
     clean: dict[str, float] = {}
-    for name in required:
+    for name, param in model.parameters.items():
+        if param.fixed is not None and name not in values:
+            clean[name] = param.fixed
+            continue
         if name not in values:
             raise InputError(source, f"params.{name}", "a number (missing)")
         value = values[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if not _is_number(value):
             raise InputError(source, f"params.{name}", f"a finite number, got {value!r}")
-        if name in CAPACITIES + RESISTANCES and value <= 0:
+        if name in positive and value <= 0:
             raise InputError(source, f"params.{name}", f"a positive value, got {value!r}")
-        if name in ("a1", "a2") and value < 0:
+        if param.min >= 0 and value < 0:
             raise InputError(source, f"params.{name}", f"a value >= 0, got {value!r}")
         clean[name] = float(value)
-    if model == "linear":
-        clean.update({"a1": 0.0, "b1": 0.0, "a2": 0.0, "b2": 0.0})
+    if model.alias == "linear":
+        clean.update(LINEAR_CONVECTION)
     extras = {k: float(v) for k, v in values.items() if k not in clean and _is_number(v)}
     return ModelParams(model, {**extras, **clean})
 
@@ -52,29 +86,36 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def load_params(path: "str | os.PathLike[str]") -> ModelParams:
-    """Read a parameter file; raise InputError naming the file and field on any defect."""
+def load_params(path: "str | os.PathLike[str]", model: ModelDefinition | None = None) -> ModelParams:
+    """Read a parameter file; raise InputError naming the file and field on any defect.
+
+    `model` (a command's `--model`) takes the place of the file's own model; its parameters must be in the file.
+    """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(path, "file", "an existing parameter file (not found)") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(path, "file", f"JSON ({exc})") from None
+    doc = read_document(path, "parameter file", json.loads, (json.JSONDecodeError,), "JSON")
     if not isinstance(doc, dict):
         raise InputError(path, "file", "a JSON object")
     if not isinstance(doc.get("params"), dict):
         raise InputError(path, "params", "an object of parameter values")
-    params = check_params(doc.get("model", "nonlinear"), doc["params"], str(path))
-    params.extra = {k: v for k, v in doc.items() if k not in ("model", "params", "units")}
+    if model is None and "network" in doc:
+        model = parse_model(doc["network"], path, prefix="network.")
+    params = check_params(model or doc.get("model", "nonlinear"), doc["params"], str(path))
+    params.extra = {k: v for k, v in doc.items() if k not in ("model", "params", "units", "network")}
     return params
 
 
 def save_params(path: "str | os.PathLike[str]", params: ModelParams, extra: Mapping[str, Any] | None = None) -> None:
-    """Write a parameter file: the contract's keys first, then any extra keys (statistics, uncertainty)."""
-    names = LINEAR_PARAMS if params.model == "linear" else NONLINEAR_PARAMS
-    values = {k: params[k] for k in names} | {k: v for k, v in params.items() if k not in NONLINEAR_PARAMS}
-    doc = {"model": params.model, "params": values, "units": UNITS, **params.extra, **dict(extra or {})}
+    """Write a parameter file: the contract's keys first (with "network" for a model that is not built in), then
+    any extra keys (statistics, uncertainty)."""
+    model = params.definition
+    dropped = LINEAR_CONVECTION if model.alias == "linear" else {}
+    values = {k: params[k] for k in model.parameters} | {k: v for k, v in params.items()
+                                                         if k not in model.parameters and k not in dropped}
+    units = {k: p.unit for k, p in model.parameters.items() if p.unit}
+    doc: dict[str, Any] = {"model": model.label, "params": values, "units": units}
+    if model.alias is None:
+        doc["network"] = model.to_doc()
+    doc.update({**params.extra, **dict(extra or {})})
     Path(path).write_text(json.dumps(doc, indent=2, default=float) + "\n")
 
 

@@ -43,11 +43,14 @@ def _open(path: Path) -> h5py.File:
         raise InputError(path, "file", "an HDF5 run file (cannot be opened as HDF5)") from None
 
 
-def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = ()) -> pd.DataFrame:
+def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = (),
+             required: Sequence[str] = REQUIRED) -> pd.DataFrame:
     """The /aligned channels as a DataFrame; attrs hold dt, units, source and the root attributes.
 
     `measured`: channels that must hold at least one measured (not NaN) sample, e.g. the temperatures a model
     is fitted to and started from; a file where one of them is NaN throughout is bad input for that use.
+    `required`: channels the file must hold (default the contract's section 1 list; a model file's run needs
+    `time` and the channels the model names, contract section 6).
     """
     path = Path(path)
     with _open(path) as f:
@@ -61,7 +64,7 @@ def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = ()) -> pd
         if not _is_number(dt) or not np.isfinite(dt) or float(dt) <= 0:
             shown = _text(dt) if isinstance(dt, bytes) else dt
             raise InputError(path, "/aligned.dt", f"a positive time step in seconds (a number), got {shown!r}")
-        columns, units = _read_channels(path, group)
+        columns, units = _read_channels(path, group, ("time", *required))
         time_dtype = group["time"].dtype
     frame = pd.DataFrame(columns)
     _check_time(path, frame["time"].to_numpy(), float(dt), time_dtype)
@@ -72,12 +75,14 @@ def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = ()) -> pd
     return frame
 
 
-def _read_channels(path: Path, group: h5py.Group) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+def _read_channels(path: Path, group: h5py.Group,
+                   required: Sequence[str]) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     columns: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
-    for name in REQUIRED:
+    for name in dict.fromkeys(required):
         if name not in group:
-            raise InputError(path, f"/aligned/{name}", f"a required channel in {ALIGNED_UNITS[name]} (missing)")
+            unit = f" in {ALIGNED_UNITS[name]}" if name in ALIGNED_UNITS else " with its unit"
+            raise InputError(path, f"/aligned/{name}", f"a required channel{unit} (missing)")
     length = None
     for name, ds in group.items():
         if not isinstance(ds, h5py.Dataset) or ds.ndim != 1 or not np.issubdtype(ds.dtype, np.number):

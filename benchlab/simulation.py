@@ -7,13 +7,9 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from benchlab.clutch import PREDICTED_CHANNELS, SIMULATED_CHANNELS, clutch_network
 from benchlab.errors import InputError
 from benchlab.network import Params, ThermalNetwork
 from benchlab.solver import run_network
-
-INPUT_CHANNELS = ("engine_speed", "clutch_state", "friction_power", "T_ambient")
-SIGNAL_CHANNELS = ("clutch_speed", "clutch_torque", "load_torque")  # not model inputs; signals of extensions' laws
 
 
 def _held(values: np.ndarray) -> np.ndarray:
@@ -24,34 +20,30 @@ def _held(values: np.ndarray) -> np.ndarray:
 
 
 def input_channels(run: pd.DataFrame) -> dict[str, np.ndarray]:
-    """All channels as arrays, the model's inputs with drop-outs held at the last valid value.
+    """Every channel as an array with drop-outs held at the last valid value (zero-order hold, as between
+    samples), for the network's laws and boundaries; a channel never measured (all NaN) is left out.
 
-    Inputs are held (zero-order hold, as between samples); measured temperatures the model
-    predicts stay as they are, NaN included, because they only set the initial state.
+    Measured temperatures are held too: a law may read them (radiation, learned terms), and the first held
+    value is the first measured one, which starts the states. Fitting targets come from the run itself.
     """
-    source = run.attrs.get("source", "<run>")
     bare = pd.DataFrame(run, copy=False)  # same columns without attrs: pandas deep-copies attrs on every run[name]
-    channels = {name: bare[name].to_numpy(np.float64) for name in bare.columns}
-    for name in INPUT_CHANNELS + ("T_engine",):
-        if name not in channels:
-            if name == "T_engine":
-                continue
-            raise InputError(source, f"/aligned/{name}", "a model input channel (missing)")
-        values = _held(channels[name])
-        if np.isnan(values).all():
-            if name == "T_engine":
-                continue
-            raise InputError(source, f"/aligned/{name}", "at least one valid sample")
-        channels[name] = values
-    for name in SIGNAL_CHANNELS:  # held like inputs where present; left out where never measured
-        if name in channels:
-            channels[name] = _held(channels[name])
-            if np.isnan(channels[name]).all():
-                del channels[name]
-    for name in PREDICTED_CHANNELS:  # measured temperatures as signals for laws (radiation, learned terms)
-        if name in channels:
-            channels[f"{name}_filled"] = _held(channels[name])
+    channels = {}
+    for name in bare.columns:
+        values = bare[name].to_numpy(np.float64)
+        if name == "time" or not np.isnan(values).all():
+            channels[name] = _held(values)
     return channels
+
+
+def model_network(params: Params, network: ThermalNetwork | None = None) -> ThermalNetwork:
+    """The network to simulate: the one given, else the parameter file's model, else the paper's nonlinear clutch."""
+    if network is not None:
+        return network
+    if hasattr(params, "network"):
+        return params.network
+    from benchlab.clutch import clutch_network
+
+    return clutch_network()
 
 
 def initial_state(network: ThermalNetwork, channels: Mapping[str, np.ndarray], source: str = "<run>",
@@ -74,11 +66,11 @@ def initial_state(network: ThermalNetwork, channels: Mapping[str, np.ndarray], s
 
 def simulate(run: pd.DataFrame, params: Params, network: ThermalNetwork | None = None,
              initial: Mapping[str, float] | None = None) -> pd.DataFrame:
-    """The model's temperatures (degC) on the run's grid: T_pressure_plate, T_flywheel, T_air, T_housing."""
-    network = network or clutch_network()
+    """The model's temperatures (degC) on the run's grid, one column per output and simulated channel
+    (the clutch: T_pressure_plate, T_flywheel, T_air, T_housing)."""
+    network = model_network(params, network)
     channels = input_channels(run)
     x0 = initial_state(network, channels, run.attrs.get("source", "<run>"), initial)
     states = run_network(network, params, channels, float(run.attrs["dt"]), x0)[:-1]
     index = {name: i for i, name in enumerate(network.state_names)}
-    columns = {name: states[:, index[network.outputs.get(name, state)]] for name, state in SIMULATED_CHANNELS.items()}
-    return pd.DataFrame(columns, index=run.index)
+    return pd.DataFrame({name: states[:, index[state]] for name, state in network.outputs.items()}, index=run.index)

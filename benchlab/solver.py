@@ -11,6 +11,7 @@ each distinct one is discretised once.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,8 +51,12 @@ def _conductances(network: ThermalNetwork, params: Params, channels: Channels, n
 
 
 def _system_matrices(network: ThermalNetwork, params: Params, conductances: list[np.ndarray],
-                     n_ops: int) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous A (n_ops, n, n) and B (n_ops, n, m) for each operating point."""
+                     coefficients: list[np.ndarray], n_ops: int) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous A (n_ops, n, n) and B (n_ops, n, m) for each operating point.
+
+    `coefficients`: per (source, node) term of `_coefficient_terms`, the heat flow per kelvin of that node
+    (an affine source, e.g. copper loss rising with winding temperature), which goes into A.
+    """
     states = {name: i for i, name in enumerate(network.state_names)}
     bcol = {b.name: len(network.sources) + j for j, b in enumerate(network.boundaries)}
     n, m = len(states), len(network.sources) + len(network.boundaries)
@@ -74,11 +79,29 @@ def _system_matrices(network: ThermalNetwork, params: Params, conductances: list
     for k, src in enumerate(network.sources):
         i = states[src.node]
         B[:, i, k] = inv_c[i]
+    for (src, node, _), k in zip(_coefficient_terms(network), coefficients):
+        A[:, states[src.node], states[node]] += k * inv_c[states[src.node]]
     for lag in network.lags:
         s, i, tau = states[lag.name], states[lag.node], params[lag.time_constant]
         A[:, s, s] = -1.0 / tau
         A[:, s, i] = 1.0 / tau
     return A, B
+
+
+def _coefficient_terms(network: ThermalNetwork) -> list[tuple]:
+    """(source, node, coefficient law) of every temperature-affine term of the network's sources."""
+    return [(src, node, law) for src in network.sources for node, law in src.coefficients]
+
+
+def _coefficients(network: ThermalNetwork, params: Params, channels: Channels) -> list[np.ndarray | float]:
+    """W/K of each temperature-affine source term: a scalar, or one value per sample."""
+    out: list[np.ndarray | float] = []
+    for src, node, law in _coefficient_terms(network):
+        k = np.asarray(law(params, channels), dtype=np.float64)
+        if not np.all(np.isfinite(k)):
+            raise ValueError(f"heat flow of source {src.label} per kelvin of {node} is not finite")
+        out.append(float(k) if k.ndim == 0 else k)
+    return out
 
 
 TAYLOR_THETA = 0.5  # 1-norm of A*h after scaling by 2**-s
@@ -197,23 +220,38 @@ def _combined_key(columns: list[np.ndarray], n: int) -> tuple[np.ndarray, list[n
     return op_index.astype(np.int64), per_column
 
 
-def _operating_points(conductances: list, n: int, resolution: float) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Group samples by quantised varying conductances; return index per sample and per-point values.
+def _quantised(values: np.ndarray, positive: bool, resolution: float) -> tuple[np.ndarray, Callable]:
+    """Integer keys of per-sample values and the map from keys back to values: conductances (positive) on a
+    log scale of relative step `resolution`, signed coefficients on a linear one relative to their largest size."""
+    if positive:
+        return np.rint(np.log(values) / resolution).astype(np.int64), lambda codes: np.exp(codes * resolution)
+    step = float(np.max(np.abs(values))) * resolution or 1.0
+    return np.rint(values / step).astype(np.int64), lambda codes: codes * step
 
-    Links that share one law (R_PA = R_FA) share one key column; the key columns are combined
-    into one integer code per sample and factorised in linear time.
+
+def _operating_points(laws: list, n: int, resolution: float,
+                      positive: list[bool] | None = None) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Group samples by quantised varying law values; return index per sample and per-point values.
+
+    `laws`: conductances (positive, the default) and temperature coefficients of sources, scalars or one
+    value per sample. Laws that share one array (R_PA = R_FA) share one key column; the key columns are
+    combined into one integer code per sample and factorised in linear time.
     """
-    varying = [i for i, g in enumerate(conductances) if isinstance(g, np.ndarray)]
+    positive = positive if positive is not None else [True] * len(laws)
+    varying = [i for i, g in enumerate(laws) if isinstance(g, np.ndarray)]
     if not varying:
-        return np.zeros(n, dtype=np.int64), [np.array([g]) for g in conductances]
+        return np.zeros(n, dtype=np.int64), [np.array([g]) for g in laws]
     columns: list[np.ndarray] = []
-    keyed: list[np.ndarray] = []  # the conductances each column was made from
+    decoders: list[Callable] = []
+    keyed: list[np.ndarray] = []  # the values each column was made from
     column_of: dict[int, int] = {}
     for i in varying:
-        g = conductances[i]
+        g = laws[i]
         same = next((j for j, k in enumerate(keyed) if k is g or np.array_equal(k, g)), None)
         if same is None:
-            columns.append(np.rint(np.log(g) / resolution).astype(np.int64))
+            codes, decode = _quantised(g, positive[i], resolution)
+            columns.append(codes)
+            decoders.append(decode)
             keyed.append(g)
             same = len(columns) - 1
         column_of[i] = same
@@ -223,9 +261,9 @@ def _operating_points(conductances: list, n: int, resolution: float) -> tuple[np
     else:
         op_index, per_column = _combined_key(columns, n)
     per_op: list[np.ndarray] = []
-    for i, g in enumerate(conductances):
+    for i, g in enumerate(laws):
         if i in column_of:
-            per_op.append(np.exp(per_column[column_of[i]] * resolution))
+            per_op.append(decoders[column_of[i]](per_column[column_of[i]]))
         else:
             per_op.append(np.full(len(per_column[0]), g))
     return op_index, per_op
@@ -236,8 +274,11 @@ def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: 
     """Evaluate the network's laws on the channels and discretise every distinct operating point."""
     n = len(next(iter(channels.values())))
     conductances = _conductances(network, params, channels, n)
-    op_index, per_op = _operating_points(conductances, n, resolution)
-    A, B = _system_matrices(network, params, per_op, len(per_op[0]) if per_op else 1)
+    coefficients = _coefficients(network, params, channels)
+    laws = conductances + coefficients
+    op_index, per_op = _operating_points(laws, n, resolution, [True] * len(conductances) + [False] * len(coefficients))
+    A, B = _system_matrices(network, params, per_op[:len(conductances)], per_op[len(conductances):],
+                            len(per_op[0]) if per_op else 1)
     Ad, Bd = _zoh(A, B, dt)
     columns = [as_samples(s.heat_flow(params, channels), n) for s in network.sources]
     columns += [as_samples(b.temperature(channels), n) for b in network.boundaries]

@@ -42,7 +42,7 @@ from scipy.optimize import least_squares  # noqa: E402
 
 from benchlab.identify.api import identify  # noqa: E402
 from benchlab.identify.evaluate import evaluate  # noqa: E402
-from benchlab.identify.spec import clutch_spec  # noqa: E402
+from benchlab.model.catalog import model_spec  # noqa: E402
 from benchlab.params import paper_params  # noqa: E402
 from protocols.table1 import table1_schedule  # noqa: E402
 from sim_bench.plant import ThermalPlant  # noqa: E402
@@ -121,7 +121,7 @@ class BudgetSpent(Exception):
 
 def peer_fit(model: PeerModel, floor_k: float, budget_s: float) -> dict:
     """least_squares from the spec's priors in log coordinates; time to reach 1.05 x floor, and where it ended."""
-    spec = clutch_spec("nonlinear")
+    spec = model_spec("nonlinear")
     to_params = lambda x: {s.name: math.exp(v) if s.log else v * s.linear_scale for s, v in zip(spec.free, x)}  # noqa: E731
     lo = np.array([math.log(s.lower) if s.log else s.lower / s.linear_scale for s in spec.free])
     hi = np.array([math.log(s.upper) if s.log else s.upper / s.linear_scale for s in spec.free])

@@ -49,7 +49,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 
 import benchlab  # noqa: E402
 from benchlab import solver  # noqa: E402
-from benchlab.clutch import SIMULATED_CHANNELS, clutch_network  # noqa: E402
+from benchlab.clutch import clutch_network  # noqa: E402
 from benchlab.network import Lag, Link, Node, ThermalNetwork, as_samples  # noqa: E402
 from benchlab.params import paper_params  # noqa: E402
 from benchlab.simulation import initial_state, input_channels  # noqa: E402
@@ -222,15 +222,14 @@ def breakdown(run: pd.DataFrame, p, repeats: int) -> tuple[dict[str, float], int
     op_index, per_op = stage("disc: operating-point keying", lambda: solver._operating_points(g, n, res))
     m = len(per_op[0])
     ad, bd = stage(f"disc: matrices + ZOH ({m} ops)",
-                   lambda: solver._zoh(*solver._system_matrices(network, p, per_op, m), dt))
+                   lambda: solver._zoh(*solver._system_matrices(network, p, per_op, [], m), dt))
     disc = solver.Discretised(op_index, ad, bd, inputs)
     states = stage("propagate (numba loop)", lambda: solver.propagate(disc, x0))
 
     def frame():
         s = states[:-1]
         index = {name: i for i, name in enumerate(network.state_names)}
-        return pd.DataFrame({name: s[:, index[network.outputs.get(name, st)]] for name, st in SIMULATED_CHANNELS.items()},
-                            index=run.index)
+        return pd.DataFrame({name: s[:, index[st]] for name, st in network.outputs.items()}, index=run.index)
     stage("output DataFrame", frame)
     one_op = solver.Discretised(np.zeros(n, dtype=np.int64), ad[:1].copy(), bd[:1].copy(), inputs)
     times["(diag) propagate, 1 op only"], _ = best_of(lambda: solver.propagate(one_op, x0), repeats)
@@ -293,7 +292,7 @@ def extended_networks() -> dict[str, ThermalNetwork]:
     lag = mass.with_lag(Lag("F_meas", "F", "tau_F"), "T_flywheel")
 
     def radiation(p, c):  # linearised grey-body exchange, keyed on the measured temperatures in 0.5 K steps
-        mean_k = np.round(c["T_flywheel_filled"] + c["T_housing_filled"]) / 2 + 273.15
+        mean_k = np.round(c["T_flywheel"] + c["T_housing"]) / 2 + 273.15
         return 1.0 / (p["eps_area"] * 5.670374419e-8 * 4 * mean_k ** 3)
     rad = lag.with_link(Link("F", "T", radiation, "radiation F")).with_link(Link("P", "T", radiation, "radiation P"))
     lag2 = rad.with_lag(Lag("A_meas", "A", "tau_A"), "T_air")
@@ -329,7 +328,7 @@ def zoh_comparison(run: pd.DataFrame, dt: float, repeats: int) -> list[tuple[str
     for name, net in extended_networks().items():
         g = solver._conductances(net, p, channels, n_samples)
         _, per_op = solver._operating_points(g, n_samples, solver.DEFAULT_RESOLUTION)
-        a, b = solver._system_matrices(net, p, per_op, len(per_op[0]))
+        a, b = solver._system_matrices(net, p, per_op, [], len(per_op[0]))
         ref_s, (ref_a, ref_b) = best_of(lambda: zoh_expm(a, b, dt), repeats)
         result = {"scipy expm (previous)": (ref_s / len(a), 0.0)}
         for label, fn in (("benchlab kernel", solver._zoh), ("numpy batched eig", zoh_eig)):

@@ -9,7 +9,7 @@ temperatures (radiation) are solved by fixed-point iteration over the whole hori
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -53,11 +53,9 @@ def slip_convection(gain_per_krpm: float) -> Effect:
 def heat_split(plate_fraction: float) -> Effect:
     """The friction power goes `plate_fraction` to the pressure plate, the rest to the flywheel."""
     def edit(net, p):
-        return ThermalNetwork(net.nodes, net.boundaries, net.links,
-                              (Source("P", lambda q, ch: q["split"] * ch["friction_power"], "plate share"),
-                               Source("F", lambda q, ch: (1 - q["split"]) * ch["friction_power"], "flywheel share"))
-                              + tuple(s for s in net.sources if s.label not in ("P/2 plate", "P/2 flywheel")),
-                              net.outputs, net.lags, net.initial)
+        return replace(net, sources=(Source("P", lambda q, ch: q["split"] * ch["friction_power"], "plate share"),
+                                     Source("F", lambda q, ch: (1 - q["split"]) * ch["friction_power"], "flywheel share"))
+                       + tuple(s for s in net.sources if s.label not in ("plate share", "flywheel share")))
     return Effect("heat_split", "friction_power", "heat_split", edit, {"split": plate_fraction})
 
 

@@ -20,7 +20,7 @@ def blas_threads():
 
 import benchlab.identify.fit  # the module, not the function the package exports under that name
 from benchlab.identify.data import prepare
-from benchlab.identify.spec import clutch_spec
+from benchlab.model.catalog import model_spec
 fit_module = sys.modules["benchlab.identify.fit"]
 seen = []
 residual_vector = fit_module.residual_vector
@@ -32,7 +32,7 @@ def spy(*args, **kwargs):  # called at every evaluation of the fit
 
 fit_module.residual_vector = spy
 before = blas_threads()
-fit_module.fit(clutch_spec("linear"), [prepare(load_run(sys.argv[1]))], max_nfev=2)
+fit_module.fit(model_spec("linear"), [prepare(load_run(sys.argv[1]))], max_nfev=2)
 print(json.dumps({"before": before, "during": seen, "after": blas_threads()}))
 """
 

@@ -15,7 +15,7 @@ from benchlab.diagnose import diagnose
 from benchlab.diagnose.engine import STEP_S
 from benchlab.identify.data import prepare
 from benchlab.identify.fit import fit_multistart
-from benchlab.identify.spec import clutch_spec
+from benchlab.model.catalog import model_spec
 from benchlab.params import paper_params
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P
@@ -135,7 +135,7 @@ def _unabsorbed_k(effect: P.Effect, seed: int) -> float:
     and what it cannot absorb is what a diagnosis sees.
     """
     _, run = _bench([effect], seed)
-    return fit_multistart(clutch_spec("nonlinear"), [prepare(run, STEP_S)], starts=2).rmse_k
+    return fit_multistart(model_spec("nonlinear"), [prepare(run, STEP_S)], starts=2).rmse_k
 
 
 @pytest.mark.parametrize("effects,seed", [([P.gearbox_churning(40.0), P.slip_convection(0.5)], 141),

@@ -1,4 +1,5 @@
-"""`benchlab diagnose RUN.h5 [RUN2.h5 …] [--baseline linear|nonlinear] [--json] [--report DIR]`."""
+"""`benchlab diagnose RUN.h5 [RUN2.h5 …] [--model FILE.toml|linear|nonlinear] [--json] [--report DIR]
+[--save-model OUT.toml]`."""
 
 from __future__ import annotations
 
@@ -9,12 +10,13 @@ from pathlib import Path
 import pandas as pd
 
 from benchlab import cliargs
-from benchlab.clutch import PREDICTED_CHANNELS
-from benchlab.diagnose.engine import MIN_DURATION_S, diagnose_runs
+from benchlab.diagnose.engine import MIN_DURATION_S, Diagnosis, diagnose_runs
 from benchlab.diagnose.regimes import worst_regimes
 from benchlab.diagnose.report import summarise
 from benchlab.errors import InputError
-from benchlab.runfile import load_run
+from benchlab.model.catalog import MODEL_HELP, resolve_model
+from benchlab.model.definition import ModelDefinition, to_toml
+from benchlab.model.runs import load_runs
 
 NAME = "diagnose"
 HELP = "find what the model gets wrong, name the cause, extend the model and measure the gain"
@@ -22,10 +24,14 @@ HELP = "find what the model gets wrong, name the cause, extend the model and mea
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", help="run files")
-    parser.add_argument("--baseline", choices=("linear", "nonlinear"), default="linear")
+    parser.add_argument("--baseline", "--model", dest="baseline", default="linear", metavar="MODEL",
+                       help=f"the model to start from: {MODEL_HELP} (default linear, the paper's starting point)")
     parser.add_argument("--json", action="store_true", help="print the contract's JSON object on stdout")
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="seed of the baseline's starting points")
     parser.add_argument("--report", metavar="DIR", help="write diagnose.md and its PNG figures into DIR")
+    parser.add_argument("--save-model", metavar="OUT.toml", type=cliargs.output_file,
+                        help="write the best model found as a model file, its fitted values as starting values "
+                             "(ready for identify --model OUT.toml)")
 
 
 def print_report(result: dict) -> None:
@@ -58,9 +64,10 @@ def check_report_dir(path: str) -> Path:
     return out
 
 
-def load_runs(paths: list[str]) -> list[pd.DataFrame]:
-    """The run files, each long enough for the blocked cross-validation (two FOLD_S blocks)."""
-    runs = [load_run(p, measured=PREDICTED_CHANNELS) for p in paths]
+def load_diagnosed_runs(paths: list[str], model: ModelDefinition) -> list[pd.DataFrame]:
+    """The run files, each holding what the model reads and long enough for the blocked cross-validation
+    (two FOLD_S blocks)."""
+    runs = load_runs(paths, model)
     for path, run in zip(paths, runs):
         duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
         if duration < MIN_DURATION_S:
@@ -69,11 +76,21 @@ def load_runs(paths: list[str]) -> list[pd.DataFrame]:
     return runs
 
 
+def best_model(diagnosis: Diagnosis) -> ModelDefinition:
+    """The best model found, as a model file: the baseline's file with the accepted extensions, fitted values as starts."""
+    final = diagnosis.final
+    return final.spec.definition.with_starts(final.params, name=final.spec.name)
+
+
 def run(args: argparse.Namespace) -> int:
     out = check_report_dir(args.report) if args.report else None
-    runs = load_runs(args.runs)
-    diagnosis = diagnose_runs(runs, args.baseline, seed=args.seed)
-    result = summarise(diagnosis, args.baseline)
+    model = resolve_model(args.baseline, "--model")
+    runs = load_diagnosed_runs(args.runs, model)
+    diagnosis = diagnose_runs(runs, model, seed=args.seed)
+    result = summarise(diagnosis, model.label)
+    if args.save_model:
+        Path(args.save_model).write_text(to_toml(best_model(diagnosis)))
+        result["best"]["model_file"] = str(args.save_model)
     if args.json:
         print(json.dumps(result, default=float))
     else:

@@ -1,31 +1,34 @@
-"""`benchlab identify RUN.h5 [RUN2.h5 …] --model linear|nonlinear --out P.json [--validate V.h5 …]`."""
+"""`benchlab identify RUN.h5 [RUN2.h5 …] --model FILE.toml|linear|nonlinear --out P.json [--validate V.h5 …]`."""
 
 from __future__ import annotations
 
 import argparse
 
 from benchlab import cliargs
-from benchlab.bounds import MAX_FIT_STARTS
-from benchlab.clutch import PREDICTED_CHANNELS
+from benchlab.bounds import MAX_FIT_STARTS, MAX_FIT_STEP_S
 from benchlab.errors import InputError
 from benchlab.identify.api import identify, parse_fixed
-from benchlab.identify.spec import clutch_spec
+from benchlab.identify.data import FIT_STEP_S
+from benchlab.model.catalog import MODEL_HELP, model_spec, resolve_model
+from benchlab.model.runs import load_runs
 from benchlab.params import save_params
-from benchlab.runfile import load_run
 
 NAME = "identify"
-HELP = "grey-box identification of the clutch model from one or more run files"
+HELP = "grey-box identification of a thermal model (the clutch's or a model file's) from one or more run files"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", help="run files to fit together")
-    parser.add_argument("--model", choices=("linear", "nonlinear"), default="nonlinear")
+    parser.add_argument("--model", default="nonlinear", help=f"{MODEL_HELP} (default nonlinear)")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="parameter file to write (JSON)")
     parser.add_argument("--validate", nargs="*", default=[], help="run files to validate on (not fitted)")
     parser.add_argument("--fix", nargs="*", default=[], metavar="NAME=VALUE", help="hold parameters fixed")
     parser.add_argument("--starts", type=cliargs.count("a number of starting points", MAX_FIT_STARTS), default=6,
                         help="number of starting points (local minima exist)")
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="seed of the starting points")
+    parser.add_argument("--step", type=cliargs.positive_float("a fitting step in s", MAX_FIT_STEP_S),
+                        default=FIT_STEP_S, help=f"fitting step in s: inputs averaged over it (default {FIT_STEP_S:g}; "
+                                                 "slow machines sampled at 1 s fit as well at a few seconds)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -33,19 +36,20 @@ def run(args: argparse.Namespace) -> int:
         fixed = parse_fixed(args.fix)
     except ValueError as exc:
         raise InputError("--fix", str(exc).split(":")[0].removeprefix("--fix "), "NAME=NUMBER") from None
-    known = {p.name: p for p in clutch_spec(args.model).free}
+    model = resolve_model(args.model)
+    known = {p.name: p for p in model_spec(model).free}
     for name, value in fixed.items():
         if name not in known:
-            raise InputError("--fix", name, f"a free parameter of the {args.model} model ({', '.join(sorted(known))})")
+            raise InputError("--fix", name, f"a free parameter of the {model.label} model ({', '.join(sorted(known))})")
         spec = known[name]
         if not spec.lower <= value <= spec.upper:
             raise InputError("--fix", name, f"a value in [{spec.lower:g}, {spec.upper:g}] {spec.unit}, got {value:g}")
-    runs = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.runs]
-    validate = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.validate]
-    result = identify(runs, args.model, fixed, validate, starts=args.starts, seed=args.seed)
+    runs = load_runs(args.runs, model)
+    validate = load_runs(args.validate, model)
+    result = identify(runs, model, fixed, validate, starts=args.starts, seed=args.seed, step_s=args.step)
     save_params(args.out, result.params, result.summary())
     se = result.uncertainty.standard_errors
-    print(f"{args.out}: {args.model} model from {len(runs)} run(s), {result.fit.starts} starts")
+    print(f"{args.out}: {model.label} model from {len(runs)} run(s), {result.fit.starts} starts")
     for name, value in result.params.items():
         if name in se:
             print(f"  {name:7s} = {value:12.6g} ± {se[name]:.3g}")

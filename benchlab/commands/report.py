@@ -1,12 +1,14 @@
-"""`benchlab report RUN.h5 --params P.json --out DIR [--compare P2.json] [--validate V.h5 …] [--sweep SWEEP.h5]`."""
+"""`benchlab report RUN.h5 --params P.json [--model FILE.toml|linear|nonlinear] --out DIR [--compare P2.json]
+[--validate V.h5 …] [--sweep SWEEP.h5]`."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.errors import InputError
+from benchlab.model.options import add_model_option, load_model_params
+from benchlab.model.runs import check_run, load_runs
 from benchlab.params import load_params
 from benchlab.runfile import load_run
 
@@ -17,6 +19,7 @@ HELP = "figures of the paper (Fig. 3, 4, 5), residual analysis and a Markdown pa
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1) the model is shown on (Fig. 4, residuals)")
     parser.add_argument("--params", required=True, help="parameter file (JSON) of the model to report")
+    add_model_option(parser)
     parser.add_argument("--out", required=True, help="directory for report.md and the PNG figures")
     parser.add_argument("--compare", help="second parameter file (typically linear against nonlinear) for Fig. 3 and 5")
     parser.add_argument("--validate", nargs="*", default=[], help="validation run files for Fig. 5 (default: RUN)")
@@ -29,10 +32,13 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(out, "--out", "a directory (a file of that name exists)")
-    measured = load_run(args.run, measured=PREDICTED_CHANNELS)
-    params = load_params(args.params)
+    params = load_model_params(args.params, args.model)
     compare = load_params(args.compare) if args.compare else None
-    validation = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.validate]
+    measured = load_runs([args.run], params.definition)[0]
+    validation = load_runs(args.validate, params.definition)
+    if compare is not None:
+        for run in [measured, *validation]:
+            check_run(compare.definition, run)
     if args.sweep:
         load_run(args.sweep)  # a run file at all (the events it needs are checked by the analysis)
     page = write_report(measured, params, out, compare, validation, args.sweep)

@@ -1,14 +1,14 @@
-"""`benchlab simulate RUN.h5 --params P.json --out SIM.h5`."""
+"""`benchlab simulate RUN.h5 --params P.json [--model FILE.toml|linear|nonlinear] --out SIM.h5`."""
 
 from __future__ import annotations
 
 import argparse
 
 from benchlab import cliargs
-from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.metrics import nrmse_pct, rmse_k
-from benchlab.params import load_params
-from benchlab.runfile import load_run, write_simulated
+from benchlab.model.options import add_model_option, load_model_params
+from benchlab.model.runs import load_runs
+from benchlab.runfile import write_simulated
 from benchlab.simulation import simulate
 
 NAME = "simulate"
@@ -18,15 +18,17 @@ HELP = "drive the model with a run's measured inputs and write /simulated"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
     parser.add_argument("--params", required=True, help="parameter file (JSON)")
+    add_model_option(parser)
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="output HDF5 file with /simulated")
 
 
 def run(args: argparse.Namespace) -> int:
-    measured = load_run(args.run, measured=PREDICTED_CHANNELS)
-    params = load_params(args.params)
+    params = load_model_params(args.params, args.model)
+    measured = load_runs([args.run], params.definition)[0]
     simulated = simulate(measured, params)
     write_simulated(args.out, measured["time"].to_numpy(), simulated,
                     {"source_run": str(args.run), "params": str(args.params), "model": params.model})
+    scored = [c for c in params.network.measured if c in measured.columns]
     print(f"{args.out}: {len(simulated)} samples, {params.model} model, "
-          f"RMSE {rmse_k(measured, simulated):.3f} K, NRMSE {nrmse_pct(measured, simulated):.2f} %")
+          f"RMSE {rmse_k(measured, simulated, scored):.3f} K, NRMSE {nrmse_pct(measured, simulated, scored):.2f} %")
     return 0

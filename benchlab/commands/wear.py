@@ -1,4 +1,5 @@
-"""`benchlab wear RUN.h5 --params P.json [--clutch CLUTCH.toml] [--predict N] [--json] [--plot OUT.png]`."""
+"""`benchlab wear RUN.h5 --params P.json [--model FILE.toml|linear|nonlinear] [--clutch CLUTCH.toml] [--predict N]
+[--json] [--plot OUT.png]`."""
 
 from __future__ import annotations
 
@@ -7,10 +8,10 @@ import json
 import math
 
 from benchlab import cliargs
-from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.errors import InputError
-from benchlab.params import load_params
-from benchlab.runfile import load_run
+from benchlab.model.options import add_model_option, load_model_params
+from benchlab.model.runs import load_runs
+from benchlab.runfile import REQUIRED
 from benchlab.wear.analysis import DEFAULT_HORIZON, DEFAULT_PATHS, WearReport, analyse_wear
 from benchlab.wear.clutchfile import default_clutch, load_clutch
 
@@ -22,6 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The command's arguments (contract section 3 plus the Monte Carlo's size and seed)."""
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
     parser.add_argument("--params", required=True, help="thermal parameter file (JSON)")
+    add_model_option(parser)
     parser.add_argument("--clutch", help="clutch file (TOML: z, r, maps of eq. 1-3); default: documented assumptions")
     parser.add_argument("--predict", type=int, default=DEFAULT_HORIZON, metavar="N_ENGAGEMENTS",
                         help=f"horizon for the failure probability and expected wear (default {DEFAULT_HORIZON})")
@@ -78,8 +80,11 @@ def run(args: argparse.Namespace) -> int:
     if args.paths < 1:
         raise InputError("--paths", "paths", f"a positive number of Monte Carlo paths, got {args.paths}")
     spec = load_clutch(args.clutch) if args.clutch else default_clutch()
-    measured = load_run(args.run, measured=PREDICTED_CHANNELS)
-    params = load_params(args.params)
+    params = load_model_params(args.params, args.model)
+    measured = load_runs([args.run], params.definition)[0]
+    for channel in REQUIRED:  # friction energy and slip need the clutch's channels, whatever the thermal model
+        if channel not in measured.columns:
+            raise InputError(args.run, f"/aligned/{channel}", "a clutch channel wear needs (missing)")
     report = analyse_wear(measured, params, spec, horizon=args.predict, paths=args.paths, seed=args.seed,
                           params_source=str(args.params))
     if args.plot:

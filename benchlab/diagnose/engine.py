@@ -30,8 +30,12 @@ from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
-from benchlab.identify.spec import ModelSpec, clutch_spec
+from benchlab.identify.spec import ModelSpec
 from benchlab.metrics import nrmse_pct
+from benchlab.model.build import build_spec
+from benchlab.model.catalog import resolve_model
+from benchlab.model.definition import ModelDefinition
+from benchlab.runfile import ALIGNED_UNITS
 
 STEP_S = 1.0
 FOLD_S = 600.0
@@ -48,6 +52,13 @@ MAX_ROUNDS = 3
 # noisy reading to start from, and the fit then bends parameters (and spurious extensions gain
 # 5-10 %) to absorb that start error. Air and housing start from a 10 s line fit (identify.data).
 FITTED_STARTS = ("T_flywheel",)
+
+
+def model_spec(model: ModelDefinition, datasets: Sequence[FitData]) -> ModelSpec:
+    """What diagnose fits for a model: its parameters plus each run's fitted start of FITTED_STARTS channels."""
+    spec = build_spec(model)
+    starts = [c for c in FITTED_STARTS if c in set(spec.network.initial.values())]
+    return with_initial_states(spec, datasets, starts) if starts else spec
 
 
 @dataclass
@@ -192,7 +203,7 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     parameters to absorb it, and the new term pays off only once they are released (a plate share
     of 0.35 screened alone lowered the cost by 0 %, with all parameters free by 40 %).
     """
-    specs = [cand.build(current.spec, channels) for cand in cands]
+    specs = [model_spec(cand.build(current.spec.definition, channels), datasets) for cand in cands]
 
     def screen_one(i: int) -> tuple[float, dict[str, float]]:
         result = fit(specs[i], datasets, max_nfev=SCREEN_NFEV,
@@ -226,12 +237,13 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut,
     return best
 
 
-def _combined(base: ModelSpec, cands: Sequence[Candidate], channels: dict[str, np.ndarray]) -> ModelSpec:
+def _combined(base: ModelSpec, cands: Sequence[Candidate], channels: dict[str, np.ndarray],
+              datasets: Sequence[FitData]) -> ModelSpec:
     """The baseline with the given extensions applied in order."""
-    spec = base
+    model = base.definition
     for cand in cands:
-        spec = cand.build(spec, channels)
-    return spec
+        model = cand.build(model, channels)
+    return model_spec(model, datasets)
 
 
 def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], final: FitResult,
@@ -245,7 +257,7 @@ def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], f
         others = [g.candidate for g in findings if g is not findings[i]]
         if not others:
             return base.cost, base_held
-        spec = _combined(base.spec, others, channels)
+        spec = _combined(base.spec, others, channels, datasets)
         refit = fit(spec, datasets, max_nfev=HELD_OUT_NFEV, start={p.name: final.params[p.name] for p in spec.free})
         return refit.cost, _held_out(spec, refit.params, datasets)
 
@@ -255,19 +267,24 @@ def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], f
 
 
 @single_threaded_blas
-def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts: int = 4,
+def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", starts: int = 4,
                   seed: int = 0) -> Diagnosis:
-    """Baseline fit, greedy accepted extensions, then a drop-one re-check of each against the combination."""
+    """Baseline fit, greedy accepted extensions, then a drop-one re-check of each against the combination.
+
+    `baseline`: a built-in name, a model file or a checked model; every extension is an edit of it."""
     duration = sum(float(run["time"].iloc[-1] - run["time"].iloc[0]) for run in runs)
     if duration < MIN_DURATION_S:
         raise ValueError(f"diagnose needs at least {MIN_DURATION_S:.0f} s of runs for held-out scoring, "
                          f"got {duration:.0f} s")
-    datasets = [prepare(run, STEP_S, name=str(i)) for i, run in enumerate(runs)]
-    channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels}
-    base = fit_multistart(with_initial_states(clutch_spec(baseline), datasets, FITTED_STARTS), datasets,
-                          starts=starts, seed=seed)
+    model = baseline if isinstance(baseline, ModelDefinition) else resolve_model(baseline)
+    network = build_spec(model).network
+    datasets = [prepare(run, STEP_S, name=str(i), network=network) for i, run in enumerate(runs)]
+    shared = set.intersection(*(set(d.channels) for d in datasets))
+    channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels if k in shared}
+    units = {**ALIGNED_UNITS, **runs[0].attrs.get("units", {})}
+    base = fit_multistart(model_spec(model, datasets), datasets, starts=starts, seed=seed)
     base_held = _held_out(base.spec, base.params, datasets)
-    library = candidates(baseline == "linear", channels)
+    library = candidates(model, channels, units)
     current, current_held, findings = base, base_held, []
     for _ in range(MAX_ROUNDS):
         used = {f.candidate.key for f in findings}
@@ -286,7 +303,7 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts
         findings = _recheck(base, base_held, findings, current, current_held, datasets, channels)
         kept = [f for f in findings if f.significant]
         if len(kept) < len(findings):  # another finding covered what this one fixed: drop it, measure again
-            spec = _combined(base.spec, [f.candidate for f in kept], channels)
+            spec = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
             current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
             current_held = _held_out(spec, current.params, datasets) if kept else base_held
             findings = _recheck(base, base_held, kept, current, current_held, datasets, channels)

@@ -39,7 +39,8 @@ MIN_BIN_SAMPLES = 10
 RATE_S = 30.0
 FORMS = {"level": "K", "rate": "K/min"}
 
-#: (signal, kind, unit) of the run's signals tested; temperatures are the measured ones, drop-outs held.
+#: (signal, kind, unit) of the clutch run's signals tested, in this order where a run has them; any other
+#: channel of the runs is tested too. Temperatures are the measured ones, drop-outs held.
 RUN_SIGNALS = (
     ("engine_speed", "input", "rpm"), ("clutch_speed", "input", "rpm"), ("slip_speed", "input", "rpm"),
     ("clutch_state", "input", "1"), ("clutch_torque", "input", "N*m"), ("load_torque", "input", "N*m"),
@@ -47,7 +48,7 @@ RUN_SIGNALS = (
     ("T_air", "measured", "degC"), ("T_housing", "measured", "degC"), ("time", "input", "s"),
     ("time_since_slip", "derived", "s"),
 )
-DERIVED = ("slip_speed", "time_since_slip")
+DERIVED = {"slip_speed": ("engine_speed", "clutch_speed"), "time_since_slip": ("friction_power",)}  # from what
 
 
 @dataclass(frozen=True)
@@ -69,23 +70,34 @@ class Evidence:
         return asdict(self)
 
 
-def signal_unit(name: str) -> str:
-    """The unit of a tested signal (model states in degC)."""
-    return next((unit for n, _, unit in RUN_SIGNALS if n == name), "degC" if name.startswith("model ") else "1")
+def signal_unit(name: str, units: dict[str, str] | None = None) -> str:
+    """The unit of a tested signal (model states in degC; other channels as their run file gives them)."""
+    found = next((unit for n, _, unit in RUN_SIGNALS if n == name), None)
+    return found or (units or {}).get(name) or ("degC" if name.startswith("model ") else "1")
 
 
 def has_signal(name: str, channels: dict[str, np.ndarray]) -> bool:
     """Whether a run holds what the signal is computed from (load_torque is optional in a run file)."""
-    return name in DERIVED or name in channels or f"{name}_filled" in channels
+    return all(c in channels for c in DERIVED.get(name, (name,)))
 
 
 def run_signal(name: str, channels: dict[str, np.ndarray], dt: float) -> np.ndarray:
-    """A tested signal of one run at the fitting step: a channel, slip speed, or the time since the last slip."""
+    """A tested signal of one run at the fitting step: a channel (measured temperatures with drop-outs held),
+    slip speed, or the time since the last slip."""
     if name == "time_since_slip":
         return time_since_slip(channels, dt)
-    if name in ("T_flywheel", "T_air", "T_housing"):
-        return channels[f"{name}_filled"]
     return signal_values(name, channels)
+
+
+def tested_signals(datasets: Sequence[FitData], measured: Sequence[str]) -> list[tuple[str, str, str]]:
+    """(signal, kind, unit) of every signal the runs hold: the clutch's list first, then any other channel that is
+    not a temperature the model leaves unmeasured (a second sensor of a measured one, a part the model lacks)."""
+    listed = [row for row in RUN_SIGNALS if all(has_signal(row[0], d.channels) for d in datasets)]
+    names = {row[0] for row in RUN_SIGNALS}
+    units = datasets[0].units
+    shared = [c for c in datasets[0].channels if c not in names and all(c in d.channels for d in datasets)
+              and (units.get(c) != "degC" or c in measured)]
+    return listed + [(c, "measured" if c in measured else "input", units.get(c, "1")) for c in shared]
 
 
 def residual_rate(residual: np.ndarray, dt: float, held_s: float = FOLD_S) -> np.ndarray:
@@ -200,7 +212,7 @@ def residual_evidence(held: HeldOut, spec: ModelSpec, params: dict[str, float], 
     samples = np.sum([np.isfinite(col).sum(axis=0) for col in columns], axis=0)
     spectra = [column_spectrum(col) for col in columns]
     signals = [(name, kind, unit, [run_signal(name, d.channels, d.dt) for d in datasets])
-               for name, kind, unit in RUN_SIGNALS if all(has_signal(name, d.channels) for d in datasets)]
+               for name, kind, unit in tested_signals(datasets, spec.network.measured)]
     signals += [(name, "model", "degC", values) for name, values in model_states(spec, params, datasets).items()]
     offsets = shift_offsets(lengths, np.random.default_rng(seed))
     rows = []

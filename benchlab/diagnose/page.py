@@ -11,10 +11,10 @@ import pandas as pd
 import benchlab
 from benchlab.diagnose.engine import ALPHA, Diagnosis
 from benchlab.diagnose.evidence import has_signal
-from benchlab.diagnose.figures import (CHANNELS, WINDOW_S, plot_binned, plot_evidence, plot_gains, plot_regimes,
-                                       plot_window, worst_window)
+from benchlab.diagnose.figures import (WINDOW_S, measured_channels, plot_binned, plot_evidence, plot_gains,
+                                       plot_regimes, plot_window, worst_window)
 from benchlab.diagnose.regimes import MIN_REGIME_SAMPLES, worst_regimes
-from benchlab.report.page import SYMBOLS, number, table, unit
+from benchlab.report.page import channel_cell, number, table, unit
 from benchlab.report.plotting import run_name
 
 PAGE = "diagnose.md"
@@ -34,24 +34,21 @@ def param_unit(name: str) -> str:
     return EXTENSION_UNITS[prefix] if prefix else unit(name)
 
 
-def _channel(c: str) -> str:
-    return f"{SYMBOLS[c]} `{c}`"
-
-
 def _rmse(entry: dict, channel: str) -> str:
     return number(entry["channels"][channel]["rmse_K"], 4)
 
 
 def _what_is_wrong(summary: dict, regimes_png: Path) -> list[str]:
     base, best, reg = summary["baseline"], summary["best"], summary["regimes"]
-    per_channel = [(_channel(c), str(reg["baseline"]["all"]["all"]["channels"][c]["samples"]),
-                    _rmse(reg["baseline"]["all"]["all"], c), _rmse(reg["best"]["all"]["all"], c)) for c in CHANNELS]
+    channels = measured_channels(reg)
+    per_channel = [(channel_cell(c), str(reg["baseline"]["all"]["all"]["channels"][c]["samples"]),
+                    _rmse(reg["baseline"]["all"]["all"], c), _rmse(reg["best"]["all"]["all"], c)) for c in channels]
     overall = reg["baseline"]["all"]["all"]["channels"]
-    worst = [(g, f"`{label}`", _channel(c), number(rmse, 4), number(rmse / overall[c]["rmse_K"], 2),
+    worst = [(g, f"`{label}`", channel_cell(c), number(rmse, 4), number(rmse / overall[c]["rmse_K"], 2),
               _rmse(reg["best"][g][label], c), str(n)) for g, label, c, rmse, n in worst_regimes(reg["baseline"], 6)]
-    full = [(g, f"`{label}`", _channel(c), _rmse(entry, c), _rmse(reg["best"][g][label], c),
+    full = [(g, f"`{label}`", channel_cell(c), _rmse(entry, c), _rmse(reg["best"][g][label], c),
              str(entry["channels"][c]["samples"]))
-            for g, labels in reg["baseline"].items() if g != "all" for label, entry in labels.items() for c in CHANNELS]
+            for g, labels in reg["baseline"].items() if g != "all" for label, entry in labels.items() for c in channels]
     return [
         "## What is wrong",
         f"The baseline model (`{base['model']}`) misses the measured temperatures by a held-out RMSE of "
@@ -86,7 +83,7 @@ def _where(result: Diagnosis, names: Sequence[str], window_png: Path) -> list[st
 def _why(summary: dict, evidence_png: Path, finding_pngs: Sequence[tuple[dict, str, Path]]) -> list[str]:
     rows = summary["evidence"]
     significant = sum(r["p_value"] < ALPHA for r in rows)
-    cells = [(str(i), f"`{r['signal']}`", r["kind"], _channel(r["channel"]), r["form"], number(r["explained_pct"], 1),
+    cells = [(str(i), f"`{r['signal']}`", r["kind"], channel_cell(r["channel"]), r["form"], number(r["explained_pct"], 1),
               number(r["shifted_pct"], 1), f"{r['p_value']:.3f}", str(r["samples"]))
              for i, r in enumerate(rows[:EVIDENCE_ROWS], 1)]
     parts = [

@@ -54,21 +54,36 @@ REGIMES = {"all": ["all"], "phase": ["slipping", "locked", "open"], "engine_spee
            "T_flywheel_degC": _band_names(TEMPERATURE_BANDS_C)}
 
 
+#: The channels each regime group is labelled from: a group is left out where the runs lack one (a model that is
+#: not the clutch gets "all" alone).
+REGIME_CHANNELS = {"all": (), "phase": ("clutch_state", "friction_power"), "engine_speed_rpm": ("engine_speed",),
+                   "clutch_state": ("clutch_state",), "cooldown": ("friction_power",),
+                   "T_flywheel_degC": ("T_flywheel",)}
+
+
 def regime_labels(d: FitData) -> dict[str, np.ndarray]:
     """Each regime group's label per sample of one run at the fitting step (None: not in the group, e.g. a
-    slipping sample is in no cool-down)."""
+    slipping sample is in no cool-down); only the groups whose channels the run holds."""
     ch = d.channels
-    clamped = ch["clutch_state"] >= 0.5
-    slipping = ch["friction_power"] > 0
-    since = time_since_slip(ch, d.dt)
-    return {
-        "all": np.full(len(d), "all", dtype=object),
-        "phase": np.where(slipping, "slipping", np.where(clamped, "locked", "open")).astype(object),
-        "engine_speed_rpm": _bands(ch["engine_speed"], SPEED_BANDS_RPM),
-        "clutch_state": np.where(clamped, "clamped", "open").astype(object),
-        "cooldown": np.where(slipping, None, np.where(since < COOLDOWN_SPLIT_S, SHORT, LONG)).astype(object),
-        "T_flywheel_degC": _bands(ch["T_flywheel_filled"], TEMPERATURE_BANDS_C),
-    }
+    groups = [g for g, needs in REGIME_CHANNELS.items() if all(c in ch for c in needs)]
+    out = {}
+    for group in groups:
+        if group == "all":
+            out[group] = np.full(len(d), "all", dtype=object)
+        elif group == "phase":
+            slipping, clamped = ch["friction_power"] > 0, ch["clutch_state"] >= 0.5
+            out[group] = np.where(slipping, "slipping", np.where(clamped, "locked", "open")).astype(object)
+        elif group == "engine_speed_rpm":
+            out[group] = _bands(ch["engine_speed"], SPEED_BANDS_RPM)
+        elif group == "clutch_state":
+            out[group] = np.where(ch["clutch_state"] >= 0.5, "clamped", "open").astype(object)
+        elif group == "cooldown":
+            since = time_since_slip(ch, d.dt)
+            out[group] = np.where(ch["friction_power"] > 0, None,
+                                  np.where(since < COOLDOWN_SPLIT_S, SHORT, LONG)).astype(object)
+        else:
+            out[group] = _bands(ch["T_flywheel"], TEMPERATURE_BANDS_C)
+    return out
 
 
 def _rmse(errors: np.ndarray) -> dict:
@@ -79,13 +94,13 @@ def regime_errors(held: HeldOut) -> dict[str, dict]:
     """Held-out RMSE (K) and sample count per regime group, label and measured channel, plus over all channels.
 
     Shape: {group: {label: {"rmse_K", "samples", "channels": {channel: {"rmse_K", "samples"}}}}}; every regime
-    of REGIMES is listed, with "rmse_K": null where the runs hold no sample of it.
+    of REGIMES whose channels the runs hold is listed, with "rmse_K": null where they hold no sample of it.
     """
     residuals = held.residuals()
     labels = [regime_labels(d) for d in held.datasets]
     errors = {c: np.concatenate([r[c] for r in residuals]) for c in residuals[0]}
     out: dict[str, dict] = {}
-    for group in REGIMES:
+    for group in (g for g in REGIMES if all(g in run for run in labels)):
         lab = np.concatenate([run[group] for run in labels])
         out[group] = {}
         for value in REGIMES[group]:

@@ -9,6 +9,7 @@ import pandas as pd
 from benchlab.diagnose.engine import ALPHA, FOLD_S, MIN_GAIN_PCT, STEP_S, Diagnosis, Finding, diagnose_runs
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
+from benchlab.model.definition import ModelDefinition
 
 
 def _finding_json(f: Finding) -> dict:
@@ -51,6 +52,7 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
     }
 
 
-def diagnose(runs: Sequence[pd.DataFrame], baseline: str = "linear", seed: int = 0) -> dict:
+def diagnose(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", seed: int = 0) -> dict:
     """Contract JSON: baseline held-out error, findings ordered by gain, best combined model, regimes, evidence."""
-    return summarise(diagnose_runs(runs, baseline, seed=seed), baseline)
+    result = diagnose_runs(runs, baseline, seed=seed)
+    return summarise(result, result.baseline.spec.name)

@@ -16,15 +16,17 @@ import numpy as np
 import pandas as pd
 
 from benchlab._blas import single_threaded_blas
-from benchlab.identify.data import FitData, prepare
+from benchlab.identify.data import FIT_STEP_S, FitData, prepare
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
 from benchlab.identify.residuals import residual_tests
-from benchlab.identify.spec import ModelSpec, ParamSpec, clutch_spec
+from benchlab.identify.spec import ModelSpec, ParamSpec
 from benchlab.identify.uncertainty import Uncertainty, estimate_uncertainty, power_noise
-from benchlab.params import ModelParams
+from benchlab.model.catalog import model_spec
+from benchlab.model.definition import ModelDefinition
+from benchlab.params import ModelParams, check_params
 
-RESIDUAL_INPUTS = ("friction_power", "engine_speed", "clutch_state")
+RESIDUAL_INPUTS = ("friction_power", "engine_speed", "clutch_state")  # the clutch's, where a run has them
 INITIAL_STATE_RANGE_K = 20.0
 
 
@@ -69,7 +71,14 @@ def with_initial_states(spec: ModelSpec, datasets: Sequence[FitData], channels: 
             first = data.first_valid[channel]
             extra.append(ParamSpec(f"init_{channel}@{data.name}", first, first - INITIAL_STATE_RANGE_K,
                                    first + INITIAL_STATE_RANGE_K, log=False, unit="degC", scale=1.0))
-    return spec.extended(spec.name, spec.network, tuple(extra))
+    return spec.with_free(tuple(extra))
+
+
+def residual_inputs(model: ModelDefinition | None, channels: Sequence[str]) -> list[str]:
+    """The signals residuals are correlated with: the clutch's operating point where the runs have it, then
+    every channel the model's laws read."""
+    read = sorted(model.law_channels()) if model is not None else []
+    return [k for k in dict.fromkeys([*RESIDUAL_INPUTS, *read]) if k in channels]
 
 
 def _residual_analysis(result: FitResult, datasets: Sequence[FitData], labels: Sequence[str]) -> dict[str, dict]:
@@ -77,7 +86,7 @@ def _residual_analysis(result: FitResult, datasets: Sequence[FitData], labels: S
     out: dict[str, dict] = {}
     for label, data in zip(labels, datasets):
         sim = simulate_outputs(result.spec.network, result.params, data)
-        inputs = {k: data.channels[k] for k in RESIDUAL_INPUTS if k in data.channels}
+        inputs = {k: data.channels[k] for k in residual_inputs(result.spec.definition, list(data.channels))}
         out[label] = {c: residual_tests(sim[c] - target, inputs) for c, target in data.targets.items()}
     return out
 
@@ -89,17 +98,19 @@ def _labels(runs: Sequence[pd.DataFrame], prefix: str) -> list[str]:
 
 
 @single_threaded_blas
-def identify(runs: Sequence[pd.DataFrame], model: str = "nonlinear", fixed: Mapping[str, float] | None = None,
-             validate: Sequence[pd.DataFrame] = (), starts: int = 6, seed: int = 0) -> Identification:
-    """Fit the paper's model to all runs at once, then measure it on them and on validation runs."""
-    spec = clutch_spec(model).with_fixed(dict(fixed or {}))
-    datasets = [prepare(run, name=f"run{i}") for i, run in enumerate(runs)]
+def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "nonlinear",
+             fixed: Mapping[str, float] | None = None, validate: Sequence[pd.DataFrame] = (), starts: int = 6,
+             seed: int = 0, step_s: float = FIT_STEP_S) -> Identification:
+    """Fit a model (a built-in name, a model file or a checked definition) to all runs at once at the fitting
+    step `step_s`, then measure it on them and on validation runs."""
+    spec = model_spec(model).with_fixed(dict(fixed or {}))
+    datasets = [prepare(run, step_s, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     search = fit_multistart(spec, datasets, starts=starts, seed=seed)
     full = with_initial_states(spec, datasets)
     result = fit(full.starting_point(search.params), datasets)
     result.starts, result.start_costs = search.starts, search.start_costs
     model_names = [p.name for p in spec.free]
-    params = ModelParams(model, {k: v for k, v in result.params.items() if "@" not in k})
+    params = check_params(spec.definition, {k: v for k, v in result.params.items() if "@" not in k}, "identify")
     noise = [power_noise(run, data.block, len(data)) for run, data in zip(runs, datasets)]
     uncertainty = estimate_uncertainty(result, datasets, noise, model_names)
     labels = _labels(runs, "run")

@@ -17,19 +17,21 @@ flywheel is smooth again. Measured on a noise-free 1 h run: 0.0088 K of bias at 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 
-from benchlab.clutch import PREDICTED_CHANNELS
+from benchlab.network import ThermalNetwork
+from benchlab.runfile import ALIGNED_UNITS
 from benchlab.simulation import input_channels
 
 FIT_STEP_S = 0.5
-SPEED_QUANTUM_RPM = 0.5
-TEMPERATURE_QUANTUM_K = 0.1
-OPERATING_CHANNELS = ("engine_speed", "clutch_speed")
+#: Operating-point quantum per unit of a channel: speeds to 0.5 rpm, temperatures read by laws to 0.1 K.
+QUANTUM = {"rpm": 0.5, "degC": 0.1}
+STATE_CHANNEL = "clutch_state"  # 0 or 1: rounded
 INITIAL_WINDOW_S = 10.0
+SLIP_POWER = "friction_power"  # the clutch's heat input: its slip windows are skipped in the targets it heats
 SLIP_HEATED_CHANNELS = ("T_flywheel",)  # heated by P directly: kinks at slip start and end
 
 
@@ -44,12 +46,13 @@ class FitData:
     first_valid: dict[str, float]
     block: int
     mask: np.ndarray  # True where the sample counts in the fit
+    units: dict[str, str] = field(default_factory=dict)  # channel -> unit, as the run file gives it
 
     def __len__(self) -> int:
         return len(self.mask)
 
     def with_mask(self, mask: np.ndarray) -> "FitData":
-        return FitData(self.name, self.dt, self.channels, self.targets, self.first_valid, self.block, mask)
+        return replace(self, mask=mask)
 
 
 def _block_mean(values: np.ndarray, block: int) -> np.ndarray:
@@ -88,7 +91,7 @@ def _initial_values(full: dict[str, np.ndarray], dt: float) -> dict[str, float]:
     One reading carries the sensor's full noise (0.03–0.08 K), and an initial error in the housing
     decays over its hour-long time constant: the fit then bends parameters by several % to absorb it.
     """
-    slipping = np.flatnonzero(np.nan_to_num(full.get("friction_power", np.zeros(1))) > 0)
+    slipping = np.flatnonzero(np.nan_to_num(full.get(SLIP_POWER, np.zeros(1))) > 0)
     first_slip = int(slipping[0]) if slipping.size else len(next(iter(full.values())))
     out = {}
     for c, values in full.items():
@@ -106,26 +109,42 @@ def _initial_values(full: dict[str, np.ndarray], dt: float) -> dict[str, float]:
     return out
 
 
-def prepare(run: pd.DataFrame, step_s: float = FIT_STEP_S, name: str | None = None) -> FitData:
-    """Decimate a run for fitting (block mean of inputs, centred means of measured temperatures)."""
+def _quantised(channels: dict[str, np.ndarray], units: dict[str, str], measured: tuple[str, ...]) -> None:
+    """Round operating-point channels so that equal operating points share one matrix exponential for every
+    trial parameter set (smooth finite differences): speeds (rpm) and measured temperatures (as law signals)
+    to their QUANTUM, the clutch state to 0 or 1. Other channels (powers, boundary temperatures) stay exact."""
+    for key, values in channels.items():
+        unit = units.get(key, "")
+        if key == STATE_CHANNEL:
+            channels[key] = np.round(values)
+        elif unit == "rpm" or (unit == "degC" and key in measured):
+            channels[key] = np.round(values / QUANTUM[unit]) * QUANTUM[unit]
+
+
+def prepare(run: pd.DataFrame, step_s: float = FIT_STEP_S, name: str | None = None,
+            network: ThermalNetwork | None = None) -> FitData:
+    """Decimate a run for fitting (block mean of inputs, centred means of measured temperatures).
+
+    `network`: the model whose measured outputs are the targets (default: the paper's clutch).
+    """
+    if network is None:
+        from benchlab.clutch import clutch_network
+
+        network = clutch_network()
     dt = float(run.attrs["dt"])
     block = max(1, int(round(step_s / dt)))
     full = input_channels(run)
+    raw = {c: run[c].to_numpy(np.float64) for c in network.measured if c in run.columns}
     n_blocks = len(run) // block
     channels = {k: _block_mean(v, block) for k, v in full.items() if np.issubdtype(v.dtype, np.number)}
-    for key in OPERATING_CHANNELS:
-        if key in channels:
-            channels[key] = np.round(channels[key] / SPEED_QUANTUM_RPM) * SPEED_QUANTUM_RPM
-    channels["clutch_state"] = np.round(channels["clutch_state"])
-    for key in [k for k in channels if k.endswith("_filled")]:  # temperatures as law signals: 0.1 K steps
-        channels[key] = np.round(channels[key] / TEMPERATURE_QUANTUM_K) * TEMPERATURE_QUANTUM_K
-    measured = [c for c in PREDICTED_CHANNELS if c in full]
-    targets = {c: _centred_mean(full[c], block, n_blocks) for c in measured}
-    if block > 1:
-        kinked = _slip_windows(full["friction_power"], block, n_blocks)
+    units = {k: u for k, u in {**ALIGNED_UNITS, **run.attrs.get("units", {})}.items() if k in channels}
+    _quantised(channels, units, network.measured)
+    targets = {c: _centred_mean(values, block, n_blocks) for c, values in raw.items()}
+    if block > 1 and SLIP_POWER in full:
+        kinked = _slip_windows(run[SLIP_POWER].to_numpy(np.float64), block, n_blocks)
         for c in SLIP_HEATED_CHANNELS:
             if c in targets:
                 targets[c][kinked] = np.nan
-    first_valid = _initial_values(full, dt)
+    first_valid = _initial_values({**{k: v for k, v in full.items() if k not in raw}, **raw}, dt)
     return FitData(name or str(run.attrs.get("source", "run")), dt * block, channels, targets, first_valid, block,
-                   np.ones(n_blocks, dtype=bool))
+                   np.ones(n_blocks, dtype=bool), units)

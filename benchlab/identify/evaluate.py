@@ -8,12 +8,14 @@ import pandas as pd
 
 from benchlab.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
 from benchlab.network import ThermalNetwork
-from benchlab.simulation import simulate
+from benchlab.simulation import model_network, simulate
 
 
 def evaluate(run: pd.DataFrame, params: Mapping[str, float], network: ThermalNetwork | None = None) -> dict:
-    """RMSE (K) and NRMSE (%) overall and per predicted channel, simulated at the run's own step."""
+    """RMSE (K) and NRMSE (%) overall and per measured channel of the model, simulated at the run's own step."""
+    network = model_network(params, network)
     sim = simulate(run, params, network)
-    return {"rmse_K": rmse_k(run, sim), "nrmse_pct": nrmse_pct(run, sim),
+    measured = [c for c in network.measured if c in run.columns]
+    return {"rmse_K": rmse_k(run, sim, measured), "nrmse_pct": nrmse_pct(run, sim, measured),
             "channels": {c: {"rmse_K": v, "nrmse_pct": channel_nrmse_pct(run, sim, (c,))[c]}
-                         for c, v in channel_rmse_k(run, sim).items()}}
+                         for c, v in channel_rmse_k(run, sim, measured).items()}}

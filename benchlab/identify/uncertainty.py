@@ -57,6 +57,8 @@ def power_noise(run: pd.DataFrame, block: int, steps: int) -> np.ndarray:
     slipping samples are noise of variance 6σ² (σ from their median, robust to engagement edges); samples are
     taken as independent, so a step's mean over n slipping samples of `block` carries √n·σ/block.
     """
+    if "friction_power" not in run.columns:  # a model without the clutch's heat input: no such noise
+        return np.zeros(steps)
     p = np.nan_to_num(run["friction_power"].to_numpy(np.float64)[: steps * block])
     slipping = p != 0
     d2 = np.full(p.shape, np.nan)
@@ -194,9 +196,15 @@ def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: 
     effect = np.sqrt(np.diag(J.T @ J))[keep] * np.abs(values)
     warnings = identifiability_warnings([names[i] for i in keep], values, se[keep], corr[np.ix_(keep, keep)],
                                         effect)
-    if "C_P" in names:
-        i = names.index("C_P")
-        warnings.append(f"C_P is seen only through the flywheel and air temperatures (the pressure plate is not "
-                        f"measured): its standard error is {100 * se[i] / result.params['C_P']:.1f} % and ϑ_P is "
-                        f"an estimate, not a measurement")
+    network = result.spec.network
+    measured_states = {network.outputs[c] for c in network.measured if c in network.outputs}
+    measured_nodes = measured_states | {lag.node for lag in network.lags if lag.name in measured_states}
+    seen_through = ", ".join(network.measured)
+    for node in network.nodes:
+        if node.name not in measured_nodes and node.capacity in names:
+            i = names.index(node.capacity)
+            warnings.append(f"{node.capacity} is seen only through the measured temperatures ({seen_through}; node "
+                            f"{node.name} is not measured): its standard error is "
+                            f"{100 * se[i] / result.params[node.capacity]:.1f} % and its temperature is an "
+                            f"estimate, not a measurement")
     return Uncertainty(names, dict(zip(names, map(float, se))), corr, sources, bandwidths, warnings)

@@ -13,7 +13,7 @@ from benchlab.errors import InputError
 from benchlab.params import ModelParams
 from benchlab.report.page import Figures, render
 from benchlab.report.residuals import plot_residuals, residuals
-from benchlab.report.resistance import plot_resistance
+from benchlab.report.resistance import has_convection_law, plot_resistance
 from benchlab.report.scores import estimate
 from benchlab.report.timeseries import plot_comparison, plot_fit
 
@@ -47,15 +47,18 @@ def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.Path
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    cooldowns = sweep_cooldowns(sweep, params) if sweep is not None else []
     models = model_labels(params, compare)
+    convection = all(has_convection_law(p) for _, p in models)
+    if sweep is not None and not convection:
+        raise InputError(sweep, "--sweep", "a report of clutch models (eq. 11): the cool-down sweep fits R_FA = R_PA")
+    cooldowns = sweep_cooldowns(sweep, params) if sweep is not None else []
     on_run = [estimate(run, p, label) for label, p in models]
     checks = [(v, [estimate(v, p, label) for label, p in models]) for v in validation] or [(run, on_run)]
-    res = residuals(run, on_run[0])
+    res = residuals(run, on_run[0], params)
     figures = Figures(
         fit=plot_fit(run, on_run[0], out / "fig4_fit.png"),
         validation=[plot_comparison(v, ests, out / f"fig5_validation_{i}.png") for i, (v, ests) in enumerate(checks, 1)],
-        resistance=plot_resistance(models, cooldowns, out / "fig3_resistance.png"),
+        resistance=plot_resistance(models, cooldowns, out / "fig3_resistance.png") if convection else None,
         residuals=plot_residuals(res, out / "residuals.png"),
     )
     rows = [(run, e) for e in on_run] + [(v, e) for v, ests in checks if v is not run for e in ests]

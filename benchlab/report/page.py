@@ -11,7 +11,6 @@ import numpy as np
 import pandas as pd
 
 import benchlab
-from benchlab.clutch import PREDICTED_CHANNELS
 from benchlab.cooldown import COVERAGE_K, CooldownResult
 from benchlab.params import ModelParams
 from benchlab.report.plotting import run_name
@@ -22,13 +21,18 @@ from benchlab.report.scores import Estimate
 SYMBOLS = {"T_flywheel": "ϑ_F", "T_air": "ϑ_A", "T_housing": "ϑ_T"}
 
 
+def channel_cell(channel: str) -> str:
+    """A measured channel in a table: the clutch's symbol and the channel name."""
+    return f"{SYMBOLS[channel]} `{channel}`" if channel in SYMBOLS else f"`{channel}`"
+
+
 @dataclass(frozen=True)
 class Figures:
     """The report's PNGs, all in the page's directory."""
 
     fit: Path
     validation: list[Path]
-    resistance: Path
+    resistance: Path | None  # Fig. 3, for clutch models with eq. (11) only
     residuals: Path
 
 
@@ -43,8 +47,11 @@ def table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
     return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])
 
 
-def unit(name: str) -> str:
-    """The unit of a parameter of the contract (section 2); extension parameters carry their model's own."""
+def unit(name: str, models: Sequence[tuple[str, ModelParams]] = ()) -> str:
+    """The unit of a parameter: as its model file gives it, else the contract's (section 2)."""
+    given = next((p.definition.parameters[name].unit for _, p in models if name in p.definition.parameters), "")
+    if given:
+        return given
     if name.startswith("C_"):
         return "J/K"
     if name.startswith("R") or name in ("a1", "a2"):
@@ -57,8 +64,8 @@ def scores_table(rows: Sequence[tuple[pd.DataFrame, Estimate]]) -> str:
     cells = []
     for run, est in rows:
         s = est.scores
-        for c in PREDICTED_CHANNELS:
-            cells.append((f"`{run_name(run)}`", est.label, f"{SYMBOLS[c]} `{c}`", number(s.channel_rmse_k[c], 4),
+        for c in est.channels:
+            cells.append((f"`{run_name(run)}`", est.label, channel_cell(c), number(s.channel_rmse_k[c], 4),
                           number(s.channel_nrmse_pct[c], 3)))
         cells.append((f"`{run_name(run)}`", est.label, "**all** (§5)", number(s.rmse_k, 4), number(s.nrmse_pct, 3)))
     return table(("run", "model", "channel", "RMSE (K)", "NRMSE (%)"), cells)
@@ -70,7 +77,7 @@ def params_table(models: Sequence[tuple[str, ModelParams]]) -> str:
     header = ["parameter", "unit"] + [h for label, _ in models for h in (label, "± SE")]
     cells = []
     for name in names:
-        row = [f"`{name}`", unit(name)]
+        row = [f"`{name}`", unit(name, models)]
         for _, params in models:
             se = standard_errors(params).get(name, math.nan)
             row += [f"{params[name]:.6g}" if name in params else "—", f"{se:.2g}" if math.isfinite(se) else "—"]
@@ -96,7 +103,7 @@ def residual_table(res: Residuals) -> str:
     header = ["channel", "samples", "ACF outside ±2.58/√N, lags 1–50 (%)", "white"] + [f"corr. with `{k}`" for k in inputs]
     cells = []
     for c, t in res.tests.items():
-        row = [f"{SYMBOLS[c]} `{c}`", str(t["samples"]), number(t["whiteness_outside_pct"], 1),
+        row = [channel_cell(c), str(t["samples"]), number(t["whiteness_outside_pct"], 1),
                "yes" if t["white"] else "no"]
         cells.append(row + [number(t["input_correlation"][k], 2) for k in inputs])
     return table(header, cells)
@@ -115,7 +122,8 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
         f"Written by benchlab {benchlab.__version__}.",
         "## Error figures (contract §5)",
         "RMSE in K over the valid samples; NRMSE = 100 · RMSE / (max − min of the measured channel), "
-        "for **all** averaged over ϑ_F, ϑ_A, ϑ_T. The model is driven by the run's measured inputs from the "
+        f"for **all** averaged over {', '.join(channel_cell(c) for c in rows[0][1].channels)}. The model is driven by "
+        "the run's measured inputs from the "
         "first valid measured temperatures (`benchlab simulate`).",
         scores_table(rows),
         "## Parameters",
@@ -125,9 +133,9 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
         f"![Fig. 4]({figures.fit.name})",
         "## Fig. 5 – validation: " + " against ".join(label for label, _ in models),
         *[f"![Fig. 5]({p.name})" for p in figures.validation],
-        "## Fig. 3 – convection resistance against engine speed",
-        f"![Fig. 3]({figures.resistance.name})",
     ]
+    if figures.resistance is not None:
+        parts += ["## Fig. 3 – convection resistance against engine speed", f"![Fig. 3]({figures.resistance.name})"]
     if cooldowns:
         parts += ["Cool-downs of the sweep, fitted with the other parameters of the first model "
                   "(`benchlab cooldown`):", cooldown_table(cooldowns, models)]

@@ -26,6 +26,21 @@ MODEL_STYLES = (("tab:red", "-"), ("tab:blue", "--"))
 COLOURS = {"T_pressure_plate": "tab:orange", "T_flywheel": "tab:red", "T_air": "tab:blue", "T_housing": "tab:green"}
 
 
+def symbol(channel: str) -> str:
+    """A channel's symbol in figures: the clutch's ϑ, any other model's channel name."""
+    return SYMBOLS.get(channel, channel)
+
+
+def label(channel: str) -> str:
+    """A channel's title in figures."""
+    return LABELS.get(channel, channel)
+
+
+def colour(channel: str, index: int) -> str:
+    """A channel's colour: the clutch's own, else the index-th of matplotlib's cycle."""
+    return COLOURS.get(channel, f"C{index}")
+
+
 def new_figure(width_in: float, height_in: float) -> Figure:
     """A constrained-layout figure on an Agg canvas (no display, no pyplot)."""
     fig = Figure(figsize=(width_in, height_in), layout="constrained")

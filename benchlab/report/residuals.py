@@ -14,14 +14,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchlab.identify.api import RESIDUAL_INPUTS
+from benchlab.identify.api import residual_inputs
 from benchlab.identify.data import prepare
 from benchlab.identify.residuals import autocorrelation, residual_tests
-from benchlab.report.plotting import COLOURS, SYMBOLS, new_figure, run_name, save
+from benchlab.params import ModelParams
+from benchlab.report.plotting import colour, new_figure, run_name, save, symbol
 from benchlab.report.scores import Estimate
 
 #: Longest autocorrelation lag drawn: longer than a Table 1 cycle's cool-down (30-120 s).
 ACF_LAG_S = 180.0
+#: The clutch's two scatter panels (axis label, scale); another model shows its first two residual inputs.
+PANELS = {"engine_speed": (r"engine speed $\omega_e$ (rpm)", 1.0), "friction_power": ("friction power P (kW)", 1e-3)}
 
 
 @dataclass(frozen=True)
@@ -37,37 +40,39 @@ class Residuals:
     tests: dict[str, dict]
 
 
-def residuals(run: pd.DataFrame, est: Estimate) -> Residuals:
-    """Residuals of `est` on `run` at the identification step, with identify's residual tests on each channel."""
-    data = prepare(run)
+def residuals(run: pd.DataFrame, est: Estimate, params: ModelParams) -> Residuals:
+    """Residuals of `est` (simulated with `params`) on `run` at the identification step, with identify's residual
+    tests on each channel."""
+    data = prepare(run, network=params.network)
     picks = slice(0, len(data) * data.block, data.block)
     residual = {c: target - est.simulated[c].to_numpy()[picks] for c, target in data.targets.items()}
-    inputs = {k: data.channels[k] for k in RESIDUAL_INPUTS if k in data.channels}
+    inputs = {k: data.channels[k] for k in residual_inputs(params.definition, list(data.channels))}
     return Residuals(est.label, run_name(run), data.dt, run["time"].to_numpy()[picks], residual, inputs,
                      {c: residual_tests(r, inputs) for c, r in residual.items()})
 
 
 def plot_residuals(res: Residuals, path: "str | os.PathLike[str]") -> Path:
-    """Four panels: residual vs time, autocorrelation with the 99 % white-noise bound, vs engine speed, vs friction power."""
+    """Four panels: residual vs time, autocorrelation with the 99 % white-noise bound, vs engine speed, vs friction
+    power (another model: vs its first two residual inputs)."""
     fig = new_figure(11, 8)
-    (over_time, acf), (vs_speed, vs_power) = fig.subplots(2, 2)
+    (over_time, acf), (vs_first, vs_second) = fig.subplots(2, 2)
     max_lag = int(round(ACF_LAG_S / res.step_s))
     lags = np.arange(max_lag + 1) * res.step_s
-    for c, r in res.residual.items():
-        style = {"color": COLOURS[c], "label": SYMBOLS[c]}
+    panels = [k for k in PANELS if k in res.inputs] if set(PANELS) <= set(res.inputs) else list(res.inputs)[:2]
+    for i, (c, r) in enumerate(res.residual.items()):
+        style = {"color": colour(c, i), "label": symbol(c)}
         over_time.plot(res.time_s / 60.0, r, lw=0.6, **style)
         acf.plot(lags, autocorrelation(r, max_lag), lw=1.0, **style)
         dots = {"s": 2, "alpha": 0.25, "rasterized": True, **style}
-        vs_speed.scatter(res.inputs["engine_speed"], r, **dots)
-        vs_power.scatter(res.inputs["friction_power"] / 1e3, r, **dots)
+        for ax, name in zip((vs_first, vs_second), panels):
+            ax.scatter(res.inputs[name] * PANELS.get(name, ("", 1.0))[1], r, **dots)
     bound = max(t["confidence_bound"] for t in res.tests.values())
     acf.axhspan(-bound, bound, color="0.85", label=r"$\pm 2.58/\sqrt{N}$ (99 %, white noise)")
     over_time.set(xlabel="time (min)", ylabel="measured − model (K)", title="residual over time")
     acf.set(xlabel="lag (s)", ylabel="autocorrelation (1)", title="whiteness: residual autocorrelation")
-    vs_speed.set(xlabel=r"engine speed $\omega_e$ (rpm)", ylabel="measured − model (K)",
-                 title="residual vs engine speed")
-    vs_power.set(xlabel="friction power P (kW)", ylabel="measured − model (K)", title="residual vs friction power")
-    for ax in (over_time, acf, vs_speed, vs_power):
+    for ax, name in zip((vs_first, vs_second), panels):
+        ax.set(xlabel=PANELS.get(name, (name, 1.0))[0], ylabel="measured − model (K)", title=f"residual vs {name}")
+    for ax in (over_time, acf, vs_first, vs_second):
         ax.axhline(0.0, color="k", lw=0.5)
         ax.legend(loc="best", fontsize=8, markerscale=4)
     fig.suptitle(f"Residual analysis – {res.run}, {res.label} model, at the identification step of "

@@ -20,6 +20,11 @@ SPEED_MAX_RPM = 3000.0
 STATES = {1: ("clutch closed (S = 1)", "tab:red", ("a1", "b1")), 0: ("clutch open (S = 0)", "tab:blue", ("a2", "b2"))}
 
 
+def has_convection_law(params: ModelParams) -> bool:
+    """Whether the parameters are a clutch model's with eq. (11) (a linear one means a1 = a2 = 0)."""
+    return all(name in params for name in ("R0", "a1", "b1", "a2", "b2"))
+
+
 def standard_errors(params: ModelParams) -> dict[str, float]:
     """The parameter file's "uncertainty" object (name -> standard error, as identify writes it); numbers only."""
     found = params.extra.get("uncertainty")

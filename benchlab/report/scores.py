@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import pandas as pd
 
 from benchlab.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
 from benchlab.network import Params
-from benchlab.simulation import simulate
+from benchlab.simulation import model_network, simulate
 
 
 @dataclass(frozen=True)
@@ -21,10 +22,11 @@ class Scores:
     channel_nrmse_pct: dict[str, float]
 
 
-def score(measured: pd.DataFrame, simulated: pd.DataFrame) -> Scores:
-    """The contract's error figures of a simulation already made (the report simulates once per model and run)."""
-    return Scores(rmse_k(measured, simulated), nrmse_pct(measured, simulated),
-                  channel_rmse_k(measured, simulated), channel_nrmse_pct(measured, simulated))
+def score(measured: pd.DataFrame, simulated: pd.DataFrame, channels: Sequence[str]) -> Scores:
+    """The contract's error figures of a simulation already made (the report simulates once per model and run)
+    over the model's measured channels."""
+    return Scores(rmse_k(measured, simulated, channels), nrmse_pct(measured, simulated, channels),
+                  channel_rmse_k(measured, simulated, channels), channel_nrmse_pct(measured, simulated, channels))
 
 
 @dataclass(frozen=True)
@@ -34,9 +36,12 @@ class Estimate:
     label: str
     simulated: pd.DataFrame
     scores: Scores
+    channels: tuple[str, ...]  # the measured channels scored
 
 
 def estimate(run: pd.DataFrame, params: Params, label: str) -> Estimate:
-    """Simulate `run` with `params` (benchlab.simulate) and score the result."""
-    simulated = simulate(run, params)
-    return Estimate(label, simulated, score(run, simulated))
+    """Simulate `run` with `params` (benchlab.simulate, the parameters' own model) and score the result."""
+    network = model_network(params)
+    simulated = simulate(run, params, network)
+    channels = tuple(c for c in network.measured if c in run.columns)
+    return Estimate(label, simulated, score(run, simulated, channels), channels)

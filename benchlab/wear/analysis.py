@@ -100,7 +100,7 @@ def analyse_wear(run: pd.DataFrame, params: ModelParams, spec: ClutchSpec | None
     spec = spec or default_clutch()
     dt = float(run.attrs["dt"])
     split = heat_split(params, params_source)
-    temps = lining_temperatures(run, params, split)
+    temps = lining_temperatures(run, params, split, params_source)
     t_plate, t_fly, t_air = (temps[c].to_numpy() for c in ("T_pressure_plate", "T_flywheel", "T_air"))
     power = friction_power(run)
     history = wear_history(spec, power, split, t_plate, t_fly, dt)

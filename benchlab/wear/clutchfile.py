@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from benchlab.errors import InputError
+from benchlab.errors import InputError, read_document
 from benchlab.wear.maps import Map1D, make_map
 from benchlab.wear.state import WearState
 
@@ -144,12 +144,7 @@ def clutch_from_doc(doc: dict[str, Any], source: str) -> ClutchSpec:
 def load_clutch(path: "str | os.PathLike[str]") -> ClutchSpec:
     """Read a clutch TOML file; InputError names the file and the field on any defect."""
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(path, "file", "an existing clutch file (not found)") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(path, "file", f"TOML ({exc})") from None
+    doc = read_document(path, "clutch file", tomllib.loads, (tomllib.TOMLDecodeError,), "TOML")
     return clutch_from_doc(doc, str(path))
 
 

@@ -2,17 +2,21 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import pandas as pd
 
-from benchlab.clutch import clutch_network
+from benchlab.clutch import DEFAULT_MODEL
 from benchlab.errors import InputError
-from benchlab.network import Source, ThermalNetwork
+from benchlab.model.build import build_network
+from benchlab.model.catalog import builtin
+from benchlab.model.definition import ModelDefinition, parse_model
+from benchlab.network import ThermalNetwork
 from benchlab.params import ModelParams
 from benchlab.simulation import simulate
 
 DEFAULT_SPLIT = 0.5
+#: The clutch model files' sources of the friction power P (eq. 6-7) and the channels wear reads.
+SHARES = {"plate share": "P", "flywheel share": "F"}
+LINING_CHANNELS = ("T_pressure_plate", "T_flywheel", "T_air")
 
 
 def heat_split(params: ModelParams, source: str = "<params>") -> float:
@@ -23,16 +27,38 @@ def heat_split(params: ModelParams, source: str = "<params>") -> float:
     return float(value)
 
 
-def split_network(split: float) -> ThermalNetwork:
-    """The paper's clutch with the friction power divided `split` : 1 - split between plate and flywheel."""
-    network = clutch_network()
+def split_model(split: float, model: ModelDefinition | None = None) -> ModelDefinition:
+    """A built-in clutch model with the friction power divided `split` : 1 - split between plate and flywheel."""
+    model = model or builtin(DEFAULT_MODEL)
     if split == DEFAULT_SPLIT:
-        return network
-    sources = (Source("P", lambda p, ch: split * ch["friction_power"], "plate share"),
-               Source("F", lambda p, ch: (1.0 - split) * ch["friction_power"], "flywheel share"))
-    return replace(network, sources=sources)
+        return model
+    doc = model.to_doc()
+    for entry in doc["sources"]:
+        if entry["name"] in SHARES:
+            share = split if SHARES[entry["name"]] == "P" else 1.0 - split
+            entry["heat"] = f"{share!r}*friction_power"
+    return parse_model(doc, model.source)
 
 
-def lining_temperatures(run: pd.DataFrame, params: ModelParams, split: float) -> pd.DataFrame:
+def split_network(split: float) -> ThermalNetwork:
+    """The paper's clutch (nonlinear model file) with the friction power divided `split` : 1 - split."""
+    return build_network(split_model(split))
+
+
+def lining_network(params: ModelParams, split: float, source: str = "<params>") -> ThermalNetwork:
+    """The network wear simulates: a built-in clutch model with the heat split applied, or the parameter file's own
+    model (a split found by diagnose is in it), which must simulate the clutch's lining temperatures."""
+    model = params.definition
+    if model.alias is not None:
+        return build_network(split_model(split, model))
+    missing = [c for c in LINING_CHANNELS if c not in {**model.outputs, **model.simulated}]
+    if missing:
+        raise InputError(source, "network.simulated", f"a clutch model that simulates {', '.join(LINING_CHANNELS)} "
+                                                      f"(wear needs the lining temperatures; {missing[0]} missing)")
+    return params.network
+
+
+def lining_temperatures(run: pd.DataFrame, params: ModelParams, split: float,
+                        source: str = "<params>") -> pd.DataFrame:
     """The model's T_pressure_plate, T_flywheel, T_air (degC) on the run's grid, with the heat split applied."""
-    return simulate(run, params, split_network(split))
+    return simulate(run, params, lining_network(params, split, source))

@@ -1,0 +1,49 @@
+"""Run files read for a model: `time` plus the channels the model names (contract section 6), each usable.
+
+The clutch models also require the channels of contract section 1 (their `requires`). A channel a law or a
+boundary reads must hold a valid sample (a boundary list falls back to its later channels); a measured output
+must too, since the fit compares with it and the state starts from it.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from benchlab.errors import InputError
+from benchlab.model.definition import ModelDefinition
+from benchlab.runfile import ALIGNED_UNITS, load_run
+
+
+def check_run(model: ModelDefinition, run: pd.DataFrame) -> None:
+    """Bad input where the run lacks what the model reads, or a channel shares a parameter's name."""
+    source = str(run.attrs.get("source", "<run>"))
+    usable = {c for c in run.columns if not np.isnan(run[c].to_numpy(np.float64)).all()}
+    for channel in model.required_channels():
+        if channel not in run.columns:
+            unit = f" in {ALIGNED_UNITS[channel]}" if channel in ALIGNED_UNITS else ""
+            raise InputError(source, f"/aligned/{channel}", f"a required channel{unit} (model {model.label} names it; "
+                                                            "missing)")
+        if channel not in usable and (channel in model.law_channels() or channel in model.outputs):
+            raise InputError(source, f"/aligned/{channel}", f"at least one measured sample (all {len(run)} are NaN; "
+                                                            f"model {model.label} reads it)")
+    for boundary, channels in model.boundaries.items():
+        if not any(c in usable for c in channels):
+            raise InputError(source, f"/aligned/{channels[-1]}",
+                             f"at least one valid sample (boundary {boundary} of model {model.label})")
+    for name in model.parameters:
+        if name in run.columns:
+            raise InputError(model.source, f"parameters.{name}", f"a name no channel of {source} has")
+
+
+def load_runs(paths: Sequence["str | os.PathLike[str]"], model: ModelDefinition) -> list[pd.DataFrame]:
+    """Each run file read and checked for the model."""
+    runs = []
+    for path in paths:
+        run = load_run(path, required=())
+        check_run(model, run)
+        runs.append(run)
+    return runs
