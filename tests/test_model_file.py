@@ -258,3 +258,12 @@ def test_run_without_a_channel_the_model_reads_is_bad_input(tmp_path, short_run,
     assert main(["identify", str(path), "--model", str(model), "--out", str(tmp_path / "p.json")]) == 2
     err = capsys.readouterr().err
     assert "/aligned/engine_speed" in err and "clutch-nonlinear" in err
+
+
+def test_cooldown_refuses_parameters_of_a_model_that_is_not_the_clutch(tmp_path, run_file, capsys):
+    model = parse_model({"schema": "benchlab-model/1", "name": "one-node", "nodes": {"W": "C"}, "outputs": {"T_air": "W"},
+                         "parameters": {"C": {"start": 100.0, "min": 1.0, "max": 1e4}}}, "one.toml")
+    save_params(tmp_path / "one.json", check_params(model, {"C": 200.0}))
+    assert main(["cooldown", str(run_file), "--params", str(tmp_path / "one.json"), "--no-store"]) == 2
+    err = capsys.readouterr().err
+    assert "one.json: params.C_P" in err and len(err.strip().splitlines()) == 1

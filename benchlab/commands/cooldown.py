@@ -32,9 +32,15 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
             if "sim_truth" not in f.attrs:
                 raise InputError(run, "sim_truth", "a run of the simulated bench for --params sim-truth")
             return dict(json.loads(f.attrs["sim_truth"])["params"])
+    from benchlab.model.catalog import builtin
     from benchlab.params import load_params
 
-    return dict(load_params(spec))
+    params = dict(load_params(spec))
+    missing = [name for name in builtin("linear").parameters if name != "R0" and name not in params]
+    if missing:
+        raise InputError(spec, f"params.{missing[0]}", "a clutch model's parameters (the cool-downs are fitted with "
+                                                        "the linear clutch model file, R0 free)")
+    return params
 
 
 def run(args: argparse.Namespace) -> int:
