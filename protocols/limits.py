@@ -10,13 +10,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from protocols.schedule import CONDITION_CHANNELS, OPERATORS, PHASES, Step, duration_s
 
 RPM = math.pi / 30.0
-ACTIONS = ("wait", "abort")
+ACTIONS = ("hold", "abort")
+# A reading older than this (s) is an unknown reading: its `stale_<channel>` interlock trips. The node's radio
+# loses a few frames in a row routinely (seconds), the scanner reads every 0.2 s and may time out once (2 s),
+# the status frames come every 10 ms.
+DEFAULT_MAX_AGE_S = {"T_flywheel": 10.0, "T_air": 5.0, "engine_speed": 0.5, "clutch_speed": 0.5, "clutch_torque": 0.5}
+MAX_AGE_LIMIT_S = 60.0  # an age beyond this would leave the bench blind for too long: refused in BENCH.toml
+INTERLOCKS = ("flywheel_over_temperature", "air_over_temperature", "controller_lost",
+              *(f"stale_{channel}" for channel in DEFAULT_MAX_AGE_S), "slip_time", "slip_energy")
 
 
 @dataclass(frozen=True)
@@ -30,17 +37,25 @@ class BenchLimits:
     # interlocks
     max_flywheel_c: float = 110.0
     max_air_c: float = 80.0
-    radio_silence_s: float = 10.0
+    max_age_s: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_MAX_AGE_S))
     max_slip_time_s: float = 15.0
     max_slip_energy_j: float = 150e3
     heartbeat: bool = True  # a controller's heartbeat lost (the CAN driver's watchdog) trips an interlock
-    on_interlock: str = "wait"  # "wait": safe state, wait until clear + resume_after_s, next cycle; "abort"
+    on_interlock: str = "hold"  # "hold": safe state, hold until clear + resume_after_s, next cycle; "abort"
+    actions: Mapping[str, str] = field(default_factory=dict)  # per interlock name, overriding on_interlock
     resume_after_s: float = 30.0
     clear_margin_k: float = 10.0  # an over-temperature clears this far below its limit
-    max_wait_s: float = 1800.0  # "wait" gives up (abort) after this long
+    max_wait_s: float = 1800.0  # "hold" gives up (abort) after this long
     # drivetrain facts used for estimates
     gear_ratio: float = 15.0
     load_inertia_kgm2: float = 70.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "max_age_s", {**DEFAULT_MAX_AGE_S, **self.max_age_s})
+
+    def action(self, interlock: str) -> str:
+        """What the named interlock does when it trips: "hold" or "abort"."""
+        return self.actions.get(interlock, self.on_interlock)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "<limits>", prefix: str = "limits") -> "BenchLimits":
@@ -52,20 +67,53 @@ class BenchLimits:
         for key, value in values.items():
             if key not in known:
                 raise InputError(source, f"{prefix}.{key}", f"one of {', '.join(known)} (unknown key)")
+            if key == "max_age_s":
+                clean[key] = _table(value, DEFAULT_MAX_AGE_S, source, f"{prefix}.{key}", _age)
+                continue
+            if key == "actions":
+                clean[key] = _table(value, INTERLOCKS, source, f"{prefix}.{key}", _action)
+                continue
             default = known[key].default
             if isinstance(default, bool):
                 if not isinstance(value, bool):
                     raise InputError(source, f"{prefix}.{key}", f"true or false, got {value!r}")
             elif isinstance(default, str):
-                if value not in ACTIONS:
-                    raise InputError(source, f"{prefix}.{key}", f"one of {', '.join(ACTIONS)}, got {value!r}")
+                _action(value, source, f"{prefix}.{key}")
             elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise InputError(source, f"{prefix}.{key}", f"a positive number, got {value!r}")
             clean[key] = float(value) if isinstance(default, float) else value
         return cls(**clean)
 
     def as_dict(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return {f.name: (dict(v) if isinstance(v := getattr(self, f.name), Mapping) else v) for f in fields(self)}
+
+
+def _table(value: Any, keys: Any, source: str, name: str, check: Any) -> dict[str, Any]:
+    """A sub-table of [limits] whose keys come from `keys`, each value passed through `check`."""
+    from benchlab.errors import InputError
+
+    if not isinstance(value, Mapping):
+        raise InputError(source, name, f"a table, got {value!r}")
+    for key in value:
+        if key not in keys:
+            raise InputError(source, f"{name}.{key}", f"one of {', '.join(keys)} (unknown key)")
+    return {key: check(v, source, f"{name}.{key}") for key, v in value.items()}
+
+
+def _age(value: Any, source: str, name: str) -> float:
+    from benchlab.errors import InputError
+
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= MAX_AGE_LIMIT_S:
+        raise InputError(source, name, f"an age in s, more than 0 and at most {MAX_AGE_LIMIT_S:g}, got {value!r}")
+    return float(value)
+
+
+def _action(value: Any, source: str, name: str) -> str:
+    from benchlab.errors import InputError
+
+    if value not in ACTIONS:
+        raise InputError(source, name, f"one of {', '.join(ACTIONS)}, got {value!r}")
+    return value
 
 
 def launch_estimate(step: Step, limits: BenchLimits) -> tuple[float, float, bool]:

@@ -66,6 +66,12 @@ def _instrument_error(bench: Any, f: Fault) -> None:
     bench.dmm.inject_error(int(f.value) or -310, f.target or "System error")
 
 
+def _instrument_mute(on: bool):
+    def apply(bench: Any, f: Fault) -> None:
+        bench.dmm.mute = on
+    return apply
+
+
 def _instrument_disconnect(bench: Any, f: Fault) -> None:
     bench.dmm.connected = False
 
@@ -85,6 +91,8 @@ KINDS = {
     "stuck_clutch": _stuck_clutch,  # clutch clamped at `value` N*m and output braked for duration_s
     "corrupt_node_frames": _corrupt_node,
     "instrument_error": _instrument_error,
-    "instrument_disconnect": _instrument_disconnect,
+    "instrument_mute": _instrument_mute(True),  # the scanner takes commands but never answers (time-outs)
+    "instrument_unmute": _instrument_mute(False),
+    "instrument_disconnect": _instrument_disconnect,  # the port is gone (a pulled USB adapter)
     "instrument_reconnect": _instrument_reconnect,
 }

@@ -81,14 +81,19 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys):
 def test_example_bench_file_loads():
     cfg = load_bench_config(EXAMPLE)
     assert cfg.instrument_channels[101] == "T_air" and cfg.can["interface"] == "socketcan"
-    assert cfg.instrument_calibration[101].r0 == 1000.12 and cfg.limits.on_interlock == "wait"
+    assert cfg.instrument_calibration[101].r0 == 1000.12 and cfg.limits.on_interlock == "hold"
 
 
 @pytest.mark.parametrize("edit, field", [
     (("url = \"/dev/ttyUSB0\"", "url = 5"), "instrument.url"),
     (("101 = \"T_air\"", "101 = \"T_oil\""), "instrument.channels.101"),
     (("max_air_c = 80.0", "max_air_c = -1"), "limits.max_air_c"),
-    (("on_interlock = \"wait\"", "on_interlock = \"pray\""), "limits.on_interlock"),
+    (("on_interlock = \"hold\"", "on_interlock = \"pray\""), "limits.on_interlock"),
+    (("T_air = 5.0 ", "T_air = 3600.0 "), "limits.max_age_s.T_air"),
+    (("clutch_torque = 0.5", "clutch_torque = -0.5"), "limits.max_age_s.clutch_torque"),
+    (("clutch_torque = 0.5", "T_oil = 0.5"), "limits.max_age_s.T_oil"),
+    (("stale_T_air = \"hold\"", "stale_T_air = \"wait\""), "limits.actions.stale_T_air"),
+    (("stale_T_air = \"hold\"", "stale_oil = \"hold\""), "limits.actions.stale_oil"),
     (("interface = \"socketcan\"", "interface = \"udp_multicast\""), "can.interface"),
     (("[drivetrain]", "[drivetrane]"), "drivetrane"),
     (("r0 = 999.87", "r0 = \"x\""), "node.calibration.1.r0"),

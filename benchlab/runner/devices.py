@@ -83,8 +83,6 @@ class BenchStatus:
 
     t: float = 0.0
     T_flywheel: float = math.nan
-    t_flywheel: float = -math.inf  # run time of the last node frame with a valid temperature
-    t_node: float = 0.0  # run time of the last node frame of any kind
     T_air: float = math.nan
     engine_speed: float = math.nan
     clutch_speed: float = math.nan
@@ -94,6 +92,7 @@ class BenchStatus:
     friction_energy_j: float = 0.0  # ∫ friction power dt over the status frames at their own times
     t_frame: float = math.nan  # run time of the newest status frame
     controllers_bad: dict[str, str] = field(default_factory=dict)
+    seen: dict[str, float] = field(default_factory=dict)  # channel -> run time of its newest valid reading
 
     @property
     def slipping(self) -> bool:
@@ -102,6 +101,11 @@ class BenchStatus:
     @property
     def locked(self) -> bool:
         return self.clamp_state == CLAMP_CLAMPED
+
+    def mark_seen(self, channel: str, t: float) -> None:
+        """`channel` has a valid value measured at `t` (its age, for the stale-reading interlocks, starts again)."""
+        if math.isfinite(getattr(self, channel)) and t > self.seen.get(channel, -math.inf):
+            self.seen[channel] = t
 
     def take_frame(self, t: float, values: Mapping[str, float], gear_ratio: float) -> None:
         """One status frame measured at run time `t`: the energy up to `t` at the power held so far, then the values."""
@@ -112,11 +116,14 @@ class BenchStatus:
             self.t_frame = t
         if "drive.speed" in values:
             self.engine_speed = values["drive.speed"]
+            self.mark_seen("engine_speed", t)
         if "load.speed" in values:
             self.clutch_speed = values["load.speed"] * gear_ratio
+            self.mark_seen("clutch_speed", t)
         if "clutch.torque" in values:
             self.clutch_torque = values["clutch.torque"]
             self.clamp_state = int(values["clutch.clamp_state"])
+            self.mark_seen("clutch_torque", t)
         power = friction_power(self.clutch_torque, self.engine_speed, self.clutch_speed, self.clamp_state)
         self.friction_power = power if power == power else 0.0  # unknown (NaN) counts as no power
 
@@ -341,11 +348,10 @@ class DriverBench:
                    STATUS_CODES.get(s.sensor_status[0], 4.0), STATUS_CODES.get(s.sensor_status[1], 4.0),
                    s.supply_mv / 1000.0, float(s.rssi_dbm), float(s.lqi), float(s.flags))
             self.readings.append(("node", t, row))
-            self.status.t_node = max(self.status.t_node, t)
             valid = [v for v in temps if np.isfinite(v)]
             if valid:
                 self.status.T_flywheel = sum(valid) / len(valid)
-                self.status.t_flywheel = t
+                self.status.mark_seen("T_flywheel", t)
         for ev in self.gateway.pop_events():
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:
@@ -359,12 +365,13 @@ class DriverBench:
             self._error(now, "instrument_error", str(exc), self.scanner.reconnect)
             return
         row: list[float] = []
+        t = readings[0].t_host if readings else now
         for r, name in zip(readings, self._names):
             row += [math.nan if r.temperature_c is None else r.temperature_c,
                     math.nan if r.resistance_ohm is None else r.resistance_ohm, STATUS_CODES[r.status]]
             if name == "T_air" and r.temperature_c is not None:
                 self.status.T_air = r.temperature_c
-        t = readings[0].t_host if readings else now
+                self.status.mark_seen("T_air", t)
         self.readings.append(("instrument", t, tuple(row)))
         for rec in self.scanner.error_log:
             self.events.append((rec.t_host, "instrument_error", f"{rec.code},{rec.text}"))
