@@ -8,6 +8,7 @@ torque by the load machine). Nothing here moves hardware.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import NamedTuple
 
 #: Condition operators: a channel reaching a value, or settling at it.
 OPERATORS = (">=", "<=", "steady")
@@ -79,6 +80,28 @@ class Step:
 
 
 PHASES = ("launch", "drive", "open", "heat")
+
+
+class Setpoints(NamedTuple):
+    """What the controllers are told during a step (the arguments of the bench's `command`)."""
+
+    engine_speed_rpm: float
+    clutch_torque_nm: float
+    clutch_open: bool
+    load_torque_nm: float
+
+
+def setpoints(step: Step, synchronised: bool = True, pulse_on: bool = False) -> Setpoints:
+    """The set-points of `step` (its phase's meaning, see `Step`): the one step interpreter.
+
+    `synchronised`: the cycle's launch reached synchronous speed (else "drive" keeps the clutch open);
+    `pulse_on`: a "heat" step is inside one of its pulses. The runner and the batch simulator both play
+    schedules through this.
+    """
+    clamped = (step.phase == "launch" or (step.phase == "drive" and synchronised)
+               or (step.phase == "heat" and pulse_on))
+    return Setpoints(step.engine_speed_rpm, step.clutch_torque_nm if clamped else 0.0, not clamped,
+                     step.load_torque_nm)
 
 
 def duration_s(steps: tuple[Step, ...]) -> float:

@@ -23,7 +23,7 @@ from benchlab.acquire import RunWriter
 from benchlab.runner.devices import BenchStatus
 from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
-from protocols.schedule import Condition, Step
+from protocols.schedule import Condition, Step, setpoints
 
 STATE_FIELDS = ("cycle", "next_step", "resumes", "energy_j", "held")  # held: 1 while an interlock holds the bench
 
@@ -211,15 +211,7 @@ class Runner:
 
     def _apply(self, step: Step, heat: "_Pulses | None") -> None:
         self._commanded = True  # the next tick comes soon: the controllers take the new set-points at once
-        if step.phase == "launch":
-            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm, False, step.load_torque_nm)
-        elif step.phase == "drive":
-            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm, not self.synced, step.load_torque_nm)
-        elif step.phase == "heat":
-            on = heat is not None and heat.on
-            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm if on else 0.0, not on, step.load_torque_nm)
-        else:
-            self.bench.command(step.engine_speed_rpm, 0.0, True, step.load_torque_nm)
+        self.bench.command(*setpoints(step, self.synced, heat is not None and heat.on))
 
     @staticmethod
     def _target(step: Step) -> float:
