@@ -23,3 +23,9 @@ MAX_TIMEOUT_S = 600.0
 MAX_PROBE_READINGS = 10_000
 #: Most starting points of a grey-box fit (each is a full least-squares fit).
 MAX_FIT_STARTS = 1_000
+#: Most Monte Carlo paths of the remaining-life estimate: each path holds one resampled load profile.
+MAX_WEAR_PATHS = 100_000
+#: Longest wear horizon in engagements: a passenger-car clutch sees about a million in its life.
+MAX_WEAR_HORIZON = 1_000_000_000
+#: Longest residual sampling period of the cool-down analysis: one sample an hour still shows a trend.
+MAX_SAMPLE_PERIOD_S = 3600.0

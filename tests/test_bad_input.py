@@ -73,6 +73,15 @@ def test_probe_reading_count_is_bounded(capsys):
     (["run", "table1", "--seed", "-1"], "--seed"),
     (["identify", "RUN", "--starts", "0", "--out", "p.json"], "--starts"),
     (["identify", "RUN", "--seed", "-3", "--out", "p.json"], "--seed"),
+    (["pipeline", "--duration", "inf"], "--duration"),
+    (["pipeline", "--duration", "-60"], "--duration"),
+    (["pipeline", "--seed", "-2"], "--seed"),
+    (["wear", "RUN", "--params", "p.json", "--paths", "0"], "--paths"),
+    (["wear", "RUN", "--params", "p.json", "--paths", "1000000000"], "--paths"),
+    (["wear", "RUN", "--params", "p.json", "--predict", "1e20"], "--predict"),
+    (["wear", "RUN", "--params", "p.json", "--predict", "-4"], "--predict"),
+    (["cooldown", "RUN", "--params", "p.json", "--sample", "nan"], "--sample"),
+    (["cooldown", "RUN", "--params", "p.json", "--sample", "1e9"], "--sample"),
 ])
 def test_counts_and_seeds_are_checked(argv, field, tmp_path, capsys):
     argv = [str(tmp_path / "run.h5") if a == "RUN" else a for a in argv]

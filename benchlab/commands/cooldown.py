@@ -10,6 +10,8 @@ from pathlib import Path
 
 import h5py
 
+from benchlab import cliargs
+from benchlab.bounds import MAX_SAMPLE_PERIOD_S
 from benchlab.errors import InputError
 
 NAME = "cooldown"
@@ -21,7 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--params", required=True,
                         help="parameter file (identified from a Table 1 run) for every parameter but R; "
                              "'sim-truth' uses the simulated bench's true parameters stored in the run")
-    parser.add_argument("--sample", type=float, default=1.0, help="residual sampling period in s (default 1)")
+    parser.add_argument("--sample", type=cliargs.positive_float("a sampling period in s", MAX_SAMPLE_PERIOD_S),
+                        default=1.0, help="residual sampling period in s (default 1)")
     parser.add_argument("--json", action="store_true", help="print the table and eq. (11) as JSON")
     parser.add_argument("--no-store", action="store_true", help="do not write /analysis into the run file")
 

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from benchlab import cliargs
+from benchlab.bounds import MAX_RUN_DURATION_S
 from benchlab.diagnose.engine import diagnose_runs
 from benchlab.diagnose.regimes import worst_regimes
 from benchlab.diagnose.report import summarise
@@ -35,8 +37,9 @@ VALIDATION_CYCLES = 3  # Table 1 cycles after the validation protocol's three lo
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out", help="directory for run, parameter and report files")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the schedule and the bench's noise")
-    parser.add_argument("--duration", type=float, default=3600.0, help="planned Table 1 duration in s")
+    parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the bench's noise")
+    parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
+                        default=3600.0, help="planned Table 1 duration in s")
 
 
 def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
