@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from benchlab import cliargs
 from benchlab.acquire.lock import RunFileLock
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
 from benchlab.errors import InputError
+from benchlab.progress import for_terminal
 from protocols.catalog import NAMES
 
 NAME = "run"
@@ -31,7 +31,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
                         "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
-    parser.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,22 +59,16 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
     from benchlab.runner.session import RunRequest, execute
 
-    tty = sys.stderr.isatty()
-
-    def progress(line: str) -> None:
-        print(("\r" + line.ljust(110)) if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
-
     request = RunRequest(protocol=args.protocol or "", out=out, bench=args.bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
-                         progress=None if args.quiet else progress)
+                         progress=for_terminal(args.quiet))
     code, summary = execute(request)
     if summary is not None:
-        if tty and not args.quiet:
-            print(file=sys.stderr)
         print("\n".join(summary.lines()))
         print(f"run file   {out}")
         if args.params and code == 0 and (args.protocol == "cooldown-sweep" or args.resume):
             from benchlab.commands import cooldown
 
-            cooldown.run(argparse.Namespace(run=str(out), params=args.params, sample=1.0, json=False, no_store=False))
+            cooldown.run(argparse.Namespace(run=str(out), params=args.params, sample=1.0, json=False, no_store=False,
+                                            quiet=args.quiet))
     return code

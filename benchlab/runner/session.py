@@ -10,7 +10,7 @@ import math
 import signal
 import subprocess
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -20,6 +20,7 @@ import h5py
 import numpy as np
 
 from benchlab.acquire import RunWriter, read_progress
+from benchlab.progress import SILENT, Progress
 from benchlab.errors import InputError
 from benchlab.runner.devices import BenchConfig, DriverBench
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
@@ -47,7 +48,7 @@ class RunRequest:
     faults: Sequence[Any] = ()  # sim only: sim_bench.faults.Fault
     sim_options: dict[str, Any] | None = None  # sim only: SimBenchConfig overrides
     limits: BenchLimits | None = None  # sim only: limits (hardware: from BENCH.toml)
-    progress: Callable[[str], None] | None = None
+    progress: Progress = SILENT  # a bar over the planned bench time (benchlab.progress.for_terminal in commands)
     install_signals: bool = True
     steps: tuple[Step, ...] | None = None  # a custom schedule instead of the named protocol's (tests, scripts)
     keep: dict[str, Any] | None = None  # if given, execute() leaves "sim", "bench", "runner" in it (tests)
@@ -194,8 +195,10 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                                planned_s=duration_s(steps), flush_every_s=config.flush_every_s,
                                state_fields=STATE_FIELDS, durable=sim is None)
             writer.state["resumes"] = 0
+        task = request.progress.task(f"{request.protocol} on the {'simulated ' if sim is not None else ''}bench",
+                                     duration_s(steps), unit="s")
         runner = Runner(bench, clock, steps, writer, config.limits, tick_s=config.tick_s,
-                        fast_tick_s=config.fast_tick_s, dt=config.dt, progress=request.progress)
+                        fast_tick_s=config.fast_tick_s, dt=config.dt, progress=task)
         if request.keep is not None:
             request.keep.update(sim=sim, bench=bench, runner=runner)
         previous = {}
@@ -212,6 +215,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             finally:
                 raise
         finally:
+            task.close()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
         writer.close(summary.status)
