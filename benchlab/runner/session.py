@@ -11,7 +11,7 @@ import signal
 import subprocess
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -199,6 +199,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                      "can_log": can_log.name, "can_log_time_base": config.can_timestamps}
             if sim is not None:
                 attrs["sim_bench"] = json.dumps(sim.cfg.as_dict(), default=str)
+                attrs["sim_faults"] = json.dumps([asdict(fault) for fault in request.faults])
                 attrs["sim_truth"] = json.dumps({"params": dict(sim.physics.truth_params),
                                                  "effects": [e.name for e in sim.physics.plant.effects
                                                              if not e.name.startswith("fault heater")]})
