@@ -13,7 +13,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
-from benchlab.bounds import MAX_RUN_DURATION_S
+from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
+from benchlab.values import positive_number
 from protocols.schedule import CONDITION_CHANNELS, OPERATORS, PHASES, Step, duration_s
 
 RPM = math.pi / 30.0
@@ -60,7 +61,7 @@ class BenchLimits:
             elif isinstance(default, str):
                 if value not in ACTIONS:
                     raise InputError(source, f"{prefix}.{key}", f"one of {', '.join(ACTIONS)}, got {value!r}")
-            elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            elif positive_number(value) is None:
                 raise InputError(source, f"{prefix}.{key}", f"a positive number, got {value!r}")
             clean[key] = float(value) if isinstance(default, float) else value
         return cls(**clean)
@@ -125,6 +126,8 @@ def schedule_problems(steps: Sequence[Step], limits: BenchLimits) -> list[Schedu
             add("clutch_torque_nm", f"clutch torque {s.clutch_torque_nm:g} N*m outside 0..{limits.max_clutch_torque_nm:g}")
         if not abs(s.load_torque_nm) <= limits.max_load_torque_nm:
             add("load_torque_nm", f"load torque {s.load_torque_nm:g} N*m beyond ±{limits.max_load_torque_nm:g}")
+        if not -1 <= s.cycle <= MAX_CYCLES:
+            add("cycle", f"cycle {s.cycle} outside -1..{MAX_CYCLES} (benchlab.bounds)")
         if not 0 < s.duration_s <= MAX_RUN_DURATION_S:
             add("duration_s", f"duration {s.duration_s!r} s outside (0, {MAX_RUN_DURATION_S:g}]")
         if s.estimate_s is not None and not 0 <= s.estimate_s <= MAX_RUN_DURATION_S:

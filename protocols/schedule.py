@@ -7,10 +7,11 @@ torque by the load machine). Nothing here moves hardware.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
+
+from benchlab.values import finite_number
 
 #: Condition operators: a channel reaching a value, or settling at it.
 OPERATORS = (">=", "<=", "steady")
@@ -99,9 +100,10 @@ class StepFieldError(ValueError):
 
 
 def _number(value: Any, field: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    number = finite_number(value)
+    if number is None:
         raise StepFieldError(field, f"a finite number, got {value!r}")
-    return float(value)
+    return number
 
 
 def _optional_number(value: Any, field: str) -> float | None:
@@ -109,9 +111,10 @@ def _optional_number(value: Any, field: str) -> float | None:
 
 
 def _integer(value: Any, field: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not float(value).is_integer():
+    number = finite_number(value)
+    if number is None or not number.is_integer():
         raise StepFieldError(field, f"an integer, got {value!r}")
-    return int(value)
+    return int(number)
 
 
 def _text(value: Any, field: str) -> str:
