@@ -17,8 +17,8 @@ import cantools
 
 from benchlab.bounds import MAX_TIMEOUT_S
 from benchlab.errors import InputError
-from benchlab.values import finite_number, positive_number
 from benchlab.runner.devices import BenchConfig
+from benchlab.values import finite_number, positive_number
 from drivers import cvd
 from drivers.can_signals import BENCH_SIGNALS
 from protocols.limits import BenchLimits
