@@ -11,6 +11,7 @@ from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
 from benchlab.errors import InputError
 from benchlab.progress import for_terminal
 from protocols.catalog import NAMES
+from sim_bench.faults import SPEC, kinds_help
 
 NAME = "run"
 HELP = "run a protocol (table1, cooldown-sweep, validation) on the simulated bench or a hardware bench"
@@ -30,11 +31,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
     parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
                         "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`)")
+    parser.add_argument("--fault", type=cliargs.fault, action="append", default=[], metavar=SPEC,
+                        help="simulated bench only, repeatable: inject a fault at SECONDS of run time to rehearse "
+                        f"what the bench does (recorded in the run file's sim_faults); kinds(keys): {kinds_help()}")
     parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
 
 
 def run(args: argparse.Namespace) -> int:
     """The run file is locked before anything else (RunFileLock), so a second run on it is refused."""
+    if args.fault and args.bench != "sim":
+        raise InputError("command line", "--fault", "--bench sim: faults are rehearsed on the simulated bench, "
+                                                    f"never injected into a hardware bench (got --bench {args.bench})")
+    if args.fault and args.resume:
+        raise InputError("command line", "--fault", "a new run: a resumed run continues as it was planned")
     if args.resume:
         out = Path(args.resume)
         if args.out and Path(args.out) != out:
@@ -61,7 +70,7 @@ def _run(args: argparse.Namespace, out: Path) -> int:
 
     request = RunRequest(protocol=args.protocol or "", out=out, bench=args.bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
-                         progress=for_terminal(args.quiet))
+                         faults=tuple(args.fault), progress=for_terminal(args.quiet))
     code, summary = execute(request)
     if summary is not None:
         print("\n".join(summary.lines()))
