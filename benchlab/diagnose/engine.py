@@ -289,12 +289,17 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: str = "linear", starts
         findings.append(finding)
         current = fit(finding.spec, datasets, start={p.name: finding.params[p.name] for p in finding.spec.free})
         current_held = finding.after
-    if len(findings) > 1:
+    dropped = False
+    while len(findings) > 1 or (findings and dropped):  # until every finding holds against the rest (alpha, gain)
         findings = _recheck(base, base_held, findings, current, current_held, datasets, channels)
         kept = [f for f in findings if f.significant]
-        if len(kept) < len(findings):  # another finding covered what this one fixed: drop it, measure again
-            spec = _combined(base.spec, [f.candidate for f in kept], channels)
-            current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
-            current_held = _held_out(spec, current.params, datasets) if kept else base_held
-            findings = _recheck(base, base_held, kept, current, current_held, datasets, channels)
+        if len(kept) == len(findings):
+            break
+        dropped = True  # another finding covered what this one fixed: drop it, measure the rest again
+        if not kept:
+            current, current_held, findings = base, base_held, []
+            break
+        spec = _combined(base.spec, [f.candidate for f in kept], channels)
+        current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
+        current_held, findings = _held_out(spec, current.params, datasets), kept
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held)
