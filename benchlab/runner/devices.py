@@ -24,7 +24,7 @@ import numpy as np
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
-from drivers.errors import CanLogError, DriverError
+from drivers.errors import CanLogError, ConnectionLost, DriverError
 from protocols.limits import BenchLimits
 
 RPM = math.pi / 30.0
@@ -328,9 +328,11 @@ class DriverBench:
         now = self.clock()
         self.status.t = now
         self._poll_node(now)
-        if now >= self._next_scan - 1e-9:
-            self._poll_instrument(now)
+        if not self.scanner.scanning and now >= self._next_scan - 1e-9:
             self._next_scan = max(self._next_scan + self.config.instrument_period_s, now + 1e-9)
+            self._poll_instrument(now, start=True)
+        elif self.scanner.scanning:
+            self._poll_instrument(now)
         self._poll_can(now)
         readings, events = self.readings, self.events
         self.readings, self.events = [], []
@@ -362,11 +364,23 @@ class DriverBench:
                 detail += f": crc_errors {ev.crc_errors}, malformed {ev.malformed}, resyncs {ev.resyncs}"
             self.events.append((ev.t_host, ev.kind, detail))
 
-    def _poll_instrument(self, now: float) -> None:
+    def _poll_instrument(self, now: float, start: bool = False) -> None:
+        """Start a scan (at its period) and take its readings once they are there: the loop never waits for them.
+
+        A silent instrument is a time-out on the loop's clock (its readings go stale, the interlock trips); only
+        a lost port is reconnected (a reset of a silent instrument would block the loop for its time-outs).
+        """
         try:
-            readings = self.scanner.read()
-        except DriverError as exc:
+            if start:
+                self.scanner.start_scan()
+            readings = self.scanner.collect()
+        except ConnectionLost as exc:
             self._error(now, "instrument_error", str(exc), self.scanner.reconnect)
+            return
+        except DriverError as exc:
+            self._error(now, "instrument_error", str(exc), None)
+            return
+        if readings is None:
             return
         row: list[float] = []
         t = readings[0].t_host if readings else now
