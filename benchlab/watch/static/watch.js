@@ -246,7 +246,7 @@ function drawPlot(plot, s, size, tStart, tEnd) {
   const Y = (v) => MARGIN.top + (hi - v) / (hi - lo) * ph;
   ctx.font = "11px system-ui, sans-serif";
   ctx.strokeStyle = "#e6e9ee"; ctx.fillStyle = "#5a6372"; ctx.lineWidth = 1;
-  const ys = niceStep(hi - lo, 5);
+  const ys = niceStep(hi - lo, Math.max(2, Math.min(5, Math.floor(ph / 30))));
   ctx.textAlign = "right"; ctx.textBaseline = "middle";
   for (let v = Math.ceil(lo / ys) * ys; v <= hi; v += ys) {
     ctx.beginPath(); ctx.moveTo(MARGIN.left, Y(v)); ctx.lineTo(w - MARGIN.right, Y(v)); ctx.stroke();
