@@ -27,7 +27,7 @@ from benchlab.cli import main
 from benchlab.runfile import write_run
 from benchlab.watch import follow
 from benchlab.watch.decimate import BASE_LEVEL, MinMaxPyramid, minmax
-from benchlab.watch.live import LiveRun, choose_level, step_status
+from benchlab.watch.live import LiveRun, Schedule, choose_level
 from benchlab.watch.server import WatchServer, listen
 from protocols.schedule import Condition, Step
 
@@ -170,13 +170,14 @@ def test_another_run_under_the_same_name_starts_again_and_a_deleted_file_keeps_w
 
 
 def test_step_status_reads_the_runner_state():
-    steps = tuple(STEPS)
-    assert step_status(steps, {}, None, 5.0) is None
-    drive = step_status(steps, {"next_step": 0.0}, ("step_start", 1.0), 11.0)
-    assert (drive["phase"], drive["left_s"], drive["run_left_s"]) == ("drive", 20.0, 20.0 + 50.0)
-    waiting = step_status(steps, {"next_step": 1.0}, ("step_end", 31.0), 31.0)
-    assert not waiting["started"] and waiting["left_s"] == 200.0
-    assert step_status(steps, {"next_step": 2.0}, ("step_end", 90.0), 90.0)["done"]
+    schedule = Schedule([*STEPS, Step("drive", 7.0, 900.0, cycle=1)])
+    assert schedule.status({}, None, 5.0) is None and Schedule(()).status({"next_step": 0.0}, None, 1.0) is None
+    assert (schedule.planned_s, schedule.cycles) == (30.0 + 50.0 + 7.0, 2)
+    drive = schedule.status({"next_step": 0.0}, ("step_start", 1.0), 11.0)
+    assert (drive["phase"], drive["left_s"], drive["run_left_s"]) == ("drive", 20.0, 20.0 + 50.0 + 7.0)
+    waiting = schedule.status({"next_step": 1.0}, ("step_end", 31.0), 31.0)
+    assert not waiting["started"] and waiting["left_s"] == 200.0 and waiting["run_left_s"] == 50.0 + 7.0
+    assert schedule.status({"next_step": 3.0}, ("step_end", 90.0), 90.0)["done"]
 
 
 # -- server -----------------------------------------------------------------------------------------------
@@ -244,6 +245,13 @@ def test_watch_refuses_what_is_not_a_run_and_a_port_in_use(tmp_path, run_file, c
     assert err.count("\n") == 1 and "--port" in err and "in use" in err
     assert main(["run", "table1", "--out", str(tmp_path / "r.h5"), "--port", "0"]) == 2
     assert "--watch" in capsys.readouterr().err
+    busy = listen(0)
+    try:  # run --watch takes its port before anything moves
+        out = tmp_path / "r.h5"
+        assert main(["run", "table1", "--out", str(out), "--watch", "--port", str(busy.getsockname()[1])]) == 2
+    finally:
+        busy.close()
+    assert "in use" in capsys.readouterr().err and not out.exists()
     with pytest.raises(SystemExit) as stop:
         main(["watch", str(run_file), "--port", "70000"])
     assert stop.value.code == 2 and "TCP port" in capsys.readouterr().err

@@ -3,7 +3,9 @@
 A plot drawn from one bucket per pixel (a vertical stroke from min to max) looks like the plot of every sample,
 spikes included, however many samples the bucket holds. The pyramid keeps the buckets of every level from
 `base_level` up and brings them up to date from the rows that arrived, so an update costs what arrived (times
-the few levels), not the length of the run; finer buckets are computed from the rows when asked for.
+the few levels), not the length of the run. A level is brought up to date when it is asked for (from the level
+below, from the first bucket that changed), so an update touches the levels up to the one the page shows.
+Finer buckets than the base level are computed from the rows when asked for.
 NaN (not measured) is skipped; a bucket without any measured sample is NaN.
 """
 
@@ -26,6 +28,13 @@ def bucket_reduce(values: np.ndarray, size: int, ufunc: np.ufunc) -> np.ndarray:
         pad = np.full((*values.shape[:-1], buckets * size - n), np.nan, dtype=values.dtype)
         values = np.concatenate([values, pad], axis=-1)
     return ufunc.reduce(values.reshape(*values.shape[:-1], buckets, size), axis=-1)
+
+
+def _pairs(values: np.ndarray, ufunc: np.ufunc) -> np.ndarray:
+    """`ufunc` of consecutive pairs along the last axis (an odd last one stays as it is)."""
+    n = values.shape[-1]
+    pairs = ufunc(values[:, 0:n - 1:2], values[:, 1:n:2])
+    return np.concatenate([pairs, values[:, n - 1:]], axis=1) if n % 2 else pairs
 
 
 def minmax(values: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -58,6 +67,7 @@ class MinMaxPyramid:
     def __init__(self, channels: int) -> None:
         self.channels = channels
         self.levels = [_Level(channels) for _ in range(BASE_LEVEL, TOP_LEVEL + 1)]
+        self._stale = [0] * len(self.levels)  # per level: its buckets from here on may be out of date
 
     def ingest(self, first_row: int, values: np.ndarray) -> None:
         """Rows `first_row`, ... of every channel (channels, rows); `first_row` starts a base bucket.
@@ -72,16 +82,23 @@ class MinMaxPyramid:
         first = first_row // size
         mins, maxs = minmax(values, size)
         self.levels[0].store(first, mins, maxs)
-        for below, level in zip(self.levels, self.levels[1:]):
-            first //= 2
-            mins = bucket_reduce(below.min[:, 2 * first:below.count], 2, np.fmin)
-            maxs = bucket_reduce(below.max[:, 2 * first:below.count], 2, np.fmax)
-            level.store(first, mins, maxs)
+        for j in range(1, len(self.levels)):
+            self._stale[j] = min(self._stale[j], first >> j)
+
+    def _bring_up_to_date(self, index: int) -> None:
+        """Levels 1..index (above the base) recomputed from the level below, from their first stale bucket."""
+        for j in range(1, index + 1):
+            below, level, first = self.levels[j - 1], self.levels[j], self._stale[j]
+            if first < -(-below.count // 2):
+                level.store(first, _pairs(below.min[:, 2 * first:below.count], np.fmin),
+                            _pairs(below.max[:, 2 * first:below.count], np.fmax))
+            self._stale[j] = level.count
 
     def buckets(self, level: int, first: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """Min and max of buckets [first, stop) at `level` (BASE_LEVEL..TOP_LEVEL), clipped to the buckets held."""
         if not BASE_LEVEL <= level <= TOP_LEVEL:
             raise ValueError(f"level {level} outside [{BASE_LEVEL}, {TOP_LEVEL}]")
+        self._bring_up_to_date(level - BASE_LEVEL)
         held = self.levels[level - BASE_LEVEL]
         stop = min(stop, held.count)
         first = min(max(first, 0), stop)

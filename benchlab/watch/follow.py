@@ -124,6 +124,8 @@ class RunFileVersion:
         time = group["time"]
         self.capacity = int(time.shape[0]) if time.ndim == 1 else 0
         self.t0 = float(time[0]) if self.capacity else 0.0
+        if not np.isfinite(self.t0):
+            raise InputError(self.path, "/aligned/time", f"a time grid starting at a number, got {self.t0}")
         self.channels: dict[str, str] = {}  # name -> unit, file order, time excluded
         self.columns: dict[str, Column] = {}
         for name, ds in group.items():

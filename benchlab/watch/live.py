@@ -39,34 +39,42 @@ def encode(values: np.ndarray) -> str:
     return base64.b64encode(np.ascontiguousarray(values, dtype="<f4").tobytes()).decode("ascii")
 
 
-def step_status(steps: Sequence[Step], state: Mapping[str, float], last_step_event: tuple[str, float] | None,
-                t_data: float) -> dict[str, Any] | None:
-    """The schedule step under way and its time left (None without a schedule or before the first step).
+class Schedule:
+    """The planned steps with what the page needs computed once: expected time after each step, cycles."""
 
-    `state` holds the runner's progress fields (next_step: index of the step under way, or the next once one
-    ended); `last_step_event` the kind and time of the last step_start/step_end event.
-    """
-    index = state.get("next_step", math.nan)
-    if not steps or not math.isfinite(index):
-        return None
-    i = int(index)
-    total_left = float(sum(s.expected_s for s in steps[i + 1:]))
-    if i >= len(steps):
-        return {"index": i, "steps": len(steps), "done": True, "run_left_s": 0.0}
-    step = steps[i]
-    started = last_step_event is not None and last_step_event[0] == "step_start"
-    elapsed = max(0.0, t_data - last_step_event[1]) if started and last_step_event else 0.0
-    info: dict[str, Any] = {
-        "index": i, "steps": len(steps), "done": False, "cycle": step.cycle,
-        "cycles": len({s.cycle for s in steps}), "phase": step.phase, "label": step.label,
-        "engine_speed_rpm": step.engine_speed_rpm, "clutch_torque_nm": step.clutch_torque_nm,
-        "load_torque_nm": step.load_torque_nm, "started": started, "elapsed_s": elapsed,
-        "left_s": max(0.0, step.duration_s - elapsed), "expected_left_s": max(0.0, step.expected_s - elapsed),
-        "until": " or ".join(c.describe() for c in step.until) if step.until else
-        ("synchronised" if step.phase == "launch" else ""),
-    }
-    info["run_left_s"] = total_left + info["expected_left_s"]
-    return info
+    def __init__(self, steps: Sequence[Step]) -> None:
+        self.steps = tuple(steps)
+        expected = np.array([s.expected_s for s in self.steps], dtype=float)
+        self.after = np.concatenate([np.cumsum(expected[::-1])[::-1][1:], [0.0]]) if len(expected) else expected
+        self.planned_s = float(expected.sum())
+        self.cycles = len({s.cycle for s in self.steps})
+
+    def status(self, state: Mapping[str, float], last_step_event: tuple[str, float] | None,
+               t_data: float) -> dict[str, Any] | None:
+        """The step under way and its time left (None without a schedule or before the first step).
+
+        `state` holds the runner's progress fields (next_step: index of the step under way, or of the next
+        once one has ended); `last_step_event` the kind and time of the last step_start/step_end event.
+        """
+        index = state.get("next_step", math.nan)
+        if not self.steps or not math.isfinite(index):
+            return None
+        i = int(index)
+        if i >= len(self.steps):
+            return {"index": i, "steps": len(self.steps), "done": True, "run_left_s": 0.0}
+        step = self.steps[i]
+        started = last_step_event is not None and last_step_event[0] == "step_start"
+        elapsed = max(0.0, t_data - last_step_event[1]) if started and last_step_event else 0.0
+        expected_left = max(0.0, step.expected_s - elapsed)
+        return {
+            "index": i, "steps": len(self.steps), "done": False, "cycle": step.cycle, "cycles": self.cycles,
+            "phase": step.phase, "label": step.label, "engine_speed_rpm": step.engine_speed_rpm,
+            "clutch_torque_nm": step.clutch_torque_nm, "load_torque_nm": step.load_torque_nm, "started": started,
+            "elapsed_s": elapsed, "left_s": max(0.0, step.duration_s - elapsed), "expected_left_s": expected_left,
+            "until": " or ".join(c.describe() for c in step.until) if step.until else
+            ("synchronised" if step.phase == "launch" else ""),
+            "run_left_s": float(self.after[i]) + expected_left,
+        }
 
 
 def choose_level(span_rows: int, width: int) -> int:
@@ -89,6 +97,7 @@ class LiveRun:
 
     def _reset(self) -> None:
         v = self.version
+        self.schedule = Schedule(v.steps)
         self.names = list(v.channels)
         self.pyramid = MinMaxPyramid(len(self.names))
         self.rows = 0
@@ -165,17 +174,16 @@ class LiveRun:
         v, progress = self.version, self.progress
         state = {k[len(STATE_PREFIX):]: val for k, val in progress.items() if k.startswith(STATE_PREFIX)}
         t_data = progress.get("t_data", v.t0 + (self.rows - 1) * v.dt if self.rows else v.t0)
-        planned = float(sum(s.expected_s for s in v.steps))
         return {
             "file": self.path.name, "generation": self.generation, "status": v.status,
             "protocol": str(v.attrs.get("protocol", "")), "seed": _json_number(v.attrs.get("seed")),
             "bench": str(v.attrs.get("bench", "")), "created_utc": str(v.attrs.get("created_utc", "")),
-            "dt": v.dt, "t0": v.t0, "rows": self.rows, "t_data": _json_number(t_data), "planned_s": planned,
+            "dt": v.dt, "t0": v.t0, "rows": self.rows, "t_data": _json_number(t_data), "planned_s": self.schedule.planned_s,
             "channels": [{"name": n, "unit": v.channels[n]} for n in self.names],
             "latest": {n: {"value": _json_number(val), "time": t} for n, (val, t) in self.latest.items()},
             "state": {k: _json_number(val) for k, val in state.items()},
             "held": state.get("held", 0.0) == 1.0, "interlocks": dict(self.interlocks),
-            "step": step_status(v.steps, state, self.last_step_event, float(t_data)),
+            "step": self.schedule.status(state, self.last_step_event, float(t_data)),
             "events": len(self.events), "quiet_s": time.monotonic() - self.quiet_since,
             "problem": self.problem, "base_level": BASE_LEVEL, "top_level": TOP_LEVEL,
         }
