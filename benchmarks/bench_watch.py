@@ -4,12 +4,12 @@
 
 For each run length a run file is written the way `benchlab run` writes it, by RunWriter, still open and
 `running` (the batch simulator's Table 1 run at 10 ms, its /aligned channels fed to the writer as one stream
-read every 10 ms, its schedule stored). The watcher (benchlab.watch.live.LiveRun) opens it and catches up once; then, N times,
-the writer adds one second of data and flushes (not timed) and one page update is timed in CPU time: read what
-is new, answer with the status, the buckets from the page's last one on and the new events, JSON-encoded, as
-the server sends it. Two views: the whole run (pyramid levels) and the last 10 minutes (buckets finer than
-the pyramid's, computed from the file). The naive peer re-reads the whole valid /aligned with h5py at each
-update (and does not even decimate it). Medians; the ratio is peer / ours.
+read every 10 ms, its schedule stored). The watcher (benchlab.watch.live.LiveRun) opens it and catches up
+once; then, N times, the writer adds one second of data and flushes (not timed) and one page update is timed
+in CPU time: read what is new, answer with the status, the buckets from the page's last one on and the new
+events, JSON-encoded, as the server sends it. Two views: the whole run (pyramid levels) and the last
+10 minutes (buckets finer than the pyramid's, computed from the file). The naive peer re-reads the whole valid
+/aligned with h5py at each update (and does not even decimate it). Medians; the ratio is peer / ours.
 """
 
 from __future__ import annotations
@@ -39,10 +39,8 @@ FLAT_FACTOR = 2.0  # an update at 10 h may cost at most this times one at 10 min
 PEER_RATIO_10H = 50.0  # and at least this much cheaper than re-reading /aligned (first measured: 115x)
 
 
-def write_until(writer: RunWriter, frame, names: list[str], start: int, stop: int) -> None:
+def write_until(writer: RunWriter, times: np.ndarray, values: np.ndarray, start: int, stop: int) -> None:
     """Feed grid rows [start, stop) of the batch run to the writer as readings, one flush per second of data."""
-    values = frame[names].to_numpy()
-    times = frame["time"].to_numpy()
     for k in range(start, stop):
         writer.add("grid", float(times[k]), values[k].tolist())
         if k % 9000 == 0:  # an event every 90 s (a Table 1 cycle), for the events part of each update
@@ -50,7 +48,8 @@ def write_until(writer: RunWriter, frame, names: list[str], start: int, stop: in
         writer.advance(float(times[k]))
 
 
-def make_run(path: Path, hours: float) -> tuple[RunWriter, object, list[str], int]:
+def make_run(path: Path, hours: float) -> tuple[RunWriter, np.ndarray, np.ndarray, int]:
+    """A run file of `hours` written by RunWriter and left open; (writer, grid times, values, rows written)."""
     duration = hours * 3600.0
     # a Table 1 schedule plans its launches at their longest: ask for more and keep what is needed
     schedule = table1_schedule(1, duration_s=1.2 * duration + 4 * TIMED_S)
@@ -65,8 +64,9 @@ def make_run(path: Path, hours: float) -> tuple[RunWriter, object, list[str], in
     rows = int(round(duration / layout.dt))
     if len(frame) < rows + 2 * TIMED_S * 100:
         raise RuntimeError(f"the batch run holds {len(frame)} rows, {rows + 2 * TIMED_S * 100} needed")
-    write_until(writer, frame, names, 0, rows)
-    return writer, frame, names, rows
+    times, values = frame["time"].to_numpy(), frame[names].to_numpy()
+    write_until(writer, times, values, 0, rows)
+    return writer, times, values, rows
 
 
 def length(hours: float) -> str:
@@ -79,30 +79,30 @@ def cpu(fn) -> tuple[float, object]:
     return time.process_time() - start, out
 
 
-def page_updates(live: LiveRun, writer: RunWriter, frame, names, row: int, span_s: float, n: int):
-    """n timed page updates, one second of new data before each; (CPU times, bytes sent, next row)."""
-    level, have, events = None, 0, 0
-    answer = live.update(width=WIDTH, span_s=span_s, events_from=0)  # the page's first load, not timed
-    level, have = answer["series"]["level"], answer["series"]["first"] + answer["series"]["count"]
-    events = len(answer["events"]["items"])
-    times, sizes = [], []
-    for _ in range(n):
-        write_until(writer, frame, names, row, row + 100)
-        row += 100
-        elapsed, body = cpu(lambda: json.dumps(live.update(width=WIDTH, span_s=span_s, level=level, have=have,
-                                                           events_from=events)))
+class Page:
+    """What a page holds between updates (as watch.js keeps it): its span, level, buckets held, events held."""
+
+    def __init__(self, live: LiveRun, span_s: float) -> None:
+        self.live, self.span_s = live, span_s
+        self.level: int | None = None
+        self.have = self.events = 0
+        self.update()  # the page's first load (not timed)
+
+    def update(self) -> tuple[float, int]:
+        """One update: (CPU seconds, bytes of the answer)."""
+        elapsed, body = cpu(lambda: json.dumps(self.live.update(
+            width=WIDTH, span_s=self.span_s, level=self.level, have=self.have, events_from=self.events)))
         answer = json.loads(body)
-        level, have = answer["series"]["level"], answer["series"]["first"] + answer["series"]["count"]
-        events += len(answer["events"]["items"])
-        times.append(elapsed)
-        sizes.append(len(body))
-    return times, sizes, row
+        self.level, self.have = answer["series"]["level"], answer["series"]["first"] + answer["series"]["count"]
+        self.events += len(answer["events"]["items"])
+        return elapsed, len(body)
 
 
-def naive(path: Path, names: list[str], rows: int) -> float:
+def naive(path: Path, rows: int) -> float:
+    """The peer: open the file and read every /aligned channel up to `rows` with h5py."""
     def read() -> int:
         with h5py.File(path, "r") as f:
-            return sum(f["aligned"][n][:rows].size for n in ["time", *names])
+            return sum(ds[:rows].size for ds in f["aligned"].values())
     return cpu(read)[0]
 
 
@@ -118,13 +118,20 @@ def main() -> int:
         for hours in (float(h) for h in args.hours.split(",")):
             path = Path(tmp) / f"run-{hours:g}h.h5"
             wall = time.perf_counter()
-            writer, frame, names, row = make_run(path, hours)
+            writer, times, values, row = make_run(path, hours)
             made = time.perf_counter() - wall
             catch_up, live = cpu(lambda: LiveRun(path))
             first, _ = cpu(lambda: live.update(width=WIDTH))
-            whole, whole_bytes, row = page_updates(live, writer, frame, names, row, 0.0, args.updates)
-            recent, recent_bytes, row = page_updates(live, writer, frame, names, row, 600.0, args.updates)
-            peer = [naive(path, names, live.rows) for _ in range(5)]
+            pages = {"whole": Page(live, 0.0), "recent": Page(live, 600.0)}
+            costs: dict[str, list[tuple[float, int]]] = {name: [] for name in pages}
+            for _ in range(args.updates):  # the two views take turns, one second of new data before each update
+                for name, page in pages.items():
+                    write_until(writer, times, values, row, row + 100)
+                    row += 100
+                    costs[name].append(page.update())
+            whole, whole_bytes = zip(*costs["whole"])
+            recent, recent_bytes = zip(*costs["recent"])
+            peer = [naive(path, live.rows) for _ in range(5)]
             live.close()
             writer.abandon()
             r = {"hours": hours, "rows": row, "made_s": made, "catch_up_ms": 1e3 * (catch_up + first),

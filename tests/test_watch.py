@@ -110,6 +110,12 @@ def test_follows_the_writer_through_growth_and_close_reading_only_what_is_new(tm
             writer.event(39.5, "step_end", 0, "drive: time")
             writer.state["next_step"] = 1
             writer.event(39.5, "step_start", 0, "open")
+        if second == 60:
+            writer.event(59.5, "interlock", 0, "stale_T_air: no valid reading for 5.2 s (hold)")
+            writer.state["held"] = 1
+        if second == 70:
+            writer.event(69.5, "interlock_cleared", 0, "stale_T_air")
+            writer.state["held"] = 0
         writer.advance(float(second))
         before, n_reads = live.rows, len(reads)
         answer = live.update(width=400, level=level, have=have, events_from=0)
@@ -126,6 +132,8 @@ def test_follows_the_writer_through_growth_and_close_reading_only_what_is_new(tm
                 assert len(reads) == n_reads + 1
         level, have = series["level"], series["first"] + series["count"]
         seen_t.append(status["t_data"])
+        held = 60 <= second < 70
+        assert status["held"] == held and list(status["interlocks"]) == (["stale_T_air"] if held else [])
     assert seen_t == sorted(seen_t) and len(set(seen_t)) == 100
     assert len(inodes) >= 2  # grew past its capacity: a new file under the same name, followed
     step = live.update()["status"]["step"]
