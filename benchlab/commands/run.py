@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from benchlab import cliargs
 from benchlab.acquire.lock import RunFileLock
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
+from benchlab.commands import watch
 from benchlab.errors import InputError
 from benchlab.progress import for_terminal
 from protocols.catalog import NAMES
@@ -35,6 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="simulated bench only, repeatable: inject a fault at SECONDS of run time to rehearse "
                         f"what the bench does (recorded in the run file's sim_faults); kinds(keys): {kinds_help()}")
     parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    parser.add_argument("--watch", action="store_true", help="serve the live view of the run on 127.0.0.1 while it "
+                        "runs (as `benchlab watch`, in a process of its own)")
+    parser.add_argument("--port", type=watch.port, help=f"with --watch: its port (default {watch.DEFAULT_PORT})")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,12 +57,20 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("command line", "--out", "a run file to write")
     else:
         out = Path(args.out or "dry-run.h5")
+    if args.port is not None and not args.watch:
+        raise InputError("command line", "--port", "--watch with it (the live view's port)")
     if args.dry_run:
         return _run(args, out)
     with RunFileLock(out, "--resume" if args.resume else "--out"):  # before anything else: one run per file
         if not args.resume and out.exists() and not args.force:
             raise InputError(out, "--out", "a new run file (it exists: --resume to continue it, --force to overwrite)")
-        return _run(args, out)
+        if not args.watch:
+            return _run(args, out)
+        from benchlab.watch.launch import watching
+
+        with watching(out, watch.DEFAULT_PORT if args.port is None else args.port) as url:
+            print(f"live view  {url}", file=sys.stderr, flush=True)
+            return _run(args, out)
 
 
 def _run(args: argparse.Namespace, out: Path) -> int:
