@@ -102,18 +102,19 @@ def test_wrong_r0_corrected_online_with_t_air(validation, identified):
     assert linear > 1.0  # the linear filter alone cannot correct a wrong law: T_air pulls the plate the wrong way
 
 
-def test_online_step_matches_the_batch_filter_and_carries_the_wear(validation):
+@pytest.mark.parametrize("adapt", [(), ("R_PA",)])
+def test_online_step_matches_the_batch_filter_and_carries_the_wear(validation, adapt):
     run, _, params = validation
     n = 30_000  # five minutes: the heating of the first cool-down, the estimate converging from 30 K off
     part = run.iloc[:n].copy()
     part.attrs = dict(run.attrs)
-    batch = observe(part, params, ["T_air"], initial_offset_k=30.0)
+    batch = observe(part, params, ["T_air"], initial_offset_k=30.0, adapt=adapt)
     inputs = ("engine_speed", "clutch_state", "friction_power", "T_ambient")
     channels = input_channels(part)
     rows = np.column_stack([channels[c] for c in inputs])
     readings = fresh(part[["T_air"]].to_numpy())
     online = OnlineObserver(params, ["T_air"], inputs, batch.initial, part.attrs["dt"], noise=batch.noise,
-                            clutch=default_clutch())
+                            clutch=default_clutch(), adapt=adapt)
     temperature, std = np.empty((n, 4)), np.empty((n, 4))
     for k in range(n):
         estimate = online.step(rows[k], readings[k])
@@ -121,6 +122,8 @@ def test_online_step_matches_the_batch_filter_and_carries_the_wear(validation):
     assert online.states == STATES
     np.testing.assert_allclose(temperature, batch.estimate[STATES].to_numpy(), atol=0.02)
     np.testing.assert_allclose(std, batch.estimate[[s + "_std" for s in STATES]].to_numpy(), rtol=0.01, atol=1e-3)
+    if adapt:
+        np.testing.assert_allclose(estimate.correction, batch.estimate["R_PA_correction"].to_numpy()[-1:], atol=1e-3)
     wear = estimated_wear(part, batch, params, default_clutch())
     assert wear["wear_plate_mm"][-1] > 0
     np.testing.assert_allclose(estimate.wear, [wear[k][-1] for k in ("wear_plate_mm", "wear_flywheel_mm",

@@ -124,4 +124,4 @@ def tune_noise(network: ThermalNetwork, params: Params, channels: Sequence[str],
         q = r * math.sqrt(2.0 * params[node.capacity] * conductance[node.name]) if r is not None else 0.0
         heat[node.name] = max(DEFAULT_HEAT_FLOW_W, q)
     origin = "identification residuals" if known else "defaults (the parameter file has no residual statistics)"
-    return NoiseModel(heat, sensor, max(DEFAULT_INITIAL_K, abs(initial_offset_k)), origin)
+    return NoiseModel(heat, sensor, float(max(DEFAULT_INITIAL_K, abs(initial_offset_k))), origin)

@@ -143,8 +143,9 @@ class OnlineObserver:
         return entry
 
     def step(self, inputs: Sequence[float], measurement: "Sequence[float] | np.ndarray") -> Estimate:
-        """This sample's inputs (in `inputs` order) and readings (in `sensors` order, NaN for none) -> the estimate
-        at this sample; the state moves on to the next sample."""
+        """This sample's inputs (in `inputs` order) and readings (in `sensors` order) -> the estimate at this
+        sample; the state moves on to the next sample. A sensor without a new reading this sample gives NaN: a
+        reading fed again on later samples would count its noise as new information each time."""
         if isinstance(inputs, np.ndarray):  # Python floats: numpy scalars make every law several times slower
             inputs = inputs.tolist()
         if math.isnan(sum(inputs)):

@@ -28,7 +28,7 @@ def plot_observation(run: pd.DataFrame, observation: Observation, truth: pd.Data
         value, spread = est[name].to_numpy()[::k], est[name + STD_SUFFIX].to_numpy()[::k]
         ax.fill_between(t[::k], value - 2 * spread, value + 2 * spread, color=colour, alpha=0.25, lw=0,
                         label="±2σ band")
-        ax.plot(t[::k], value[:], color=colour, lw=1.1, label="estimate")
+        ax.plot(t[::k], value, color=colour, lw=1.1, label="estimate")
         if name in run.columns:
             used = name in model.sensors
             ax.plot(t[::k], run[name].to_numpy()[::k], color="k", lw=0.8 if used else 0.6, alpha=0.55 if used else 0.35,
