@@ -1,4 +1,5 @@
-"""`benchlab observe RUN.h5 --params P.json [--sensors T_air,…] [--initial-offset K] --out EST.h5 [--plot FIG.png]`."""
+"""`benchlab observe RUN.h5 --params P.json [--sensors T_air,…] [--initial-offset K] --out EST.h5 [--plot FIG.png]`
+(and --reinit, --adapt, noise overrides: docs/observer.md)."""
 
 from __future__ import annotations
 

@@ -25,7 +25,8 @@ STD_SUFFIX = "_std"
 
 @dataclass(frozen=True)
 class Observation:
-    """Estimates (state channel names, degC) with their standard deviations (`<name>_std`, K), and how they came."""
+    """Estimates (state channel names, degC; law corrections, K/W) with their standard deviations (`<name>_std`),
+    and how they came about: observability, the model with its sensors and noise, the starting estimate."""
 
     estimate: pd.DataFrame
     observability: Observability

@@ -12,7 +12,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from benchlab.errors import InputError
-from benchlab.network import Channels, Params, Source, ThermalNetwork, as_samples, state_channels
+from benchlab.network import (Channels, ParamChannelFunction, Params, Source, ThermalNetwork, as_samples,
+                              state_channels)
 from benchlab.observer.noise import ADAPT_DRIFT, ADAPT_INITIAL, NoiseModel
 from benchlab.solver import Discretised, conductance_matrices, discretise
 
@@ -59,7 +60,7 @@ class ObserverModel:
         self._real = [c for c in range(n_in) if c not in noise_cols]
         self._order = self._real + noise_cols  # Bd columns: the network's inputs, then the noise heat flows
         self.m = len(self._real)
-        self._adapt_laws: list = []  # one correction per law: R_PA and R_FA share eq. (11)
+        self._adapt_laws: list[ParamChannelFunction] = []  # one correction per law: R_PA and R_FA share eq. 11
         self.adapted: list[str] = []  # its name in files: `<link>_correction` (K/W)
         for label in adapt:
             link = next((k for k in network.links if k.label == label), None)

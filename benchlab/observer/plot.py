@@ -31,8 +31,9 @@ def plot_observation(run: pd.DataFrame, observation: Observation, truth: pd.Data
         ax.plot(t[::k], value, color=colour, lw=1.1, label="estimate")
         if name in run.columns:
             used = name in model.sensors
-            ax.plot(t[::k], run[name].to_numpy()[::k], color="k", lw=0.8 if used else 0.6, alpha=0.55 if used else 0.35,
-                    ls="-" if used else ":", label="measured, observer input" if used else "measured, not used")
+            ax.plot(t[::k], run[name].to_numpy()[::k], color="k", lw=0.8 if used else 0.6,
+                    alpha=0.55 if used else 0.35, ls="-" if used else ":",
+                    label="measured, observer input" if used else "measured, not used")
         if truth is not None and name in truth.columns:
             error = est[name].to_numpy() - truth[name].to_numpy()
             covered = np.mean(np.abs(error) <= 2 * est[name + STD_SUFFIX].to_numpy())
