@@ -46,5 +46,5 @@ def plot_observation(run: pd.DataFrame, observation: Observation, truth: pd.Data
         ax.legend(loc="best", fontsize=7)
     axes[-1].set_xlabel("time (min)")
     sensors = ", ".join(model.sensors) or "none (open loop)"
-    fig.suptitle(f"Fig. 4 with an observer – {run_name(run)}: estimated clutch temperatures ±2σ, sensors: {sensors}")
+    fig.suptitle(f"Fig. 4 with an observer – {run_name(run)}: estimated temperatures ±2σ, sensors: {sensors}")
     return save(fig, path)
