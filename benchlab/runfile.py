@@ -180,9 +180,28 @@ def write_run(path: "str | os.PathLike[str]", frame: pd.DataFrame, dt: float, pr
 def write_simulated(path: "str | os.PathLike[str]", time: np.ndarray, simulated: pd.DataFrame,
                     attrs: Mapping[str, str]) -> None:
     """Write the contract's /simulated group (time plus the model's temperatures, degC)."""
+    write_results(path, "simulated", time, {name: (simulated[name].to_numpy(np.float64), "degC")
+                                            for name in simulated.columns}, attrs)
+
+
+def write_results(path: "str | os.PathLike[str]", group_name: str, time: np.ndarray,
+                  columns: Mapping[str, tuple[np.ndarray, str]], attrs: Mapping[str, str]) -> None:
+    """Write a results file: root attributes and one group of `time` (s) plus channels, each with its unit."""
     with h5py.File(path, "w") as f:
         f.attrs.update(attrs)
-        group = f.create_group("simulated")
+        group = f.create_group(group_name)
         group.create_dataset("time", data=time).attrs["units"] = "s"
-        for name in simulated.columns:
-            group.create_dataset(name, data=simulated[name].to_numpy(np.float64)).attrs["units"] = "degC"
+        for name, (values, unit) in columns.items():
+            group.create_dataset(name, data=np.asarray(values, dtype=np.float64)).attrs["units"] = unit
+
+
+def load_truth(path: "str | os.PathLike[str]") -> pd.DataFrame | None:
+    """The simulated bench's /truth: the plant's true temperatures (degC) on the /aligned grid, named like
+    /simulated (T_pressure_plate, ...); None for a run without it (hardware, imported, killed before closing)."""
+    path = Path(path)
+    with _open(path) as f:
+        if "truth" not in f:
+            return None
+        frame = pd.DataFrame({name: ds[()].astype(np.float64) for name, ds in f["truth"].items()})
+    frame.attrs["source"] = str(path)
+    return frame

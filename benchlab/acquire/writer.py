@@ -176,6 +176,7 @@ class RunWriter:
         self._fd: int | None = None
         self._mm: np.memmap | None = None
         self._views: dict[str, np.ndarray] = {}
+        self._closing_groups: dict[str, Mapping[str, tuple[np.ndarray, str]]] = {}
         if _resume:
             return
         capacity = self._capacities(planned_s)
@@ -241,12 +242,18 @@ class RunWriter:
         self._last_flush_t = now
         self.flushes += 1
 
-    def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None) -> None:
-        """Flush, then replace the file by its compact, compressed form with root attribute `status`."""
+    def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None,
+              groups: Mapping[str, Mapping[str, tuple[np.ndarray, str]]] | None = None) -> None:
+        """Flush, then replace the file by its compact, compressed form with root attribute `status`.
+
+        `groups`: extra groups known only at the end (the simulated bench's /truth), name -> dataset ->
+        (values, units), written into the compact file before it replaces the run's: all or nothing.
+        """
         if self._fd is None:
             return
         self.flush()
         self._close_fd()
+        self._closing_groups = dict(groups or {})
         self._rebuild(None, compact=True, status=status, attrs=attrs)
 
     def abandon(self) -> None:
@@ -410,6 +417,12 @@ class RunWriter:
             ds.attrs["fields"] = json.dumps(fields)
             ds.attrs["units"] = "1"
             acq.attrs["layout"] = json.dumps(describe_layout(self.layout))
+            for name, columns in self._closing_groups.items():
+                group = f.create_group(name)
+                for col, (values, units) in columns.items():
+                    arr = np.asarray(values, dtype=float)
+                    ds = group.create_dataset(col, data=arr, track_times=False, **_compression(compact, arr))
+                    ds.attrs["units"] = units
             f.flush()
 
     def _write_group(self, parent: h5py.Group, name: str, columns: Mapping[str, str], capacity, data,

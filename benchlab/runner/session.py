@@ -225,14 +225,14 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             try:
                 bench.safe_state()
                 writer.event(clock(), "run_aborted", runner.cycle, f"failure: {type(exc).__name__}: {exc}")
-                writer.close("aborted")
+                writer.close("aborted", groups=_truth_groups(sim, writer, resume_state))
             finally:
                 raise
         finally:
             task.close()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
-        writer.close(summary.status)
+        writer.close(summary.status, groups=_truth_groups(sim, writer, resume_state))
     finally:
         bench.close()
         if sim is not None:
@@ -253,6 +253,22 @@ def _stored_steps(f: h5py.File, path: Path) -> tuple[Step, ...]:
     if rows is None:
         raise InputError(path, "/schedule steps_json", "the schedule as a JSON list of steps (missing or not JSON)")
     return steps_from_rows(rows, str(path))
+
+
+def _truth_groups(sim: Any, writer: RunWriter, resume_state: dict[str, Any] | None) -> dict[str, Any]:
+    """The simulated bench's /truth for the writer's close: the plant's true temperatures (degC) on the run's
+    grid, the rows before a resume as the file held them; nothing on hardware."""
+    if sim is None:
+        return {}
+    rows = writer.rows
+    before = resume_state["truth"] if resume_state else {}
+    columns = {"time": (np.arange(rows) * writer.layout.dt, "s")}
+    for name, values in sim.physics.true_states(rows).items():
+        head = np.full(rows - len(values), np.nan)
+        kept = before.get(name, head)[:len(head)]
+        head[:len(kept)] = kept
+        columns[name] = (np.concatenate([head, values]), "degC")
+    return {"truth": columns}
 
 
 def _resume_state(request: RunRequest) -> dict[str, Any]:
@@ -285,9 +301,10 @@ def _resume_state(request: RunRequest) -> dict[str, Any]:
         protocol = str(f.attrs.get("protocol"))
         options = json.loads(f.attrs.get("protocol_options", "{}"))
         seed = int(f.attrs.get("seed", request.seed))
+        truth = {name: ds[:rows] for name, ds in f["truth"].items() if name != "time"} if "truth" in f else {}
     f_init = initial["T_flywheel"] if math.isfinite(initial["T_flywheel"]) else 22.0
     states = {"P": f_init, "F": f_init, "A": initial["T_air"] if math.isfinite(initial["T_air"]) else f_init,
               "T": initial["T_housing"] if math.isfinite(initial["T_housing"]) else f_init}
     return {"steps": steps, "start": start, "cycle": cycle, "t0": rows * dt, "initial": states,
             "resumes": int(resumes if math.isfinite(resumes) else 0) + 1, "protocol": protocol,
-            "options": options, "seed": seed}
+            "options": options, "seed": seed, "truth": truth}
