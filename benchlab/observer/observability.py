@@ -45,7 +45,7 @@ class Observability:
         if partly:
             out.append(f"open loop for part of the run (unobservable at the operating point of the moment): "
                        f"{', '.join(partly)} of the time")
-        if self.sensors and self.no_reading_share > 0:
+        if self.sensors and self.no_reading_share >= 0.0005:  # what rounds to 0.0 % is not worth a warning
             out.append(f"no reading from {seen_from} for {100 * self.no_reading_share:.1f} % of the samples "
                        "(drop-outs): open loop there, the band widens")
         return out
