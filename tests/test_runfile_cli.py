@@ -106,3 +106,43 @@ def test_csv_missing_column_and_bad_value(tmp_path, short_run, capsys):
     frame.to_csv(csv, index=False)
     assert main(["import", str(csv), "--out", str(tmp_path / "r.h5")]) == 2
     assert "column T_air, line 12" in capsys.readouterr().err
+
+
+def test_import_refuses_to_overwrite_an_existing_file_without_force(tmp_path, short_run, capsys):
+    csv, out = tmp_path / "d.csv", tmp_path / "r.h5"
+    short_run.iloc[:100].to_csv(csv, index=False)
+    out.write_bytes(b"an earlier run")
+    assert main(["import", str(csv), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--force" in err and str(out) in err
+    assert out.read_bytes() == b"an earlier run"
+    assert main(["import", str(csv), "--out", str(out), "--force"]) == 0
+    assert len(benchlab.load_run(out)) == 100
+
+
+@pytest.mark.parametrize("sep, decimal, flags", [
+    (";", ",", []),                                   # a German spreadsheet: found from the header and the data
+    (";", ".", []),                                   # semicolons with decimal points
+    ("\t", ",", []),
+    (";", ",", ["--sep", ";", "--decimal", ","]),     # said on the command line
+])
+def test_import_reads_semicolon_and_decimal_comma_csv(sep, decimal, flags, tmp_path, short_run):
+    csv, out = tmp_path / "d.csv", tmp_path / "r.h5"
+    part = short_run.iloc[:300]
+    part.to_csv(csv, index=False, sep=sep, decimal=decimal)
+    assert main(["import", str(csv), "--out", str(out), *flags]) == 0
+    run = benchlab.load_run(out)
+    for c in part.columns:
+        np.testing.assert_allclose(run[c].to_numpy(), part[c].to_numpy(), rtol=1e-12)
+
+
+def test_import_reads_units_in_the_header_and_checks_them(tmp_path, short_run, capsys):
+    csv, out = tmp_path / "d.csv", tmp_path / "r.h5"
+    part = short_run.iloc[:50]
+    part.rename(columns={"T_air": "T_air [degC]", "time": "time [s]"}).to_csv(csv, index=False)
+    assert main(["import", str(csv), "--out", str(out)]) == 0
+    np.testing.assert_allclose(benchlab.load_run(out)["T_air"].to_numpy(), part["T_air"].to_numpy())
+    part.rename(columns={"T_air": "T_air [K]"}).to_csv(csv, index=False)
+    assert main(["import", str(csv), "--out", str(tmp_path / "k.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "column T_air [K]" in err and "degC" in err and not (tmp_path / "k.h5").exists()
