@@ -21,6 +21,18 @@ ALIGNED_UNITS: dict[str, str] = {
     "T_engine": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC",
 }
 REQUIRED = tuple(list(ALIGNED_UNITS)[:10])
+#: What each contract channel is (contract section 1): the comment an export gives the channel.
+ALIGNED_MEANING: dict[str, str] = {
+    "time": "time since run start, uniform step dt",
+    "engine_speed": "ω_e, engine-side (drive motor) speed",
+    "clutch_speed": "ω_c, transmission input shaft speed; slip Δω = ω_e − ω_c",
+    "clutch_torque": "T_c, torque transmitted by the clutch",
+    "clutch_state": "S: 1 clamped (engaged or slipping), 0 open",
+    "friction_power": "P = T_c · Δω, Δω in rad/s (eq. 4); 0 when not slipping",
+    "T_flywheel": "ϑ_F, mean of the flywheel sensors", "T_air": "ϑ_A, clutch-chamber air",
+    "T_housing": "ϑ_T, transmission housing", "T_ambient": "ϑ_amb, ambient", "T_engine": "ϑ_eng, engine",
+    "load_torque": "load machine torque", "T_flywheel_1": "flywheel sensor 1", "T_flywheel_2": "flywheel sensor 2",
+}
 TIME_TOLERANCE = 1e-6  # relative to dt
 #: Values a dry-clutch bench can measure, per unit: anything beyond (1e300, inf) is a corrupt number, not a
 #: measurement. Channels in other units are only checked for infinities.
