@@ -157,3 +157,19 @@ def test_resistance_band_uses_the_parameter_correlations():
     assert sigma == pytest.approx(r.std(axis=0), rel=0.05)
     params.extra.pop("correlation")  # without it, a1 and R0 (correlation -0.9) add up where both matter
     assert resistance(params, speed, state=1)[1][0] > 1.5 * r.std(axis=0)[0]
+
+
+def test_fig5_title_names_the_temperatures_it_plots(monkeypatch, short_run, tmp_path):
+    from benchlab.report import timeseries
+    from benchlab.report.plotting import SYMBOLS
+    from benchlab.report.scores import estimate
+
+    figures = []
+    monkeypatch.setattr(timeseries, "save", lambda fig, path: figures.append(fig))
+    timeseries.plot_comparison(short_run, [estimate(short_run, paper_params("nonlinear"), "nonlinear")],
+                               tmp_path / "fig5.png")
+    fig = figures[0]
+    plotted = [ax.get_ylabel().removesuffix(" (°C)") for ax in fig.axes if ax.get_ylabel().endswith("(°C)")]
+    title = fig._suptitle.get_text()
+    assert plotted == [SYMBOLS["T_flywheel"], SYMBOLS["T_air"]]
+    assert [s for s in SYMBOLS.values() if s in title] == plotted
