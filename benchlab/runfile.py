@@ -167,12 +167,18 @@ def write_run(path: "str | os.PathLike[str]", frame: pd.DataFrame, dt: float, pr
             ds.attrs["units"] = units[name]
 
 
-def write_simulated(path: "str | os.PathLike[str]", time: np.ndarray, simulated: pd.DataFrame,
+def write_simulated(path: "str | os.PathLike[str]", run: "str | os.PathLike[str]", simulated: pd.DataFrame,
                     attrs: Mapping[str, str]) -> None:
-    """Write the contract's /simulated group (time plus the model's temperatures, degC)."""
-    with h5py.File(path, "w") as f:
+    """Write SIM.h5: a run file in its own right (the run's root attributes and /aligned, copied as stored, so
+    every command that reads a run reads it) plus the contract's /simulated group on the run's grid (time, s;
+    the model's temperatures, degC) and `attrs` saying where it came from (source run, parameters, model)."""
+    if Path(path).resolve() == Path(run).resolve():
+        raise InputError(path, "--out", "a file other than the run file it simulates")
+    with h5py.File(run, "r") as src, h5py.File(path, "w") as f:
+        f.attrs.update(src.attrs)
         f.attrs.update(attrs)
+        src.copy(src["aligned"], f, "aligned")
         group = f.create_group("simulated")
-        group.create_dataset("time", data=time).attrs["units"] = "s"
+        group.create_dataset("time", data=src["aligned/time"][()].astype(np.float64)).attrs["units"] = "s"
         for name in simulated.columns:
             group.create_dataset(name, data=simulated[name].to_numpy(np.float64)).attrs["units"] = "degC"

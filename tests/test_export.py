@@ -163,3 +163,20 @@ def test_parquet_without_pyarrow_says_what_to_install(run_file, tmp_path, capsys
     out = tmp_path / "run.parquet"
     _one_line_exit_2(["export", str(run_file), "--to", str(out)], capsys, "pyarrow", "benchlab[export]")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.h5"]  # no output, no half-made copy
+
+
+def test_mf4_of_a_simulate_output_puts_model_beside_measurement(run_file, params_file, tmp_path):
+    sim, out = tmp_path / "sim.h5", tmp_path / "sim.mf4"
+    assert main(["simulate", str(run_file), "--params", str(params_file), "--out", str(sim)]) == 0
+    assert main(["export", str(sim), "--to", str(out)]) == 0
+    mdf = MDF(out)
+    try:
+        assert [g.channel_group.acq_name for g in mdf.groups] == ["/aligned", "/simulated"]
+        with h5py.File(sim, "r") as f:
+            for name in ("T_flywheel", "T_pressure_plate"):
+                model = mdf.get(f"simulated.{name}")
+                np.testing.assert_array_equal(model.samples, f["simulated"][name][()])
+                assert model.unit == "degC"
+            np.testing.assert_array_equal(mdf.get("T_flywheel").samples, f["aligned/T_flywheel"][()])
+    finally:
+        mdf.close()

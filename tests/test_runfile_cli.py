@@ -146,3 +146,26 @@ def test_import_reads_units_in_the_header_and_checks_them(tmp_path, short_run, c
     assert main(["import", str(csv), "--out", str(tmp_path / "k.h5")]) == 2
     err = capsys.readouterr().err
     assert "column T_air [K]" in err and "degC" in err and not (tmp_path / "k.h5").exists()
+
+
+def test_simulate_writes_a_run_file_the_other_commands_read(run_file, params_file, tmp_path, capsys):
+    sim, again = tmp_path / "sim.h5", tmp_path / "again.h5"
+    assert main(["simulate", str(run_file), "--params", str(params_file), "--out", str(sim)]) == 0
+    before, after = benchlab.load_run(run_file), benchlab.load_run(sim)  # the contract's reader takes it
+    assert list(after.columns) == list(before.columns) and after.attrs["protocol"] == before.attrs["protocol"]
+    for c in before.columns:
+        np.testing.assert_array_equal(after[c].to_numpy(), before[c].to_numpy())
+    fits = []
+    for source, out in ((run_file, "p_run.json"), (sim, "p_sim.json")):
+        assert main(["identify", str(source), "--model", "linear", "--starts", "1", "--out", str(tmp_path / out)]) == 0
+        fits.append(json.loads((tmp_path / out).read_text())["params"])
+    assert fits[0] == fits[1]  # the same measurements: the same fit
+    assert main(["wear", str(sim), "--params", str(params_file), "--json"]) == 0
+    assert main(["simulate", str(sim), "--params", str(params_file), "--out", str(again)]) == 0
+    with h5py.File(sim) as a, h5py.File(again) as b:
+        assert a.attrs["source_run"] == str(run_file) and b.attrs["source_run"] == str(sim)
+        for name in a["simulated"]:
+            np.testing.assert_array_equal(a["simulated"][name][()], b["simulated"][name][()])
+    assert main(["simulate", str(sim), "--params", str(params_file), "--out", str(sim)]) == 2
+    assert "a file other than the run file" in capsys.readouterr().err
+    assert benchlab.load_run(sim)["T_air"].equals(after["T_air"])  # refused before anything was written
