@@ -1,4 +1,5 @@
-"""`benchlab probe pt1000|node|can --url URL [--json] [--count N] [--bitrate BIT/S]`: read a few values from one bench device.
+"""`benchlab probe pt1000|node|can --url URL [--json] [--count N] [--bitrate BIT/S]`: read a few values from one
+bench device.
 
 Exit 0 with data, 1 when nothing arrived in time, 2 for a URL that does not open. Read-only: the PT1000
 scanner is reset and configured (that is how it measures), the node and the CAN bus are only listened to. `sim://NAME` URLs reach the in-process emulators (sim_bench.emulators).

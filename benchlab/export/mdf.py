@@ -23,10 +23,11 @@ COMPRESSION = 2
 def header_comment(content: RunContent) -> str:
     """The MDF header's XML comment: what the file is, and every root attribute as a common property."""
     root = ET.Element("HDcomment")
-    ET.SubElement(root, "TX").text = (f"benchlab run {content.source.name}: protocol "
-                                      f"{content.attrs.get('protocol', '?')}, status {content.attrs.get('status', '?')}")
+    attrs = content.attrs
+    ET.SubElement(root, "TX").text = (f"benchlab run {content.source.name}: protocol {attrs.get('protocol', '?')}, "
+                                      f"status {attrs.get('status', '?')}")
     common = ET.SubElement(root, "common_properties")
-    for name, value in content.attrs.items():
+    for name, value in attrs.items():
         ET.SubElement(common, "e", name=name).text = value
     return ET.tostring(root, encoding="unicode")
 
