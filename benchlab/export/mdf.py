@@ -16,7 +16,8 @@ from pathlib import Path
 from benchlab.export.content import ChannelGroup, RunContent
 
 MDF_VERSION = "4.10"
-#: Transposed deflate (MDF 4.10 DZ blocks): float columns of a bench shrink to about a third.
+#: Transposed deflate (MDF 4.10 DZ blocks): a 30 min run's MF4 is 9.2 MB instead of 43.5 MB uncompressed (the
+#: run file: 9.4 MB), for about the same CPU time (0.45 s against 0.42 s).
 COMPRESSION = 2
 
 
