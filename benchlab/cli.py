@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"benchlab.commands.{info.name}")
         cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(cmd)
+        cmd.add_argument("--quiet", "-q", action="store_true", help="no progress bars (there are none on a pipe)")
         cmd.set_defaults(handler=module.run)
     return parser
 

@@ -11,6 +11,7 @@ from typing import Any
 
 from benchlab.clutch import CAPACITIES, LINEAR_PARAMS, NONLINEAR_PARAMS, RESISTANCES
 from benchlab.errors import InputError
+from benchlab.values import finite_number
 
 UNITS = {"C_*": "J/K", "R_*, R0, a1, a2": "K/W", "b1, b2": "1/rpm"}
 MODELS = ("linear", "nonlinear")
@@ -35,7 +36,7 @@ def check_params(model: str, values: Mapping[str, Any], source: str = "<params>"
         if name not in values:
             raise InputError(source, f"params.{name}", "a number (missing)")
         value = values[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if finite_number(value) is None:
             raise InputError(source, f"params.{name}", f"a finite number, got {value!r}")
         if name in CAPACITIES + RESISTANCES and value <= 0:
             raise InputError(source, f"params.{name}", f"a positive value, got {value!r}")

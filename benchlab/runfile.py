@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -53,6 +54,27 @@ def _open(path: Path) -> h5py.File:
         return h5py.File(path, "r")
     except OSError:
         raise InputError(path, "file", "an HDF5 run file (cannot be opened as HDF5)") from None
+
+
+def load_attrs(path: "str | os.PathLike[str]") -> dict[str, str]:
+    """Every root attribute of the run file as text (JSON-valued ones such as `sim_truth` stay JSON text)."""
+    with _open(Path(path)) as f:
+        return {k: _text(v) for k, v in f.attrs.items()}
+
+
+def load_events(path: "str | os.PathLike[str]") -> list[tuple[float, int, str, str]]:
+    """The run's /events as (time s, cycle, kind, detail), up to the progress record of a file still running."""
+    path = Path(path)
+    with _open(path) as f:
+        if "events" not in f:
+            raise InputError(path, "/events", "an events table (a run written by benchlab run)")
+        g = f["events"]
+        n = len(g["time"])
+        if "acquire/progress" in f:
+            prog = dict(zip(json.loads(f["acquire/progress"].attrs["fields"]), f["acquire/progress"][()]))
+            n = min(n, int(prog.get("event_rows", n)))
+        return [(float(t), int(c), _text(k), _text(d)) for t, c, k, d in
+                zip(g["time"][:n], g["cycle"][:n], g["kind"][:n], g["detail"][:n])]
 
 
 def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = ()) -> pd.DataFrame:

@@ -27,7 +27,7 @@ import cantools
 
 from drivers import can_signals as sig
 from drivers.can_codec import MessageCodec, compile_codecs
-from drivers.errors import CanLogError
+from drivers.errors import CanBusError, CanConfigError, CanLogError
 from drivers.timebase import ClockMap
 
 EventKind = Literal["silent", "back", "fault", "fault_cleared", "alive_error", "estop", "estop_released"]
@@ -112,11 +112,14 @@ class CanBench:
                  idle_rpm: float = 800.0, fault_state: int = sig.STATE_FAULT, listen_only: bool = False,
                  timestamps: TimestampSource = "interface", log: can.Listener | None = None) -> None:
         if timestamps not in ("interface", "run", "receive"):
-            raise ValueError(f"timestamps: 'interface', 'run' or 'receive', got {timestamps!r}")
+            raise CanConfigError(f"timestamps: 'interface', 'run' or 'receive', got {timestamps!r}")
         self.bus, self.clock, self.idle_rpm, self.fault_state = bus, clock, idle_rpm, fault_state
         self.listen_only, self.timestamps, self.log = listen_only, timestamps, log
         self.clock_map = ClockMap()
-        self.db = cantools.database.load_file(str(dbc))
+        try:
+            self.db = cantools.database.load_file(str(dbc))
+        except (OSError, ValueError, cantools.database.Error) as exc:
+            raise CanConfigError(f"{dbc}: not a DBC cantools can load ({type(exc).__name__})") from exc
         self.stats = CanStats()
         self.latest: dict[str, float] = {}
         self.estop_active = False
@@ -132,7 +135,11 @@ class CanBench:
     @classmethod
     def from_config(cls, config: Mapping[str, Any], **kwargs: Any) -> "CanBench":
         """Build the bus from a python-can config, e.g. {"interface": "socketcan", "channel": "can0"}."""
-        return cls(can.Bus(**config), **kwargs)
+        try:
+            bus = can.Bus(**config)
+        except (can.CanError, ValueError, ImportError, OSError) as exc:  # no such interface, channel or driver
+            raise CanBusError(f"cannot open the CAN bus {dict(config)}: {exc}") from exc
+        return cls(bus, **kwargs)
 
     # -- set-points --------------------------------------------------------------------------------
     def set_drive_speed(self, rpm: float) -> None:
@@ -193,7 +200,10 @@ class CanBench:
     def receive(self) -> list[CanSample]:
         """Every waiting frame at its own time, decoded and watched; then the silence watchdog at now."""
         now = self.clock()
-        frames = list(iter(lambda: self.bus.recv(timeout=0), None))
+        try:
+            frames = list(iter(lambda: self.bus.recv(timeout=0), None))
+        except can.CanError as exc:  # the interface itself failed (bus-off, adapter gone)
+            raise CanBusError(f"receiving: {exc}") from exc
         if self.log is not None:
             self._to_log += frames
         if self.timestamps == "interface":  # the whole batch first: its fastest frame shows the offset best
@@ -291,7 +301,7 @@ class CanBench:
 
     def _set(self, updates: Mapping[str, float]) -> None:
         if self.listen_only:
-            raise RuntimeError("CanBench was opened listen-only; it sends nothing")
+            raise CanConfigError("CanBench was opened listen-only; it sends nothing")
         touched = {}
         for key, value in updates.items():
             tx = self._tx_of[key]

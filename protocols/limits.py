@@ -13,6 +13,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
+from benchlab.values import positive_number
 from protocols.schedule import CONDITION_CHANNELS, OPERATORS, PHASES, Step, duration_s
 
 RPM = math.pi / 30.0
@@ -79,7 +81,7 @@ class BenchLimits:
                     raise InputError(source, f"{prefix}.{key}", f"true or false, got {value!r}")
             elif isinstance(default, str):
                 _action(value, source, f"{prefix}.{key}")
-            elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            elif positive_number(value) is None:
                 raise InputError(source, f"{prefix}.{key}", f"a positive number, got {value!r}")
             clean[key] = float(value) if isinstance(default, float) else value
         return cls(**clean)
@@ -133,53 +135,81 @@ def launch_estimate(step: Step, limits: BenchLimits) -> tuple[float, float, bool
     return t, step.clutch_torque_nm * omega * t, False
 
 
+@dataclass(frozen=True)
+class ScheduleProblem:
+    """One thing a schedule asks that the bench must not do: its step (None: the whole schedule), the Step field
+    it is about (e.g. "engine_speed_rpm", "until[0].value") and the line that says why."""
+
+    step: int | None
+    field: str
+    text: str
+
+    def __str__(self) -> str:
+        return self.text
+
+
 def check_schedule(steps: Sequence[Step], limits: BenchLimits) -> list[str]:
     """Problems of a schedule against the limits, one line each (empty: the schedule may run)."""
-    problems: list[str] = []
+    return [p.text for p in schedule_problems(steps, limits)]
+
+
+def schedule_problems(steps: Sequence[Step], limits: BenchLimits) -> list[ScheduleProblem]:
+    """Problems of a schedule against the limits, each naming its step and field (empty: the schedule may run).
+
+    Every comparison is written so that NaN fails it: an unknown set-point is never within the limits.
+    """
+    problems: list[ScheduleProblem] = []
     for i, s in enumerate(steps):
         where = f"step {i} (cycle {s.cycle}, {s.phase})"
+
+        def add(field: str, text: str) -> None:
+            problems.append(ScheduleProblem(i, field, f"{where}: {text}"))
+
         if s.phase not in PHASES:
-            problems.append(f"{where}: unknown phase {s.phase!r}")
+            add("phase", f"unknown phase {s.phase!r}")
             continue
         if not (0.0 <= s.engine_speed_rpm <= limits.max_engine_speed_rpm):
-            problems.append(f"{where}: engine speed {s.engine_speed_rpm:g} rpm outside 0..{limits.max_engine_speed_rpm:g}")
+            add("engine_speed_rpm", f"engine speed {s.engine_speed_rpm:g} rpm outside 0..{limits.max_engine_speed_rpm:g}")
         if not (0.0 <= s.clutch_torque_nm <= limits.max_clutch_torque_nm):
-            problems.append(f"{where}: clutch torque {s.clutch_torque_nm:g} N*m outside 0..{limits.max_clutch_torque_nm:g}")
-        if abs(s.load_torque_nm) > limits.max_load_torque_nm:
-            problems.append(f"{where}: load torque {s.load_torque_nm:g} N*m beyond ±{limits.max_load_torque_nm:g}")
-        if not (s.duration_s > 0 and math.isfinite(s.duration_s)):
-            problems.append(f"{where}: duration {s.duration_s!r} s is not positive")
+            add("clutch_torque_nm", f"clutch torque {s.clutch_torque_nm:g} N*m outside 0..{limits.max_clutch_torque_nm:g}")
+        if not abs(s.load_torque_nm) <= limits.max_load_torque_nm:
+            add("load_torque_nm", f"load torque {s.load_torque_nm:g} N*m beyond ±{limits.max_load_torque_nm:g}")
+        if not -1 <= s.cycle <= MAX_CYCLES:
+            add("cycle", f"cycle {s.cycle} outside -1..{MAX_CYCLES} (benchlab.bounds)")
+        if not 0 < s.duration_s <= MAX_RUN_DURATION_S:
+            add("duration_s", f"duration {s.duration_s!r} s outside (0, {MAX_RUN_DURATION_S:g}]")
+        if s.estimate_s is not None and not 0 <= s.estimate_s <= MAX_RUN_DURATION_S:
+            add("estimate_s", f"estimated duration {s.estimate_s!r} s outside 0..{MAX_RUN_DURATION_S:g}")
         if s.phase == "launch":
             t, energy, _ = launch_estimate(s, limits)
-            if s.duration_s > limits.max_slip_time_s:
-                problems.append(f"{where}: slip time up to {s.duration_s:g} s beyond the {limits.max_slip_time_s:g} s limit")
-            if energy > limits.max_slip_energy_j:
-                problems.append(f"{where}: slip energy up to {energy / 1e3:.0f} kJ beyond the "
-                                f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
+            if not s.duration_s <= limits.max_slip_time_s:
+                add("duration_s", f"slip time up to {s.duration_s:g} s beyond the {limits.max_slip_time_s:g} s limit")
+            if not energy <= limits.max_slip_energy_j:
+                add("clutch_torque_nm", f"slip energy up to {energy / 1e3:.0f} kJ beyond the "
+                                        f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
         if s.phase == "heat":
             energy = s.clutch_torque_nm * s.engine_speed_rpm * RPM * s.pulse_s
             if not (0 < s.pulse_s <= limits.max_slip_time_s):
-                problems.append(f"{where}: heat pulse {s.pulse_s:g} s outside 0..{limits.max_slip_time_s:g} s")
-            if energy > limits.max_slip_energy_j:
-                problems.append(f"{where}: heat pulse energy {energy / 1e3:.0f} kJ beyond the "
-                                f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
-            if s.rest_s <= 0:
-                problems.append(f"{where}: heat pulses need a rest between them (rest_s > 0)")
-            if s.clutch_torque_nm >= s.load_torque_nm / limits.gear_ratio:
-                problems.append(f"{where}: load torque {s.load_torque_nm:g} N*m cannot hold the output against "
-                                f"{s.clutch_torque_nm:g} N*m clutch torque")
-        for c in s.until:
+                add("pulse_s", f"heat pulse {s.pulse_s:g} s outside 0..{limits.max_slip_time_s:g} s")
+            if not energy <= limits.max_slip_energy_j:
+                add("pulse_s", f"heat pulse energy {energy / 1e3:.0f} kJ beyond the "
+                               f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
+            if not s.rest_s > 0:
+                add("rest_s", "heat pulses need a rest between them (rest_s > 0)")
+            if not s.clutch_torque_nm < s.load_torque_nm / limits.gear_ratio:
+                add("load_torque_nm", f"load torque {s.load_torque_nm:g} N*m cannot hold the output against "
+                                      f"{s.clutch_torque_nm:g} N*m clutch torque")
+        for j, c in enumerate(s.until):
             if c.channel not in CONDITION_CHANNELS:
-                problems.append(f"{where}: condition channel {c.channel!r} not one of {', '.join(CONDITION_CHANNELS)}")
+                add(f"until[{j}].channel",
+                    f"condition channel {c.channel!r} not one of {', '.join(CONDITION_CHANNELS)}")
             if c.op not in OPERATORS:
-                problems.append(f"{where}: condition operator {c.op!r} not one of {', '.join(OPERATORS)}")
+                add(f"until[{j}].op", f"condition operator {c.op!r} not one of {', '.join(OPERATORS)}")
             limit = {"T_flywheel": limits.max_flywheel_c, "T_air": limits.max_air_c}.get(c.channel)
-            if limit is not None and c.op in (">=", "steady") and c.value + c.band_k > limit - limits.clear_margin_k:
-                problems.append(f"{where}: target {c.channel} {c.value:g} too close to its interlock at {limit:g}")
-    from benchlab.bounds import MAX_RUN_DURATION_S
-
+            if limit is not None and c.op in (">=", "steady") and not c.value + c.band_k <= limit - limits.clear_margin_k:
+                add(f"until[{j}].value", f"target {c.channel} {c.value:g} too close to its interlock at {limit:g}")
     planned = duration_s(tuple(steps))
-    if planned > MAX_RUN_DURATION_S:
-        problems.append(f"planned duration {planned:.0f} s beyond the longest run a bench does, "
-                        f"{MAX_RUN_DURATION_S:.0f} s (benchlab.bounds)")
+    if not planned <= MAX_RUN_DURATION_S:
+        problems.append(ScheduleProblem(None, "duration_s", f"planned duration {planned:.0f} s beyond the longest run a "
+                                        f"bench does, {MAX_RUN_DURATION_S:.0f} s (benchlab.bounds)"))
     return problems

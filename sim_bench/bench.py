@@ -160,6 +160,8 @@ class SimPhysics:
             self._ensure(k - 1)
         if k >= self._end:
             return
+        if self._chunks:  # a command stamped before the oldest state still kept takes effect from there
+            k = max(k, self._chunks[0][0])
         while self._chunks and self._chunks[-1][0] > k:
             self._chunks.pop()
         k0, cols, temps = self._chunks[-1]

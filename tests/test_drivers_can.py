@@ -1,6 +1,7 @@
 """Bench CAN: DBC contents, exact frames, codec vs cantools, watchdog events, fault injection, safe state."""
 
 import itertools
+from pathlib import Path
 
 import can
 import cantools
@@ -12,6 +13,7 @@ from hypothesis import strategies as st
 from drivers import can_signals as sig
 from drivers.can_bench import CanBench
 from drivers.can_codec import MessageCodec
+from drivers.errors import CanBusError, CanConfigError
 from sim_bench.emulators import CanBenchEmulator, ManualClock, SimCanBus
 
 DB = cantools.database.load_file(str(sig.BENCH_DBC))
@@ -169,7 +171,7 @@ def test_malformed_frames_counted_not_crashed(buses) -> None:
         ctrl.send(msg)
     assert bench.poll() == []
     assert (bench.stats.bad_dlc, bench.stats.unknown_id, bench.stats.error_frames) == (1, 2, 1)
-    with pytest.raises(RuntimeError):
+    with pytest.raises(CanConfigError):
         bench.set_drive_speed(1000)
 
 
@@ -315,3 +317,31 @@ def test_from_config() -> None:
     bench = CanBench.from_config({"interface": "virtual", "channel": f"cfg{next(_chan)}"}, listen_only=True)
     assert bench.poll() == []
     bench.close()
+
+
+class _DeadBus(can.BusABC):
+    """A bus whose adapter is gone: every receive raises python-can's own error."""
+
+    def __init__(self) -> None:
+        super().__init__(channel="dead")
+
+    def send(self, msg, timeout=None):
+        raise can.CanOperationError("adapter gone")
+
+    def _recv_internal(self, timeout):
+        raise can.CanOperationError("adapter gone")
+
+
+def test_the_can_driver_raises_its_own_errors() -> None:
+    """Configuration, an unopenable bus and a failing interface are CanDriverErrors (python-can's tree as model)."""
+    with pytest.raises(CanConfigError):
+        CanBench(_DeadBus(), timestamps="sometimes")
+    with pytest.raises(CanConfigError):
+        CanBench(_DeadBus(), dbc=Path(__file__))  # not a DBC
+    with pytest.raises(CanBusError):
+        CanBench.from_config({"interface": "no_such_interface", "channel": "x"})
+    bus = _DeadBus()
+    bench = CanBench(bus, listen_only=True)
+    with pytest.raises(CanBusError, match="adapter gone"):
+        bench.receive()
+    bus.shutdown()

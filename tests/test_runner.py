@@ -175,10 +175,11 @@ def test_real_time_loop_on_emulated_devices(tmp_path):
     writer = RunWriter(tmp_path / "rt.h5", bench.layout, protocol="rt", planned_s=5, state_fields=STATE_FIELDS,
                        durable=True)
     try:
-        t0 = time.monotonic()
         summary = Runner(bench, clock, steps, writer, BenchLimits(), tick_s=0.1, fast_tick_s=0.02).run()
         writer.close(summary.status)
-        assert summary.status == "complete" and 1.5 < time.monotonic() - t0 < 8.0  # launch syncs in ~1.1 s
+        # the steps last at least the launch's synchronisation (~1.1 s) plus the open step, on the real clock;
+        # no upper bound: a loaded machine only makes the loop late, never the run shorter
+        assert summary.status == "complete" and summary.sim_s >= 1.5
     finally:
         bench.close()
         sim.close()

@@ -42,12 +42,13 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     from benchlab.cooldown import analyse, fit_eq11, store, table_lines
+    from benchlab.progress import for_terminal
     from benchlab.runfile import load_run
 
     path = Path(args.run)
     load_run(path)  # checks the file (InputError on a bad one)
     params = load_analysis_params(args.params, path)
-    results = analyse(path, params, args.sample)
+    results = analyse(path, params, args.sample, progress=for_terminal(args.quiet))
     if not results:
         raise InputError(path, "/events", "completed cool-downs (cooldown_start/cooldown_end events)")
     try:

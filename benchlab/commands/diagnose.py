@@ -14,6 +14,7 @@ from benchlab.diagnose.engine import MIN_DURATION_S, diagnose_runs
 from benchlab.diagnose.regimes import worst_regimes
 from benchlab.diagnose.report import summarise
 from benchlab.errors import InputError
+from benchlab.progress import for_terminal
 from benchlab.runfile import load_run
 
 NAME = "diagnose"
@@ -72,7 +73,7 @@ def load_runs(paths: list[str]) -> list[pd.DataFrame]:
 def run(args: argparse.Namespace) -> int:
     out = check_report_dir(args.report) if args.report else None
     runs = load_runs(args.runs)
-    diagnosis = diagnose_runs(runs, args.baseline, seed=args.seed)
+    diagnosis = diagnose_runs(runs, args.baseline, seed=args.seed, progress=for_terminal(args.quiet))
     result = summarise(diagnosis, args.baseline)
     if args.json:
         print(json.dumps(result, default=float))

@@ -11,6 +11,7 @@ from benchlab.errors import InputError
 from benchlab.identify.api import identify, parse_fixed
 from benchlab.identify.spec import clutch_spec
 from benchlab.params import save_params
+from benchlab.progress import for_terminal
 from benchlab.runfile import load_run
 
 NAME = "identify"
@@ -42,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
             raise InputError("--fix", name, f"a value in [{spec.lower:g}, {spec.upper:g}] {spec.unit}, got {value:g}")
     runs = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.runs]
     validate = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.validate]
-    result = identify(runs, args.model, fixed, validate, starts=args.starts, seed=args.seed)
+    result = identify(runs, args.model, fixed, validate, starts=args.starts, seed=args.seed,
+                      progress=for_terminal(args.quiet))
     save_params(args.out, result.params, result.summary())
     se = result.uncertainty.standard_errors
     print(f"{args.out}: {args.model} model from {len(runs)} run(s), {result.fit.starts} starts")

@@ -24,6 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from benchlab.progress import for_terminal
     from benchlab.report import write_report  # matplotlib only when the command runs
 
     out = Path(args.out)
@@ -35,6 +36,6 @@ def run(args: argparse.Namespace) -> int:
     validation = [load_run(p, measured=PREDICTED_CHANNELS) for p in args.validate]
     if args.sweep:
         load_run(args.sweep)  # a run file at all (the events it needs are checked by the analysis)
-    page = write_report(measured, params, out, compare, validation, args.sweep)
+    page = write_report(measured, params, out, compare, validation, args.sweep, progress=for_terminal(args.quiet))
     print(page)
     return 0

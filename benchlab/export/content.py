@@ -20,7 +20,7 @@ import numpy as np
 
 from benchlab.acquire import read_progress
 from benchlab.errors import InputError
-from benchlab.runfile import ALIGNED_MEANING, load_run
+from benchlab.runfile import ALIGNED_MEANING, load_attrs, load_run
 
 
 @dataclass(frozen=True)
@@ -67,8 +67,8 @@ def read_content(path: "str | os.PathLike[str]") -> RunContent:
     """Read a run file for export; a file that is not a run file (contract section 1) is an InputError."""
     path = Path(path)
     run = load_run(path)
+    attrs = load_attrs(path)
     with h5py.File(path, "r") as f:
-        attrs = {k: _text(v) for k, v in f.attrs.items()}
         progress = read_progress(f) if "acquire/progress" in f else {}
         layout = f["acquire"].attrs.get("layout", "{}") if isinstance(f.get("acquire"), h5py.Group) else "{}"
         sources = json.loads(_text(layout)).get("aligned", {})

@@ -25,6 +25,7 @@ from benchlab.identify.residuals import run_residuals
 from benchlab.identify.spec import ModelSpec, ParamSpec, clutch_spec
 from benchlab.identify.uncertainty import Uncertainty, estimate_uncertainty, power_noise
 from benchlab.params import ModelParams
+from benchlab.progress import SILENT, Progress
 from benchlab.simulation import simulate
 
 INITIAL_STATE_RANGE_K = 20.0
@@ -82,13 +83,19 @@ def _labels(runs: Sequence[pd.DataFrame], prefix: str) -> list[str]:
 
 @single_threaded_blas
 def identify(runs: Sequence[pd.DataFrame], model: str = "nonlinear", fixed: Mapping[str, float] | None = None,
-             validate: Sequence[pd.DataFrame] = (), starts: int = 6, seed: int = 0) -> Identification:
-    """Fit the paper's model to all runs at once, then measure it on them and on validation runs."""
+             validate: Sequence[pd.DataFrame] = (), starts: int = 6, seed: int = 0,
+             progress: Progress = SILENT) -> Identification:
+    """Fit the paper's model to all runs at once, then measure it on them and on validation runs.
+
+    `progress` gets one task in fits: the multistart's scouts and polish, the fit with the start states.
+    """
     spec = clutch_spec(model).with_fixed(dict(fixed or {}))
     datasets = [prepare(run, name=f"run{i}") for i, run in enumerate(runs)]
-    search = fit_multistart(spec, datasets, starts=starts, seed=seed)
-    full = with_initial_states(spec, datasets)
-    result = fit(full.starting_point(search.params), datasets)
+    with progress.task(f"identify {model}", starts + 2, unit="fit") as task:
+        search = fit_multistart(spec, datasets, starts=starts, seed=seed, task=task)
+        full = with_initial_states(spec, datasets)
+        result = fit(full.starting_point(search.params), datasets)
+        task.advance()
     result.starts, result.start_costs = search.starts, search.start_costs
     model_names = [p.name for p in spec.free]
     params = ModelParams(model, {k: v for k, v in result.params.items() if "@" not in k})

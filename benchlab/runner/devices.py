@@ -24,7 +24,7 @@ import numpy as np
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
-from drivers.errors import CanLogError, DriverError
+from drivers.errors import CanLogError, ConnectionLost, DriverError
 from protocols.limits import BenchLimits
 
 RPM = math.pi / 30.0
@@ -175,7 +175,8 @@ ALIGNED_UNITS = {"engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": 
                  "T_ambient": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC"}
 
 
-CAN_HOLD_CYCLES = 2.5  # a status value holds on the grid for one lost frame, not for two
+CAN_HOLD_CYCLES = 2.5
+REPEAT_EVENT_S = 10.0  # a device error repeating (a port gone, a muted instrument) is one event per this long  # a status value holds on the grid for one lost frame, not for two
 
 
 @functools.lru_cache(maxsize=8)
@@ -290,6 +291,7 @@ class DriverBench:
         self._next_scan = clock()
         self._setpoints: tuple[float, ...] | None = None
         self._last_error_t = -math.inf
+        self._repeats: dict[str, tuple[float, int]] = {}  # kind -> (time last said, errors since)
         self._next_clock_row = -math.inf
 
     # -- commands ----------------------------------------------------------------------------------
@@ -326,9 +328,11 @@ class DriverBench:
         now = self.clock()
         self.status.t = now
         self._poll_node(now)
-        if now >= self._next_scan - 1e-9:
-            self._poll_instrument(now)
+        if not self.scanner.scanning and now >= self._next_scan - 1e-9:
             self._next_scan = max(self._next_scan + self.config.instrument_period_s, now + 1e-9)
+            self._poll_instrument(now, start=True)
+        elif self.scanner.scanning:
+            self._poll_instrument(now)
         self._poll_can(now)
         readings, events = self.readings, self.events
         self.readings, self.events = [], []
@@ -356,13 +360,27 @@ class DriverBench:
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:
                 detail += f", span {ev.span_s:.3f} s, lost {ev.lost_frames} frames"
+            if ev.kind == "frame_errors":  # the window's counts, so the run file adds up to the gateway's counters
+                detail += f": crc_errors {ev.crc_errors}, malformed {ev.malformed}, resyncs {ev.resyncs}"
             self.events.append((ev.t_host, ev.kind, detail))
 
-    def _poll_instrument(self, now: float) -> None:
+    def _poll_instrument(self, now: float, start: bool = False) -> None:
+        """Start a scan (at its period) and take its readings once they are there: the loop never waits for them.
+
+        A silent instrument is a time-out on the loop's clock (its readings go stale, the interlock trips); only
+        a lost port is reconnected (a reset of a silent instrument would block the loop for its time-outs).
+        """
         try:
-            readings = self.scanner.read()
-        except DriverError as exc:
+            if start:
+                self.scanner.start_scan()
+            readings = self.scanner.collect()
+        except ConnectionLost as exc:
             self._error(now, "instrument_error", str(exc), self.scanner.reconnect)
+            return
+        except DriverError as exc:
+            self._error(now, "instrument_error", str(exc), None)
+            return
+        if readings is None:
             return
         row: list[float] = []
         t = readings[0].t_host if readings else now
@@ -401,13 +419,24 @@ class DriverBench:
             self._next_clock_row = now + 1.0
 
     def _error(self, now: float, kind: str, detail: str, reconnect: Callable[[], None] | None) -> None:
-        self.events.append((now, kind, detail))
+        """A device error: an event (the same one repeating is summarised), and a reconnect at most once a second."""
+        self._event(now, kind, detail)
         if reconnect is not None and now - self._last_error_t > 1.0:
             self._last_error_t = now
             try:
                 reconnect()
             except DriverError as exc:
-                self.events.append((now, kind, f"reconnect failed: {exc}"))
+                self._event(now, kind, f"reconnect failed: {exc}")
+
+    def _event(self, now: float, kind: str, detail: str) -> None:
+        """An event, at most one per kind every REPEAT_EVENT_S: the errors in between are counted in the next one."""
+        last = self._repeats.get(kind)
+        if last is not None and now - last[0] < REPEAT_EVENT_S:
+            self._repeats[kind] = (last[0], last[1] + 1)
+            return
+        repeated = f" (and {last[1]} more {kind} in {now - last[0]:.0f} s)" if last is not None and last[1] else ""
+        self.events.append((now, kind, detail + repeated))
+        self._repeats[kind] = (now, 0)
 
     def close(self) -> None:
         for closer in (self.scanner.close, self.gateway.close, self.can.close):

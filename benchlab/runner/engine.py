@@ -13,13 +13,14 @@ from __future__ import annotations
 import collections
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
 from benchlab.acquire import RunWriter
+from benchlab.progress import Task
 from benchlab.runner.devices import BenchStatus
 from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
@@ -90,7 +91,7 @@ class Runner:
 
     def __init__(self, bench: Bench, clock: Clock, steps: Sequence[Step], writer: RunWriter, limits: BenchLimits, *,
                  tick_s: float = 0.2, fast_tick_s: float = 0.05, dt: float = 0.01,
-                 progress: Callable[[str], None] | None = None, progress_every_s: float = 2.0) -> None:
+                 progress: Task = Task(), progress_every_s: float = 0.5) -> None:
         self.bench, self.clock, self.steps, self.writer, self.limits = bench, clock, tuple(steps), writer, limits
         self.tick_s, self.fast_tick_s, self.dt = tick_s, fast_tick_s, dt
         self.progress, self.progress_every_s = progress, progress_every_s
@@ -101,6 +102,9 @@ class Runner:
         self.cycle = -1
         self.synced = True
         self._last_progress = -math.inf
+        self._planned_before = np.concatenate([[0.0], np.cumsum([s.expected_s for s in self.steps])])
+        self._reported = 0.0
+        self._t_step_start = clock()
         self._history: collections.deque[tuple[float, float]] = collections.deque()
         self._step_index = 0
         self._commanded = False
@@ -138,6 +142,7 @@ class Runner:
             self.bench.safe_state()
             self._tick(interlocks=False)  # already safe: nothing left to interlock
             self.writer.event(self.clock(), "run_complete", self.cycle)
+            self.progress.advance(self._planned_before[-1] - self._reported)
         except Stopped as stop:
             self.bench.safe_state()
             self.writer.event(self.clock(), "run_aborted", self.cycle, stop.reason)
@@ -318,17 +323,18 @@ class Runner:
         raise _SkipCycle()
 
     def _report(self, now: float) -> None:
-        if self.progress is None:
-            return
+        """The progress bar: planned seconds done (finished steps, the current one up to its expected length)."""
         wall = time.perf_counter()
         if wall - self._last_progress < self.progress_every_s:
             return
         self._last_progress = wall
-        step = self.steps[min(self._step_index, len(self.steps) - 1)]
-        left = sum(s.expected_s for s in self.steps[self._step_index + 1:])
-        cycles = self.summary.cycles_planned
-        self.progress(f"cycle {step.cycle + 1}/{cycles}  {step.phase:6s} {step.label:10s} t={now:8.1f} s  "
-                      f"T_flywheel {self.bench.status.T_flywheel:6.2f} degC  left ~{left:7.0f} s")
+        index = min(self._step_index, len(self.steps) - 1)
+        step = self.steps[index]
+        done = self._planned_before[index] + min(max(now - self._t_step_start, 0.0), step.expected_s)
+        self.progress.advance(done - self._reported)
+        self._reported = done
+        self.progress.note(f"cycle {step.cycle + 1}/{self.summary.cycles_planned} {step.phase} {step.label} "
+                           f"T_flywheel {self.bench.status.T_flywheel:.1f} degC")
 
 
 class _Pulses:
