@@ -22,6 +22,18 @@ ALIGNED_UNITS: dict[str, str] = {
     "T_engine": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC",
 }
 REQUIRED = tuple(list(ALIGNED_UNITS)[:10])
+#: What each contract channel is (contract section 1): the comment an export gives the channel.
+ALIGNED_MEANING: dict[str, str] = {
+    "time": "time since run start, uniform step dt",
+    "engine_speed": "ω_e, engine-side (drive motor) speed",
+    "clutch_speed": "ω_c, transmission input shaft speed; slip Δω = ω_e − ω_c",
+    "clutch_torque": "T_c, torque transmitted by the clutch",
+    "clutch_state": "S: 1 clamped (engaged or slipping), 0 open",
+    "friction_power": "P = T_c · Δω, Δω in rad/s (eq. 4); 0 when not slipping",
+    "T_flywheel": "ϑ_F, mean of the flywheel sensors", "T_air": "ϑ_A, clutch-chamber air",
+    "T_housing": "ϑ_T, transmission housing", "T_ambient": "ϑ_amb, ambient", "T_engine": "ϑ_eng, engine",
+    "load_torque": "load machine torque", "T_flywheel_1": "flywheel sensor 1", "T_flywheel_2": "flywheel sensor 2",
+}
 TIME_TOLERANCE = 1e-6  # relative to dt
 #: Values a dry-clutch bench can measure, per unit: anything beyond (1e300, inf) is a corrupt number, not a
 #: measurement. Channels in other units are only checked for infinities.
@@ -177,11 +189,19 @@ def write_run(path: "str | os.PathLike[str]", frame: pd.DataFrame, dt: float, pr
             ds.attrs["units"] = units[name]
 
 
-def write_simulated(path: "str | os.PathLike[str]", time: np.ndarray, simulated: pd.DataFrame,
+def write_simulated(path: "str | os.PathLike[str]", run: "str | os.PathLike[str]", simulated: pd.DataFrame,
                     attrs: Mapping[str, str]) -> None:
-    """Write the contract's /simulated group (time plus the model's temperatures, degC)."""
-    write_results(path, "simulated", time, {name: (simulated[name].to_numpy(np.float64), "degC")
-                                            for name in simulated.columns}, attrs)
+    """Write SIM.h5: a run file in its own right (the run's root attributes and /aligned, copied as stored, so
+    every command that reads a run reads it) plus the contract's /simulated group on the run's grid (time, s;
+    the model's temperatures, degC) and `attrs` saying where it came from (source run, parameters, model)."""
+    if Path(path).resolve() == Path(run).resolve():
+        raise InputError(path, "--out", "a file other than the run file it simulates")
+    with h5py.File(run, "r") as src, h5py.File(path, "w") as f:
+        f.attrs.update(src.attrs)
+        f.attrs.update(attrs)
+        src.copy(src["aligned"], f, "aligned")
+        _write_group(f, "simulated", src["aligned/time"][()].astype(np.float64),
+                     {name: (simulated[name].to_numpy(np.float64), "degC") for name in simulated.columns})
 
 
 def write_results(path: "str | os.PathLike[str]", group_name: str, time: np.ndarray,
@@ -189,10 +209,15 @@ def write_results(path: "str | os.PathLike[str]", group_name: str, time: np.ndar
     """Write a results file: root attributes and one group of `time` (s) plus channels, each with its unit."""
     with h5py.File(path, "w") as f:
         f.attrs.update(attrs)
-        group = f.create_group(group_name)
-        group.create_dataset("time", data=time).attrs["units"] = "s"
-        for name, (values, unit) in columns.items():
-            group.create_dataset(name, data=np.asarray(values, dtype=np.float64)).attrs["units"] = unit
+        _write_group(f, group_name, time, columns)
+
+
+def _write_group(f: h5py.File, group_name: str, time: np.ndarray, columns: Mapping[str, tuple[np.ndarray, str]]) -> None:
+    """One group of results: `time` (s) and each channel as float64 with its unit."""
+    group = f.create_group(group_name)
+    group.create_dataset("time", data=time).attrs["units"] = "s"
+    for name, (values, unit) in columns.items():
+        group.create_dataset(name, data=np.asarray(values, dtype=np.float64)).attrs["units"] = unit
 
 
 def load_truth(path: "str | os.PathLike[str]") -> pd.DataFrame | None:

@@ -1,4 +1,4 @@
-"""`benchlab simulate RUN.h5 --params P.json --out SIM.h5`."""
+"""`benchlab simulate RUN.h5 --params P.json --out SIM.h5`: SIM.h5 is the run file plus /simulated."""
 
 from __future__ import annotations
 
@@ -18,14 +18,15 @@ HELP = "drive the model with a run's measured inputs and write /simulated"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
     parser.add_argument("--params", required=True, help="parameter file (JSON)")
-    parser.add_argument("--out", required=True, type=cliargs.output_file, help="output HDF5 file with /simulated")
+    parser.add_argument("--out", required=True, type=cliargs.output_file,
+                        help="file to write: the run's root attributes and /aligned plus /simulated (a run file)")
 
 
 def run(args: argparse.Namespace) -> int:
     measured = load_run(args.run, measured=PREDICTED_CHANNELS)
     params = load_params(args.params)
     simulated = simulate(measured, params)
-    write_simulated(args.out, measured["time"].to_numpy(), simulated,
+    write_simulated(args.out, args.run, simulated,
                     {"source_run": str(args.run), "params": str(args.params), "model": params.model})
     print(f"{args.out}: {len(simulated)} samples, {params.model} model, "
           f"RMSE {rmse_k(measured, simulated):.3f} K, NRMSE {nrmse_pct(measured, simulated):.2f} %")

@@ -31,7 +31,7 @@ from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
 from benchlab.identify.spec import ModelSpec, clutch_spec
-from benchlab.metrics import nrmse_pct
+from benchlab.metrics import nrmse_pct, residual
 from benchlab.progress import SILENT, Progress
 
 STEP_S = 1.0
@@ -60,8 +60,8 @@ class HeldOut:
     params: list[dict[str, float]]  # per fold
 
     def residuals(self) -> list[dict[str, np.ndarray]]:
-        """Simulated minus measured per run and channel; NaN where the sample has no valid target."""
-        return [{c: pred[c] - d.targets[c] for c in pred} for d, pred in zip(self.datasets, self.predictions)]
+        """Simulated − measured (benchlab.metrics.residual) per run and channel; NaN where no valid target."""
+        return [{c: residual(pred[c], d.targets[c]) for c in pred} for d, pred in zip(self.datasets, self.predictions)]
 
     @cached_property
     def _scored(self) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,9 @@ The multi-start search takes each run's initial state from the data's start valu
 then fits each run's starting ϑ_F, ϑ_A and ϑ_T as well (ϑ_P starts with ϑ_F, contract §2). A start
 value carries its sensor's noise, and an initial error of a few hundredths of a kelvin in the slow
 housing decays over the whole run: held fixed, it biased C_T, R_Feng and R_Tamb by many standard
-errors (R_Feng by 9.5 % rms over ten 1 h runs, against 0.8 % with the states fitted).
+errors (R_Feng by 9.5 % rms over ten 1 h runs, against 0.8 % with the states fitted). The fitted
+starts serve the estimate only: the error figures and the residual tests are of the identified model
+as `simulate`, `report` and every user run it, from the run's measured start (identify.residuals).
 """
 
 from __future__ import annotations
@@ -18,14 +20,14 @@ import pandas as pd
 from benchlab._blas import single_threaded_blas
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.evaluate import evaluate
-from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
-from benchlab.identify.residuals import residual_tests
+from benchlab.identify.fit import FitResult, fit, fit_multistart
+from benchlab.identify.residuals import run_residuals
 from benchlab.identify.spec import ModelSpec, ParamSpec, clutch_spec
 from benchlab.identify.uncertainty import Uncertainty, estimate_uncertainty, power_noise
 from benchlab.params import ModelParams
 from benchlab.progress import SILENT, Progress
+from benchlab.simulation import simulate
 
-RESIDUAL_INPUTS = ("friction_power", "engine_speed", "clutch_state")
 INITIAL_STATE_RANGE_K = 20.0
 
 
@@ -73,16 +75,6 @@ def with_initial_states(spec: ModelSpec, datasets: Sequence[FitData], channels: 
     return spec.extended(spec.name, spec.network, tuple(extra))
 
 
-def _residual_analysis(result: FitResult, datasets: Sequence[FitData], labels: Sequence[str]) -> dict[str, dict]:
-    """Per run and measured channel: whiteness and input correlation of the residuals at the fitting step."""
-    out: dict[str, dict] = {}
-    for label, data in zip(labels, datasets):
-        sim = simulate_outputs(result.spec.network, result.params, data)
-        inputs = {k: data.channels[k] for k in RESIDUAL_INPUTS if k in data.channels}
-        out[label] = {c: residual_tests(sim[c] - target, inputs) for c, target in data.targets.items()}
-    return out
-
-
 def _labels(runs: Sequence[pd.DataFrame], prefix: str) -> list[str]:
     """Each run's source (its file), numbered where two runs share one."""
     names = [str(run.attrs.get("source", f"{prefix}{i}")) for i, run in enumerate(runs)]
@@ -115,8 +107,8 @@ def identify(runs: Sequence[pd.DataFrame], model: str = "nonlinear", fixed: Mapp
                        for c in initial_channels(spec)} for label, data in zip(labels, datasets)}
     fitting = {label: evaluate(r, params) for label, r in zip(labels, runs)}
     validation = {label: evaluate(r, params) for label, r in zip(_labels(validate, "validation"), validate)}
-    return Identification(params, result, uncertainty, fitting, validation,
-                          _residual_analysis(result, datasets, labels), initial)
+    residuals = {label: run_residuals(r, simulate(r, params)).tests for label, r in zip(labels, runs)}
+    return Identification(params, result, uncertainty, fitting, validation, residuals, initial)
 
 
 def parse_fixed(items: Sequence[str], source: str = "--fix") -> dict[str, float]:

@@ -10,6 +10,8 @@ import pandas as pd
 from matplotlib.axes import Axes
 
 from benchlab.clutch import PREDICTED_CHANNELS
+from benchlab.metrics import RESIDUAL_LABEL
+from benchlab.metrics import residual as model_error
 from benchlab.report.plotting import (COLOURS, LABELS, MODEL_STYLES, SYMBOLS, minutes, new_figure, run_name, save,
                                       stride)
 from benchlab.report.scores import Estimate
@@ -22,7 +24,7 @@ def _measured(ax: Axes, run: pd.DataFrame, channel: str, k: int) -> None:
 
 
 def plot_fit(run: pd.DataFrame, est: Estimate, path: "str | os.PathLike[str]") -> Path:
-    """Fig. 4: measured and estimated ϑ_F, ϑ_A, ϑ_T over the run, the residual (measured − model) underneath."""
+    """Fig. 4: measured and estimated ϑ_F, ϑ_A, ϑ_T over the run, the residual (simulated − measured) underneath."""
     t, k, sim = minutes(run), stride(len(run)), est.simulated
     fig = new_figure(10, 10)
     axes = fig.subplots(4, 1, sharex=True, height_ratios=(2, 2, 2, 1.5))
@@ -37,9 +39,10 @@ def plot_fit(run: pd.DataFrame, est: Estimate, path: "str | os.PathLike[str]") -
         ax.legend(loc="best", fontsize=8)
     residual = axes[3]
     for c in PREDICTED_CHANNELS:
-        residual.plot(t[::k], (run[c] - sim[c]).to_numpy()[::k], color=COLOURS[c], lw=0.7, label=SYMBOLS[c])
+        residual.plot(t[::k], model_error(sim[c], run[c]).to_numpy()[::k], color=COLOURS[c], lw=0.7,
+                      label=SYMBOLS[c])
     residual.axhline(0.0, color="k", lw=0.5)
-    residual.set_ylabel("measured − model (K)")
+    residual.set_ylabel(f"{RESIDUAL_LABEL} (K)")
     residual.set_xlabel("time (min)")
     residual.legend(loc="best", fontsize=8, ncols=3)
     fig.suptitle(f"Fig. 4 – measured and estimated clutch temperatures, {run_name(run)}, {est.label} model: "
@@ -47,12 +50,16 @@ def plot_fit(run: pd.DataFrame, est: Estimate, path: "str | os.PathLike[str]") -
     return save(fig, path)
 
 
+#: What Fig. 5 plots, as the paper's does: the flywheel and the chamber air (ϑ_T is slow and in Fig. 4).
+COMPARISON_CHANNELS = ("T_flywheel", "T_air")
+
+
 def plot_comparison(run: pd.DataFrame, estimates: Sequence[Estimate], path: "str | os.PathLike[str]") -> Path:
     """Fig. 5: measured ϑ_F and ϑ_A against each model on a validation run (RMSE in the legend), operating point below."""
     t, k = minutes(run), stride(len(run))
     fig = new_figure(10, 8.5)
     axes = fig.subplots(3, 1, sharex=True, height_ratios=(2, 2, 1.2))
-    for ax, c in zip(axes, ("T_flywheel", "T_air")):
+    for ax, c in zip(axes, COMPARISON_CHANNELS):
         _measured(ax, run, c, k)
         for est, (colour, style) in zip(estimates, MODEL_STYLES):
             ax.plot(t[::k], est.simulated[c].to_numpy()[::k], color=colour, ls=style, lw=1.1,
@@ -68,6 +75,7 @@ def plot_comparison(run: pd.DataFrame, estimates: Sequence[Estimate], path: "str
     speed.set_xlabel("time (min)")
     speed.legend(loc="best", fontsize=8)
     overall = "; ".join(f"{e.label} RMSE {e.scores.rmse_k:.2f} K ({e.scores.nrmse_pct:.1f} %)" for e in estimates)
-    fig.suptitle(f"Fig. 5 – models compared on {run_name(run)} ({SYMBOLS['T_flywheel']}, {SYMBOLS['T_air']}, "
-                 f"{SYMBOLS['T_housing']}): {overall}")
+    shown = ", ".join(SYMBOLS[c] for c in COMPARISON_CHANNELS)
+    fig.suptitle(f"Fig. 5 – {shown}: models compared on {run_name(run)}; RMSE over all measured temperatures: "
+                 f"{overall}")
     return save(fig, path)
