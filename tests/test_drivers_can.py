@@ -233,7 +233,7 @@ def test_set_points_are_tracked(loop) -> None:
     assert latest["drive.speed"] == pytest.approx(1500, abs=1) and latest["clutch.torque"] == pytest.approx(45, abs=0.1)
     assert latest["load.torque"] == pytest.approx(30, abs=0.1) and latest["load.speed"] > 0
     assert latest["drive.state"] == sig.STATE_RUNNING and latest["clutch.clamp_state"] == sig.CLAMP_SLIPPING
-    assert len(out) == 3 * 501 + 3 * 51  # every status frame (10 ms) and heartbeat (100 ms) due in [0, 5] s
+    assert len(out) == 3 * 500 + 3 * 50  # every status frame (10 ms) and heartbeat (100 ms) due in (0, 5] s
     assert bench.stats.alive_errors == 0 and bench.pop_events() == []
     assert emu.stats.malformed == 0
 

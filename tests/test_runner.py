@@ -44,6 +44,9 @@ def test_same_seed_same_aligned_data(tmp_path):
     assert a.attrs["status"] == "complete"
     # physically sensible: launches heat the clutch, friction power only while clamped
     assert np.nanmax(a["friction_power"]) > 1000 and np.all(a["friction_power"][a["clutch_state"] == 0] == 0)
+    with h5py.File(tmp_path / "a.h5", "r") as f:  # every raw stream in the order it was measured
+        for name, stream in f["raw"].items():
+            assert np.all(np.diff(stream["time"][()]) >= 0), name
     kinds = [k for _, k, _ in _events(tmp_path / "a.h5")]
     assert kinds.count("cycle_start") == 3 and "engagement_start" in kinds and "synchronised" in kinds
     c, _ = execute(RunRequest("table1", tmp_path / "c.h5", seed=12, cycles=3, install_signals=False))

@@ -76,7 +76,7 @@ class CanBenchEmulator:
         self._t = self.origin  # frames due before this instant have been sent
         for ctrl in self.controllers.values():
             for key in (f"{ctrl.name}.alive", f"{ctrl.name}.hb_alive"):
-                ctrl.sent_cycles[key] = 0
+                ctrl.sent_cycles[key] = 1  # the first frame one cycle after start-up (a time stamp of 0.0 means "unset")
                 ctrl.alive[key] = 0
 
     # -- fault hooks ---------------------------------------------------------------------------------
