@@ -66,7 +66,17 @@ class CanBlock:
     message: str
     index: np.ndarray  # each frame's position among all frames of that receive (arrival order across messages)
     t: np.ndarray  # run-clock time each frame was received by the interface
-    values: dict[str, np.ndarray]  # logical signal → physical values
+    matrix: np.ndarray  # (frames, signals) physical values; column j holds logical signal keys[j]
+    keys: tuple[str, ...]
+
+    @property
+    def values(self) -> dict[str, np.ndarray]:
+        """Logical signal → its column."""
+        return {key: self.matrix[:, j] for j, key in enumerate(self.keys)}
+
+    def columns(self, keys: "tuple[str, ...] | list[str]") -> np.ndarray:
+        """The (frames, len(keys)) values of `keys`, in that order."""
+        return self.matrix.take([self.keys.index(key) for key in keys], axis=1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,6 +152,8 @@ class _RxTable:
         self.alive_col, self.fault_col, self.state_col = (self._columns(rx, attr)
                                                           for attr in ("alive_key", "fault_key", "state_key"))
         self.alive_modulo = np.array([max(r.alive_modulo, 1) for r in rx], dtype=np.int64)
+        self.key_columns = [[j for j, key in enumerate(r.codec.columns) if key is not None] for r in rx]
+        self.keys = [tuple(r.codec.columns[j] for j in at) for r, at in zip(rx, self.key_columns)]
         self.alive = np.full(len(rx), -1, dtype=np.int64)  # last alive counter per slot (-1: none yet)
         self.controllers = sorted({r.controller for r in rx})
         self.owner = np.array([self.controllers.index(r.controller) for r in rx], dtype=np.int64)
@@ -325,26 +337,23 @@ class CanBench:
             float(self.fault_state), table.owner, table.faulted)
         rows, values = rows.take(order), values.take(order, axis=0)  # per message, each in the order received
         t = t.take(rows)
-        events_before = len(self._events)
+        events = []  # (arrival position, check, event): in the order the frames arrived, as frame by frame
         if alive_wrong.any() or fault_change.any():
-            self._frame_events(slot.take(order), values, t, alive_wrong, alive_before, fault_change)
+            events = self._frame_events(rows, slot.take(order), values, t, alive_wrong, alive_before, fault_change)
         bounds = starts.tolist()
         present = [m for m in range(len(table.rx)) if bounds[m + 1] > bounds[m]]
         firsts, ends = [bounds[m] for m in present], [bounds[m + 1] for m in present]
         blocks = []
         for m, a, b, newest, last in zip(present, firsts, ends, np.maximum.reduceat(t, firsts).tolist(),
                                          values.take([e - 1 for e in ends], axis=0).tolist()):
-            rx = table.rx[m]
+            rx, keys, at = table.rx[m], table.keys[m], table.key_columns[m]
             rx.last_seen = max(rx.last_seen, newest)
-            keys = rx.codec.columns
-            self.latest.update({key: v for key, v in zip(keys, last) if key is not None})
-            block = values[a:b]
-            columns = {key: block[:, j] for j, key in enumerate(keys) if key is not None}
+            self.latest.update(zip(keys, [last[j] for j in at]))
+            block = CanBlock(rx.controller, rx.codec.message.name, rows[a:b], t[a:b], values[a:b, at], keys)
             if rx.controller == "estop":
-                self._estop_events(t[a:b], columns)
-            blocks.append(CanBlock(rx.controller, rx.codec.message.name, rows[a:b], t[a:b], columns))
-        if len(self._events) - events_before > 1:  # in time order across messages, as the frames were measured
-            self._events[events_before:] = sorted(self._events[events_before:], key=lambda e: e.t)
+                events += self._estop_events(block)
+            blocks.append(block)
+        self._events += [event for *_, event in sorted(events, key=lambda e: e[:2])]
         return blocks
 
     def _bus_time(self, t: float) -> float:
@@ -419,29 +428,33 @@ class CanBench:
                 pass
             raise CanLogError(f"CAN log cannot be written: {type(exc).__name__}: {exc}") from exc
 
-    def _frame_events(self, slot: np.ndarray, values: np.ndarray, t: np.ndarray, alive_wrong: np.ndarray,
-                      alive_before: np.ndarray, fault_change: np.ndarray) -> None:
-        """Alive-counter and fault events `_watch` flagged (frames sorted by message)."""
+    def _frame_events(self, rows: np.ndarray, slot: np.ndarray, values: np.ndarray, t: np.ndarray,
+                      alive_wrong: np.ndarray, alive_before: np.ndarray,
+                      fault_change: np.ndarray) -> list[tuple[int, int, ControllerEvent]]:
+        """Alive-counter (check 0) and fault (check 1) events `_watch` flagged, with each frame's arrival position."""
         table, events = self._rx_table, []
         for i in np.flatnonzero(alive_wrong | (fault_change != 0)).tolist():
-            rx, m = table.rx[slot[i]], slot[i]
+            rx, m, row = table.rx[slot[i]], slot[i], int(rows[i])
             if alive_wrong[i]:
                 self.stats.alive_errors += 1
                 alive = int(values[i, table.alive_col[m]])
-                events.append(ControllerEvent(float(t[i]), rx.controller, "alive_error",
-                                              f"{rx.codec.message.name}: {alive_before[i]} → {alive}"))
+                events.append((row, 0, ControllerEvent(float(t[i]), rx.controller, "alive_error",
+                                                       f"{rx.codec.message.name}: {alive_before[i]} → {alive}")))
             if fault_change[i]:
                 code = int(values[i, table.fault_col[m]]) if table.fault_col[m] >= 0 else 0
                 state = "None" if table.state_col[m] < 0 else format(values[i, table.state_col[m]], "g")
-                events.append(ControllerEvent(float(t[i]), rx.controller,
-                                              "fault" if fault_change[i] > 0 else "fault_cleared",
-                                              f"state {state}, code {code}"))
-        self._events += events
+                events.append((row, 1, ControllerEvent(float(t[i]), rx.controller,
+                                                       "fault" if fault_change[i] > 0 else "fault_cleared",
+                                                       f"state {state}, code {code}")))
+        return events
 
-    def _estop_events(self, t: np.ndarray, columns: Mapping[str, np.ndarray]) -> None:
-        sources = columns.get("estop.source", np.full(len(t), np.nan)).tolist()
-        for ti, request, source in zip(t.tolist(), columns["estop.request"].tolist(), sources):
-            self._event(ti, "estop", "estop" if request else "estop_released", f"source {source:g}")
+    def _estop_events(self, block: CanBlock) -> list[tuple[int, int, ControllerEvent]]:
+        """An emergency stop (or its release) seen on the bus, per frame (check 1), with its arrival position."""
+        values = block.values
+        sources = values.get("estop.source", np.full(len(block.t), np.nan)).tolist()
+        return [(row, 1, ControllerEvent(t, "estop", "estop" if request else "estop_released", f"source {source:g}"))
+                for row, t, request, source in zip(block.index.tolist(), block.t.tolist(),
+                                                   values["estop.request"].tolist(), sources)]
 
     def _watch(self, now: float) -> None:
         overdue: dict[str, str] = {}
@@ -494,11 +507,8 @@ def _in_time_order(items: list[Record | np.ndarray]) -> np.ndarray:
 
 def _samples(blocks: list[CanBlock]) -> list[CanSample]:
     """One CanSample per frame of `blocks`, in the order received."""
-    numbered = []
-    for b in blocks:
-        keys, columns = list(b.values), [c.tolist() for c in b.values.values()]
-        for j, (i, t) in enumerate(zip(b.index.tolist(), b.t.tolist())):
-            numbered.append((i, CanSample(t, b.controller, b.message, {k: c[j] for k, c in zip(keys, columns)})))
+    numbered = [(i, CanSample(t, b.controller, b.message, dict(zip(b.keys, row))))
+                for b in blocks for i, t, row in zip(b.index.tolist(), b.t.tolist(), b.matrix.tolist())]
     numbered.sort(key=lambda pair: pair[0])
     return [sample for _, sample in numbered]
 

@@ -3,6 +3,8 @@
 Same results as cantools for plain integer signals (Intel or Motorola, signed or not, linear scaling);
 messages with multiplexed or float signals fall back to cantools. Encoding saturates each signal to its raw
 range instead of raising. Output keys can be renamed (DBC signal → logical name), unmapped signals are skipped.
+`CodecTable` holds several messages' layouts as arrays so that a batch of frames of any of them is decoded or
+encoded by one compiled loop (numba), with the same numbers as the per-frame methods.
 """
 
 from __future__ import annotations
@@ -55,18 +57,13 @@ class MessageCodec:
 
         ValueError if a row does not decode (only messages that fall back to cantools can refuse one).
         """
-        columns, valid = self.decode_valid(payloads)
-        if not valid.all():
-            raise ValueError(f"{self.message.name}: row {int(np.argmin(valid))} does not decode")
-        return columns
-
-    def decode_valid(self, payloads: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        """`decode_array` of the rows that decode, and a boolean mask of those rows (the others are NaN, never a number)."""
         n = len(payloads)
         padded = np.zeros((n, self.table.payload_bytes), dtype=np.uint8)
         padded[:, :self.length] = payloads
         values, valid = self.table.decode(np.zeros(n, dtype=np.intp), padded)
-        return {key: values[:, j] for j, key in enumerate(self.columns) if key is not None}, valid
+        if not valid.all():
+            raise ValueError(f"{self.message.name}: row {int(np.argmin(valid))} does not decode")
+        return {key: values[:, j] for j, key in enumerate(self.columns) if key is not None}
 
     def encode(self, values: Mapping[str, float]) -> bytes:
         """Payload for the mapped keys in `values`; missing signals are 0, out-of-range values saturate."""
@@ -84,14 +81,6 @@ class MessageCodec:
                 little |= raw << shift
         data = little.to_bytes(self.length, "little")
         return (int.from_bytes(data, "big") | big).to_bytes(self.length, "big") if big else data
-
-    def encode_array(self, columns: Mapping[str, "np.ndarray | float"], n: int) -> np.ndarray:
-        """Vectorised `encode` of n frames: key → column (or one value for all); an (n, length) uint8 array."""
-        values = np.zeros((n, self.table.width))
-        for j, key in enumerate(self.columns):
-            if key in columns:
-                values[:, j] = columns[key]
-        return np.ascontiguousarray(self.table.encode(np.zeros(n, dtype=np.intp), values)[:, :self.length])
 
     @property
     def table(self) -> "CodecTable":
@@ -167,19 +156,24 @@ class CodecTable:
 
 
 @njit(cache=True, nogil=True)
+def _words(payload: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """The first 8 bytes of a payload as little-endian and as big-endian unsigned words."""
+    little = np.uint64(0)
+    big = np.uint64(0)
+    for b in range(8):
+        byte = np.uint64(payload[b])
+        little |= byte << np.uint64(8 * b)
+        big = (big << np.uint64(8)) | byte
+    return little, big
+
+
+@njit(cache=True, nogil=True)
 def _decode_rows(which: np.ndarray, payloads: np.ndarray, bits: np.ndarray, linear: np.ndarray,
                  compiled: np.ndarray, values: np.ndarray) -> None:  # pragma: no cover - compiled
     """CodecTable.decode of the rows whose message is compiled: each field out of its 8-byte word, sign, scale."""
-    for i in range(which.shape[0]):
+    for i in np.flatnonzero(compiled[which]):
         m = which[i]
-        if not compiled[m]:
-            continue
-        little = np.uint64(0)
-        big = np.uint64(0)
-        for b in range(8):
-            byte = np.uint64(payloads[i, b])
-            little |= byte << np.uint64(8 * b)
-            big = (big << np.uint64(8)) | byte
+        little, big = _words(payloads[i])
         for j in range(values.shape[1]):
             raw = ((big if bits[m, 0, j] else little) >> bits[m, 1, j]) & bits[m, 2, j]
             signed = np.int64(raw - ((raw & bits[m, 3, j]) << np.uint64(1)))  # two's complement: minus 2 × sign bit

@@ -86,14 +86,18 @@ class _Readings:
 
     def add(self, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading (`t` a number, `row` its values) or a block (`t` N times, `row` an (N, columns) array)."""
-        if np.ndim(t) == 0:
+        if not isinstance(t, np.ndarray):
             self._rows.append((t, *row))
             self._count += 1
             return
-        self._close_rows()
         block = np.empty((len(t), 1 + self.columns))
         block[:, 0] = t
         block[:, 1:] = row
+        self.add_rows(block)
+
+    def add_rows(self, block: np.ndarray) -> None:
+        """Readings already as (N, 1 + columns) rows, time first (kept as they are: not to be changed after)."""
+        self._close_rows()
         self._blocks.append(block)
         self._count += len(block)
 
@@ -137,6 +141,10 @@ class AlignedBuilder:
         """One reading of `stream`, or a block of them (`t` an array, `row` an (N, columns) array)."""
         self._pending[stream].add(t, row)
 
+    def add_rows(self, stream: str, rows: np.ndarray) -> None:
+        """Readings of `stream` as (N, 1 + columns) rows, time first."""
+        self._pending[stream].add_rows(rows)
+
     def finalise(self, until_row: int) -> dict[str, np.ndarray]:
         """Channels for grid rows [rows, until_row) (time included); later readings stay pending."""
         k0, k1 = self.rows, max(self.rows, until_row)
@@ -160,7 +168,7 @@ class AlignedBuilder:
             if n_before:
                 self._carry[spec.name] = readings[n_before - 1].copy()
             if n_before < len(readings):
-                pending.add(readings[n_before:, 0], readings[n_before:, 1:])
+                pending.add_rows(readings[n_before:])
             for j, name in enumerate(spec.names):
                 held[f"{spec.name}/{name}"] = values[:, j]
         out: dict[str, np.ndarray] = {"time": tk}
@@ -255,7 +263,7 @@ class RunWriter:
         raw = {spec.name: self._raw[spec.name].take() for spec in self.layout.streams}
         for name, data in raw.items():
             if len(data):
-                self.builder.add(name, data[:, 0], data[:, 1:])
+                self.builder.add_rows(name, data)
         k0 = self.builder.rows
         if until_row > k0:
             rows = self.builder.finalise(until_row)

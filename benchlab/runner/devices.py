@@ -155,8 +155,9 @@ def _held_status(blocks: list[Any], st: BenchStatus, gear_ratio: float) -> tuple
     a = 0
     for k, (b, size) in enumerate(zip(blocks, sizes)):
         for j, key in enumerate(_STATUS_HELD):
-            if key in b.values:
-                given[a:a + size, j] = b.values[key] * gear_ratio if key == "load.speed" else b.values[key]
+            if key in b.keys:
+                column = b.matrix[:, b.keys.index(key)]
+                given[a:a + size, j] = column * gear_ratio if key == "load.speed" else column
                 carries[k, j] = True
         a += size
     order = np.argsort(np.concatenate([b.index for b in blocks]), kind="stable")
@@ -433,7 +434,7 @@ class DriverBench:
         status = [b for b in blocks if b.controller in _STATUS_MESSAGE and b.message.endswith("_Status")]
         for b in status:  # one block of rows per stream, each frame at its own time
             stream = _STATUS_MESSAGE[b.controller]
-            self.readings.append((stream, b.t, np.column_stack([b.values[key] for key in _CAN_KEYS[stream]])))
+            self.readings.append((stream, b.t, b.columns(_CAN_KEYS[stream])))
         if status:
             st.take_frames(*_held_status(status, st, self.config.gear_ratio))
         for ev in self.can.pop_events():

@@ -19,12 +19,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import can
-import numpy as np
 import cantools
+import numpy as np
+from numba import njit
 
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, compile_codecs
-from drivers.can_frames import make_frames, pick
+from drivers.can_frames import make_frames
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 from sim_bench.emulators.sim_can_bus import send_frames
 
@@ -235,34 +236,71 @@ class CanBenchEmulator:
         self._t = max(self._t, t_end)
         if not plan:
             return
-        counts = [k1 - k0 for _, _, k0, k1 in plan]
-        slot = np.repeat([self._slot[key] for _, key, _, _ in plan], counts)
-        local = np.arange(len(slot)) - np.repeat(np.cumsum([0, *counts[:-1]]), counts)  # frame number in its message
-        cycle = np.repeat([self._cycle[key] for _, key, _, _ in plan], counts)
-        stamps = self.origin + (local + np.repeat([k0 for *_, k0, _ in plan], counts)) * cycle
-        times = np.unique(stamps)
+        slots = np.array([self._slot[key] for _, key, _, _ in plan])
+        item, local, stamps, times, row = _due_frames(
+            np.array([k0 for _, _, k0, _ in plan]), np.array([k1 - k0 for _, _, k0, k1 in plan]),
+            np.array([self._cycle[key] for _, key, _, _ in plan]), self._frame_id.take(slots), self.origin)
         actuals = self.provider.actuals_at(times)
-        measured = np.column_stack([getattr(actuals, name) for name in _ACTUALS])
-        constant = np.zeros((len(self._slot), self._table.width))  # state, fault code, heartbeat state per message
+        constant = np.zeros((len(plan), self._table.width))  # state, fault code, heartbeat state per message
         start, frozen, modulo = [], [], []
-        for ctrl, key, k0, k1 in plan:
+        for p, (ctrl, key, k0, k1) in enumerate(plan):
             state, code = self.state(ctrl.name, self.origin + k0 * self._cycle[key])
             column = self._column[self._slot[key]]
             for name, value in ((f"{ctrl.name}.state", state), (f"{ctrl.name}.fault_code", code),
                                 (f"{ctrl.name}.hb_state", state)):
                 if name in column:
-                    constant[self._slot[key], column[name]] = value
+                    constant[p, column[name]] = value
             start.append(ctrl.alive[key])
             frozen.append(ctrl.alive_frozen)
             modulo.append(self._modulo[key])
             if not ctrl.alive_frozen:
                 ctrl.alive[key] = (ctrl.alive[key] + k1 - k0) % self._modulo[key]
-        source = self._source.take(slot, axis=0)
-        values = np.where(source >= 0, measured[np.searchsorted(times, stamps)[:, None], source], constant.take(slot, axis=0))
-        counting = np.where(np.repeat(frozen, counts), 0, local + 1)
-        values[np.arange(len(slot)), self._alive_col.take(slot)] = (np.repeat(start, counts) + counting) % np.repeat(modulo, counts)
+        values = _frame_values(item, local, row, np.array([getattr(actuals, name) for name in _ACTUALS]),
+                               self._source.take(slots, axis=0), constant, self._alive_col.take(slots),
+                               np.array(start), np.array(frozen), np.array(modulo))
+        slot = slots.take(item)
         frames = make_frames(stamps, self._frame_id.take(slot), self._table.encode(slot, values), self._length.take(slot),
                              extended=self._extended.take(slot))
-        frames = pick(frames, np.lexsort((frames["arbitration_id"], frames["timestamp"])))
         send_frames(self.bus, frames)
         self.stats.sent += len(frames)
+
+
+@njit(cache=True, nogil=True)
+def _due_frames(first: np.ndarray, count: np.ndarray, cycle: np.ndarray, frame_id: np.ndarray,
+                origin: float) -> tuple:  # pragma: no cover - compiled
+    """The frames of messages p = 0.. due at origin + (first[p] + l)·cycle[p], l < count[p], merged in time order
+    (ties by frame id): each frame's message p and number l, its time; the distinct times, each frame's among them."""
+    n = count.sum()
+    item, local = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    stamps, times, row = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
+    taken = np.zeros(count.shape[0], dtype=np.int64)
+    distinct = 0
+    for k in range(n):
+        best, best_t = -1, 0.0
+        for p in range(count.shape[0]):
+            if taken[p] < count[p]:
+                t = origin + (first[p] + taken[p]) * cycle[p]
+                if best < 0 or t < best_t or (t == best_t and frame_id[p] < frame_id[best]):
+                    best, best_t = p, t
+        item[k], local[k], stamps[k] = best, taken[best], best_t
+        taken[best] += 1
+        if distinct == 0 or best_t != times[distinct - 1]:
+            times[distinct] = best_t
+            distinct += 1
+        row[k] = distinct - 1
+    return item, local, stamps, times[:distinct].copy(), row
+
+
+@njit(cache=True, nogil=True)
+def _frame_values(item: np.ndarray, local: np.ndarray, row: np.ndarray, measured: np.ndarray, source: np.ndarray,
+                  constant: np.ndarray, alive_col: np.ndarray, start: np.ndarray, frozen: np.ndarray,
+                  modulo: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Each frame's signal values: a measured actual (source ≥ 0, at the frame's time `row`) or its message's
+    constant, and the alive counter counting on from `start` (held while frozen)."""
+    values = np.empty((item.shape[0], source.shape[1]))
+    for k in range(item.shape[0]):
+        p = item[k]
+        for j in range(source.shape[1]):
+            values[k, j] = measured[source[p, j], row[k]] if source[p, j] >= 0 else constant[p, j]
+        values[k, alive_col[p]] = start[p] if frozen[p] else (start[p] + 1 + local[k]) % modulo[p]
+    return values
