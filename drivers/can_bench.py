@@ -263,7 +263,7 @@ class CanBench:
         return _samples(self.receive_blocks())
 
     def receive_blocks(self) -> list[CanBlock]:
-        """Every waiting frame at its own time, decoded and watched, as columns per message; then the watchdog at now."""
+        """Every waiting frame at its own time, decoded and watched, as columns per message; then the watchdog."""
         now = self.clock()
         frames = drain(self.bus)
         if self.log is not None and len(frames):
@@ -488,7 +488,7 @@ class CanBench:
 
 
 def _in_time_order(items: list[Record | np.ndarray]) -> np.ndarray:
-    """Sent frames (records) and received FRAME arrays as one FRAME array, sorted by time stamp (ties in order given)."""
+    """Sent frames (records) and received FRAME arrays as one FRAME array, sorted by time (ties as given)."""
     parts: list[np.ndarray] = []
     records: list[Record] = []
     for item in items:

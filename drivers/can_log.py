@@ -1,7 +1,7 @@
 """The raw CAN log fed with frame arrays (drivers/can_frames.py): many frames per call into python-can's writers.
 
 Into python-can's `BLFWriter` (what `can.Logger("x.blf")` returns), `log_frames()` packs the CAN_MESSAGE objects
-of a batch with numpy instead of one `struct.pack` per frame and puts them into the writer's own container
+of a batch in one compiled pass instead of one `struct.pack` per frame and puts them into the writer's own container
 buffer: byte for byte what `on_message_received()` writes for the same frames (tests/test_drivers_can.py checks
 it); the file header, containers, compression, flushing and `stop()` stay python-can's. Error and CAN FD frames
 go through `on_message_received()`, in order; so does every frame for any other listener (ASC, ...).
@@ -24,8 +24,8 @@ _CAN_OBJECT = np.dtype([("signature", "S4"), ("header_size", "<u2"), ("header_ve
                         ("data", "u1", (8,))])
 assert _CAN_OBJECT.itemsize == _HEADER_SIZE + blf.CAN_MSG_STRUCT.size  # python-can's layout, no padding
 _TEMPLATE = np.zeros((), _CAN_OBJECT)  # what every CAN_MESSAGE object's headers hold
-_TEMPLATE[()] = (b"LOBJ", _HEADER_SIZE, 1, _CAN_OBJECT.itemsize, blf.CAN_MESSAGE, blf.TIME_ONE_NANS, 0, 0, 0, 0, 0, 0, 0,
-                 np.zeros(8, np.uint8))
+_TEMPLATE[()] = (b"LOBJ", _HEADER_SIZE, 1, _CAN_OBJECT.itemsize, blf.CAN_MESSAGE, blf.TIME_ONE_NANS,
+                 0, 0, 0, 0, 0, 0, 0, np.zeros(8, np.uint8))
 CAN_MSG_EXT, REMOTE_FLAG, DIR = blf.CAN_MSG_EXT, blf.REMOTE_FLAG, blf.DIR  # python-can's BLF constants, for the kernel
 
 
@@ -65,7 +65,10 @@ def _add_can_objects(writer: can.BLFWriter, frames: np.ndarray) -> None:
     writer._buffer_size += objects.nbytes  # noqa: SLF001
     writer.object_count += len(frames)
     while writer._buffer_size >= writer.max_container_size:  # noqa: SLF001 - containers cut where python-can cuts them
+        left = writer._buffer_size  # noqa: SLF001
         writer._flush()  # noqa: SLF001
+        if writer._buffer_size >= left:  # noqa: SLF001 - python-can silently writes nothing into a closed file
+            raise ValueError(f"{getattr(writer.file, 'name', 'BLF log')}: closed, frames cannot be written")
 
 
 @njit(cache=True, nogil=True)

@@ -14,6 +14,7 @@ from drivers.can_bench import CanBench
 from drivers.can_codec import CodecTable, MessageCodec
 from drivers.can_frames import frames_from_messages, messages_from_frames
 from drivers.can_log import log_frames
+from drivers.errors import CanLogError
 from sim_bench.emulators import CanBenchEmulator, ManualClock, SimCanBus
 
 DB = cantools.database.load_file(str(sig.BENCH_DBC))
@@ -221,7 +222,8 @@ def test_codec_table_decodes_and_encodes_a_mixed_batch_as_each_codec_frame_by_fr
         expected = codec.decode(bytes(payloads[i, :codec.length]))
         got = {key: values[i, j] for j, key in enumerate(codec.columns) if key is not None}
         assert got.keys() == expected.keys()
-        assert all(got[k] == expected[k] or (np.isnan(got[k]) and np.isnan(expected[k])) for k in got), codec.message.name
+        same = [got[k] == expected[k] or (np.isnan(got[k]) and np.isnan(expected[k])) for k in got]
+        assert all(same), codec.message.name
     values = np.nan_to_num(values)
     vectorised = ~np.isin(which, [i for i, c in enumerate(codecs) if c.message.name in ("Float", "Long")])
     values[vectorised & (np.arange(len(which)) % 5 == 0)] *= 3.0  # some beyond their range: saturated
@@ -336,6 +338,18 @@ def test_driver_gives_the_same_results_frame_by_frame_as_in_bulk(tmp_path) -> No
     assert (bulk[2].unknown_id, bulk[2].bad_dlc) == (2, 1)  # 0x7FF and the extended 0x101; 0x101 of 2 bytes
     assert bulk == per_frame
     assert (tmp_path / "False.blf").read_bytes()[144:] == (tmp_path / "True.blf").read_bytes()[144:]  # header: sizes
+
+
+def test_a_can_log_that_cannot_be_written_stops_with_can_log_error(tmp_path, loop) -> None:
+    """The bulk write into a BLF file that fails (here: its file closed under it, as a full disk fails a write)
+    is one CanLogError, and the log is given up, not written half."""
+    clock, emu, bench = loop
+    bench.log = can.Logger(str(tmp_path / "run.blf"), max_container_size=4096)
+    step(clock, emu, bench, 0.5)
+    bench.log.file.close()
+    with pytest.raises(CanLogError, match="CAN log cannot be written"):
+        step(clock, emu, bench, 1.0)
+    assert bench.log is None
 
 
 @settings(max_examples=300, deadline=None)

@@ -228,9 +228,10 @@ def test_friction_energy_of_a_polls_frames_in_bulk_equals_frame_by_frame():
                 used += counts[controller]
                 if not len(index):
                     continue
-                columns = {"drive.speed": rng.uniform(700, 3000, len(index)), "clutch.torque": rng.uniform(0, 80, len(index)),
-                           "clutch.clamp_state": rng.integers(0, 3, len(index)).astype(float),
-                           "load.speed": rng.uniform(0, 200, len(index))}
+                n_frames = len(index)
+                columns = {"drive.speed": rng.uniform(700, 3000, n_frames), "clutch.torque": rng.uniform(0, 80, n_frames),
+                           "clutch.clamp_state": rng.integers(0, 3, n_frames).astype(float),
+                           "load.speed": rng.uniform(0, 200, n_frames)}
                 matrix = np.column_stack([columns[k] for k in keys])
                 blocks.append(CanBlock(controller, controller, index, times[index], matrix, keys))
                 frames += [(i, times[i], dict(zip(keys, row))) for i, row in zip(index, matrix.tolist())]

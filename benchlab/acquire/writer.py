@@ -17,6 +17,7 @@ Closing also compacts (exact lengths, compressed). One run per file is the calle
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -43,7 +44,7 @@ class StreamSpec:
     rate_hz: float
     hold_s: float
 
-    @property
+    @functools.cached_property
     def names(self) -> tuple[str, ...]:
         return tuple(c for c, _ in self.columns)
 
@@ -136,6 +137,7 @@ class AlignedBuilder:
         self.rows = 0  # grid rows finalised
         self._pending = {s.name: _Readings(len(s.columns)) for s in layout.streams}
         self._carry: dict[str, np.ndarray | None] = {s.name: None for s in layout.streams}  # last row before the grid
+        self._column = {s.name: {c: j for j, c in enumerate(s.names)} for s in layout.streams}
 
     def add(self, stream: str, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading of `stream`, or a block of them (`t` an array, `row` an (N, columns) array)."""
@@ -149,18 +151,15 @@ class AlignedBuilder:
         """Channels for grid rows [rows, until_row) (time included); later readings stay pending."""
         k0, k1 = self.rows, max(self.rows, until_row)
         tk = np.arange(k0, k1) * self.dt
-        held: dict[str, np.ndarray] = {}
+        held: dict[str, np.ndarray] = {}  # stream → (rows, columns) values held on the grid
         for spec in self.layout.streams:
             pending, carry = self._pending[spec.name], self._carry[spec.name]
-            ncol = len(spec.columns)
+            held[spec.name] = values = np.empty((k1 - k0, len(spec.columns)))
             if k1 == k0:  # no grid rows to fill: the readings stay pending
-                for name in spec.names:
-                    held[f"{spec.name}/{name}"] = np.empty(0)
                 continue
             readings = pending.take()
             if carry is not None:
                 readings = np.concatenate([carry[None, :], readings])
-            values = np.empty((k1 - k0, ncol))
             n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, values)
             if n_before < 0:  # readings out of time order: sorted (stable), then held
                 readings = readings[np.argsort(readings[:, 0], kind="stable")]
@@ -169,11 +168,9 @@ class AlignedBuilder:
                 self._carry[spec.name] = readings[n_before - 1].copy()
             if n_before < len(readings):
                 pending.add_rows(readings[n_before:])
-            for j, name in enumerate(spec.names):
-                held[f"{spec.name}/{name}"] = values[:, j]
         out: dict[str, np.ndarray] = {"time": tk}
         for src in self.layout.sources:
-            column = held[f"{src.stream}/{src.column}"]
+            column = held[src.stream][:, self._column[src.stream][src.column]]
             out[src.channel] = column if src.scale == 1.0 else column * src.scale
         if self.layout.derive is not None:
             out.update(self.layout.derive(out))
@@ -267,16 +264,11 @@ class RunWriter:
         k0 = self.builder.rows
         if until_row > k0:
             rows = self.builder.finalise(until_row)
-            for name in self.layout.aligned_units:
-                self._put(f"aligned/{name}", k0, rows[name])
-        for spec in self.layout.streams:
-            data = raw[spec.name]
+            _store(self._aligned_views, k0, [rows[name] for name in self.layout.aligned_units])
+        for name, data in raw.items():
             if len(data):
-                a = self._raw_rows[spec.name]
-                self._put(f"raw/{spec.name}/time", a, data[:, 0])
-                for j, name in enumerate(spec.names):
-                    self._put(f"raw/{spec.name}/{name}", a, data[:, j + 1])
-                self._raw_rows[spec.name] = a + len(data)
+                _store(self._stream_views[name], self._raw_rows[name], data.T)
+                self._raw_rows[name] += len(data)
         if self._events:
             a, ev = self._event_rows, self._events
             self._put("events/time", a, np.array([e[0] for e in ev], dtype=float))
@@ -373,7 +365,11 @@ class RunWriter:
         self._fd = os.open(self.path, os.O_RDWR)
         self._mm = np.memmap(self.path, dtype=np.uint8, mode="r+")
         whole = np.asarray(self._mm)  # a plain ndarray view of the mapping: slicing it skips memmap's bookkeeping
-        self._views = {name: whole[off:off + cap * dt.itemsize].view(dt) for name, (off, dt, cap) in self._where.items()}
+        self._views = {name: whole[off:off + cap * dt.itemsize].view(dt)
+                       for name, (off, dt, cap) in self._where.items()}
+        self._aligned_views = [self._views[f"aligned/{name}"] for name in self.layout.aligned_units]
+        self._stream_views = {s.name: [self._views[f"raw/{s.name}/{c}"] for c in ("time", *s.names)]
+                              for s in self.layout.streams}
 
     def _close_fd(self) -> None:
         if self._fd is not None:
@@ -406,12 +402,12 @@ class RunWriter:
         return np.asarray(values, dtype=float)
 
     def _ensure_capacity(self, until_row: int) -> None:
+        """Grow the file (rebuilt at twice what is needed) if what the next flush writes would not fit."""
         need = {"aligned": until_row, "events": self._event_rows + len(self._events)}
-        for s in self.layout.streams:
-            need[f"raw/{s.name}"] = self._raw_rows[s.name] + len(self._raw[s.name])
         have = {"aligned": self._capacity("aligned/time"), "events": self._capacity("events/time")}
-        for s in self.layout.streams:
-            have[f"raw/{s.name}"] = self._capacity(f"raw/{s.name}/time")
+        for name, views in self._stream_views.items():
+            need[f"raw/{name}"] = self._raw_rows[name] + len(self._raw[name])
+            have[f"raw/{name}"] = len(views[0])
         if all(need[k] <= have[k] for k in need):
             return
         capacity = {k: max(have[k], 2 * need[k]) for k in have}
@@ -528,6 +524,12 @@ class RunWriter:
         meta = {"attrs": meta_attrs, "schedule": schedule, "schedule_units": units,
                 "progress": [by_name[k] for k in self._progress_fields()]}
         self._build(dest, capacity, meta, data)
+
+
+def _store(views: Sequence[np.ndarray], start: int, columns: Sequence[np.ndarray]) -> None:
+    """Columns into their datasets' mapped bytes from row `start` (the capacity is made sure of before)."""
+    for view, column in zip(views, columns):
+        view[start:start + len(column)] = column
 
 
 def _tmp(path: Path) -> Path:

@@ -2,12 +2,13 @@
 
 Speaks the frames of drivers/bench.dbc through the same logical signal map as the driver. `poll()` takes the
 waiting command frames and, in time order, applies each at its time stamp, then sends every status frame and
-heartbeat that fell due up to now at its DBC cycle time, stamped with the instant it fell due and carrying
-the drivetrain's actual values at that instant (a controller samples and sends on its own cycle, whenever the
-PC reads the bus). A controller that is disabled, faulted, without commands for `command_timeout_s`
-(default 3 command cycles; fault 16 while it lasts) or under emergency stop gets safe set-points (drive
-0 rpm, clutch open, load 0 N·m). Fault hooks: `silence`, `set_fault`, `clear_fault`, `freeze_alive`,
-`send_raw`.
+heartbeat that fell due up to now at its DBC cycle time, stamped with the instant it fell due and carrying the
+drivetrain's actual values at that instant (a controller samples and sends on its own cycle, whenever the PC
+reads the bus); the frames of one poll go out as one array of FRAME records (drivers/can_frames.py) onto a bus
+that takes arrays (the simulated bus), else one can.Message at a time. A controller that is disabled, faulted,
+without commands for `command_timeout_s` (default 3 command cycles; fault 16 while it lasts) or under
+emergency stop gets safe set-points (drive 0 rpm, clutch open, load 0 N·m). Fault hooks: `silence`,
+`set_fault`, `clear_fault`, `freeze_alive`, `send_raw`.
 """
 
 from __future__ import annotations
@@ -259,8 +260,8 @@ class CanBenchEmulator:
                                self._source.take(slots, axis=0), constant, self._alive_col.take(slots),
                                np.array(start), np.array(frozen), np.array(modulo))
         slot = slots.take(item)
-        frames = make_frames(stamps, self._frame_id.take(slot), self._table.encode(slot, values), self._length.take(slot),
-                             extended=self._extended.take(slot))
+        frames = make_frames(stamps, self._frame_id.take(slot), self._table.encode(slot, values),
+                             self._length.take(slot), extended=self._extended.take(slot))
         send_frames(self.bus, frames)
         self.stats.sent += len(frames)
 
