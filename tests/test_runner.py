@@ -1,11 +1,13 @@
 """The runner on the simulated bench (drivers over sim:// serial URLs and an in-process CAN bus).
 
 Same seed, same /aligned; every interlock tripped by an injected fault leaves the bench safe; SIGTERM
-closes the file as aborted.
+closes the file as aborted; the friction energy taken from a poll's status frames in bulk is the energy frame by
+frame.
 """
 
 from __future__ import annotations
 
+import math
 import signal
 import subprocess
 import sys
@@ -16,7 +18,9 @@ import numpy as np
 import pytest
 
 from benchlab.runfile import load_run
+from benchlab.runner.devices import BenchStatus, _held_status, friction_power
 from benchlab.runner.session import RunRequest, execute
+from drivers.can_bench import CanBlock
 from drivers.can_signals import CLAMP_OPEN
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
@@ -188,3 +192,57 @@ def test_real_time_loop_on_emulated_devices(tmp_path):
         sim.close()
     run = load_run(tmp_path / "rt.h5")
     assert np.nanmax(run["clutch_speed"]) > 1900 and np.nanmax(run["friction_power"]) > 5000
+
+
+def _frame_by_frame(st: BenchStatus, t: float, values: dict, gear: float) -> None:
+    """Reference: one status frame at its time, the power held since the newest frame before it."""
+    if t > st.t_frame:
+        st.friction_energy_j += st.friction_power * (t - st.t_frame)
+        st.t_frame = t
+    elif math.isnan(st.t_frame):
+        st.t_frame = t
+    st.engine_speed = values.get("drive.speed", st.engine_speed)
+    st.clutch_speed = values["load.speed"] * gear if "load.speed" in values else st.clutch_speed
+    if "clutch.torque" in values:
+        st.clutch_torque, st.clamp_state = values["clutch.torque"], int(values["clutch.clamp_state"])
+    power = friction_power(st.clutch_torque, st.engine_speed, st.clutch_speed, st.clamp_state)
+    st.friction_power = power if power == power else 0.0
+
+
+def test_friction_energy_of_a_polls_frames_in_bulk_equals_frame_by_frame():
+    """Status frames of the three controllers, interleaved, some late (older than a frame already taken), over
+    many polls: BenchStatus.take_frames on the merged blocks gives the energy and values of taking each frame in
+    the order received."""
+    rng = np.random.default_rng(5)
+    signals = {"drive": ("drive.speed",), "clutch": ("clutch.torque", "clutch.clamp_state"), "load": ("load.speed",)}
+    for _ in range(100):
+        bulk, reference, t0 = BenchStatus(), BenchStatus(), 0.0
+        for _ in range(5):
+            counts = {c: int(rng.integers(0, 6)) for c in signals}
+            n = sum(counts.values())
+            if not n:
+                continue
+            times = np.sort(t0 + rng.uniform(0.0, 0.1, n))
+            t0 = times[-1]
+            if rng.random() < 0.3:
+                times = rng.permutation(times)  # received out of time order
+            arrival, blocks, frames, used = rng.permutation(n), [], [], 0
+            for controller, keys in signals.items():
+                index = np.sort(arrival[used:used + counts[controller]])
+                used += counts[controller]
+                if not len(index):
+                    continue
+                n_frames = len(index)
+                columns = {"drive.speed": rng.uniform(700, 3000, n_frames), "clutch.torque": rng.uniform(0, 80, n_frames),
+                           "clutch.clamp_state": rng.integers(0, 3, n_frames).astype(float),
+                           "load.speed": rng.uniform(0, 200, n_frames)}
+                matrix = np.column_stack([columns[k] for k in keys])
+                blocks.append(CanBlock(controller, controller, index, times[index], matrix, keys))
+                frames += [(i, times[i], dict(zip(keys, row))) for i, row in zip(index, matrix.tolist())]
+            for _, t, values in sorted(frames, key=lambda f: f[0]):
+                _frame_by_frame(reference, t, values, 15.0)
+            bulk.take_frames(*_held_status(blocks, bulk, 15.0))
+            for name in ("engine_speed", "clutch_speed", "clutch_torque", "clamp_state", "friction_power", "t_frame"):
+                a, b = getattr(bulk, name), getattr(reference, name)
+                assert a == b or (math.isnan(a) and math.isnan(b)), name
+            assert bulk.friction_energy_j == pytest.approx(reference.friction_energy_j, rel=1e-12, abs=1e-12)
