@@ -25,3 +25,13 @@ MAX_PROBE_READINGS = 10_000
 MAX_FIT_STARTS = 1_000
 #: Longest fitting step: an hour (a thermal model of anything sampled faster is still fitted at this step).
 MAX_FIT_STEP_S = 3600.0
+#: Most Monte Carlo paths of the remaining-life estimate: each path holds one resampled load profile.
+MAX_WEAR_PATHS = 100_000
+#: Longest wear horizon in engagements: a passenger-car clutch sees about a million in its life.
+MAX_WEAR_HORIZON = 1_000_000_000
+#: Bit rates of a classic CAN bus, bit/s: 5 kbit/s, the lowest common controllers set, to 1 Mbit/s, the
+#: standard's highest (the bench's DBC is classic CAN).
+MIN_CAN_BITRATE = 5_000
+MAX_CAN_BITRATE = 1_000_000
+#: Longest residual sampling period of the cool-down analysis: one sample an hour still shows a trend.
+MAX_SAMPLE_PERIOD_S = 3600.0

@@ -2,20 +2,31 @@
 
 A command module defines NAME, HELP, add_arguments(parser) and run(args) -> int. Bad input
 (InputError) is one line on stderr and exit 2; any other failure is one line and exit 1; Ctrl-C, from the
-moment `main` runs (imports of the commands included), is one line and exit 130.
+moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
+early (`benchlab run --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends other tools.
+`-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import logging
+import os
 import pkgutil
+import select
 import sys
 from collections.abc import Sequence
 
+import benchlab
 import benchlab.commands
 from benchlab.errors import InputError
 from benchlab.interrupts import RedeliverInterrupts
+
+#: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
+BROKEN_PIPE_EXIT = 141
+_LOG_HANDLER = logging.StreamHandler()
+_LOG_HANDLER.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
 
 
 class _Parser(argparse.ArgumentParser):
@@ -26,11 +37,15 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="benchlab", description="Dry-clutch test bench: acquire, simulate, identify, diagnose.")
     parser.add_argument("--debug", action="store_true", help="show a traceback on unexpected failures")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {benchlab.__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="log what benchlab does on stderr (-v: info, -vv: debug)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for info in sorted(pkgutil.iter_modules(benchlab.commands.__path__), key=lambda m: m.name):
         module = importlib.import_module(f"benchlab.commands.{info.name}")
         cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(cmd)
+        cmd.add_argument("--quiet", "-q", action="store_true", help="no progress bars (there are none on a pipe)")
         cmd.set_defaults(handler=module.run)
     return parser
 
@@ -45,6 +60,30 @@ def _caused_by_interrupt(exc: BaseException) -> bool:
         seen.add(id(link))
         link = link.__cause__ or link.__context__
     return False
+
+
+def configure_logging(verbosity: int) -> None:
+    """benchlab's loggers to stderr at INFO (-v) or DEBUG (-vv); WARNING without -v. Other libraries keep theirs."""
+    logger = logging.getLogger("benchlab")
+    _LOG_HANDLER.stream = sys.stderr  # not setStream: it flushes the old stream, which may be closed by now
+    if _LOG_HANDLER not in logger.handlers:
+        logger.addHandler(_LOG_HANDLER)
+    logger.setLevel({0: logging.WARNING, 1: logging.INFO}.get(verbosity, logging.DEBUG))
+
+
+def _stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe whose reader has left (the kernel reports an error on its write end); if so,
+    stdout is pointed at /dev/null so that the interpreter's last flush at exit stays quiet."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # stdout replaced by an object without a descriptor
+        return False
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    if not any(events & select.POLLERR for _, events in poller.poll(0)):
+        return False
+    os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
+    return True
 
 
 def _interrupted(args: argparse.Namespace | None) -> int:
@@ -66,7 +105,12 @@ def _dispatch(argv: Sequence[str] | None) -> int:
     args = None
     try:
         args = build_parser().parse_args(argv)  # imports every command module: Ctrl-C may land here too
-        return int(args.handler(args) or 0)
+        configure_logging(args.verbose)
+        code = int(args.handler(args) or 0)
+        sys.stdout.flush()  # a reader that has left shows here, not in the interpreter's last flush
+        return code
+    except BrokenPipeError as exc:
+        return BROKEN_PIPE_EXIT if _stdout_reader_gone() else _failed(args, exc)
     except InputError as exc:
         print(f"benchlab {args.command}: {exc}", file=sys.stderr)
         return 2
@@ -75,10 +119,15 @@ def _dispatch(argv: Sequence[str] | None) -> int:
     except Exception as exc:  # noqa: BLE001 - the CLI's last line of defence
         if _caused_by_interrupt(exc):  # Ctrl-C while a class is being created: Python 3.11 wraps it (__set_name__)
             return _interrupted(args)
-        if args is None or args.debug:  # a failure while building the parser is a bug: show it
-            raise
-        print(f"benchlab {args.command}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return 1
+        return _failed(args, exc)
+
+
+def _failed(args: argparse.Namespace | None, exc: Exception) -> int:
+    """An unexpected failure: one line and exit 1 (a traceback with --debug, or while building the parser)."""
+    if args is None or args.debug:  # a failure while building the parser is a bug: show it
+        raise exc
+    print(f"benchlab {args.command}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from benchlab.bounds import MAX_SCAN_CHANNELS
 from drivers import scpi
+from sim_bench import faults
 
 
 def positive_float(what: str, maximum: float) -> Callable[[str], float]:
@@ -64,3 +65,11 @@ def output_file(text: str) -> str:
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text}: a file to write, not a directory")
     return text
+
+
+def fault(text: str) -> faults.Fault:
+    """A simulated-bench fault KIND@SECONDS[:key=value,...], checked against sim_bench.faults.KINDS."""
+    try:
+        return faults.parse_fault(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"a fault {faults.SPEC}: {exc}, got {text!r}") from None

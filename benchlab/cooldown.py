@@ -37,8 +37,8 @@ import pandas as pd
 import scipy.optimize
 
 from benchlab.clutch import clutch_network, convection_resistance
-from benchlab.errors import InputError
-from benchlab.runfile import load_run
+from benchlab.progress import SILENT, Progress, Task
+from benchlab.runfile import load_events, load_run
 from benchlab.simulation import initial_state, input_channels
 from benchlab.solver import run_network
 
@@ -73,19 +73,6 @@ class CooldownResult:
     R_true: float = math.nan
 
 
-def _events(path: Path) -> list[tuple[float, int, str, str]]:
-    with h5py.File(path, "r") as f:
-        if "events" not in f:
-            raise InputError(path, "/events", "an events table (a run written by benchlab run)")
-        g = f["events"]
-        n = len(g["time"])
-        if "acquire/progress" in f:
-            prog = dict(zip(json.loads(f["acquire/progress"].attrs["fields"]), f["acquire/progress"][()]))
-            n = min(n, int(prog.get("event_rows", n)))
-        return [(float(t), int(c), k.decode(), d.decode()) for t, c, k, d in
-                zip(g["time"][:n], g["cycle"][:n], g["kind"][:n], g["detail"][:n])]
-
-
 def _point(detail: str) -> dict[str, float]:
     return {k: float(v) for k, v in re.findall(r"(\w+)=([-+0-9.eE]+)", detail)}
 
@@ -94,7 +81,7 @@ def segments(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, di
     """(cycle, t_start, t_end, point) of every completed cool-down of the run."""
     path = Path(path)
     out, open_ = [], {}
-    for t, cycle, kind, detail in _events(path):
+    for t, cycle, kind, detail in load_events(path):
         if kind == "cooldown_start":
             open_[cycle] = (t, _point(detail))
         elif kind == "cooldown_end" and cycle in open_:
@@ -206,26 +193,33 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
             "rmse_K": float(np.sqrt(np.nanmean(err ** 2))), "n": n, "chi2_red": chi2}
 
 
-def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_s: float = 1.0) -> list[CooldownResult]:
-    """Every cool-down of a cooldown-sweep run, fitted; R_true filled in for a simulated bench."""
+def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_s: float = 1.0,
+            progress: Progress = SILENT) -> list[CooldownResult]:
+    """Every cool-down of a cooldown-sweep run, fitted (one progress step each); R_true filled in for a simulated bench."""
     path = Path(path)
     run = load_run(path)
     truth = None
     with h5py.File(path, "r") as f:
         if "sim_truth" in f.attrs:
             truth = json.loads(f.attrs["sim_truth"]).get("params")
-    results = []
-    for cycle, t0, t1, point in segments(path):
-        rpm, state = point.get("engine_speed", math.nan), int(point.get("clutch_state", 0))
-        fit = fit_segment(run, params, t0, t1, sample_s, engine_speed=rpm if math.isfinite(rpm) else None)
-        r_true = math.nan
-        if truth is not None:
-            r_true = float(np.asarray(convection_resistance(truth, {"engine_speed": np.array([rpm]),
-                                                                     "clutch_state": np.array([float(state)])})).ravel()[0])
-        results.append(CooldownResult(cycle, rpm, state, point.get("slip_speed", math.nan), t0, t1, fit["R"],
-                                      fit["R_se"], COVERAGE_K * math.hypot(fit["R_se"], SYSTEMATIC_REL * fit["R"]), fit["T_P0"], fit["T_P0_se"],
-                                      fit["rmse_K"], int(fit["n"]), fit["chi2_red"], r_true))
-    return results
+    found = segments(path)
+    with progress.task("cool-downs", len(found), unit="fit") as task:
+        return [_fit_cooldown(run, params, sample_s, truth, *segment, task) for segment in found]
+
+
+def _fit_cooldown(run: pd.DataFrame, params: Mapping[str, float], sample_s: float, truth: Mapping[str, float] | None,
+                  cycle: int, t0: float, t1: float, point: Mapping[str, float], task: Task) -> CooldownResult:
+    """One cool-down's fit, with the plant's true resistance at its operating point where known."""
+    rpm, state = point.get("engine_speed", math.nan), int(point.get("clutch_state", 0))
+    fit = fit_segment(run, params, t0, t1, sample_s, engine_speed=rpm if math.isfinite(rpm) else None)
+    r_true = math.nan
+    if truth is not None:
+        r_true = float(np.asarray(convection_resistance(truth, {"engine_speed": np.array([rpm]),
+                                                                 "clutch_state": np.array([float(state)])})).ravel()[0])
+    task.advance()
+    return CooldownResult(cycle, rpm, state, point.get("slip_speed", math.nan), t0, t1, fit["R"], fit["R_se"],
+                          COVERAGE_K * math.hypot(fit["R_se"], SYSTEMATIC_REL * fit["R"]), fit["T_P0"],
+                          fit["T_P0_se"], fit["rmse_K"], int(fit["n"]), fit["chi2_red"], r_true)
 
 
 def fit_eq11(results: Sequence[CooldownResult]) -> dict[str, float]:

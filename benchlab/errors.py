@@ -8,12 +8,17 @@ from pathlib import Path
 from typing import Any
 
 
+def _one_line(text: str) -> str:
+    """`text` with line breaks and other unprintable characters escaped (a key read from a file may hold them)."""
+    return text if text.isprintable() else repr(text)[1:-1]
+
+
 class InputError(Exception):
     """Bad input from a user-supplied file or argument; the CLI prints it on one line and exits 2."""
 
     def __init__(self, source: "str | os.PathLike[str]", field: str, expected: str) -> None:
         self.source, self.field, self.expected = str(source), field, expected
-        super().__init__(f"{self.source}: {field}: {expected}")
+        super().__init__(f"{_one_line(self.source)}: {_one_line(field)}: {_one_line(expected)}")
 
 
 def read_document(path: "str | os.PathLike[str]", what: str, parse: Callable[[str], Any],

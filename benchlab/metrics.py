@@ -1,18 +1,32 @@
-"""Error figures of contract section 5: RMSE in K over the predicted channels, NRMSE per channel in %."""
+"""Error figures of contract section 5: RMSE in K over the predicted channels, NRMSE per channel in %.
+
+Also the one home of the residual's sign: every residual benchlab computes, tests, plots or reports is
+simulated − measured (positive: the model is warmer than the measurement), see docs/report.md.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import TypeVar
 
 import numpy as np
 import pandas as pd
 
 from benchlab.clutch import PREDICTED_CHANNELS
 
+#: How a residual axis or table is labelled, everywhere: the sign convention of `residual`.
+RESIDUAL_LABEL = "simulated − measured"
+Values = TypeVar("Values", np.ndarray, pd.Series, float)
+
+
+def residual(simulated: Values, measured: Values) -> Values:
+    """The model's error: simulated − measured (K for temperatures); NaN where either is missing."""
+    return simulated - measured
+
 
 def rmse_k(measured: pd.DataFrame, simulated: pd.DataFrame, channels: Iterable[str] = PREDICTED_CHANNELS) -> float:
     """Root-mean-square error in K over all valid samples of the given channels together."""
-    errors = np.concatenate([(simulated[c] - measured[c]).to_numpy() for c in channels])
+    errors = np.concatenate([residual(simulated[c], measured[c]).to_numpy() for c in channels])
     errors = errors[np.isfinite(errors)]
     return float(np.sqrt(np.mean(errors ** 2))) if errors.size else float("nan")
 

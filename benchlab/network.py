@@ -122,3 +122,14 @@ def as_samples(value: "float | np.ndarray", n: int) -> np.ndarray:
     """Broadcast a scalar-or-array law result to one float64 value per sample."""
     arr = np.asarray(value, dtype=np.float64)
     return np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr
+
+
+def state_channels(network: ThermalNetwork) -> dict[str, str]:
+    """Each state's channel name for files and figures: the first output that reads it, else the state's own name.
+
+    The clutch's P, F, A, T become T_pressure_plate, T_flywheel, T_air, T_housing (the /simulated names).
+    """
+    names = {}
+    for channel, state in network.outputs.items():
+        names.setdefault(state, channel)
+    return {state: names.get(state, state) for state in network.state_names}

@@ -8,7 +8,6 @@ report, diagnose from or estimate wear with.
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -19,6 +18,7 @@ from benchlab.model.build import build_network
 from benchlab.model.catalog import BUILTIN, builtin
 from benchlab.model.definition import ModelDefinition, parse_model
 from benchlab.network import ThermalNetwork
+from benchlab.values import finite_number
 
 #: Contract section 2: a linear parameter file may omit eq. (11)'s terms and means a1 = a2 = 0.
 LINEAR_CONVECTION = {"a1": 0.0, "b1": 0.0, "a2": 0.0, "b2": 0.0}
@@ -69,7 +69,7 @@ def check_params(model: "str | ModelDefinition", values: Mapping[str, Any], sour
         if name not in values:
             raise InputError(source, f"params.{name}", "a number (missing)")
         value = values[name]
-        if not _is_number(value):
+        if finite_number(value) is None:
             raise InputError(source, f"params.{name}", f"a finite number, got {value!r}")
         if name in positive and value <= 0:
             raise InputError(source, f"params.{name}", f"a positive value, got {value!r}")
@@ -78,12 +78,8 @@ def check_params(model: "str | ModelDefinition", values: Mapping[str, Any], sour
         clean[name] = float(value)
     if model.alias == "linear":
         clean.update(LINEAR_CONVECTION)
-    extras = {k: float(v) for k, v in values.items() if k not in clean and _is_number(v)}
+    extras = {k: float(v) for k, v in values.items() if k not in clean and finite_number(v) is not None}
     return ModelParams(model, {**extras, **clean})
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def load_params(path: "str | os.PathLike[str]", model: ModelDefinition | None = None) -> ModelParams:

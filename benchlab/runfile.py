@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -21,6 +22,18 @@ ALIGNED_UNITS: dict[str, str] = {
     "T_engine": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC",
 }
 REQUIRED = tuple(list(ALIGNED_UNITS)[:10])
+#: What each contract channel is (contract section 1): the comment an export gives the channel.
+ALIGNED_MEANING: dict[str, str] = {
+    "time": "time since run start, uniform step dt",
+    "engine_speed": "ω_e, engine-side (drive motor) speed",
+    "clutch_speed": "ω_c, transmission input shaft speed; slip Δω = ω_e − ω_c",
+    "clutch_torque": "T_c, torque transmitted by the clutch",
+    "clutch_state": "S: 1 clamped (engaged or slipping), 0 open",
+    "friction_power": "P = T_c · Δω, Δω in rad/s (eq. 4); 0 when not slipping",
+    "T_flywheel": "ϑ_F, mean of the flywheel sensors", "T_air": "ϑ_A, clutch-chamber air",
+    "T_housing": "ϑ_T, transmission housing", "T_ambient": "ϑ_amb, ambient", "T_engine": "ϑ_eng, engine",
+    "load_torque": "load machine torque", "T_flywheel_1": "flywheel sensor 1", "T_flywheel_2": "flywheel sensor 2",
+}
 TIME_TOLERANCE = 1e-6  # relative to dt
 #: Values a dry-clutch bench can measure, per unit: anything beyond (1e300, inf) is a corrupt number, not a
 #: measurement. Channels in other units are only checked for infinities.
@@ -41,6 +54,27 @@ def _open(path: Path) -> h5py.File:
         return h5py.File(path, "r")
     except OSError:
         raise InputError(path, "file", "an HDF5 run file (cannot be opened as HDF5)") from None
+
+
+def load_attrs(path: "str | os.PathLike[str]") -> dict[str, str]:
+    """Every root attribute of the run file as text (JSON-valued ones such as `sim_truth` stay JSON text)."""
+    with _open(Path(path)) as f:
+        return {k: _text(v) for k, v in f.attrs.items()}
+
+
+def load_events(path: "str | os.PathLike[str]") -> list[tuple[float, int, str, str]]:
+    """The run's /events as (time s, cycle, kind, detail), up to the progress record of a file still running."""
+    path = Path(path)
+    with _open(path) as f:
+        if "events" not in f:
+            raise InputError(path, "/events", "an events table (a run written by benchlab run)")
+        g = f["events"]
+        n = len(g["time"])
+        if "acquire/progress" in f:
+            prog = dict(zip(json.loads(f["acquire/progress"].attrs["fields"]), f["acquire/progress"][()]))
+            n = min(n, int(prog.get("event_rows", n)))
+        return [(float(t), int(c), _text(k), _text(d)) for t, c, k, d in
+                zip(g["time"][:n], g["cycle"][:n], g["kind"][:n], g["detail"][:n])]
 
 
 def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = (),
@@ -160,12 +194,44 @@ def write_run(path: "str | os.PathLike[str]", frame: pd.DataFrame, dt: float, pr
             ds.attrs["units"] = units[name]
 
 
-def write_simulated(path: "str | os.PathLike[str]", time: np.ndarray, simulated: pd.DataFrame,
+def write_simulated(path: "str | os.PathLike[str]", run: "str | os.PathLike[str]", simulated: pd.DataFrame,
                     attrs: Mapping[str, str]) -> None:
-    """Write the contract's /simulated group (time plus the model's temperatures, degC)."""
+    """Write SIM.h5: a run file in its own right (the run's root attributes and /aligned, copied as stored, so
+    every command that reads a run reads it) plus the contract's /simulated group on the run's grid (time, s;
+    the model's temperatures, degC) and `attrs` saying where it came from (source run, parameters, model)."""
+    if Path(path).resolve() == Path(run).resolve():
+        raise InputError(path, "--out", "a file other than the run file it simulates")
+    with h5py.File(run, "r") as src, h5py.File(path, "w") as f:
+        f.attrs.update(src.attrs)
+        f.attrs.update(attrs)
+        src.copy(src["aligned"], f, "aligned")
+        _write_group(f, "simulated", src["aligned/time"][()].astype(np.float64),
+                     {name: (simulated[name].to_numpy(np.float64), "degC") for name in simulated.columns})
+
+
+def write_results(path: "str | os.PathLike[str]", group_name: str, time: np.ndarray,
+                  columns: Mapping[str, tuple[np.ndarray, str]], attrs: Mapping[str, str]) -> None:
+    """Write a results file: root attributes and one group of `time` (s) plus channels, each with its unit."""
     with h5py.File(path, "w") as f:
         f.attrs.update(attrs)
-        group = f.create_group("simulated")
-        group.create_dataset("time", data=time).attrs["units"] = "s"
-        for name in simulated.columns:
-            group.create_dataset(name, data=simulated[name].to_numpy(np.float64)).attrs["units"] = "degC"
+        _write_group(f, group_name, time, columns)
+
+
+def _write_group(f: h5py.File, group_name: str, time: np.ndarray, columns: Mapping[str, tuple[np.ndarray, str]]) -> None:
+    """One group of results: `time` (s) and each channel as float64 with its unit."""
+    group = f.create_group(group_name)
+    group.create_dataset("time", data=time).attrs["units"] = "s"
+    for name, (values, unit) in columns.items():
+        group.create_dataset(name, data=np.asarray(values, dtype=np.float64)).attrs["units"] = unit
+
+
+def load_truth(path: "str | os.PathLike[str]") -> pd.DataFrame | None:
+    """The simulated bench's /truth: the plant's true temperatures (degC) on the /aligned grid, named like
+    /simulated (T_pressure_plate, ...); None for a run without it (hardware, imported, killed before closing)."""
+    path = Path(path)
+    with _open(path) as f:
+        if "truth" not in f:
+            return None
+        frame = pd.DataFrame({name: ds[()].astype(np.float64) for name, ds in f["truth"].items()})
+    frame.attrs["source"] = str(path)
+    return frame

@@ -353,3 +353,14 @@ def run_network(network: ThermalNetwork, params: Params, channels: Channels, dt:
                 resolution: float = DEFAULT_RESOLUTION) -> np.ndarray:
     """Simulate the network over the channels: states (N + 1, n), row k at time k*dt."""
     return propagate(discretise(network, params, channels, dt, resolution), x0)
+
+
+def conductance_matrices(network: ThermalNetwork, params: Params, links: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """dA/dg (n, n) and dB/dg (n, m): how the continuous system changes per W/K of conductance added to each of
+    the links `links` (indices into network.links); an observer that corrects a link law online needs them."""
+    on = [np.ones(1) if i in links else np.zeros(1) for i in range(len(network.links))]
+    off = [np.zeros(1)] * len(network.links)
+    affine = [np.zeros(1)] * len(_coefficient_terms(network))  # temperature-affine heat: no conductance, cancels
+    A1, B1 = _system_matrices(network, params, on, affine, 1)
+    A0, B0 = _system_matrices(network, params, off, affine, 1)
+    return A1[0] - A0[0], B1[0] - B0[0]

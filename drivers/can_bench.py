@@ -7,10 +7,13 @@ already stamps on the run clock (`"run"`, the simulated bench), or the receive t
 gives none (`"receive"`). `poll()` = `send_due()` (every cyclic command frame, PC heartbeat and, while
 active, emergency stop that fell due since the last call, at its DBC cycle) + `receive()` (every waiting
 frame, none dropped, decoded and watched: silent = a watched message not seen within `silent_cycles` cycle
-times; faulted = fault code ≠ 0 or fault state; alive counter not +1). Frames with an unknown id or a wrong
-DLC are counted, never decoded. With a `log` (a python-can Listener such as `can.Logger("run.blf")`) every
-frame sent and received is logged, sorted by time at each `receive()`, in the bus's time base; a log that cannot be written
-raises CanLogError.
+times; faulted = fault code ≠ 0 or fault state; alive counter not +1). The waiting frames are taken as one
+array (drivers/can_frames.py) and decoded, watched and logged per message id in bulk, with the same results
+as frame by frame; `receive_blocks()` hands them out as columns per message, `receive()` as one CanSample
+per frame. Frames with an unknown id or a wrong DLC are counted, never decoded. With a `log` (a python-can
+Listener such as `can.Logger("run.blf")`; a BLF writer is fed in bulk, drivers/can_log.py) every frame sent
+and received is logged, sorted by time at each `receive()`, in the bus's time base; a log that cannot be
+written raises CanLogError.
 """
 
 from __future__ import annotations
@@ -24,16 +27,25 @@ from typing import Any, Literal
 
 import can
 import cantools
+import numpy as np
+from numba import njit
 
 from drivers import can_signals as sig
-from drivers.can_codec import MessageCodec, compile_codecs
-from drivers.errors import CanLogError
+from drivers.can_codec import CodecTable, MessageCodec, compile_codecs
+from drivers.can_frames import (ERROR, EXTENDED, REMOTE, RX, Record, drain, frames_from_messages,
+                                frames_from_records, join, pick, record)
+from drivers.can_log import log_frames
+from drivers.errors import CanBusError, CanConfigError, CanLogError
 from drivers.timebase import ClockMap
 
 EventKind = Literal["silent", "back", "fault", "fault_cleared", "alive_error", "estop", "estop_released"]
 TimestampSource = Literal["interface", "run", "receive"]
 LOG_SYNC_S = 1.0  # the log file is flushed to the OS this often
 MAX_CATCH_UP_S = 1.0  # a cyclic frame more than this late is skipped, not sent in a burst
+_STANDARD_IDS = 1 << 11
+# why a frame is not decoded (_classify): its id is not one we receive, its length is wrong, it is an error or
+# remote frame, it is our own frame echoed by the interface, or its id needs the slow lookup (extended ids)
+UNKNOWN_ID, BAD_LENGTH, ERROR_FRAME, OWN_FRAME, LOOK_UP = -1, -2, -3, -4, -5
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +56,27 @@ class CanSample:
     controller: str
     message: str
     values: dict[str, float]
+
+
+@dataclass(frozen=True, slots=True)
+class CanBlock:
+    """The frames of one message taken by one `receive_blocks()`, as columns, in the order received."""
+
+    controller: str
+    message: str
+    index: np.ndarray  # each frame's position among all frames of that receive (arrival order across messages)
+    t: np.ndarray  # run-clock time each frame was received by the interface
+    matrix: np.ndarray  # (frames, signals) physical values; column j holds logical signal keys[j]
+    keys: tuple[str, ...]
+
+    @property
+    def values(self) -> dict[str, np.ndarray]:
+        """Logical signal → its column."""
+        return {key: self.matrix[:, j] for j, key in enumerate(self.keys)}
+
+    def columns(self, keys: "tuple[str, ...] | list[str]") -> np.ndarray:
+        """The (frames, len(keys)) values of `keys`, in that order."""
+        return self.matrix.take([self.keys.index(key) for key in keys], axis=1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,7 +116,6 @@ class _Rx:
     fault_key: str | None
     state_key: str | None
     last_seen: float
-    last_alive: int | None = None
 
 
 @dataclass(slots=True)
@@ -103,6 +135,42 @@ class _Tx:
         return self.origin + self.cycles * self.cycle_s
 
 
+class _RxTable:
+    """The received messages as arrays for the compiled paths: id → slot, codec table, watched columns, state."""
+
+    def __init__(self, rx: list[_Rx], ids: list[tuple[int, bool]]) -> None:
+        self.rx = rx
+        self.codecs = CodecTable([r.codec for r in rx])
+        self.standard = np.full(_STANDARD_IDS, UNKNOWN_ID, dtype=np.int64)  # 11-bit id → slot
+        self.extended: dict[int, int] = {}
+        for slot, (ident, extended) in enumerate(ids):
+            if extended:
+                self.extended[ident] = slot
+            else:
+                self.standard[ident] = slot
+        self.length = np.array([r.codec.length for r in rx], dtype=np.int64)
+        self.alive_col, self.fault_col, self.state_col = (self._columns(rx, attr)
+                                                          for attr in ("alive_key", "fault_key", "state_key"))
+        self.alive_modulo = np.array([max(r.alive_modulo, 1) for r in rx], dtype=np.int64)
+        self.key_columns = [[j for j, key in enumerate(r.codec.columns) if key is not None] for r in rx]
+        self.keys = [tuple(r.codec.columns[j] for j in at) for r, at in zip(rx, self.key_columns)]
+        self.alive = np.full(len(rx), -1, dtype=np.int64)  # last alive counter per slot (-1: none yet)
+        self.controllers = sorted({r.controller for r in rx})
+        self.owner = np.array([self.controllers.index(r.controller) for r in rx], dtype=np.int64)
+        self.faulted = np.zeros(len(self.controllers), dtype=bool)  # per controller
+
+    @staticmethod
+    def _columns(rx: list[_Rx], attr: str) -> np.ndarray:
+        """Per slot, the value-matrix column of the signal named by `attr` (-1: the message has none)."""
+        keys = [getattr(r, attr) for r in rx]
+        return np.array([-1 if k is None else r.codec.columns.index(k) for r, k in zip(rx, keys)], dtype=np.int64)
+
+    def look_up(self, ident: int, flags: int, length: int) -> int:
+        """Slot of one frame `_classify` left to Python (an extended id), or UNKNOWN_ID / BAD_LENGTH."""
+        slot = self.extended.get(ident, UNKNOWN_ID) if flags & EXTENDED else UNKNOWN_ID
+        return slot if slot < 0 or length == self.length[slot] else BAD_LENGTH
+
+
 class CanBench:
     """Talks to the three bench controllers over any python-can bus."""
 
@@ -112,27 +180,34 @@ class CanBench:
                  idle_rpm: float = 800.0, fault_state: int = sig.STATE_FAULT, listen_only: bool = False,
                  timestamps: TimestampSource = "interface", log: can.Listener | None = None) -> None:
         if timestamps not in ("interface", "run", "receive"):
-            raise ValueError(f"timestamps: 'interface', 'run' or 'receive', got {timestamps!r}")
+            raise CanConfigError(f"timestamps: 'interface', 'run' or 'receive', got {timestamps!r}")
         self.bus, self.clock, self.idle_rpm, self.fault_state = bus, clock, idle_rpm, fault_state
         self.listen_only, self.timestamps, self.log = listen_only, timestamps, log
         self.clock_map = ClockMap()
-        self.db = cantools.database.load_file(str(dbc))
+        try:
+            self.db = cantools.database.load_file(str(dbc))
+        except (OSError, ValueError, cantools.database.Error) as exc:
+            raise CanConfigError(f"{dbc}: not a DBC cantools can load ({type(exc).__name__})") from exc
         self.stats = CanStats()
         self.latest: dict[str, float] = {}
         self.estop_active = False
         self._events: list[ControllerEvent] = []
         self._silent: dict[str, str] = {}
-        self._faulted: dict[str, bool] = {}
-        self._to_log: list[can.Message] = []
+        self._to_log: list[Record | np.ndarray] = []  # sent frames and received FRAME arrays, in order
         self._log_synced = -math.inf
         now = clock()
         self._rx, self._tx = self._compile(signals, silent_cycles, now)
+        self._rx_table = _RxTable(list(self._rx.values()), list(self._rx))
         self._tx_of = {key: tx for tx in self._tx.values() for key in tx.codec.names.values()}
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any], **kwargs: Any) -> "CanBench":
         """Build the bus from a python-can config, e.g. {"interface": "socketcan", "channel": "can0"}."""
-        return cls(can.Bus(**config), **kwargs)
+        try:
+            bus = can.Bus(**config)
+        except (can.CanError, ValueError, ImportError, OSError) as exc:  # no such interface, channel or driver
+            raise CanBusError(f"cannot open the CAN bus {dict(config)}: {exc}") from exc
+        return cls(bus, **kwargs)
 
     # -- set-points --------------------------------------------------------------------------------
     def set_drive_speed(self, rpm: float) -> None:
@@ -191,55 +266,27 @@ class CanBench:
                 tx.cycles += 1
 
     def receive(self) -> list[CanSample]:
-        """Every waiting frame at its own time, decoded and watched; then the silence watchdog at now."""
+        """Every waiting frame at its own time, decoded and watched, one CanSample per frame in arrival order."""
+        return _samples(self.receive_blocks())
+
+    def receive_blocks(self) -> list[CanBlock]:
+        """Every waiting frame at its own time, decoded and watched, as columns per message; then the watchdog."""
         now = self.clock()
-        frames = list(iter(lambda: self.bus.recv(timeout=0), None))
-        if self.log is not None:
-            self._to_log += frames
-        if self.timestamps == "interface":  # the whole batch first: its fastest frame shows the offset best
-            for msg in frames:
-                if msg.timestamp:
-                    self.clock_map.observe(msg.timestamp, now)
-        samples = []
-        for msg in frames:
-            if not msg.is_rx:  # our own frame echoed by the interface: logged, not decoded
-                continue
-            sample = self.handle(msg, self._frame_time(msg, now))
-            if sample is not None:
-                samples.append(sample)
+        try:
+            frames = drain(self.bus)
+        except can.CanError as exc:  # the interface itself failed (bus-off, adapter gone)
+            raise CanBusError(f"receiving: {exc}") from exc
+        if self.log is not None and len(frames):
+            self._to_log.append(frames)
+        blocks = self._take(frames, self._frame_times(frames, now))
         self._watch(now)
         self._flush_log()
-        return samples
+        return blocks
 
     def handle(self, msg: can.Message, t: float) -> CanSample | None:
         """Decode and watch one received frame measured at run time `t`; None (and a counter) if not decodable."""
-        stats = self.stats
-        if msg.is_error_frame or msg.is_remote_frame:
-            stats.error_frames += 1
-            return None
-        rx = self._rx.get((msg.arbitration_id, msg.is_extended_id))
-        if rx is None:
-            stats.unknown_id += 1
-            return None
-        if len(msg.data) != rx.codec.length:
-            stats.bad_dlc += 1
-            return None
-        try:
-            values = rx.codec.decode(msg.data)
-        except ValueError:
-            stats.decode_errors += 1
-            return None
-        stats.frames_ok += 1
-        rx.last_seen = max(rx.last_seen, t)
-        self.latest.update(values)
-        if rx.alive_key is not None:
-            self._check_alive(rx, int(values[rx.alive_key]), t)
-        if rx.controller == "estop":
-            self._event(t, "estop", "estop" if values.get("estop.request") else "estop_released",
-                        f"source {values.get('estop.source')}")
-        elif rx.fault_key or rx.state_key:
-            self._check_fault(rx, values, t)
-        return CanSample(t, rx.controller, rx.codec.message.name, values)
+        samples = _samples(self._take(frames_from_messages([msg]), np.array([t])))
+        return samples[0] if samples else None
 
     def pop_events(self) -> list[ControllerEvent]:
         """Controller events since the last call, oldest first."""
@@ -257,12 +304,67 @@ class CanBench:
                 log.stop()
 
     # -- internals ---------------------------------------------------------------------------------
-    def _frame_time(self, msg: can.Message, now: float) -> float:
+    def _frame_times(self, frames: np.ndarray, now: float) -> np.ndarray:
+        """Run time of each frame. Interface stamps: the whole batch maps the clocks first (its fastest frame shows
+        the offset best; all frames arrive at `now`, so observing the latest stamp is observing every one)."""
+        stamps = frames["timestamp"]
         if self.timestamps == "run":
-            return msg.timestamp
-        if self.timestamps == "interface" and msg.timestamp:
-            return min(self.clock_map.to_run(msg.timestamp), now)
-        return now
+            return stamps
+        if self.timestamps == "interface" and len(stamps):
+            stamped = stamps != 0
+            if stamped.any():
+                self.clock_map.observe(float(stamps[stamped].max()), now)
+                return np.where(stamped, np.minimum(self.clock_map.to_run(stamps), now), now)
+        return np.full(len(stamps), now)
+
+    def _take(self, frames: np.ndarray, t: np.ndarray) -> list[CanBlock]:
+        """Decode and watch received frames (run times `t`): all messages in one pass, then a block per message.
+
+        Our own frames echoed by the interface (not `is_rx`) are logged, not decoded.
+        """
+        stats, table, flags = self.stats, self._rx_table, frames["flags"]
+        slot = np.empty(len(frames), dtype=np.int64)
+        _classify(flags, frames["arbitration_id"], frames["length"], table.standard, table.length, slot)
+        counts = np.bincount(slot - LOOK_UP, minlength=1 - LOOK_UP).tolist()  # index 0: LOOK_UP ... 4: UNKNOWN_ID
+        if counts[0]:
+            for i in np.flatnonzero(slot == LOOK_UP).tolist():
+                slot[i] = table.look_up(int(frames["arbitration_id"][i]), int(flags[i]), int(frames["length"][i]))
+            counts = np.bincount(slot - LOOK_UP, minlength=1 - LOOK_UP).tolist()
+        stats.unknown_id += counts[UNKNOWN_ID - LOOK_UP]
+        stats.bad_dlc += counts[BAD_LENGTH - LOOK_UP]
+        stats.error_frames += counts[ERROR_FRAME - LOOK_UP]
+        rows = np.flatnonzero(slot >= 0)
+        slot = slot.take(rows)
+        values, valid = table.codecs.decode(slot, frames["data"].take(rows, axis=0))
+        if not valid.all():
+            stats.decode_errors += len(rows) - int(np.count_nonzero(valid))
+            rows, slot, values = rows[valid], slot[valid], values[valid]
+        if not len(rows):
+            return []
+        stats.frames_ok += len(rows)
+        order, starts, alive_wrong, alive_before, fault_change = _watch(
+            slot, values, table.alive_col, table.alive_modulo, table.alive, table.fault_col, table.state_col,
+            float(self.fault_state), table.owner, table.faulted)
+        rows, values = rows.take(order), values.take(order, axis=0)  # per message, each in the order received
+        t = t.take(rows)
+        events = []  # (arrival position, check, event): in the order the frames arrived, as frame by frame
+        if alive_wrong.any() or fault_change.any():
+            events = self._frame_events(rows, slot.take(order), values, t, alive_wrong, alive_before, fault_change)
+        bounds = starts.tolist()
+        present = [m for m in range(len(table.rx)) if bounds[m + 1] > bounds[m]]
+        firsts, ends = [bounds[m] for m in present], [bounds[m + 1] for m in present]
+        blocks = []
+        for m, a, b, newest, last in zip(present, firsts, ends, np.maximum.reduceat(t, firsts).tolist(),
+                                         values.take([e - 1 for e in ends], axis=0).tolist()):
+            rx, keys, at = table.rx[m], table.keys[m], table.key_columns[m]
+            rx.last_seen = max(rx.last_seen, newest)
+            self.latest.update(zip(keys, [last[j] for j in at]))
+            block = CanBlock(rx.controller, rx.codec.message.name, rows[a:b], t[a:b], values[a:b, at], keys)
+            if rx.controller == "estop":
+                events += self._estop_events(block)
+            blocks.append(block)
+        self._events += [event for *_, event in sorted(events, key=lambda e: e[:2])]
+        return blocks
 
     def _bus_time(self, t: float) -> float:
         """A run time in the bus's time base (for the frames the PC sends, as logged)."""
@@ -291,7 +393,7 @@ class CanBench:
 
     def _set(self, updates: Mapping[str, float]) -> None:
         if self.listen_only:
-            raise RuntimeError("CanBench was opened listen-only; it sends nothing")
+            raise CanConfigError("CanBench was opened listen-only; it sends nothing")
         touched = {}
         for key, value in updates.items():
             tx = self._tx_of[key]
@@ -314,15 +416,14 @@ class CanBench:
             self.stats.send_errors += 1
             return
         if self.log is not None:
-            self._to_log.append(msg)
+            self._to_log.append(record(msg))
 
     def _flush_log(self) -> None:
         if not self._to_log or self.log is None:
             return
-        frames, self._to_log = sorted(self._to_log, key=_timestamp), []
+        frames, self._to_log = _in_time_order(self._to_log), []
         try:
-            for msg in frames:
-                self.log.on_message_received(msg)
+            log_frames(self.log, frames)
             now = self.clock()
             if now - self._log_synced >= LOG_SYNC_S:  # written containers leave the process: a kill keeps them
                 self._log_synced = now
@@ -337,19 +438,33 @@ class CanBench:
                 pass
             raise CanLogError(f"CAN log cannot be written: {type(exc).__name__}: {exc}") from exc
 
-    def _check_alive(self, rx: _Rx, alive: int, t: float) -> None:
-        if rx.last_alive is not None and alive != (rx.last_alive + 1) % rx.alive_modulo:
-            self.stats.alive_errors += 1
-            self._event(t, rx.controller, "alive_error", f"{rx.codec.message.name}: {rx.last_alive} → {alive}")
-        rx.last_alive = alive
+    def _frame_events(self, rows: np.ndarray, slot: np.ndarray, values: np.ndarray, t: np.ndarray,
+                      alive_wrong: np.ndarray, alive_before: np.ndarray,
+                      fault_change: np.ndarray) -> list[tuple[int, int, ControllerEvent]]:
+        """Alive-counter (check 0) and fault (check 1) events `_watch` flagged, with each frame's arrival position."""
+        table, events = self._rx_table, []
+        for i in np.flatnonzero(alive_wrong | (fault_change != 0)).tolist():
+            rx, m, row = table.rx[slot[i]], slot[i], int(rows[i])
+            if alive_wrong[i]:
+                self.stats.alive_errors += 1
+                alive = int(values[i, table.alive_col[m]])
+                events.append((row, 0, ControllerEvent(float(t[i]), rx.controller, "alive_error",
+                                                       f"{rx.codec.message.name}: {alive_before[i]} → {alive}")))
+            if fault_change[i]:
+                code = int(values[i, table.fault_col[m]]) if table.fault_col[m] >= 0 else 0
+                state = "None" if table.state_col[m] < 0 else format(values[i, table.state_col[m]], "g")
+                events.append((row, 1, ControllerEvent(float(t[i]), rx.controller,
+                                                       "fault" if fault_change[i] > 0 else "fault_cleared",
+                                                       f"state {state}, code {code}")))
+        return events
 
-    def _check_fault(self, rx: _Rx, values: Mapping[str, float], t: float) -> None:
-        code = int(values.get(rx.fault_key, 0))
-        state = values.get(rx.state_key)
-        faulted = code != 0 or state == self.fault_state
-        if faulted != self._faulted.get(rx.controller, False):
-            self._faulted[rx.controller] = faulted
-            self._event(t, rx.controller, "fault" if faulted else "fault_cleared", f"state {state}, code {code}")
+    def _estop_events(self, block: CanBlock) -> list[tuple[int, int, ControllerEvent]]:
+        """An emergency stop (or its release) seen on the bus, per frame (check 1), with its arrival position."""
+        values = block.values
+        sources = values.get("estop.source", np.full(len(block.t), np.nan)).tolist()
+        return [(row, 1, ControllerEvent(t, "estop", "estop" if request else "estop_released", f"source {source:g}"))
+                for row, t, request, source in zip(block.index.tolist(), block.t.tolist(),
+                                                   values["estop.request"].tolist(), sources)]
 
     def _watch(self, now: float) -> None:
         overdue: dict[str, str] = {}
@@ -379,8 +494,89 @@ class CanBench:
     @property
     def faulted(self) -> set[str]:
         """Controllers currently reporting a fault."""
-        return {c for c, f in self._faulted.items() if f}
+        return {c for c, f in zip(self._rx_table.controllers, self._rx_table.faulted.tolist()) if f}
 
 
-def _timestamp(msg: can.Message) -> float:
-    return msg.timestamp
+def _in_time_order(items: list[Record | np.ndarray]) -> np.ndarray:
+    """Sent frames (records) and received FRAME arrays as one FRAME array, sorted by time (ties as given)."""
+    parts: list[np.ndarray] = []
+    records: list[Record] = []
+    for item in items:
+        if isinstance(item, tuple):
+            records.append(item)
+            continue
+        if records:
+            parts.append(frames_from_records(records))
+            records = []
+        parts.append(item)
+    if records:
+        parts.append(frames_from_records(records))
+    frames = join(parts)
+    return pick(frames, np.argsort(frames["timestamp"], kind="stable"))
+
+
+def _samples(blocks: list[CanBlock]) -> list[CanSample]:
+    """One CanSample per frame of `blocks`, in the order received."""
+    numbered = [(i, CanSample(t, b.controller, b.message, dict(zip(b.keys, row))))
+                for b in blocks for i, t, row in zip(b.index.tolist(), b.t.tolist(), b.matrix.tolist())]
+    numbered.sort(key=lambda pair: pair[0])
+    return [sample for _, sample in numbered]
+
+
+@njit(cache=True, nogil=True)
+def _classify(flags: np.ndarray, ident: np.ndarray, length: np.ndarray, standard: np.ndarray, slot_length: np.ndarray,
+              slot: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Per frame its message's slot, or why it is not decoded (UNKNOWN_ID, BAD_LENGTH, ... LOOK_UP)."""
+    for i in range(flags.shape[0]):
+        f = flags[i]
+        if not f & RX:
+            slot[i] = OWN_FRAME
+        elif f & (ERROR | REMOTE):
+            slot[i] = ERROR_FRAME
+        elif f & EXTENDED or ident[i] >= _STANDARD_IDS:
+            slot[i] = LOOK_UP
+        else:
+            m = standard[ident[i]]
+            slot[i] = m if m < 0 or length[i] == slot_length[m] else BAD_LENGTH
+
+
+@njit(cache=True, nogil=True)
+def _watch(slot: np.ndarray, values: np.ndarray, alive_col: np.ndarray, alive_modulo: np.ndarray, alive: np.ndarray,
+           fault_col: np.ndarray, state_col: np.ndarray, fault_state: float, owner: np.ndarray,
+           faulted: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """Decoded frames grouped by message (stable), watched frame by frame in that order.
+
+    Returns the order, each slot's start in it (slots + 1 bounds), and per position: alive counter not the
+    previous + 1 (and the previous), fault state changed (+1 faulted, -1 cleared). Updates `alive` (per slot)
+    and `faulted` (per controller, `owner` of each slot).
+    """
+    n, slots = slot.shape[0], alive_col.shape[0]
+    starts = np.zeros(slots + 1, dtype=np.int64)
+    for i in range(n):
+        starts[slot[i] + 1] += 1
+    for m in range(slots):
+        starts[m + 1] += starts[m]
+    order = np.empty(n, dtype=np.int64)
+    fill = starts[:-1].copy()
+    for i in range(n):
+        order[fill[slot[i]]] = i
+        fill[slot[i]] += 1
+    alive_wrong = np.zeros(n, dtype=np.bool_)
+    alive_before = np.full(n, -1, dtype=np.int64)
+    fault_change = np.zeros(n, dtype=np.int8)
+    for k in range(n):
+        i = order[k]
+        m = slot[i]
+        if alive_col[m] >= 0:
+            counter = np.int64(values[i, alive_col[m]])
+            if alive[m] >= 0 and counter != (alive[m] + 1) % alive_modulo[m]:
+                alive_wrong[k] = True
+                alive_before[k] = alive[m]
+            alive[m] = counter
+        if fault_col[m] >= 0 or state_col[m] >= 0:
+            code = np.int64(values[i, fault_col[m]]) if fault_col[m] >= 0 else 0
+            now_faulted = code != 0 or (state_col[m] >= 0 and values[i, state_col[m]] == fault_state)
+            if now_faulted != faulted[owner[m]]:
+                fault_change[k] = 1 if now_faulted else -1
+                faulted[owner[m]] = now_faulted
+    return order, starts, alive_wrong, alive_before, fault_change

@@ -3,6 +3,8 @@
 Same results as cantools for plain integer signals (Intel or Motorola, signed or not, linear scaling);
 messages with multiplexed or float signals fall back to cantools. Encoding saturates each signal to its raw
 range instead of raising. Output keys can be renamed (DBC signal → logical name), unmapped signals are skipped.
+`CodecTable` holds several messages' layouts as arrays so that a batch of frames of any of them is decoded or
+encoded by one compiled loop (numba), with the same numbers as the per-frame methods.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from collections.abc import Mapping
 
 import cantools
 import numpy as np
+from numba import njit
 
 
 class MessageCodec:
@@ -23,6 +26,10 @@ class MessageCodec:
         self._fallback = message.is_multiplexed() or any(s.is_float for s in message.signals)
         self._fields = [] if self._fallback else [self._field(s) for s in message.signals]
         self._limits = [(-sign, sign - 1) if sign else (0, mask) for _, _, _, mask, sign, _, _ in self._fields]
+        # key of each column of the vectorised paths' value matrices (None: a DBC signal without a logical name)
+        self.columns: tuple[str | None, ...] = (tuple(self.names.values()) if self._fallback
+                                                else tuple(f[0] for f in self._fields))
+        self._table: CodecTable | None = None
 
     def decode(self, data: bytes) -> dict[str, float]:
         """Physical values of the mapped signals; ValueError if `data` is not `length` bytes."""
@@ -46,22 +53,17 @@ class MessageCodec:
         return out
 
     def decode_array(self, payloads: np.ndarray) -> dict[str, np.ndarray]:
-        """Vectorised decode of stored raw frames, an (N, length) uint8 array: key → float64 column."""
-        if self._fallback:
-            rows = [self.decode(bytes(row)) for row in payloads]
-            return {key: np.array([r[key] for r in rows], dtype=float) for key in self.names.values()}
-        padded = np.zeros((len(payloads), 8), dtype=np.uint8)
+        """Vectorised decode of raw frames, an (N, length) uint8 array: key → float64 column.
+
+        ValueError if a row does not decode (only messages that fall back to cantools can refuse one).
+        """
+        n = len(payloads)
+        padded = np.zeros((n, self.table.payload_bytes), dtype=np.uint8)
         padded[:, :self.length] = payloads
-        little, big = padded.view("<u8").ravel(), padded.view(">u8").ravel()
-        out = {}
-        for key, is_big, shift, mask, sign, scale, offset in self._fields:
-            if key is None:
-                continue
-            shift += (8 - self.length) * 8 if is_big else 0
-            v = ((big if is_big else little) >> np.uint64(shift)) & np.uint64(mask)
-            col = v.astype(np.int64) - np.where(v & np.uint64(sign), mask + 1, 0) if sign else v.astype(np.int64)
-            out[key] = col.astype(float) if scale is None else col * scale + offset
-        return out
+        values, valid = self.table.decode(np.zeros(n, dtype=np.intp), padded)
+        if not valid.all():
+            raise ValueError(f"{self.message.name}: row {int(np.argmin(valid))} does not decode")
+        return {key: values[:, j] for j, key in enumerate(self.columns) if key is not None}
 
     def encode(self, values: Mapping[str, float]) -> bytes:
         """Payload for the mapped keys in `values`; missing signals are 0, out-of-range values saturate."""
@@ -80,24 +82,12 @@ class MessageCodec:
         data = little.to_bytes(self.length, "little")
         return (int.from_bytes(data, "big") | big).to_bytes(self.length, "big") if big else data
 
-    def encode_array(self, columns: Mapping[str, "np.ndarray | float"], n: int) -> np.ndarray:
-        """Vectorised `encode` of n frames: key → column (or one value for all); an (n, length) uint8 array."""
-        if self._fallback:
-            rows = [{k: (v[i] if np.ndim(v) else v) for k, v in columns.items()} for i in range(n)]
-            return np.frombuffer(b"".join(self.encode(r) for r in rows), dtype=np.uint8).reshape(n, self.length)
-        little, big = np.zeros(n, dtype=np.uint64), np.zeros(n, dtype=np.uint64)
-        for (key, is_big, shift, mask, sign, scale, offset), (lo, hi) in zip(self._fields, self._limits):
-            value = np.broadcast_to(np.asarray(columns.get(key, 0), dtype=float), (n,))
-            raw = np.clip(np.round(value if scale is None else (value - offset) / scale), lo, hi).astype(np.int64)
-            field = (raw & mask).astype(np.uint64) << np.uint64(shift)
-            if is_big:
-                big |= field
-            else:
-                little |= field
-        data = little.astype("<u8").view(np.uint8).reshape(n, 8)[:, :self.length]
-        if self.length and big.any():
-            data = data | big.astype(">u8").view(np.uint8).reshape(n, 8)[:, 8 - self.length:]
-        return np.ascontiguousarray(data)
+    @property
+    def table(self) -> "CodecTable":
+        """This message alone as a CodecTable (the vectorised paths)."""
+        if self._table is None:
+            self._table = CodecTable([self])
+        return self._table
 
     def _field(self, s: cantools.database.Signal) -> tuple:
         if s.byte_order == "little_endian":
@@ -108,6 +98,108 @@ class MessageCodec:
         integer = s.scale == int(s.scale) == 1 and s.offset == 0
         return (self.names.get(s.name), is_big, shift, (1 << s.length) - 1,
                 (1 << (s.length - 1)) if s.is_signed else 0, None if integer else s.scale, s.offset)
+
+
+class CodecTable:
+    """Several messages' codecs as one table: a batch of frames of any of them decoded or encoded in one compiled
+    pass. Row i of a batch belongs to message `which[i]` (its index in `codecs`); values are an (n, width) matrix
+    whose column j holds the signal `codecs[which[i]].columns[j]`; payloads are (n, 8+) uint8 rows, each
+    message's bytes first and zeros after. Messages that fall back to cantools or are longer than 8 bytes go row
+    by row through MessageCodec.decode/encode. Same numbers as MessageCodec.decode/encode, bit for bit.
+    """
+
+    def __init__(self, codecs: "list[MessageCodec]") -> None:
+        self.codecs = codecs
+        self.width = max([len(c.columns) for c in codecs] + [1])
+        # per message and column: [big-endian word?, shift in the padded 8-byte word, mask, sign bit] and
+        # [scale, offset, lowest raw, highest raw]; columns without a field keep mask 0 (value 0)
+        self._bits = np.zeros((len(codecs), 4, self.width), dtype=np.uint64)
+        self._linear = np.zeros((len(codecs), 4, self.width))
+        self._linear[:, 0] = 1.0
+        self._row_by_row = [m for m, c in enumerate(codecs) if c._fallback or c.length > 8]
+        self.compiled = np.array([m not in self._row_by_row for m in range(len(codecs))])
+        self.payload_bytes = max([8] + [c.length for c in codecs])
+        for m, c in enumerate(codecs):
+            if m in self._row_by_row:
+                continue
+            for j, ((_, is_big, shift, mask, sign, scale, offset), (lo, hi)) in enumerate(zip(c._fields, c._limits)):
+                self._bits[m, :, j] = is_big, shift + (8 * (8 - c.length) if is_big else 0), mask, sign
+                self._linear[m, :, j] = 1.0 if scale is None else scale, offset, lo, hi
+
+    def decode(self, which: np.ndarray, payloads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Values (n, width) of each row's message, and which rows decoded (the others are NaN)."""
+        values = np.empty((len(which), self.width))
+        valid = np.ones(len(which), dtype=bool)
+        _decode_rows(which, payloads, self._bits, self._linear, self.compiled, values)
+        for m in self._row_by_row:
+            codec = self.codecs[m]
+            for i in np.flatnonzero(which == m).tolist():
+                try:
+                    decoded = codec.decode(bytes(payloads[i, :codec.length]))
+                except ValueError:
+                    values[i], valid[i] = np.nan, False
+                    continue
+                values[i] = np.nan
+                values[i, :len(codec.columns)] = [decoded.get(key, np.nan) for key in codec.columns]
+        return values, valid
+
+    def encode(self, which: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Payloads (n, payload_bytes) of each row's message from its values; out-of-range values saturate."""
+        payloads = np.zeros((len(which), self.payload_bytes), dtype=np.uint8)
+        _encode_rows(which, values, self._bits, self._linear, self.compiled, payloads)
+        for m in self._row_by_row:
+            codec = self.codecs[m]
+            for i in np.flatnonzero(which == m).tolist():
+                data = codec.encode(dict(zip(codec.columns, values[i].tolist())))
+                payloads[i, :len(data)] = np.frombuffer(data, dtype=np.uint8)
+        return payloads
+
+
+@njit(cache=True, nogil=True)
+def _words(payload: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """The first 8 bytes of a payload as little-endian and as big-endian unsigned words."""
+    little = np.uint64(0)
+    big = np.uint64(0)
+    for b in range(8):
+        byte = np.uint64(payload[b])
+        little |= byte << np.uint64(8 * b)
+        big = (big << np.uint64(8)) | byte
+    return little, big
+
+
+@njit(cache=True, nogil=True)
+def _decode_rows(which: np.ndarray, payloads: np.ndarray, bits: np.ndarray, linear: np.ndarray,
+                 compiled: np.ndarray, values: np.ndarray) -> None:  # pragma: no cover - compiled
+    """CodecTable.decode of the rows whose message is compiled: each field out of its 8-byte word, sign, scale."""
+    for i in np.flatnonzero(compiled[which]):
+        m = which[i]
+        little, big = _words(payloads[i])
+        for j in range(values.shape[1]):
+            raw = ((big if bits[m, 0, j] else little) >> bits[m, 1, j]) & bits[m, 2, j]
+            signed = np.int64(raw - ((raw & bits[m, 3, j]) << np.uint64(1)))  # two's complement: minus 2 × sign bit
+            values[i, j] = signed * linear[m, 0, j] + linear[m, 1, j]
+
+
+@njit(cache=True, nogil=True)
+def _encode_rows(which: np.ndarray, values: np.ndarray, bits: np.ndarray, linear: np.ndarray,
+                 compiled: np.ndarray, payloads: np.ndarray) -> None:  # pragma: no cover - compiled
+    """CodecTable.encode of the rows whose message is compiled: scale, round half to even, saturate, place."""
+    for i in range(which.shape[0]):
+        m = which[i]
+        if not compiled[m]:
+            continue
+        little = np.uint64(0)
+        big = np.uint64(0)
+        for j in range(values.shape[1]):
+            raw = np.rint((values[i, j] - linear[m, 1, j]) / linear[m, 0, j])
+            raw = min(max(raw, linear[m, 2, j]), linear[m, 3, j])
+            field = (np.uint64(np.int64(raw)) & bits[m, 2, j]) << bits[m, 1, j]
+            if bits[m, 0, j]:
+                big |= field
+            else:
+                little |= field
+        for b in range(8):
+            payloads[i, b] = ((little >> np.uint64(8 * b)) | (big >> np.uint64(8 * (7 - b)))) & np.uint64(0xFF)
 
 
 def compile_codecs(db: cantools.database.Database, signals: Mapping[str, tuple[str, str]] | None = None

@@ -6,13 +6,17 @@ after each scan and entries are *recorded* in `error_log` (with host time), so o
 scan; a reply that cannot be parsed raises InstrumentError. Silence raises DeviceTimeout, a failing
 transport ConnectionLost (then `reconnect()`). Open sensors (overload +9.9E37) and shorts (< `short_ohm`)
 become readings with status "open"/"short" and no number; values outside −200…850 °C have status "range".
+
+Two ways to scan: `read()` waits for the reply (probe, scripts); `start_scan()` + `collect()` never wait
+(the runner's loop, which must keep CAN frames cyclic and interlocks watched while a silent instrument
+times out on the loop's own clock).
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol
 
@@ -31,7 +35,10 @@ class SerialPort(Protocol):
     timeout: float | None
 
     def write(self, data: bytes) -> int | None: ...
+    def read(self, size: int = 1) -> bytes: ...
     def read_until(self, expected: bytes = b"\n", size: int | None = None) -> bytes: ...
+    @property
+    def in_waiting(self) -> int: ...
     def reset_input_buffer(self) -> None: ...
     def open(self) -> None: ...
     def close(self) -> None: ...
@@ -71,6 +78,8 @@ class Pt1000Scanner:
         self.channels = sorted(set(channels))
         self.coefficients = {ch: (coefficients or {}).get(ch, cvd.PT1000) for ch in self.channels}
         self.error_log: list[ErrorRecord] = []
+        self._scan_steps: Generator[None, None, list[Pt1000Reading]] | None = None
+        self._rx = bytearray()
 
     @classmethod
     def open(cls, url: str, channels: Sequence[int], *, baudrate: int = 115200, timeout: float = 2.0,
@@ -103,6 +112,38 @@ class Pt1000Scanner:
     def read(self) -> list[Pt1000Reading]:
         """Run one scan (`READ?`) and return a reading per channel; instrument errors go to `error_log`."""
         return self._scan("READ?")
+
+    def start_scan(self) -> None:
+        """Send `READ?` and return at once; `collect()` gathers the reply without ever blocking (acquisition loops)."""
+        self._rx.clear()
+        try:
+            self.port.reset_input_buffer()  # a late reply to an earlier, timed-out scan is not this scan's
+        except (serial.SerialException, OSError) as exc:
+            raise ConnectionLost(f"READ?: {exc}") from exc
+        self._scan_steps = self._scan_without_waiting(self.clock() + (self.port.timeout or 0.0))
+
+    def collect(self) -> list[Pt1000Reading] | None:
+        """The scan started by `start_scan()` if its reply (and the error queue's) has arrived, else None.
+
+        Never waits: a loop that also keeps CAN frames cyclic and interlocks watched calls it every tick.
+        DeviceTimeout once the port's time-out has passed on the loop's clock; ConnectionLost if the port fails.
+        """
+        if self._scan_steps is None:
+            raise DriverConfigError("collect() without start_scan()")
+        try:
+            next(self._scan_steps)
+            return None
+        except StopIteration as done:
+            self._scan_steps = None
+            return done.value
+        except BaseException:
+            self._scan_steps = None
+            raise
+
+    @property
+    def scanning(self) -> bool:
+        """A scan was started and is not collected yet."""
+        return self._scan_steps is not None
 
     def initiate(self) -> None:
         """Start a scan (`INIT`) without waiting; collect it later with `fetch()`."""
@@ -163,6 +204,44 @@ class Pt1000Scanner:
             raise InstrumentError(str(exc), tuple(self.drain_errors())) from None
         self.error_log.extend(ErrorRecord(t_host, code, text) for code, text in self.drain_errors())
         return [self.convert(ch, v, t_host) for ch, v in zip(self.channels, values)]
+
+    def _scan_without_waiting(self, deadline: float) -> Generator[None, None, list[Pt1000Reading]]:
+        """`READ?`, its reply, then the error queue (`SYST:ERR?` until 0), yielding whenever a reply is not complete."""
+        self._write("READ?")
+        reply = yield from self._line("READ?", deadline)
+        t_host = self.clock()
+        entries = []
+        for _ in range(_MAX_ERRORS_DRAINED):
+            self._write("SYST:ERR?")
+            code, text = scpi.parse_error((yield from self._line("SYST:ERR?", deadline)))
+            if code == 0:
+                break
+            entries.append((code, text))
+        try:
+            values = scpi.parse_values(reply, len(self.channels))
+        except InstrumentError as exc:  # a reply that is not a scan: with what the error queue said
+            raise InstrumentError(str(exc), tuple(entries)) from None
+        self.error_log.extend(ErrorRecord(t_host, code, text) for code, text in entries)
+        return [self.convert(ch, v, t_host) for ch, v in zip(self.channels, values)]
+
+    def _line(self, command: str, deadline: float) -> Generator[None, None, bytes]:
+        """The next reply line, taking only the bytes already there; yields while it is incomplete."""
+        while True:
+            try:
+                waiting = self.port.in_waiting
+                if waiting:
+                    self._rx += self.port.read(waiting)
+            except (serial.SerialException, OSError) as exc:
+                raise ConnectionLost(f"{command}: {exc}") from exc
+            end = self._rx.find(b"\n")
+            if end >= 0:
+                line = bytes(self._rx[:end + 1])
+                del self._rx[:end + 1]
+                return line
+            if self.clock() > deadline:
+                raise DeviceTimeout(f"{command}: no complete reply within {self.port.timeout} s "
+                                    f"(got {bytes(self._rx[:40])!r})")
+            yield
 
     def _command(self, *commands: str) -> None:
         for command in commands:

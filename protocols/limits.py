@@ -10,13 +10,22 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
+from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
+from benchlab.values import positive_number
 from protocols.schedule import CONDITION_CHANNELS, OPERATORS, PHASES, Step, duration_s
 
 RPM = math.pi / 30.0
-ACTIONS = ("wait", "abort")
+ACTIONS = ("hold", "abort")
+# A reading older than this (s) is an unknown reading: its `stale_<channel>` interlock trips. The node's radio
+# loses a few frames in a row routinely (seconds), the scanner reads every 0.2 s and may time out once (2 s),
+# the status frames come every 10 ms.
+DEFAULT_MAX_AGE_S = {"T_flywheel": 10.0, "T_air": 5.0, "engine_speed": 0.5, "clutch_speed": 0.5, "clutch_torque": 0.5}
+MAX_AGE_LIMIT_S = 60.0  # an age beyond this would leave the bench blind for too long: refused in BENCH.toml
+INTERLOCKS = ("flywheel_over_temperature", "air_over_temperature", "controller_lost",
+              *(f"stale_{channel}" for channel in DEFAULT_MAX_AGE_S), "slip_time", "slip_energy")
 
 
 @dataclass(frozen=True)
@@ -30,17 +39,25 @@ class BenchLimits:
     # interlocks
     max_flywheel_c: float = 110.0
     max_air_c: float = 80.0
-    radio_silence_s: float = 10.0
+    max_age_s: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_MAX_AGE_S))
     max_slip_time_s: float = 15.0
     max_slip_energy_j: float = 150e3
     heartbeat: bool = True  # a controller's heartbeat lost (the CAN driver's watchdog) trips an interlock
-    on_interlock: str = "wait"  # "wait": safe state, wait until clear + resume_after_s, next cycle; "abort"
+    on_interlock: str = "hold"  # "hold": safe state, hold until clear + resume_after_s, next cycle; "abort"
+    actions: Mapping[str, str] = field(default_factory=dict)  # per interlock name, overriding on_interlock
     resume_after_s: float = 30.0
     clear_margin_k: float = 10.0  # an over-temperature clears this far below its limit
-    max_wait_s: float = 1800.0  # "wait" gives up (abort) after this long
+    max_wait_s: float = 1800.0  # "hold" gives up (abort) after this long
     # drivetrain facts used for estimates
     gear_ratio: float = 15.0
     load_inertia_kgm2: float = 70.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "max_age_s", {**DEFAULT_MAX_AGE_S, **self.max_age_s})
+
+    def action(self, interlock: str) -> str:
+        """What the named interlock does when it trips: "hold" or "abort"."""
+        return self.actions.get(interlock, self.on_interlock)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "<limits>", prefix: str = "limits") -> "BenchLimits":
@@ -52,20 +69,53 @@ class BenchLimits:
         for key, value in values.items():
             if key not in known:
                 raise InputError(source, f"{prefix}.{key}", f"one of {', '.join(known)} (unknown key)")
+            if key == "max_age_s":
+                clean[key] = _table(value, DEFAULT_MAX_AGE_S, source, f"{prefix}.{key}", _age)
+                continue
+            if key == "actions":
+                clean[key] = _table(value, INTERLOCKS, source, f"{prefix}.{key}", _action)
+                continue
             default = known[key].default
             if isinstance(default, bool):
                 if not isinstance(value, bool):
                     raise InputError(source, f"{prefix}.{key}", f"true or false, got {value!r}")
             elif isinstance(default, str):
-                if value not in ACTIONS:
-                    raise InputError(source, f"{prefix}.{key}", f"one of {', '.join(ACTIONS)}, got {value!r}")
-            elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                _action(value, source, f"{prefix}.{key}")
+            elif positive_number(value) is None:
                 raise InputError(source, f"{prefix}.{key}", f"a positive number, got {value!r}")
             clean[key] = float(value) if isinstance(default, float) else value
         return cls(**clean)
 
     def as_dict(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return {f.name: (dict(v) if isinstance(v := getattr(self, f.name), Mapping) else v) for f in fields(self)}
+
+
+def _table(value: Any, keys: Any, source: str, name: str, check: Any) -> dict[str, Any]:
+    """A sub-table of [limits] whose keys come from `keys`, each value passed through `check`."""
+    from benchlab.errors import InputError
+
+    if not isinstance(value, Mapping):
+        raise InputError(source, name, f"a table, got {value!r}")
+    for key in value:
+        if key not in keys:
+            raise InputError(source, f"{name}.{key}", f"one of {', '.join(keys)} (unknown key)")
+    return {key: check(v, source, f"{name}.{key}") for key, v in value.items()}
+
+
+def _age(value: Any, source: str, name: str) -> float:
+    from benchlab.errors import InputError
+
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= MAX_AGE_LIMIT_S:
+        raise InputError(source, name, f"an age in s, more than 0 and at most {MAX_AGE_LIMIT_S:g}, got {value!r}")
+    return float(value)
+
+
+def _action(value: Any, source: str, name: str) -> str:
+    from benchlab.errors import InputError
+
+    if value not in ACTIONS:
+        raise InputError(source, name, f"one of {', '.join(ACTIONS)}, got {value!r}")
+    return value
 
 
 def launch_estimate(step: Step, limits: BenchLimits) -> tuple[float, float, bool]:
@@ -85,53 +135,81 @@ def launch_estimate(step: Step, limits: BenchLimits) -> tuple[float, float, bool
     return t, step.clutch_torque_nm * omega * t, False
 
 
+@dataclass(frozen=True)
+class ScheduleProblem:
+    """One thing a schedule asks that the bench must not do: its step (None: the whole schedule), the Step field
+    it is about (e.g. "engine_speed_rpm", "until[0].value") and the line that says why."""
+
+    step: int | None
+    field: str
+    text: str
+
+    def __str__(self) -> str:
+        return self.text
+
+
 def check_schedule(steps: Sequence[Step], limits: BenchLimits) -> list[str]:
     """Problems of a schedule against the limits, one line each (empty: the schedule may run)."""
-    problems: list[str] = []
+    return [p.text for p in schedule_problems(steps, limits)]
+
+
+def schedule_problems(steps: Sequence[Step], limits: BenchLimits) -> list[ScheduleProblem]:
+    """Problems of a schedule against the limits, each naming its step and field (empty: the schedule may run).
+
+    Every comparison is written so that NaN fails it: an unknown set-point is never within the limits.
+    """
+    problems: list[ScheduleProblem] = []
     for i, s in enumerate(steps):
         where = f"step {i} (cycle {s.cycle}, {s.phase})"
+
+        def add(field: str, text: str) -> None:
+            problems.append(ScheduleProblem(i, field, f"{where}: {text}"))
+
         if s.phase not in PHASES:
-            problems.append(f"{where}: unknown phase {s.phase!r}")
+            add("phase", f"unknown phase {s.phase!r}")
             continue
         if not (0.0 <= s.engine_speed_rpm <= limits.max_engine_speed_rpm):
-            problems.append(f"{where}: engine speed {s.engine_speed_rpm:g} rpm outside 0..{limits.max_engine_speed_rpm:g}")
+            add("engine_speed_rpm", f"engine speed {s.engine_speed_rpm:g} rpm outside 0..{limits.max_engine_speed_rpm:g}")
         if not (0.0 <= s.clutch_torque_nm <= limits.max_clutch_torque_nm):
-            problems.append(f"{where}: clutch torque {s.clutch_torque_nm:g} N*m outside 0..{limits.max_clutch_torque_nm:g}")
-        if abs(s.load_torque_nm) > limits.max_load_torque_nm:
-            problems.append(f"{where}: load torque {s.load_torque_nm:g} N*m beyond ±{limits.max_load_torque_nm:g}")
-        if not (s.duration_s > 0 and math.isfinite(s.duration_s)):
-            problems.append(f"{where}: duration {s.duration_s!r} s is not positive")
+            add("clutch_torque_nm", f"clutch torque {s.clutch_torque_nm:g} N*m outside 0..{limits.max_clutch_torque_nm:g}")
+        if not abs(s.load_torque_nm) <= limits.max_load_torque_nm:
+            add("load_torque_nm", f"load torque {s.load_torque_nm:g} N*m beyond ±{limits.max_load_torque_nm:g}")
+        if not -1 <= s.cycle <= MAX_CYCLES:
+            add("cycle", f"cycle {s.cycle} outside -1..{MAX_CYCLES} (benchlab.bounds)")
+        if not 0 < s.duration_s <= MAX_RUN_DURATION_S:
+            add("duration_s", f"duration {s.duration_s!r} s outside (0, {MAX_RUN_DURATION_S:g}]")
+        if s.estimate_s is not None and not 0 <= s.estimate_s <= MAX_RUN_DURATION_S:
+            add("estimate_s", f"estimated duration {s.estimate_s!r} s outside 0..{MAX_RUN_DURATION_S:g}")
         if s.phase == "launch":
             t, energy, _ = launch_estimate(s, limits)
-            if s.duration_s > limits.max_slip_time_s:
-                problems.append(f"{where}: slip time up to {s.duration_s:g} s beyond the {limits.max_slip_time_s:g} s limit")
-            if energy > limits.max_slip_energy_j:
-                problems.append(f"{where}: slip energy up to {energy / 1e3:.0f} kJ beyond the "
-                                f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
+            if not s.duration_s <= limits.max_slip_time_s:
+                add("duration_s", f"slip time up to {s.duration_s:g} s beyond the {limits.max_slip_time_s:g} s limit")
+            if not energy <= limits.max_slip_energy_j:
+                add("clutch_torque_nm", f"slip energy up to {energy / 1e3:.0f} kJ beyond the "
+                                        f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
         if s.phase == "heat":
             energy = s.clutch_torque_nm * s.engine_speed_rpm * RPM * s.pulse_s
             if not (0 < s.pulse_s <= limits.max_slip_time_s):
-                problems.append(f"{where}: heat pulse {s.pulse_s:g} s outside 0..{limits.max_slip_time_s:g} s")
-            if energy > limits.max_slip_energy_j:
-                problems.append(f"{where}: heat pulse energy {energy / 1e3:.0f} kJ beyond the "
-                                f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
-            if s.rest_s <= 0:
-                problems.append(f"{where}: heat pulses need a rest between them (rest_s > 0)")
-            if s.clutch_torque_nm >= s.load_torque_nm / limits.gear_ratio:
-                problems.append(f"{where}: load torque {s.load_torque_nm:g} N*m cannot hold the output against "
-                                f"{s.clutch_torque_nm:g} N*m clutch torque")
-        for c in s.until:
+                add("pulse_s", f"heat pulse {s.pulse_s:g} s outside 0..{limits.max_slip_time_s:g} s")
+            if not energy <= limits.max_slip_energy_j:
+                add("pulse_s", f"heat pulse energy {energy / 1e3:.0f} kJ beyond the "
+                               f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
+            if not s.rest_s > 0:
+                add("rest_s", "heat pulses need a rest between them (rest_s > 0)")
+            if not s.clutch_torque_nm < s.load_torque_nm / limits.gear_ratio:
+                add("load_torque_nm", f"load torque {s.load_torque_nm:g} N*m cannot hold the output against "
+                                      f"{s.clutch_torque_nm:g} N*m clutch torque")
+        for j, c in enumerate(s.until):
             if c.channel not in CONDITION_CHANNELS:
-                problems.append(f"{where}: condition channel {c.channel!r} not one of {', '.join(CONDITION_CHANNELS)}")
+                add(f"until[{j}].channel",
+                    f"condition channel {c.channel!r} not one of {', '.join(CONDITION_CHANNELS)}")
             if c.op not in OPERATORS:
-                problems.append(f"{where}: condition operator {c.op!r} not one of {', '.join(OPERATORS)}")
+                add(f"until[{j}].op", f"condition operator {c.op!r} not one of {', '.join(OPERATORS)}")
             limit = {"T_flywheel": limits.max_flywheel_c, "T_air": limits.max_air_c}.get(c.channel)
-            if limit is not None and c.op in (">=", "steady") and c.value + c.band_k > limit - limits.clear_margin_k:
-                problems.append(f"{where}: target {c.channel} {c.value:g} too close to its interlock at {limit:g}")
-    from benchlab.bounds import MAX_RUN_DURATION_S
-
+            if limit is not None and c.op in (">=", "steady") and not c.value + c.band_k <= limit - limits.clear_margin_k:
+                add(f"until[{j}].value", f"target {c.channel} {c.value:g} too close to its interlock at {limit:g}")
     planned = duration_s(tuple(steps))
-    if planned > MAX_RUN_DURATION_S:
-        problems.append(f"planned duration {planned:.0f} s beyond the longest run a bench does, "
-                        f"{MAX_RUN_DURATION_S:.0f} s (benchlab.bounds)")
+    if not planned <= MAX_RUN_DURATION_S:
+        problems.append(ScheduleProblem(None, "duration_s", f"planned duration {planned:.0f} s beyond the longest run a "
+                                        f"bench does, {MAX_RUN_DURATION_S:.0f} s (benchlab.bounds)"))
     return problems

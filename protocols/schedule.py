@@ -7,7 +7,11 @@ torque by the load machine). Nothing here moves hardware.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable
+from dataclasses import MISSING, asdict, dataclass, field, fields
+from typing import Any, NamedTuple
+
+from benchlab.values import finite_number
 
 #: Condition operators: a channel reaching a value, or settling at it.
 OPERATORS = (">=", "<=", "steady")
@@ -81,17 +85,128 @@ class Step:
 PHASES = ("launch", "drive", "open", "heat")
 
 
+class Setpoints(NamedTuple):
+    """What the controllers are told during a step (the arguments of the bench's `command`)."""
+
+    engine_speed_rpm: float
+    clutch_torque_nm: float
+    clutch_open: bool
+    load_torque_nm: float
+
+
+def setpoints(step: Step, synchronised: bool = True, pulse_on: bool = False) -> Setpoints:
+    """The set-points of `step` (its phase's meaning, see `Step`): the one step interpreter.
+
+    `synchronised`: the cycle's launch reached synchronous speed (else "drive" keeps the clutch open);
+    `pulse_on`: a "heat" step is inside one of its pulses. The runner and the batch simulator both play
+    schedules through this.
+    """
+    clamped = (step.phase == "launch" or (step.phase == "drive" and synchronised)
+               or (step.phase == "heat" and pulse_on))
+    return Setpoints(step.engine_speed_rpm, step.clutch_torque_nm if clamped else 0.0, not clamped,
+                     step.load_torque_nm)
+
+
 def duration_s(steps: tuple[Step, ...]) -> float:
     """Planned duration; a launch's duration is its maximum slip time, a closed-loop step's its estimate."""
     return float(sum(step.expected_s for step in steps))
 
 
-def step_from_dict(row: dict) -> Step:
-    """Inverse of `Step.as_dict` (JSON round trip: lists back to tuples)."""
-    row = dict(row)
-    row["until"] = tuple(Condition(**c) for c in row.get("until", ()))
-    row["point"] = tuple((str(k), float(v)) for k, v in row.get("point", ()))
-    return Step(**row)
+class StepFieldError(ValueError):
+    """A stored step that is not a Step: `field` names the entry (e.g. "until[0].value"; "" the step itself),
+    `expected` what it should be."""
+
+    def __init__(self, field: str, expected: str) -> None:
+        self.field, self.expected = field, expected
+        super().__init__(f"{field}: {expected}")
+
+
+def _number(value: Any, field: str) -> float:
+    number = finite_number(value)
+    if number is None:
+        raise StepFieldError(field, f"a finite number, got {value!r}")
+    return number
+
+
+def _optional_number(value: Any, field: str) -> float | None:
+    return None if value is None else _number(value, field)
+
+
+def _integer(value: Any, field: str) -> int:
+    number = finite_number(value)
+    if number is None or not number.is_integer():
+        raise StepFieldError(field, f"an integer, got {value!r}")
+    return int(number)
+
+
+def _text(value: Any, field: str) -> str:
+    if not isinstance(value, str):
+        raise StepFieldError(field, f"a string, got {value!r}")
+    return value
+
+
+def _list(value: Any, field: str) -> list[Any]:
+    if not isinstance(value, (list, tuple)):
+        raise StepFieldError(field, f"a list, got {value!r}")
+    return list(value)
+
+
+def _conditions(value: Any, field: str) -> tuple[Condition, ...]:
+    return tuple(_dataclass_from(Condition, c, f"{field}[{i}]") for i, c in enumerate(_list(value, field)))
+
+
+def _point(value: Any, field: str) -> tuple[tuple[str, float], ...]:
+    pairs = []
+    for i, pair in enumerate(_list(value, field)):
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise StepFieldError(f"{field}[{i}]", f"a pair [name, number], got {pair!r}")
+        pairs.append((_text(pair[0], f"{field}[{i}][0]"), _number(pair[1], f"{field}[{i}][1]")))
+    return tuple(pairs)
+
+
+#: How each annotated field type of Step and Condition is read back from JSON.
+_READERS: dict[str, Callable[[Any, str], Any]] = {
+    "str": _text, "float": _number, "int": _integer, "float | None": _optional_number,
+    "tuple[Condition, ...]": _conditions, "tuple[tuple[str, float], ...]": _point}
+
+
+def _dataclass_from(cls: type, row: Any, where: str) -> Any:
+    """`cls(**row)` with every key known, every field without a default present and every value of its type."""
+    prefix = f"{where}." if where else ""
+    known = {f.name: f for f in fields(cls)}
+    if not isinstance(row, dict):
+        raise StepFieldError(where, f"an object with the fields {', '.join(known)}, got {row!r}")
+    for key in row:
+        if key not in known:
+            raise StepFieldError(f"{prefix}{key}", f"one of {', '.join(known)} (unknown field)")
+    values = {}
+    for name, f in known.items():
+        if name in row:
+            values[name] = _READERS[str(f.type)](row[name], f"{prefix}{name}")
+        elif f.default is MISSING and f.default_factory is MISSING:
+            raise StepFieldError(f"{prefix}{name}", "present (missing)")
+    return cls(**values)
+
+
+def step_from_dict(row: Any) -> Step:
+    """Inverse of `Step.as_dict` (JSON round trip), checked: StepFieldError names the first field that is unknown,
+    missing or not of its type (numbers finite), so a stored schedule never reaches the bench half-read."""
+    return _dataclass_from(Step, row, "")
+
+
+def steps_from_rows(rows: Any, source: str) -> tuple[Step, ...]:
+    """A stored schedule (a list of `Step.as_dict` rows) read back; InputError naming `source`, step and field."""
+    from benchlab.errors import InputError
+
+    if not isinstance(rows, list):
+        raise InputError(source, "/schedule", f"a list of steps, got {type(rows).__name__}")
+    steps = []
+    for i, row in enumerate(rows):
+        try:
+            steps.append(step_from_dict(row))
+        except StepFieldError as exc:
+            raise InputError(source, f"/schedule step {i} {exc.field}".rstrip(), exc.expected) from None
+    return tuple(steps)
 
 
 def describe(steps: tuple[Step, ...]) -> list[str]:

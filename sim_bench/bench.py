@@ -102,6 +102,8 @@ class SimPhysics:
         self.t_setpoints = config.t0  # set-points given now hold from this time (the controllers' last advance)
         self.computed_s = 0.0
         self.solver_calls = 0
+        self._truth_k0 = k0  # grid index of the first recorded true state
+        self._truth = np.full((0, len(self.plant.state_names)), np.nan)
 
     # -- grid and chunks -----------------------------------------------------------------------------
     def _index(self, t: float) -> int:
@@ -123,6 +125,7 @@ class SimPhysics:
         states = self.plant.advance(cols, self.dt)
         temps = self.plant.sensor_temperatures(states)
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
+        self._record_truth(k0, temps["_states"])
         # what the sensors read on this grid: noise per sample, resistances in one vectorised call each
         sc, rng = self.cfg.sensors, self.rng_sensor
         for j in (1, 2):
@@ -160,6 +163,8 @@ class SimPhysics:
             self._ensure(k - 1)
         if k >= self._end:
             return
+        if self._chunks:  # a command stamped before the oldest state still kept takes effect from there
+            k = max(k, self._chunks[0][0])
         while self._chunks and self._chunks[-1][0] > k:
             self._chunks.pop()
         k0, cols, temps = self._chunks[-1]
@@ -261,6 +266,27 @@ class SimPhysics:
         return NodeInputs((float(temps["_R_node1"][i]), float(temps["_R_node2"][i])), 5000, -60, 200)
 
     # -- truth, for tests and analysis ----------------------------------------------------------------
+    def _record_truth(self, k0: int, states: np.ndarray) -> None:
+        """Keep the true states of grid points k0 onwards; a chunk recomputed after a cut overwrites its rows."""
+        start, end = k0 - self._truth_k0, k0 - self._truth_k0 + len(states)
+        if end > len(self._truth):
+            grown = np.full((max(end, 2 * len(self._truth)), self._truth.shape[1]), np.nan)
+            grown[:len(self._truth)] = self._truth
+            self._truth = grown
+        self._truth[start:end] = states
+
+    def true_states(self, rows: int) -> dict[str, np.ndarray]:
+        """The plant's true temperatures (degC) on grid rows [first recorded, `rows`), named by
+        `state_channels` of the plant's network; NaN where not computed (yet)."""
+        from benchlab.network import state_channels
+
+        n = max(rows - self._truth_k0, 0)
+        valid = min(n, self._end - self._truth_k0, len(self._truth))
+        out = np.full((n, self._truth.shape[1]), np.nan)
+        out[:valid] = self._truth[:valid]
+        names = state_channels(self.plant.network)
+        return {names[s]: out[:, i] for i, s in enumerate(self.plant.state_names)}
+
     def true_convection_resistance(self, engine_rpm: float, clutch_state: int) -> float:
         from benchlab.clutch import convection_resistance
 

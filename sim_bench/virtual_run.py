@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from protocols.schedule import Step
+from protocols.schedule import Step, setpoints
 from sim_bench.drivetrain import CHANNELS, Drivetrain, DrivetrainConfig
 from sim_bench.plant import ThermalPlant
 
@@ -64,8 +64,8 @@ def drive_schedule(steps: Sequence[Step], dt: float, config: DrivetrainConfig = 
     stalled_cycle = None
     for step in steps:
         n = int(round(step.duration_s / dt))
-        clamped = step.phase in ("launch", "drive") and step.cycle != stalled_cycle
-        drivetrain.set_points(step.engine_speed_rpm, clamped, step.clutch_torque_nm, step.load_torque_nm)
+        sp = setpoints(step, synchronised=step.cycle != stalled_cycle)
+        drivetrain.set_points(sp.engine_speed_rpm, not sp.clutch_open, sp.clutch_torque_nm, sp.load_torque_nm)
         events.append({"time": t * dt, "event": f"{step.phase}_start", "cycle": step.cycle})
         piece = drivetrain.advance(n, dt, stop_at_sync=step.phase == "launch")
         pieces.append(piece)

@@ -63,6 +63,31 @@ def test_finalise_in_pieces_equals_in_one_go():
     np.testing.assert_array_equal(np.concatenate(parts), whole)
 
 
+def test_readings_in_blocks_give_the_same_file_as_one_by_one(tmp_path):
+    """A driver may hand a stream's readings as blocks (times, rows), mixed with single readings and out of time
+    order; raw streams and the aligned grid come out as if they had been added one by one."""
+    rng = np.random.default_rng(4)
+    times = np.sort(rng.uniform(0.0, 6.0, 400))
+    times[rng.integers(0, 400, 20)] -= 0.03  # a few arrive late
+    rows = np.array([_row(t) for t in times])
+    rows[rng.integers(0, 400, 10), 2] = np.nan
+    cuts = np.sort(rng.choice(np.arange(1, 400), 60, replace=False))
+    for name, blocks in (("one.h5", False), ("blocks.h5", True)):
+        w = RunWriter(tmp_path / name, _layout(), protocol="table1", planned_s=6.0)
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, 400]):
+            if blocks and b - a > 1:
+                w.add("s", times[a:b], rows[a:b])
+            else:
+                for t, row in zip(times[a:b], rows[a:b]):
+                    w.add("s", float(t), tuple(row))
+            w.advance(float(times[b - 1]) - 0.05)
+        w.close("complete")
+    with h5py.File(tmp_path / "one.h5", "r") as one, h5py.File(tmp_path / "blocks.h5", "r") as blocks:
+        for group in ("aligned", "raw/s"):
+            for name in one[group]:
+                np.testing.assert_array_equal(blocks[group][name][:], one[group][name][:], err_msg=f"{group}/{name}")
+
+
 def test_run_file_layout_units_status_and_events(tmp_path):
     path = tmp_path / "run.h5"
     w = RunWriter(path, _layout(), protocol="table1", attrs={"seed": 3}, planned_s=2.0,

@@ -73,6 +73,15 @@ def test_probe_reading_count_is_bounded(capsys):
     (["run", "table1", "--seed", "-1"], "--seed"),
     (["identify", "RUN", "--starts", "0", "--out", "p.json"], "--starts"),
     (["identify", "RUN", "--seed", "-3", "--out", "p.json"], "--seed"),
+    (["pipeline", "--duration", "inf"], "--duration"),
+    (["pipeline", "--duration", "-60"], "--duration"),
+    (["pipeline", "--seed", "-2"], "--seed"),
+    (["wear", "RUN", "--params", "p.json", "--paths", "0"], "--paths"),
+    (["wear", "RUN", "--params", "p.json", "--paths", "1000000000"], "--paths"),
+    (["wear", "RUN", "--params", "p.json", "--predict", "1e20"], "--predict"),
+    (["wear", "RUN", "--params", "p.json", "--predict", "-4"], "--predict"),
+    (["cooldown", "RUN", "--params", "p.json", "--sample", "nan"], "--sample"),
+    (["cooldown", "RUN", "--params", "p.json", "--sample", "1e9"], "--sample"),
 ])
 def test_counts_and_seeds_are_checked(argv, field, tmp_path, capsys):
     argv = [str(tmp_path / "run.h5") if a == "RUN" else a for a in argv]
@@ -202,3 +211,30 @@ def test_import_refuses_what_load_run_would_refuse(channel, value, foreign_run, 
     frame.to_csv(csv, index=False)
     err = _refused(["import", str(csv), "--out", str(tmp_path / "r.h5")], f"column {channel}, line 6", capsys)
     assert str(csv) in err and not (tmp_path / "r.h5").exists()
+
+
+@pytest.mark.parametrize("where", ["params", "clutch"])
+def test_an_integer_beyond_a_float_in_a_user_file_is_bad_input_not_a_crash(where, tmp_path):
+    """TOML and JSON integers have any size; float() of 10**400 overflows (one check: benchlab.values)."""
+    import json
+    import re
+
+    from benchlab.errors import InputError
+    from benchlab.params import load_params
+    from benchlab.wear.clutchfile import load_clutch
+
+    huge = str(10 ** 400)
+    if where == "params":
+        path = tmp_path / "p.json"
+        path.write_text(json.dumps({"model": "linear", "params": {"C_P": 1}}).replace(": 1}", f": {huge}}}"))
+        with pytest.raises(InputError, match="C_P"):
+            load_params(path)
+    else:
+        path = tmp_path / "c.toml"
+        example = Path(__file__).resolve().parents[1] / "examples" / "clutch.toml"
+        edited, count = re.subn(r"(?m)^(faces_per_side|friction_faces|area_mm2|z)\s*=\s*\S+", lambda m: f"{m.group(1)} = {huge}",
+                                example.read_text(), count=1)
+        assert count == 1
+        path.write_text(edited)
+        with pytest.raises(InputError):
+            load_clutch(path)

@@ -1,6 +1,7 @@
 """Bench CAN: DBC contents, exact frames, codec vs cantools, watchdog events, fault injection, safe state."""
 
 import itertools
+from pathlib import Path
 
 import can
 import cantools
@@ -11,11 +12,26 @@ from hypothesis import strategies as st
 
 from drivers import can_signals as sig
 from drivers.can_bench import CanBench
-from drivers.can_codec import MessageCodec
+from drivers.can_codec import CodecTable, MessageCodec
+from drivers.can_frames import frames_from_messages, messages_from_frames
+from drivers.can_log import log_frames
+from drivers.errors import CanBusError, CanConfigError, CanLogError
 from sim_bench.emulators import CanBenchEmulator, ManualClock, SimCanBus
 
 DB = cantools.database.load_file(str(sig.BENCH_DBC))
 _chan = itertools.count()
+
+ODD_DBC = """VERSION ""
+BS_:
+BU_: A
+BO_ 1100 Float: 8 A
+ SG_ F : 0|32@1- (1,0) [0|0] "" A
+ SG_ G : 32|16@1+ (0.5,1) [0|100] "" A
+BO_ 1101 Long: 12 A
+ SG_ H : 0|16@1+ (1,0) [0|60000] "" A
+ SG_ K : 80|16@1- (0.1,0) [-100|100] "" A
+SIG_VALTYPE_ 1100 F : 1;
+"""
 
 MOTOROLA_DBC = """VERSION ""
 BS_:
@@ -169,7 +185,7 @@ def test_malformed_frames_counted_not_crashed(buses) -> None:
         ctrl.send(msg)
     assert bench.poll() == []
     assert (bench.stats.bad_dlc, bench.stats.unknown_id, bench.stats.error_frames) == (1, 2, 1)
-    with pytest.raises(RuntimeError):
+    with pytest.raises(CanConfigError):
         bench.set_drive_speed(1000)
 
 
@@ -186,6 +202,155 @@ def test_codec_matches_cantools_and_vectorised() -> None:
             assert codec.decode(bytes(row)) == pytest.approx(expected), m.name
             assert {k: c[i] for k, c in cols.items()} == pytest.approx(expected), m.name
             assert codec.encode(expected) == m.encode(expected, strict=False), m.name
+
+
+def test_codec_table_decodes_and_encodes_a_mixed_batch_as_each_codec_frame_by_frame() -> None:
+    """One compiled pass over frames of many messages (Intel, Motorola, float fallback, 12 bytes) = per frame."""
+    rng = np.random.default_rng(2)
+    db = cantools.database.Database()
+    db.add_dbc_string(MOTOROLA_DBC)
+    db.add_dbc_string(ODD_DBC)
+    codecs = [MessageCodec(m) for m in list(DB.messages) + list(db.messages)]
+    table = CodecTable(codecs)
+    which = rng.integers(0, len(codecs), 2000)
+    payloads = np.zeros((len(which), table.payload_bytes), dtype=np.uint8)
+    for i, m in enumerate(which):
+        payloads[i, :codecs[m].length] = rng.integers(0, 256, codecs[m].length)
+    values, valid = table.decode(which, payloads)
+    assert valid.all()
+    for i, m in enumerate(which):
+        codec = codecs[m]
+        expected = codec.decode(bytes(payloads[i, :codec.length]))
+        got = {key: values[i, j] for j, key in enumerate(codec.columns) if key is not None}
+        assert got.keys() == expected.keys()
+        same = [got[k] == expected[k] or (np.isnan(got[k]) and np.isnan(expected[k])) for k in got]
+        assert all(same), codec.message.name
+    values = np.nan_to_num(values)
+    vectorised = ~np.isin(which, [i for i, c in enumerate(codecs) if c.message.name in ("Float", "Long")])
+    values[vectorised & (np.arange(len(which)) % 5 == 0)] *= 3.0  # some beyond their range: saturated
+    encoded = table.encode(which, values)
+    for i, m in enumerate(which):
+        codec = codecs[m]
+        assert bytes(encoded[i, :codec.length]) == codec.encode(dict(zip(codec.columns, values[i].tolist())))
+        assert not encoded[i, codec.length:].any()
+
+
+def test_bulk_blf_log_is_byte_for_byte_what_python_can_writes_frame_by_frame(tmp_path) -> None:
+    """Frames of every kind (standard, extended, remote, error, FD; sent and received; channels) into a BLF file:
+    fed as arrays, python-can's own writer produces the same file, and python-can reads the frames back."""
+    rng = np.random.default_rng(3)
+    messages, t = [], 1.7e9 + 0.1234567
+    for _ in range(3000):
+        t += rng.uniform(0, 0.003)
+        kind = rng.integers(0, 20)
+        kw = dict(timestamp=t, arbitration_id=int(rng.integers(0, 0x7FF)), is_extended_id=bool(rng.integers(0, 2)),
+                  data=rng.integers(0, 256, int(rng.integers(0, 9)), dtype=np.uint8).tobytes(),
+                  is_rx=bool(rng.integers(0, 2)), channel=[None, 0, "can1", 2][rng.integers(0, 4)])
+        if kind == 0:
+            kw.update(is_error_frame=True)
+        elif kind == 1:
+            kw.update(is_fd=True, data=rng.integers(0, 256, 12, dtype=np.uint8).tobytes(), bitrate_switch=True)
+        elif kind == 2:
+            kw.update(is_remote_frame=True, data=b"", dlc=4)
+        messages.append(can.Message(**kw))
+    one_by_one = can.Logger(str(tmp_path / "a.blf"), max_container_size=4096)
+    for msg in messages:
+        one_by_one.on_message_received(msg)
+    one_by_one.stop()
+    in_bulk = can.Logger(str(tmp_path / "b.blf"), max_container_size=4096)
+    for chunk in np.array_split(frames_from_messages(messages), 37):
+        log_frames(in_bulk, chunk)
+    in_bulk.stop()
+    assert (tmp_path / "a.blf").read_bytes() == (tmp_path / "b.blf").read_bytes()
+    back = list(can.LogReader(str(tmp_path / "b.blf")))
+    assert [(m.arbitration_id, bytes(m.data)) for m in back] == [(m.arbitration_id, bytes(m.data)) for m in messages]
+    assert np.allclose([m.timestamp for m in back], [m.timestamp for m in messages], rtol=0, atol=1e-6)
+    assert all(a.equals(b, timestamp_delta=0, check_channel=False)
+               for a, b in zip(messages, messages_from_frames(frames_from_messages(messages))))
+
+
+class _FrameByFrame(can.BusABC):
+    """Only python-can's per-frame API of another bus (as a hardware interface offers): no bulk read."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        super().__init__(channel=None)
+        self._bus = bus
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self._bus.send(msg)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        return self._bus.recv(timeout=0), False
+
+    def shutdown(self) -> None:
+        self._bus.shutdown()
+        super().shutdown()
+
+
+def test_driver_gives_the_same_results_frame_by_frame_as_in_bulk(tmp_path) -> None:
+    """The simulated bus hands the driver all waiting frames as one array; a hardware interface goes through
+    python-can's recv() one frame at a time. The same traffic (faults, silence, frozen counters, garbage,
+    emergency stop) gives the same samples, counters, events, latest values and CAN log either way."""
+    results = []
+    for per_frame in (False, True):
+        name = f"same{next(_chan)}"
+        clock = ManualClock(2.0)
+        pc, ctrl = SimCanBus(name, clock=clock), SimCanBus(name, clock=clock)
+        emu = CanBenchEmulator(ctrl, clock=clock)
+        log = can.Logger(str(tmp_path / f"{per_frame}.blf"))
+        bench = CanBench(_FrameByFrame(pc) if per_frame else pc, clock=clock, timestamps="run", log=log)
+        samples, events = [], []
+
+        def run(seconds: float, dt: float) -> None:
+            for _ in range(round(seconds / dt)):
+                clock.advance(dt)
+                bench.send_due()
+                emu.poll()
+                samples.extend((s.t, s.controller, s.message, s.values) for s in bench.receive())
+                events.extend(bench.pop_events())
+
+        bench.set_drive_speed(1500)
+        bench.set_clutch_torque(45)
+        bench.set_load_torque(30)
+        run(1.0, 0.05)
+        run(2.0, 0.5)
+        emu.silence("clutch")
+        run(0.3, 0.03)
+        emu.silence("clutch", False)
+        emu.set_fault("load", 3)
+        run(0.5, 0.05)
+        emu.clear_fault("load")
+        emu.freeze_alive("drive")
+        run(0.2, 0.01)
+        emu.freeze_alive("drive", False)
+        emu.send_raw(0x101, b"\x00\x01")
+        emu.send_raw(0x7FF, bytes(8))
+        emu.send_raw(0x101, bytes(8), is_extended_id=True)
+        emu.send_raw(0x010, b"\x31\x00")  # another node's emergency stop (source 3) on the bus
+        bench.emergency_stop()
+        run(0.5, 0.05)
+        bench.release_emergency_stop()
+        run(0.5, 0.1)
+        bench.close()
+        ctrl.shutdown()
+        results.append((samples, events, bench.stats, dict(bench.latest), bench.faulted, bench.silent))
+    bulk, per_frame = results
+    assert len(bulk[0]) > 1000 and {e.kind for e in bulk[1]} >= {"silent", "back", "fault", "alive_error", "estop"}
+    assert (bulk[2].unknown_id, bulk[2].bad_dlc) == (2, 1)  # 0x7FF and the extended 0x101; 0x101 of 2 bytes
+    assert bulk == per_frame
+    assert (tmp_path / "False.blf").read_bytes()[144:] == (tmp_path / "True.blf").read_bytes()[144:]  # header: sizes
+
+
+def test_a_can_log_that_cannot_be_written_stops_with_can_log_error(tmp_path, loop) -> None:
+    """The bulk write into a BLF file that fails (here: its file closed under it, as a full disk fails a write)
+    is one CanLogError, and the log is given up, not written half."""
+    clock, emu, bench = loop
+    bench.log = can.Logger(str(tmp_path / "run.blf"), max_container_size=4096)
+    step(clock, emu, bench, 0.5)
+    bench.log.file.close()
+    with pytest.raises(CanLogError, match="CAN log cannot be written"):
+        step(clock, emu, bench, 1.0)
+    assert bench.log is None
 
 
 @settings(max_examples=300, deadline=None)
@@ -231,7 +396,7 @@ def test_set_points_are_tracked(loop) -> None:
     assert latest["drive.speed"] == pytest.approx(1500, abs=1) and latest["clutch.torque"] == pytest.approx(45, abs=0.1)
     assert latest["load.torque"] == pytest.approx(30, abs=0.1) and latest["load.speed"] > 0
     assert latest["drive.state"] == sig.STATE_RUNNING and latest["clutch.clamp_state"] == sig.CLAMP_SLIPPING
-    assert len(out) == 3 * 501 + 3 * 51  # every status frame (10 ms) and heartbeat (100 ms) due in [0, 5] s
+    assert len(out) == 3 * 500 + 3 * 50  # every status frame (10 ms) and heartbeat (100 ms) due in (0, 5] s
     assert bench.stats.alive_errors == 0 and bench.pop_events() == []
     assert emu.stats.malformed == 0
 
@@ -315,3 +480,31 @@ def test_from_config() -> None:
     bench = CanBench.from_config({"interface": "virtual", "channel": f"cfg{next(_chan)}"}, listen_only=True)
     assert bench.poll() == []
     bench.close()
+
+
+class _DeadBus(can.BusABC):
+    """A bus whose adapter is gone: every receive raises python-can's own error."""
+
+    def __init__(self) -> None:
+        super().__init__(channel="dead")
+
+    def send(self, msg, timeout=None):
+        raise can.CanOperationError("adapter gone")
+
+    def _recv_internal(self, timeout):
+        raise can.CanOperationError("adapter gone")
+
+
+def test_the_can_driver_raises_its_own_errors() -> None:
+    """Configuration, an unopenable bus and a failing interface are CanDriverErrors (python-can's tree as model)."""
+    with pytest.raises(CanConfigError):
+        CanBench(_DeadBus(), timestamps="sometimes")
+    with pytest.raises(CanConfigError):
+        CanBench(_DeadBus(), dbc=Path(__file__))  # not a DBC
+    with pytest.raises(CanBusError):
+        CanBench.from_config({"interface": "no_such_interface", "channel": "x"})
+    bus = _DeadBus()
+    bench = CanBench(bus, listen_only=True)
+    with pytest.raises(CanBusError, match="adapter gone"):
+        bench.receive()
+    bus.shutdown()

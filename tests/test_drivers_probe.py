@@ -47,7 +47,25 @@ def test_probe_can_nothing_there_exits_1(capsys) -> None:
     assert "silent" in capsys.readouterr().out
 
 
+def test_probe_can_passes_the_bitrate_to_the_bus(monkeypatch, capsys) -> None:
+    opened = []
+
+    def bus(**config):
+        opened.append(config)
+        return can.interface.Bus(**config)
+
+    monkeypatch.setattr(can, "Bus", bus)
+    assert main(["probe", "can", "--url", "virtual:bitrate-test", "--bitrate", "250000", "--timeout", "0.1"]) == 1
+    assert opened == [{"interface": "virtual", "channel": "bitrate-test", "bitrate": 250000}]
+    assert main(["probe", "can", "--url", "virtual:bitrate-test", "--timeout", "0.1"]) == 1
+    assert "bitrate" not in opened[1]  # not given: the interface's own default
+
+
 @pytest.mark.parametrize("argv", [
+    ["probe", "can", "--url", "virtual:x", "--bitrate", "fast"],
+    ["probe", "can", "--url", "virtual:x", "--bitrate", "0"],
+    ["probe", "can", "--url", "virtual:x", "--bitrate", "8000000"],
+    ["probe", "node", "--url", "sim://node", "--bitrate", "500000"],
     ["probe", "pt1000", "--url", "nonsense://x"],
     ["probe", "pt1000", "--url", "/dev/does-not-exist-benchlab"],
     ["probe", "pt1000", "--url", "sim://no-such-emulator"],

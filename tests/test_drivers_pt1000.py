@@ -288,3 +288,33 @@ def test_fuzz_error_parser(reply: bytes) -> None:
     except InstrumentError:
         return
     assert isinstance(code, int) and '"' not in text
+
+
+def test_a_scan_is_collected_without_waiting_even_when_the_reply_comes_in_pieces() -> None:
+    """The acquisition loop's path: start_scan() sends READ?, collect() takes only the bytes already there."""
+    port = ScriptedSerial([(b"READ?\n", b""), (b"SYST:ERR?\n", b'-222,"Data out of range"\n'), NO_ERR], timeout=2.0)
+    now = [100.0]
+    s = Pt1000Scanner(port, (101, 102), clock=lambda: now[0])
+    s.start_scan()
+    assert s.scanning and s.collect() is None  # nothing there yet: returns at once
+    port.deliver(b"+1.09734700E+03,")
+    now[0] += 0.5
+    assert s.collect() is None  # half a reply: still nothing, still not waiting
+    port.deliver(b"+1.00000000E+03\n")
+    a, b = s.collect()  # the reply, then the error queue drained in the same call
+    assert (a.status, b.status, a.t_host) == ("ok", "ok", 100.5) and not s.scanning and port.finished
+    assert [(e.code, e.t_host) for e in s.error_log] == [(-222, 100.5)]
+
+
+def test_a_silent_instrument_times_out_on_the_loops_clock_not_by_blocking() -> None:
+    port = ScriptedSerial([(b"READ?\n", b"")], timeout=2.0)
+    now = [0.0]
+    s = Pt1000Scanner(port, (101,), clock=lambda: now[0])
+    s.start_scan()
+    for t in (0.0, 1.0, 2.0):  # within the port's time-out: no reply, no error, no wait
+        now[0] = t
+        assert s.collect() is None
+    now[0] = 2.01
+    with pytest.raises(DeviceTimeout, match="READ"):
+        s.collect()
+    assert not s.scanning

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+from html.parser import HTMLParser
 
 from benchlab.cli import main
 from benchlab.params import load_params
@@ -24,3 +26,33 @@ def test_pipeline_runs_end_to_end_and_writes_every_product(tmp_path, capsys):
     for page in ("report/report.md", "diagnose/diagnose.md"):
         assert (tmp_path / page).stat().st_size > 0
     assert json.loads((tmp_path / "wear.json").read_text())["engagements"] > 0
+    _check_index(tmp_path)
+
+
+class _Links(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.targets: list[str] = []
+        self.text: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        self.targets += [v for k, v in attrs if k in ("href", "src")]
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+
+def _check_index(out):
+    """One page tells the whole job: every link resolves, the sections are there, the numbers agree."""
+    page = _Links()
+    page.feed((out / "index.html").read_text())
+    assert page.targets and all((out / t).exists() for t in page.targets), page.targets
+    for figure in ("report/fig4_fit.png", "report/fig3_resistance.png", "wear.png", "diagnose.json"):
+        assert figure in page.targets
+    text = " ".join(page.text)
+    assert "simulated bench" in text and "plant truth" in text and "2.5 %" in text  # the paper beside ours
+    # per long cool-down of the validation run: the linear model (constant R0) is the worse one on a plant whose
+    # convection depends on the engine speed and the clutch state (as in the paper's Fig. 5)
+    rows = re.findall(r"(\d) \| ([^|]+\(\d+–\d+ rpm\)) \| ([\d.]+) % \| ([\d.]+) %", " | ".join(page.text))
+    assert len(rows) == 3, rows
+    assert all(float(linear) > 2 * float(nonlinear) for _, _, linear, nonlinear in rows)

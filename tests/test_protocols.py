@@ -81,14 +81,19 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys):
 def test_example_bench_file_loads():
     cfg = load_bench_config(EXAMPLE)
     assert cfg.instrument_channels[101] == "T_air" and cfg.can["interface"] == "socketcan"
-    assert cfg.instrument_calibration[101].r0 == 1000.12 and cfg.limits.on_interlock == "wait"
+    assert cfg.instrument_calibration[101].r0 == 1000.12 and cfg.limits.on_interlock == "hold"
 
 
 @pytest.mark.parametrize("edit, field", [
     (("url = \"/dev/ttyUSB0\"", "url = 5"), "instrument.url"),
     (("101 = \"T_air\"", "101 = \"T_oil\""), "instrument.channels.101"),
     (("max_air_c = 80.0", "max_air_c = -1"), "limits.max_air_c"),
-    (("on_interlock = \"wait\"", "on_interlock = \"pray\""), "limits.on_interlock"),
+    (("on_interlock = \"hold\"", "on_interlock = \"pray\""), "limits.on_interlock"),
+    (("T_air = 5.0 ", "T_air = 3600.0 "), "limits.max_age_s.T_air"),
+    (("clutch_torque = 0.5", "clutch_torque = -0.5"), "limits.max_age_s.clutch_torque"),
+    (("clutch_torque = 0.5", "T_oil = 0.5"), "limits.max_age_s.T_oil"),
+    (("stale_T_air = \"hold\"", "stale_T_air = \"wait\""), "limits.actions.stale_T_air"),
+    (("stale_T_air = \"hold\"", "stale_oil = \"hold\""), "limits.actions.stale_oil"),
     (("interface = \"socketcan\"", "interface = \"udp_multicast\""), "can.interface"),
     (("[drivetrain]", "[drivetrane]"), "drivetrane"),
     (("r0 = 999.87", "r0 = \"x\""), "node.calibration.1.r0"),
@@ -111,3 +116,35 @@ def test_unknown_condition_channel_is_a_problem_not_a_default():
     step = Step("open", 600.0, 1000.0, cycle=0, until=(Condition("T_flywheel_typo", "<=", 60.0),), estimate_s=300.0)
     problems = check_schedule((step,), BenchLimits())
     assert len(problems) == 1 and "T_flywheel_typo" in problems[0] and "T_flywheel, T_air" in problems[0]
+
+
+def test_one_step_interpreter_plays_the_schedule_for_the_runner_and_the_batch_simulator(tmp_path):
+    """The runner's commanded set-points and the batch simulator's drivetrain both follow `setpoints`."""
+    import h5py
+    import numpy as np
+
+    from benchlab.runner.session import RunRequest, execute
+    from protocols.schedule import setpoints
+    from sim_bench.virtual_run import drive_schedule
+
+    # a launch that synchronises (drive clamped) and one that cannot (drive stays open: the slip limit)
+    steps = (Step("open", 20.0, 1500.0, 0.0, 0.0, 0), Step("launch", 8.0, 2000.0, 70.0, 100.0, 0),
+             Step("drive", 20.0, 2000.0, 70.0, 100.0, 0), Step("launch", 3.0, 2500.0, 10.0, 140.0, 1),
+             Step("drive", 20.0, 2500.0, 10.0, 140.0, 1), Step("open", 20.0, 1000.0, 0.0, 50.0, 1))
+    path = tmp_path / "run.h5"
+    code, _ = execute(RunRequest("custom", path, steps=steps, install_signals=False, sim_options={"dropouts": False}))
+    assert code == 0
+    with h5py.File(path, "r") as f:
+        sp = f["raw/setpoints"]
+        rows = [tuple(float(sp[c][i]) for c in ("engine_speed", "clutch_torque", "clutch_open", "load_torque"))
+                for i in range(len(sp["time"]))]
+    synced = (True, True, True, True, False, False)
+    played = [tuple(float(v) for v in setpoints(s, ok)) for s, ok in zip(steps, synced)]
+    expected = [row for i, row in enumerate(played) if i == 0 or row != played[i - 1]]  # changes are recorded
+    commanded = [r for r in rows if r[0] != BenchLimits().idle_speed_rpm or r[2] == 0.0]  # without safe states
+    assert commanded == expected
+    truth, events = drive_schedule(steps, 0.01)
+    outcome = [e["event"] for e in events if e["event"] in ("synchronised", "slip_time_limit")]
+    assert outcome == ["synchronised", "slip_time_limit"]
+    open_after_stall = truth["clutch_state"][-int(40.0 / 0.01):]
+    assert np.all(open_after_stall == 0.0)  # the stalled cycle's drive stays open in the batch simulator too

@@ -157,3 +157,48 @@ def test_resistance_band_uses_the_parameter_correlations():
     assert sigma == pytest.approx(r.std(axis=0), rel=0.05)
     params.extra.pop("correlation")  # without it, a1 and R0 (correlation -0.9) add up where both matter
     assert resistance(params, speed, state=1)[1][0] > 1.5 * r.std(axis=0)[0]
+
+
+def test_fig5_title_names_the_temperatures_it_plots(monkeypatch, short_run, tmp_path):
+    from benchlab.report import timeseries
+    from benchlab.report.plotting import SYMBOLS
+    from benchlab.report.scores import estimate
+
+    figures = []
+    monkeypatch.setattr(timeseries, "save", lambda fig, path: figures.append(fig))
+    timeseries.plot_comparison(short_run, [estimate(short_run, paper_params("nonlinear"), "nonlinear")],
+                               tmp_path / "fig5.png")
+    fig = figures[0]
+    plotted = [ax.get_ylabel().removesuffix(" (°C)") for ax in fig.axes if ax.get_ylabel().endswith("(°C)")]
+    title = fig._suptitle.get_text()
+    assert plotted == [SYMBOLS["T_flywheel"], SYMBOLS["T_air"]]
+    assert [s for s in SYMBOLS.values() if s in title] == plotted
+
+
+def test_identify_and_report_test_the_same_residuals(short_run):
+    """One start (the run's measured temperatures), one test, one sign: identify's verdicts are the report's."""
+    from benchlab.identify.api import identify
+    from benchlab.report.residuals import residuals
+    from benchlab.report.scores import estimate
+
+    result = identify([short_run], "linear", starts=1)
+    page = residuals(short_run, estimate(short_run, result.params, "linear"), result.params)
+    assert result.residuals[short_run.attrs["source"]] == page.tests
+    assert {t["white"] for t in page.tests.values()} == {False}  # the linear model misses the convection law
+
+
+def test_residuals_are_simulated_minus_measured(short_run):
+    from benchlab.identify.residuals import run_residuals
+    from benchlab.metrics import RESIDUAL_LABEL
+
+    warm = dict(paper_params("nonlinear"), C_F=0.7 * paper_params("nonlinear")["C_F"])  # flywheel heats faster
+    cool = dict(paper_params("nonlinear"), C_F=1.4 * paper_params("nonlinear")["C_F"])
+    assert RESIDUAL_LABEL == "simulated − measured"
+    for params, sign in ((warm, 1.0), (cool, -1.0)):
+        res = run_residuals(short_run, benchlab.simulate(short_run, params))
+        assert sign * np.nanmean(res.residual["T_flywheel"]) > 0.1
+
+
+def test_page_states_the_residual_sign_and_start(report):
+    text = (report / "report.md").read_text()
+    assert "Residual = simulated − measured" in text and "measured temperatures" in text

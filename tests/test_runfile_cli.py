@@ -106,3 +106,66 @@ def test_csv_missing_column_and_bad_value(tmp_path, short_run, capsys):
     frame.to_csv(csv, index=False)
     assert main(["import", str(csv), "--out", str(tmp_path / "r.h5")]) == 2
     assert "column T_air, line 12" in capsys.readouterr().err
+
+
+def test_import_refuses_to_overwrite_an_existing_file_without_force(tmp_path, short_run, capsys):
+    csv, out = tmp_path / "d.csv", tmp_path / "r.h5"
+    short_run.iloc[:100].to_csv(csv, index=False)
+    out.write_bytes(b"an earlier run")
+    assert main(["import", str(csv), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--force" in err and str(out) in err
+    assert out.read_bytes() == b"an earlier run"
+    assert main(["import", str(csv), "--out", str(out), "--force"]) == 0
+    assert len(benchlab.load_run(out)) == 100
+
+
+@pytest.mark.parametrize("sep, decimal, flags", [
+    (";", ",", []),                                   # a German spreadsheet: found from the header and the data
+    (";", ".", []),                                   # semicolons with decimal points
+    ("\t", ",", []),
+    (";", ",", ["--sep", ";", "--decimal", ","]),     # said on the command line
+])
+def test_import_reads_semicolon_and_decimal_comma_csv(sep, decimal, flags, tmp_path, short_run):
+    csv, out = tmp_path / "d.csv", tmp_path / "r.h5"
+    part = short_run.iloc[:300]
+    part.to_csv(csv, index=False, sep=sep, decimal=decimal)
+    assert main(["import", str(csv), "--out", str(out), *flags]) == 0
+    run = benchlab.load_run(out)
+    for c in part.columns:
+        np.testing.assert_allclose(run[c].to_numpy(), part[c].to_numpy(), rtol=1e-12)
+
+
+def test_import_reads_units_in_the_header_and_checks_them(tmp_path, short_run, capsys):
+    csv, out = tmp_path / "d.csv", tmp_path / "r.h5"
+    part = short_run.iloc[:50]
+    part.rename(columns={"T_air": "T_air [degC]", "time": "time [s]"}).to_csv(csv, index=False)
+    assert main(["import", str(csv), "--out", str(out)]) == 0
+    np.testing.assert_allclose(benchlab.load_run(out)["T_air"].to_numpy(), part["T_air"].to_numpy())
+    part.rename(columns={"T_air": "T_air [K]"}).to_csv(csv, index=False)
+    assert main(["import", str(csv), "--out", str(tmp_path / "k.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "column T_air [K]" in err and "degC" in err and not (tmp_path / "k.h5").exists()
+
+
+def test_simulate_writes_a_run_file_the_other_commands_read(run_file, params_file, tmp_path, capsys):
+    sim, again = tmp_path / "sim.h5", tmp_path / "again.h5"
+    assert main(["simulate", str(run_file), "--params", str(params_file), "--out", str(sim)]) == 0
+    before, after = benchlab.load_run(run_file), benchlab.load_run(sim)  # the contract's reader takes it
+    assert list(after.columns) == list(before.columns) and after.attrs["protocol"] == before.attrs["protocol"]
+    for c in before.columns:
+        np.testing.assert_array_equal(after[c].to_numpy(), before[c].to_numpy())
+    fits = []
+    for source, out in ((run_file, "p_run.json"), (sim, "p_sim.json")):
+        assert main(["identify", str(source), "--model", "linear", "--starts", "1", "--out", str(tmp_path / out)]) == 0
+        fits.append(json.loads((tmp_path / out).read_text())["params"])
+    assert fits[0] == fits[1]  # the same measurements: the same fit
+    assert main(["wear", str(sim), "--params", str(params_file), "--json"]) == 0
+    assert main(["simulate", str(sim), "--params", str(params_file), "--out", str(again)]) == 0
+    with h5py.File(sim) as a, h5py.File(again) as b:
+        assert a.attrs["source_run"] == str(run_file) and b.attrs["source_run"] == str(sim)
+        for name in a["simulated"]:
+            np.testing.assert_array_equal(a["simulated"][name][()], b["simulated"][name][()])
+    assert main(["simulate", str(sim), "--params", str(params_file), "--out", str(sim)]) == 2
+    assert "a file other than the run file" in capsys.readouterr().err
+    assert benchlab.load_run(sim)["T_air"].equals(after["T_air"])  # refused before anything was written

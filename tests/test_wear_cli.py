@@ -122,5 +122,6 @@ def test_missing_clutch_file_and_bad_horizon(files, tmp_path, capsys):
     run, params, _, _ = files
     assert main(["wear", str(run), "--params", str(params), "--clutch", str(tmp_path / "none.toml")]) == 2
     assert "none.toml: file" in capsys.readouterr().err
-    assert main(["wear", str(run), "--params", str(params), "--predict", "0"]) == 2
-    assert "N_ENGAGEMENTS" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:  # refused by argparse, before anything is read
+        main(["wear", str(run), "--params", str(params), "--predict", "0"])
+    assert exit_.value.code == 2 and "--predict" in capsys.readouterr().err

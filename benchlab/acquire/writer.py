@@ -17,15 +17,17 @@ Closing also compacts (exact lengths, compressed). One run per file is the calle
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import h5py
 import numpy as np
+from numba import njit
 
 SCHEMA = "benchlab-run/1"
 EVENT_KIND_LEN = 32
@@ -42,7 +44,7 @@ class StreamSpec:
     rate_hz: float
     hold_s: float
 
-    @property
+    @functools.cached_property
     def names(self) -> tuple[str, ...]:
         return tuple(c for c, _ in self.columns)
 
@@ -74,10 +76,47 @@ class Layout:
         return next(s for s in self.streams if s.name == name)
 
 
-@dataclass
-class _Pending:
-    times: list[float] = field(default_factory=list)
-    rows: list[Sequence[float]] = field(default_factory=list)
+class _Readings:
+    """Readings of one stream in arrival order, single rows or blocks, handed out as one (N, 1 + columns) array."""
+
+    def __init__(self, columns: int) -> None:
+        self.columns = columns
+        self._blocks: list[np.ndarray] = []
+        self._rows: list[tuple[float, ...]] = []
+        self._count = 0
+
+    def add(self, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
+        """One reading (`t` a number, `row` its values) or a block (`t` N times, `row` an (N, columns) array)."""
+        if not isinstance(t, np.ndarray):
+            self._rows.append((t, *row))
+            self._count += 1
+            return
+        block = np.empty((len(t), 1 + self.columns))
+        block[:, 0] = t
+        block[:, 1:] = row
+        self.add_rows(block)
+
+    def add_rows(self, block: np.ndarray) -> None:
+        """Readings already as (N, 1 + columns) rows, time first (kept as they are: not to be changed after)."""
+        self._close_rows()
+        self._blocks.append(block)
+        self._count += len(block)
+
+    def take(self) -> np.ndarray:
+        """Everything added since the last take, in order, and forget it."""
+        self._close_rows()
+        blocks, self._blocks, self._count = self._blocks, [], 0
+        if len(blocks) == 1:
+            return blocks[0]
+        return np.concatenate(blocks) if blocks else np.empty((0, 1 + self.columns))
+
+    def __len__(self) -> int:
+        return self._count
+
+    def _close_rows(self) -> None:
+        if self._rows:
+            self._blocks.append(np.asarray(self._rows, dtype=float).reshape(len(self._rows), 1 + self.columns))
+            self._rows = []
 
 
 def _str_array(values: Sequence[str], length: int) -> np.ndarray:
@@ -96,59 +135,69 @@ class AlignedBuilder:
         self.layout = layout
         self.dt = layout.dt
         self.rows = 0  # grid rows finalised
-        self._pending = {s.name: _Pending() for s in layout.streams}
-        self._carry: dict[str, tuple[float, np.ndarray] | None] = {s.name: None for s in layout.streams}
-        self._col = {s.name: {c: i for i, c in enumerate(s.names)} for s in layout.streams}
+        self._pending = {s.name: _Readings(len(s.columns)) for s in layout.streams}
+        self._carry: dict[str, np.ndarray | None] = {s.name: None for s in layout.streams}  # last row before the grid
+        self._column = {s.name: {c: j for j, c in enumerate(s.names)} for s in layout.streams}
 
-    def add(self, stream: str, t: float, row: Sequence[float]) -> None:
-        pending = self._pending[stream]
-        pending.times.append(t)
-        pending.rows.append(row)
+    def add(self, stream: str, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
+        """One reading of `stream`, or a block of them (`t` an array, `row` an (N, columns) array)."""
+        self._pending[stream].add(t, row)
+
+    def add_rows(self, stream: str, rows: np.ndarray) -> None:
+        """Readings of `stream` as (N, 1 + columns) rows, time first."""
+        self._pending[stream].add_rows(rows)
 
     def finalise(self, until_row: int) -> dict[str, np.ndarray]:
         """Channels for grid rows [rows, until_row) (time included); later readings stay pending."""
         k0, k1 = self.rows, max(self.rows, until_row)
         tk = np.arange(k0, k1) * self.dt
-        held: dict[str, np.ndarray] = {}
+        held: dict[str, np.ndarray] = {}  # stream → (rows, columns) values held on the grid
         for spec in self.layout.streams:
-            pend, carry = self._pending[spec.name], self._carry[spec.name]
-            ncol = len(spec.columns)
-            n_new = len(pend.times)
-            if carry is None and n_new == 0:
-                values = np.full((k1 - k0, ncol), np.nan)
-            else:
-                rt = np.empty(n_new + (carry is not None))
-                rv = np.empty((len(rt), ncol))
-                j = 0
-                if carry is not None:
-                    rt[0], rv[0] = carry
-                    j = 1
-                if n_new:
-                    rt[j:] = pend.times
-                    rv[j:] = np.asarray(pend.rows, dtype=float).reshape(n_new, ncol)
-                if np.any(np.diff(rt) < 0):
-                    order = np.argsort(rt, kind="stable")
-                    rt, rv = rt[order], rv[order]
-                idx = np.searchsorted(rt, tk + _EPS, side="right") - 1
-                safe = np.maximum(idx, 0)
-                ok = (idx >= 0) & (tk - rt[safe] < spec.hold_s + _EPS)
-                values = rv[safe]
-                values[~ok] = np.nan
-                keep = rt > (k1 - 1) * self.dt + _EPS if k1 > k0 else np.ones(len(rt), bool)
-                n_before = int(np.count_nonzero(~keep))
-                if n_before:
-                    self._carry[spec.name] = (rt[n_before - 1], rv[n_before - 1].copy())
-                pend.times = rt[n_before:].tolist()
-                pend.rows = [tuple(r) for r in rv[n_before:]]
-            for j, name in enumerate(spec.names):
-                held[f"{spec.name}/{name}"] = values[:, j]
+            pending, carry = self._pending[spec.name], self._carry[spec.name]
+            held[spec.name] = values = np.empty((k1 - k0, len(spec.columns)))
+            if k1 == k0:  # no grid rows to fill: the readings stay pending
+                continue
+            readings = pending.take()
+            if carry is not None:
+                readings = np.concatenate([carry[None, :], readings])
+            n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, values)
+            if n_before < 0:  # readings out of time order: sorted (stable), then held
+                readings = readings[np.argsort(readings[:, 0], kind="stable")]
+                n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, values)
+            if n_before:
+                self._carry[spec.name] = readings[n_before - 1].copy()
+            if n_before < len(readings):
+                pending.add_rows(readings[n_before:])
         out: dict[str, np.ndarray] = {"time": tk}
         for src in self.layout.sources:
-            out[src.channel] = held[f"{src.stream}/{src.column}"] * src.scale
+            column = held[src.stream][:, self._column[src.stream][src.column]]
+            out[src.channel] = column if src.scale == 1.0 else column * src.scale
         if self.layout.derive is not None:
             out.update(self.layout.derive(out))
         self.rows = k1
         return out
+
+
+@njit(cache=True, nogil=True)
+def _hold_on_grid(readings: np.ndarray, k0: int, k1: int, dt: float, hold_s: float,
+                  values: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Grid rows k0..k1-1 (time k·dt) from time-ordered readings (time, values...): each row holds the newest
+    reading at or before it, NaN when there is none or it is `hold_s` old or older. Returns how many readings
+    lie at or before the last row (-1, nothing written, if the readings are not in time order)."""
+    n = readings.shape[0]
+    for j in range(1, n):
+        if readings[j, 0] < readings[j - 1, 0]:
+            return -1
+    j = 0
+    for k in range(k0, k1):
+        t = k * dt
+        while j < n and readings[j, 0] <= t + _EPS:
+            j += 1
+        if j > 0 and t - readings[j - 1, 0] < hold_s + _EPS:
+            values[k - k0, :] = readings[j - 1, 1:]
+        else:
+            values[k - k0, :] = np.nan
+    return j
 
 
 class RunWriter:
@@ -165,7 +214,7 @@ class RunWriter:
         self.state_fields = tuple(state_fields)
         self.state: dict[str, float] = {k: float("nan") for k in self.state_fields}
         self.builder = AlignedBuilder(layout)
-        self._raw: dict[str, list[Sequence[float]]] = {s.name: [] for s in layout.streams}
+        self._raw = {s.name: _Readings(len(s.columns)) for s in layout.streams}
         self._raw_rows = {s.name: 0 for s in layout.streams}
         self._events: list[tuple[float, int, str, str]] = []
         self._event_rows = 0
@@ -176,6 +225,7 @@ class RunWriter:
         self._fd: int | None = None
         self._mm: np.memmap | None = None
         self._views: dict[str, np.ndarray] = {}
+        self._closing_groups: dict[str, Mapping[str, tuple[np.ndarray, str]]] = {}
         if _resume:
             return
         capacity = self._capacities(planned_s)
@@ -185,10 +235,10 @@ class RunWriter:
         self._open()
 
     # -- public API --------------------------------------------------------------------------------
-    def add(self, stream: str, t: float, row: Sequence[float]) -> None:
-        """One reading of `stream` at run time `t` (s): values in the stream's column order (NaN = no number)."""
-        self._raw[stream].append((t, *row))
-        self.builder.add(stream, t, row)
+    def add(self, stream: str, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
+        """One reading of `stream` at run time `t` (s): values in the stream's column order (NaN = no number);
+        or a block of readings: `t` an array of N times, `row` an (N, columns) array."""
+        self._raw[stream].add(t, row)
 
     def event(self, t: float, kind: str, cycle: int = -1, detail: str = "") -> None:
         """An entry of the events table (cycle start, engagement, interlock, fault, drop-out, ...)."""
@@ -208,21 +258,18 @@ class RunWriter:
         assert self._fd is not None
         until_row = int(np.floor(now / self.layout.dt + _EPS)) + 1
         self._ensure_capacity(until_row)
+        raw = {spec.name: self._raw[spec.name].take() for spec in self.layout.streams}
+        for name, data in raw.items():
+            if len(data):
+                self.builder.add_rows(name, data)
         k0 = self.builder.rows
         if until_row > k0:
             rows = self.builder.finalise(until_row)
-            for name in self.layout.aligned_units:
-                self._put(f"aligned/{name}", k0, rows[name])
-        for spec in self.layout.streams:
-            buf = self._raw[spec.name]
-            if buf:
-                data = np.asarray(buf, dtype=float)
-                a = self._raw_rows[spec.name]
-                self._put(f"raw/{spec.name}/time", a, data[:, 0])
-                for j, name in enumerate(spec.names):
-                    self._put(f"raw/{spec.name}/{name}", a, data[:, j + 1])
-                self._raw_rows[spec.name] = a + len(data)
-                buf.clear()
+            _store(self._aligned_views, k0, [rows[name] for name in self.layout.aligned_units])
+        for name, data in raw.items():
+            if len(data):
+                _store(self._stream_views[name], self._raw_rows[name], data.T)
+                self._raw_rows[name] += len(data)
         if self._events:
             a, ev = self._event_rows, self._events
             self._put("events/time", a, np.array([e[0] for e in ev], dtype=float))
@@ -241,12 +288,18 @@ class RunWriter:
         self._last_flush_t = now
         self.flushes += 1
 
-    def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None) -> None:
-        """Flush, then replace the file by its compact, compressed form with root attribute `status`."""
+    def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None,
+              groups: Mapping[str, Mapping[str, tuple[np.ndarray, str]]] | None = None) -> None:
+        """Flush, then replace the file by its compact, compressed form with root attribute `status`.
+
+        `groups`: extra groups known only at the end (the simulated bench's /truth), name -> dataset ->
+        (values, units), written into the compact file before it replaces the run's: all or nothing.
+        """
         if self._fd is None:
             return
         self.flush()
         self._close_fd()
+        self._closing_groups = dict(groups or {})
         self._rebuild(None, compact=True, status=status, attrs=attrs)
 
     def abandon(self) -> None:
@@ -318,8 +371,12 @@ class RunWriter:
             f.visititems(visit)
         self._fd = os.open(self.path, os.O_RDWR)
         self._mm = np.memmap(self.path, dtype=np.uint8, mode="r+")
-        self._views = {name: self._mm[off:off + cap * dt.itemsize].view(dt)
+        whole = np.asarray(self._mm)  # a plain ndarray view of the mapping: slicing it skips memmap's bookkeeping
+        self._views = {name: whole[off:off + cap * dt.itemsize].view(dt)
                        for name, (off, dt, cap) in self._where.items()}
+        self._aligned_views = [self._views[f"aligned/{name}"] for name in self.layout.aligned_units]
+        self._stream_views = {s.name: [self._views[f"raw/{s.name}/{c}"] for c in ("time", *s.names)]
+                              for s in self.layout.streams}
 
     def _close_fd(self) -> None:
         if self._fd is not None:
@@ -352,12 +409,12 @@ class RunWriter:
         return np.asarray(values, dtype=float)
 
     def _ensure_capacity(self, until_row: int) -> None:
+        """Grow the file (rebuilt at twice what is needed) if what the next flush writes would not fit."""
         need = {"aligned": until_row, "events": self._event_rows + len(self._events)}
-        for s in self.layout.streams:
-            need[f"raw/{s.name}"] = self._raw_rows[s.name] + len(self._raw[s.name])
         have = {"aligned": self._capacity("aligned/time"), "events": self._capacity("events/time")}
-        for s in self.layout.streams:
-            have[f"raw/{s.name}"] = self._capacity(f"raw/{s.name}/time")
+        for name, views in self._stream_views.items():
+            need[f"raw/{name}"] = self._raw_rows[name] + len(self._raw[name])
+            have[f"raw/{name}"] = len(views[0])
         if all(need[k] <= have[k] for k in need):
             return
         capacity = {k: max(have[k], 2 * need[k]) for k in have}
@@ -410,6 +467,12 @@ class RunWriter:
             ds.attrs["fields"] = json.dumps(fields)
             ds.attrs["units"] = "1"
             acq.attrs["layout"] = json.dumps(describe_layout(self.layout))
+            for name, columns in self._closing_groups.items():
+                group = f.create_group(name)
+                for col, (values, units) in columns.items():
+                    arr = np.asarray(values, dtype=float)
+                    ds = group.create_dataset(col, data=arr, track_times=False, **_compression(compact, arr))
+                    ds.attrs["units"] = units
             f.flush()
 
     def _write_group(self, parent: h5py.Group, name: str, columns: Mapping[str, str], capacity, data,
@@ -474,6 +537,12 @@ class RunWriter:
         meta = {"attrs": meta_attrs, "schedule": schedule, "schedule_units": units,
                 "progress": [by_name[k] for k in self._progress_fields()]}
         self._build(dest, capacity, meta, data)
+
+
+def _store(views: Sequence[np.ndarray], start: int, columns: Sequence[np.ndarray]) -> None:
+    """Columns into their datasets' mapped bytes from row `start` (the capacity is made sure of before)."""
+    for view, column in zip(views, columns):
+        view[start:start + len(column)] = column
 
 
 def _tmp(path: Path) -> Path:

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import h5py
 
+from benchlab import cliargs
+from benchlab.bounds import MAX_SAMPLE_PERIOD_S
 from benchlab.errors import InputError
 
 NAME = "cooldown"
@@ -21,7 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--params", required=True,
                         help="parameter file (identified from a Table 1 run) for every parameter but R; "
                              "'sim-truth' uses the simulated bench's true parameters stored in the run")
-    parser.add_argument("--sample", type=float, default=1.0, help="residual sampling period in s (default 1)")
+    parser.add_argument("--sample", type=cliargs.positive_float("a sampling period in s", MAX_SAMPLE_PERIOD_S),
+                        default=1.0, help="residual sampling period in s (default 1)")
     parser.add_argument("--json", action="store_true", help="print the table and eq. (11) as JSON")
     parser.add_argument("--no-store", action="store_true", help="do not write /analysis into the run file")
 
@@ -45,12 +48,13 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     from benchlab.cooldown import analyse, fit_eq11, store, table_lines
+    from benchlab.progress import for_terminal
     from benchlab.runfile import load_run
 
     path = Path(args.run)
     load_run(path)  # checks the file (InputError on a bad one)
     params = load_analysis_params(args.params, path)
-    results = analyse(path, params, args.sample)
+    results = analyse(path, params, args.sample, progress=for_terminal(args.quiet))
     if not results:
         raise InputError(path, "/events", "completed cool-downs (cooldown_start/cooldown_end events)")
     try:

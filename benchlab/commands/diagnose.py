@@ -17,6 +17,7 @@ from benchlab.errors import InputError
 from benchlab.model.catalog import MODEL_HELP, resolve_model
 from benchlab.model.definition import ModelDefinition, to_toml
 from benchlab.model.runs import load_runs
+from benchlab.progress import for_terminal
 
 NAME = "diagnose"
 HELP = "find what the model gets wrong, name the cause, extend the model and measure the gain"
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     out = check_report_dir(args.report) if args.report else None
     model = resolve_model(args.baseline, "--model")
     runs = load_diagnosed_runs(args.runs, model)
-    diagnosis = diagnose_runs(runs, model, seed=args.seed)
+    diagnosis = diagnose_runs(runs, model, seed=args.seed, progress=for_terminal(args.quiet))
     result = summarise(diagnosis, model.label)
     if args.save_model:
         Path(args.save_model).write_text(to_toml(best_model(diagnosis)))

@@ -12,6 +12,7 @@ from benchlab.identify.data import FIT_STEP_S
 from benchlab.model.catalog import MODEL_HELP, model_spec, resolve_model
 from benchlab.model.runs import load_runs
 from benchlab.params import save_params
+from benchlab.progress import for_terminal
 
 NAME = "identify"
 HELP = "grey-box identification of a thermal model (the clutch's or a model file's) from one or more run files"
@@ -46,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
             raise InputError("--fix", name, f"a value in [{spec.lower:g}, {spec.upper:g}] {spec.unit}, got {value:g}")
     runs = load_runs(args.runs, model)
     validate = load_runs(args.validate, model)
-    result = identify(runs, model, fixed, validate, starts=args.starts, seed=args.seed, step_s=args.step)
+    result = identify(runs, model, fixed, validate, starts=args.starts, seed=args.seed, step_s=args.step,
+                      progress=for_terminal(args.quiet))
     save_params(args.out, result.params, result.summary())
     se = result.uncertainty.standard_errors
     print(f"{args.out}: {model.label} model from {len(runs)} run(s), {result.fit.starts} starts")

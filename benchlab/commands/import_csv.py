@@ -1,14 +1,21 @@
 """`benchlab import DATA.csv --out RUN.h5 [--dt S] [--unit NAME=UNIT …] [--model FILE.toml|linear|nonlinear]`:
 a CSV becomes a run file (contract sections 1 and 6).
 
-Columns with the contract's /aligned names carry the contract's units; any other column needs its unit, from a
-second header line of units or `--unit NAME=UNIT`. Without a `time` column, `--dt S` gives the grid. The CSV
-must hold the clutch channels of section 1, or with `--model` the channels that model names.
+Columns with the contract's /aligned names carry the contract's units; any other column needs its unit, from its
+title (`name [unit]`, what `benchlab export --to X.csv` writes), a second header line of units or
+`--unit NAME=UNIT`. Without a `time` column, `--dt S` gives the grid. The CSV must hold the clutch channels of
+section 1, or with `--model` the channels that model names.
+
+The separator is the one of `,` `;` TAB that the header line holds (or `--sep`); with `;` or TAB a decimal
+comma is read as a number when the data holds commas (German spreadsheets: `21,5;1500`), or as `--decimal`
+says.
 """
 
 from __future__ import annotations
 
 import argparse
+import io
+import re
 from pathlib import Path
 
 import numpy as np
@@ -22,10 +29,13 @@ from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmea
 
 NAME = "import"
 HELP = "convert a CSV (contract channel names, or any channel with its unit) into a run file"
+SEPARATORS = {",": ",", ";": ";", "tab": "\t"}
+#: A column title with its unit, `T_flywheel [degC]`.
+TITLE_WITH_UNIT = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\]]*)\]$")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("csv", help="CSV file, one column per channel, header = channel names "
+    parser.add_argument("csv", help="CSV file, one column per channel, header = channel names or `name [unit]` "
                                     "(optionally a second header line of units)")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="run file to write")
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
@@ -34,6 +44,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the unit of each column beyond the contract's channels, e.g. --unit IqFbk=A speed=rpm")
     parser.add_argument("--model", help=f"{MODEL_HELP}: the CSV must hold the channels it names "
                                         "(default: the clutch channels of contract section 1)")
+    parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
+    parser.add_argument("--decimal", choices=(".", ","),
+                        help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
 
 
 def parse_units(items: list[str]) -> dict[str, str]:
@@ -47,33 +61,63 @@ def parse_units(items: list[str]) -> dict[str, str]:
     return units
 
 
-def _is_number(text: object) -> bool:
+def _is_number(text: object, decimal: str = ".") -> bool:
     try:
-        float(str(text))
+        float(str(text).replace(decimal, "."))
     except ValueError:
         return False
     return True
 
 
+def _dialect(text: str, sep: str | None, decimal: str | None) -> tuple[str, str]:
+    """Separator and decimal mark: given, or the separator the header holds most of and the decimal that fits."""
+    header, _, body = text.partition("\n")
+    sep = SEPARATORS[sep] if sep else max(SEPARATORS.values(), key=header.count)
+    if decimal is None:
+        decimal = "," if sep != "," and "," in body else "."
+    return sep, decimal
+
+
+def _channel_names(path: Path, titles: list[str]) -> tuple[list[str], dict[str, str]]:
+    """Column titles to channel names and the units the titles give; a unit in the title of a contract channel
+    must be its contract unit."""
+    names, units = [], {}
+    for title in (str(t).strip() for t in titles):
+        match = TITLE_WITH_UNIT.match(title)
+        name = match["name"] if match else title
+        if match:
+            unit = match["unit"].strip()
+            if name in ALIGNED_UNITS and unit != ALIGNED_UNITS[name]:
+                raise InputError(path, f"column {title}", f"{name} in {ALIGNED_UNITS[name]}, got {match['unit']!r}")
+            if unit:
+                units[name] = unit
+        names.append(name)
+    return names, units
+
+
 def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None = None,
-             required: tuple[str, ...] = REQUIRED) -> tuple[pd.DataFrame, float, dict[str, str]]:
+             required: tuple[str, ...] = REQUIRED, sep: str | None = None,
+             decimal: str | None = None) -> tuple[pd.DataFrame, float, dict[str, str]]:
     """Read and check the CSV: required columns, a unit for every column, numeric values, a uniform time grid
     (or `dt`); return frame, dt and the units."""
     if not path.exists():
         raise InputError(path, "file", "an existing CSV file (not found)")
     try:
-        frame = pd.read_csv(path, dtype=str, keep_default_na=False)
+        text = path.read_text(encoding="utf-8-sig")  # a spreadsheet's byte-order mark is not part of the header
+        sep, decimal = _dialect(text, sep, decimal)
+        frame = pd.read_csv(io.StringIO(text), sep=sep, dtype=str, keep_default_na=False)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise InputError(path, "file", f"a CSV table ({str(exc).splitlines()[0]})") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
+    names, title_units = _channel_names(path, list(frame.columns))
+    frame.columns = names
     first_line = 2
-    if len(frame) and not any(_is_number(v) for v in frame.iloc[0]):  # a second header line: the units
+    if len(frame) and not any(_is_number(v, decimal) for v in frame.iloc[0]):  # a second header line: the units
         header_units = {c: str(u).strip() for c, u in zip(frame.columns, frame.iloc[0]) if str(u).strip()}
         frame = frame.iloc[1:].reset_index(drop=True)
         first_line = 3
     else:
         header_units = {}
-    units = _units(path, list(frame.columns), {**header_units, **dict(units or {})})
+    units = _units(path, list(frame.columns), {**title_units, **header_units, **dict(units or {})})
     if dt is not None and "time" in frame.columns:
         raise InputError(path, "column time", "no time column with --dt (one or the other gives the grid)")
     if dt is None and "time" not in frame.columns:
@@ -84,6 +128,8 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
                                                      "(missing)")
     for name in frame.columns:
         text = frame[name].astype(str).str.strip()
+        if decimal != ".":
+            text = text.str.replace(decimal, ".", regex=False)
         values = pd.to_numeric(text.replace({"": np.nan, "nan": np.nan, "NaN": np.nan}), errors="coerce")
         bad = values.isna() & ~text.isin(["", "nan", "NaN"])
         if bad.any():
@@ -126,7 +172,9 @@ def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, s
 
 def run(args: argparse.Namespace) -> int:
     required = tuple(resolve_model(args.model).required_channels()) if args.model else REQUIRED
-    frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required)
+    if Path(args.out).exists() and not args.force:
+        raise InputError(args.out, "--out", "a new run file (it exists: --force to overwrite)")
+    frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep, args.decimal)
     write_run(args.out, frame, dt, protocol="imported", units=units)
     print(f"{args.out}: {len(frame)} samples at dt={dt:g} s, {len(frame.columns)} channels")
     return 0

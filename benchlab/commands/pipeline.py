@@ -18,11 +18,14 @@ from pathlib import Path
 
 import pandas as pd
 
+from benchlab import cliargs
+from benchlab.bounds import MAX_RUN_DURATION_S
 from benchlab.diagnose.engine import diagnose_runs
 from benchlab.diagnose.regimes import worst_regimes
 from benchlab.diagnose.report import summarise
 from benchlab.identify.api import identify
 from benchlab.params import load_params, save_params
+from benchlab.progress import Progress, for_terminal
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from benchlab.wear import analyse_wear
@@ -35,8 +38,9 @@ VALIDATION_CYCLES = 3  # Table 1 cycles after the validation protocol's three lo
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out", help="directory for run, parameter and report files")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the schedule and the bench's noise")
-    parser.add_argument("--duration", type=float, default=3600.0, help="planned Table 1 duration in s")
+    parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the bench's noise")
+    parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
+                        default=3600.0, help="planned Table 1 duration in s")
 
 
 def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
@@ -44,10 +48,10 @@ def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
           f"flywheel up to {run['T_flywheel'].max():.1f} degC")
 
 
-def _bench_run(label: str, path: Path, protocol: str, seed: int, **options: float) -> pd.DataFrame:
+def _bench_run(label: str, path: Path, protocol: str, seed: int, progress: Progress, **options: float) -> pd.DataFrame:
     """One protocol on the simulated bench through the runner and the real drivers; the run as loaded back."""
     code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, plant=ThermalPlant(),
-                                       install_signals=False, **options))
+                                       install_signals=False, progress=progress, **options))
     if code != 0 or summary is None or summary.status != "complete":
         raise RuntimeError(f"{label} run {path} ended {summary.status if summary else 'without a summary'} "
                            f"(exit {code})")
@@ -56,11 +60,11 @@ def _bench_run(label: str, path: Path, protocol: str, seed: int, **options: floa
     return run
 
 
-def _diagnose(fitting: pd.DataFrame, out: Path) -> None:
-    """Diagnose the linear baseline on the fitting run: JSON, page with figures, two labelled lines."""
+def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
+    """Diagnose the linear baseline on the fitting run: JSON, page with figures, two labelled lines; the summary."""
     from benchlab.diagnose.page import write_page  # matplotlib only when the command runs
 
-    diagnosis = diagnose_runs([fitting], "linear")
+    diagnosis = diagnose_runs([fitting], "linear", progress=progress)
     summary = summarise(diagnosis, "linear")
     (out / "diagnose.json").write_text(json.dumps(summary, indent=2, default=float))
     page = write_page(diagnosis, summary, [fitting], out / "diagnose")
@@ -73,29 +77,43 @@ def _diagnose(fitting: pd.DataFrame, out: Path) -> None:
     if worst:
         group, label, channel, rmse, _ = worst[0]
         print(f"          worst regime (held-out): {group} = {label}, {channel} {rmse:.3f} K -> {page}")
+    return summary
 
 
 def run(args: argparse.Namespace) -> int:
     from benchlab.report import write_report  # matplotlib only when the command runs
+    from benchlab.report.index import cooldown_scores, write_index
+    from benchlab.report.resistance import standard_errors
+    from benchlab.wear.plot import plot_wear
 
+    progress = for_terminal(args.quiet)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for stale in [out / "table1.h5", out / "validation.h5", *out.glob("table1*.blf"), *out.glob("validation*.blf")]:
         stale.unlink(missing_ok=True)  # the job writes its runs anew each time
-    fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, duration_s=args.duration)
-    validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, cycles=VALIDATION_CYCLES)
+    fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, progress, duration_s=args.duration)
+    validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, progress,
+                            cycles=VALIDATION_CYCLES)
+    figures = {}
     for model in ("linear", "nonlinear"):
-        result = identify([fitting], model, validate=[validation], starts=4)
+        result = identify([fitting], model, validate=[validation], starts=4, progress=progress)
         save_params(out / f"{model}.json", result.params, result.summary())
         fit_fig, val_fig = next(iter(result.fitting.values())), next(iter(result.validation.values()))
+        figures[model] = {"fit": fit_fig, "validation": val_fig}
         print(f"identify  {model:9s}: fit RMSE {fit_fig['rmse_K']:.3f} K ({fit_fig['nrmse_pct']:.2f} %), "
               f"validation RMSE {val_fig['rmse_K']:.3f} K ({val_fig['nrmse_pct']:.2f} %) -> {out / (model + '.json')}")
-    nonlinear = load_params(out / "nonlinear.json")
-    page = write_report(fitting, nonlinear, out / "report", compare=load_params(out / "linear.json"),
-                        validation=[validation])
+    nonlinear, linear = load_params(out / "nonlinear.json"), load_params(out / "linear.json")
+    page = write_report(fitting, nonlinear, out / "report", compare=linear, validation=[validation],
+                        progress=progress)
     print(f"report    nonlinear against linear, validated on {out / 'validation.h5'} -> {page}")
-    _diagnose(fitting, out)
-    wear = analyse_wear(fitting, nonlinear).as_dict()
+    diagnosis = _diagnose(fitting, out, progress)
+    wear_report = analyse_wear(fitting, nonlinear)
+    wear = wear_report.as_dict()
     (out / "wear.json").write_text(json.dumps(wear, indent=2, default=float))
+    plot_wear(wear_report, out / "wear.png")
     print(f"wear      {wear['engagements']} engagements, {wear['friction_energy_J'] / 1e6:.2f} MJ -> {out / 'wear.json'}")
+    cooldowns = cooldown_scores(validation, out / "validation.h5", [("linear", linear), ("nonlinear", nonlinear)])
+    index = write_index(out, {"Table 1": (out / "table1.h5", fitting), "validation": (out / "validation.h5", validation)},
+                        figures, cooldowns, nonlinear, standard_errors(nonlinear), diagnosis, wear)
+    print(f"page      the whole job -> {index}")
     return 0

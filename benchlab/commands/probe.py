@@ -1,4 +1,5 @@
-"""`benchlab probe pt1000|node|can --url URL [--json] [--count N]`: read a few values from one bench device.
+"""`benchlab probe pt1000|node|can --url URL [--json] [--count N] [--bitrate BIT/S]`: read a few values from one
+bench device.
 
 Exit 0 with data, 1 when nothing arrived in time, 2 for a URL that does not open. Read-only: the PT1000
 scanner is reset and configured (that is how it measures), the node and the CAN bus are only listened to. `sim://NAME` URLs reach the in-process emulators (sim_bench.emulators).
@@ -15,7 +16,7 @@ from typing import Any
 import can
 
 from benchlab import cliargs
-from benchlab.bounds import MAX_PROBE_READINGS, MAX_TIMEOUT_S
+from benchlab.bounds import MAX_CAN_BITRATE, MAX_PROBE_READINGS, MAX_TIMEOUT_S, MIN_CAN_BITRATE
 from benchlab.errors import InputError
 from drivers.can_bench import CanBench
 from drivers.clutch_node import ClutchNodeGateway
@@ -39,10 +40,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="pt1000 channel list (default (@101:104))")
     parser.add_argument("--mode", choices=("fres", "frtd"), default="fres",
                         help="pt1000: 4-wire resistance + CVD in software, or the instrument's RTD conversion")
+    parser.add_argument("--bitrate", type=cliargs.count("a CAN bit rate in bit/s", MAX_CAN_BITRATE, MIN_CAN_BITRATE),
+                        help="can: the bus's bit rate in bit/s (e.g. 500000), for interfaces that set it "
+                             "(socketcan takes the rate set with `ip link`)")
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of text lines")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.bitrate is not None and args.device != "can":
+        raise InputError("command line", "--bitrate", f"only with `probe can` (a CAN bus), not {args.device}")
     if args.url.startswith("sim://"):
         import sim_bench.emulators  # noqa: F401 - registers the sim:// pyserial handler
     report = {"pt1000": _probe_pt1000, "node": _probe_node, "can": _probe_can}[args.device](args)
@@ -90,8 +96,10 @@ def _probe_can(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError("--url", args.url, "INTERFACE:CHANNEL for can, e.g. socketcan:can0 or virtual:bench")
     if interface not in can.interfaces.VALID_INTERFACES or interface == "udp_multicast":
         raise InputError("--url", args.url, f"a python-can interface other than udp_multicast, not {interface!r}")
-    bench = _open(lambda: CanBench.from_config({"interface": interface, "channel": channel}, listen_only=True),
-                  args.url)
+    config = {"interface": interface, "channel": channel}
+    if args.bitrate is not None:
+        config["bitrate"] = args.bitrate
+    bench = _open(lambda: CanBench.from_config(config, listen_only=True), args.url)
     samples = []
     try:
         deadline = time.monotonic() + args.timeout

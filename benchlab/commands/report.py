@@ -27,6 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from benchlab.progress import for_terminal
     from benchlab.report import write_report  # matplotlib only when the command runs
 
     out = Path(args.out)
@@ -41,6 +42,6 @@ def run(args: argparse.Namespace) -> int:
             check_run(compare.definition, run)
     if args.sweep:
         load_run(args.sweep)  # a run file at all (the events it needs are checked by the analysis)
-    page = write_report(measured, params, out, compare, validation, args.sweep)
+    page = write_report(measured, params, out, compare, validation, args.sweep, progress=for_terminal(args.quiet))
     print(page)
     return 0

@@ -9,8 +9,11 @@ from pathlib import Path
 from benchlab import cliargs
 from benchlab.acquire.lock import RunFileLock
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
+from benchlab.commands import watch
 from benchlab.errors import InputError
+from benchlab.progress import for_terminal
 from protocols.catalog import NAMES
+from sim_bench.faults import SPEC, kinds_help
 
 NAME = "run"
 HELP = "run a protocol (table1, cooldown-sweep, validation) on the simulated bench or a hardware bench"
@@ -30,12 +33,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
     parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
                         "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`)")
+    parser.add_argument("--fault", type=cliargs.fault, action="append", default=[], metavar=SPEC,
+                        help="simulated bench only, repeatable: inject a fault at SECONDS of run time to rehearse "
+                        f"what the bench does (recorded in the run file's sim_faults); kinds(keys): {kinds_help()}")
     parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
-    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("--watch", action="store_true", help="serve the live view of the run on 127.0.0.1 while it "
+                        "runs (as `benchlab watch`, in a process of its own)")
+    parser.add_argument("--port", type=watch.port, help=f"with --watch: its port (default {watch.DEFAULT_PORT})")
 
 
 def run(args: argparse.Namespace) -> int:
     """The run file is locked before anything else (RunFileLock), so a second run on it is refused."""
+    if args.fault and args.bench != "sim":
+        raise InputError("command line", "--fault", "--bench sim: faults are rehearsed on the simulated bench, "
+                                                    f"never injected into a hardware bench (got --bench {args.bench})")
+    if args.fault and args.resume:
+        raise InputError("command line", "--fault", "a new run: a resumed run continues as it was planned")
     if args.resume:
         out = Path(args.resume)
         if args.out and Path(args.out) != out:
@@ -44,12 +57,20 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("command line", "--out", "a run file to write")
     else:
         out = Path(args.out or "dry-run.h5")
+    if args.port is not None and not args.watch:
+        raise InputError("command line", "--port", "--watch with it (the live view's port)")
     if args.dry_run:
         return _run(args, out)
     with RunFileLock(out, "--resume" if args.resume else "--out"):  # before anything else: one run per file
         if not args.resume and out.exists() and not args.force:
             raise InputError(out, "--out", "a new run file (it exists: --resume to continue it, --force to overwrite)")
-        return _run(args, out)
+        if not args.watch:
+            return _run(args, out)
+        from benchlab.watch.launch import watching
+
+        with watching(out, watch.DEFAULT_PORT if args.port is None else args.port) as url:
+            print(f"live view  {url}", file=sys.stderr, flush=True)
+            return _run(args, out)
 
 
 def _run(args: argparse.Namespace, out: Path) -> int:
@@ -60,22 +81,16 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
     from benchlab.runner.session import RunRequest, execute
 
-    tty = sys.stderr.isatty()
-
-    def progress(line: str) -> None:
-        print(("\r" + line.ljust(110)) if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
-
     request = RunRequest(protocol=args.protocol or "", out=out, bench=args.bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
-                         progress=None if args.quiet else progress)
+                         faults=tuple(args.fault), progress=for_terminal(args.quiet))
     code, summary = execute(request)
     if summary is not None:
-        if tty and not args.quiet:
-            print(file=sys.stderr)
         print("\n".join(summary.lines()))
         print(f"run file   {out}")
         if args.params and code == 0 and (args.protocol == "cooldown-sweep" or args.resume):
             from benchlab.commands import cooldown
 
-            cooldown.run(argparse.Namespace(run=str(out), params=args.params, sample=1.0, json=False, no_store=False))
+            cooldown.run(argparse.Namespace(run=str(out), params=args.params, sample=1.0, json=False, no_store=False,
+                                            quiet=args.quiet))
     return code

@@ -1,4 +1,5 @@
-"""`benchlab simulate RUN.h5 --params P.json [--model FILE.toml|linear|nonlinear] --out SIM.h5`."""
+"""`benchlab simulate RUN.h5 --params P.json [--model FILE.toml|linear|nonlinear] --out SIM.h5`: SIM.h5 is the run
+file plus /simulated."""
 
 from __future__ import annotations
 
@@ -19,14 +20,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
     parser.add_argument("--params", required=True, help="parameter file (JSON)")
     add_model_option(parser)
-    parser.add_argument("--out", required=True, type=cliargs.output_file, help="output HDF5 file with /simulated")
+    parser.add_argument("--out", required=True, type=cliargs.output_file,
+                        help="file to write: the run's root attributes and /aligned plus /simulated (a run file)")
 
 
 def run(args: argparse.Namespace) -> int:
     params = load_model_params(args.params, args.model)
     measured = load_runs([args.run], params.definition)[0]
     simulated = simulate(measured, params)
-    write_simulated(args.out, measured["time"].to_numpy(), simulated,
+    write_simulated(args.out, args.run, simulated,
                     {"source_run": str(args.run), "params": str(args.params), "model": params.model})
     scored = [c for c in params.network.measured if c in measured.columns]
     print(f"{args.out}: {len(simulated)} samples, {params.model} model, "

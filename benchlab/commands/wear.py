@@ -8,6 +8,7 @@ import json
 import math
 
 from benchlab import cliargs
+from benchlab.bounds import MAX_WEAR_HORIZON, MAX_WEAR_PATHS
 from benchlab.errors import InputError
 from benchlab.model.options import add_model_option, load_model_params
 from benchlab.model.runs import load_runs
@@ -25,9 +26,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--params", required=True, help="thermal parameter file (JSON)")
     add_model_option(parser)
     parser.add_argument("--clutch", help="clutch file (TOML: z, r, maps of eq. 1-3); default: documented assumptions")
-    parser.add_argument("--predict", type=int, default=DEFAULT_HORIZON, metavar="N_ENGAGEMENTS",
+    parser.add_argument("--predict", type=cliargs.count("engagements", MAX_WEAR_HORIZON), default=DEFAULT_HORIZON,
+                        metavar="N_ENGAGEMENTS",
                         help=f"horizon for the failure probability and expected wear (default {DEFAULT_HORIZON})")
-    parser.add_argument("--paths", type=int, default=DEFAULT_PATHS, help="Monte Carlo paths for the remaining life")
+    parser.add_argument("--paths", type=cliargs.count("Monte Carlo paths", MAX_WEAR_PATHS), default=DEFAULT_PATHS,
+                        help="Monte Carlo paths for the remaining life")
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="Monte Carlo seed")
     parser.add_argument("--json", action="store_true", help="print the result as one JSON object")
     parser.add_argument("--plot", metavar="OUT.png", type=cliargs.output_file,
@@ -75,10 +78,6 @@ def _summary(report: WearReport) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse the run; print JSON or a summary, optionally write the figure."""
-    if args.predict < 1:
-        raise InputError("--predict", "N_ENGAGEMENTS", f"a positive number of engagements, got {args.predict}")
-    if args.paths < 1:
-        raise InputError("--paths", "paths", f"a positive number of Monte Carlo paths, got {args.paths}")
     spec = load_clutch(args.clutch) if args.clutch else default_clutch()
     params = load_model_params(args.params, args.model)
     measured = load_runs([args.run], params.definition)[0]

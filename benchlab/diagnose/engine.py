@@ -31,10 +31,11 @@ from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
 from benchlab.identify.spec import ModelSpec
-from benchlab.metrics import nrmse_pct
+from benchlab.metrics import nrmse_pct, residual
 from benchlab.model.build import build_spec
 from benchlab.model.catalog import resolve_model
 from benchlab.model.definition import ModelDefinition
+from benchlab.progress import SILENT, Progress
 from benchlab.runfile import ALIGNED_UNITS
 
 STEP_S = 1.0
@@ -70,8 +71,8 @@ class HeldOut:
     params: list[dict[str, float]]  # per fold
 
     def residuals(self) -> list[dict[str, np.ndarray]]:
-        """Simulated minus measured per run and channel; NaN where the sample has no valid target."""
-        return [{c: pred[c] - d.targets[c] for c in pred} for d, pred in zip(self.datasets, self.predictions)]
+        """Simulated − measured (benchlab.metrics.residual) per run and channel; NaN where no valid target."""
+        return [{c: residual(pred[c], d.targets[c]) for c in pred} for d, pred in zip(self.datasets, self.predictions)]
 
     @cached_property
     def _scored(self) -> tuple[np.ndarray, np.ndarray]:
@@ -196,7 +197,7 @@ Screened = tuple[float, Candidate, ModelSpec, dict[str, float]]  # in-sample cos
 
 
 def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[FitData],
-            channels: dict[str, np.ndarray]) -> list[Screened]:
+            channels: dict[str, np.ndarray], progress: Progress, what: str) -> list[Screened]:
     """A short in-sample fit of each candidate, every parameter free, from the current model; by cost, best first.
 
     Every parameter, not only the new ones: a model that lacks an effect has bent its other
@@ -211,8 +212,10 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
                             **{k: current.params[k] for k in current.free_names}})
         return result.cost, result.params
 
-    scored = [(cost, cand, spec, params) for cand, spec, (cost, params)
-              in zip(cands, specs, map_indices(screen_one, len(specs))) if cost < current.cost]
+    with progress.task(what, len(specs), unit="fit") as task:
+        screened = map_indices(screen_one, len(specs), task.advance)
+    scored = [(cost, cand, spec, params) for cand, spec, (cost, params) in zip(cands, specs, screened)
+              if cost < current.cost]
     return sorted(scored, key=lambda item: item[0])
 
 
@@ -268,10 +271,12 @@ def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], f
 
 @single_threaded_blas
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", starts: int = 4,
-                  seed: int = 0) -> Diagnosis:
+                  seed: int = 0, progress: Progress = SILENT) -> Diagnosis:
     """Baseline fit, greedy accepted extensions, then a drop-one re-check of each against the combination.
 
-    `baseline`: a built-in name, a model file or a checked model; every extension is an edit of it."""
+    `baseline`: a built-in name, a model file or a checked model; every extension is an edit of it.
+    `progress` gets a task for the baseline's multistart and one per screening of candidates.
+    """
     duration = sum(float(run["time"].iloc[-1] - run["time"].iloc[0]) for run in runs)
     if duration < MIN_DURATION_S:
         raise ValueError(f"diagnose needs at least {MIN_DURATION_S:.0f} s of runs for held-out scoring, "
@@ -282,29 +287,35 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
     shared = set.intersection(*(set(d.channels) for d in datasets))
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels if k in shared}
     units = {**ALIGNED_UNITS, **runs[0].attrs.get("units", {})}
-    base = fit_multistart(model_spec(model, datasets), datasets, starts=starts, seed=seed)
+    with progress.task(f"diagnose: {model.label} baseline", starts + 1, unit="fit") as task:
+        base = fit_multistart(model_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
     library = candidates(model, channels, units)
     current, current_held, findings = base, base_held, []
-    for _ in range(MAX_ROUNDS):
+    for round_ in range(1, MAX_ROUNDS + 1):
         used = {f.candidate.key for f in findings}
         remaining = [c for c in library if c.key not in used]
-        finding = _try(_screen([c for c in remaining if c.physical], current, datasets, channels),
-                       current, current_held, datasets)
+        finding = _try(_screen([c for c in remaining if c.physical], current, datasets, channels, progress,
+                               f"diagnose round {round_}: mechanisms"), current, current_held, datasets)
         if finding is None:
-            finding = _try(_screen([c for c in remaining if not c.physical], current, datasets, channels),
-                           current, current_held, datasets)
+            finding = _try(_screen([c for c in remaining if not c.physical], current, datasets, channels, progress,
+                                   f"diagnose round {round_}: learned flows"), current, current_held, datasets)
         if finding is None:
             break
         findings.append(finding)
         current = fit(finding.spec, datasets, start={p.name: finding.params[p.name] for p in finding.spec.free})
         current_held = finding.after
-    if len(findings) > 1:
+    dropped = False
+    while len(findings) > 1 or (findings and dropped):  # until every finding holds against the rest (alpha, gain)
         findings = _recheck(base, base_held, findings, current, current_held, datasets, channels)
         kept = [f for f in findings if f.significant]
-        if len(kept) < len(findings):  # another finding covered what this one fixed: drop it, measure again
-            spec = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
-            current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
-            current_held = _held_out(spec, current.params, datasets) if kept else base_held
-            findings = _recheck(base, base_held, kept, current, current_held, datasets, channels)
+        if len(kept) == len(findings):
+            break
+        dropped = True  # another finding covered what this one fixed: drop it, measure the rest again
+        if not kept:
+            current, current_held, findings = base, base_held, []
+            break
+        spec = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
+        current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
+        current_held, findings = _held_out(spec, current.params, datasets), kept
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held)

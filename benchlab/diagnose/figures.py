@@ -11,6 +11,7 @@ import numpy as np
 
 from benchlab.diagnose.engine import ALPHA, Diagnosis, HeldOut
 from benchlab.diagnose.evidence import FORMS, binned_means, residual_forms, run_signal, signal_unit
+from benchlab.metrics import RESIDUAL_LABEL
 from benchlab.report.plotting import colour, label, new_figure, save, symbol
 
 WINDOW_S = 600.0
@@ -89,7 +90,7 @@ def plot_window(result: Diagnosis, run_names: Sequence[str], path: "str | os.Pat
         for i, (channel, r) in enumerate(held.residuals()[run].items()):
             errors.plot(minutes, r[start:stop], color=colour(channel, i), lw=1.0,
                         ls="--" if model == "baseline" else "-", label=f"{symbol(channel)} {model}")
-    errors.set_ylabel("simulated − measured (K)")
+    errors.set_ylabel(f"{RESIDUAL_LABEL} (K)")
     errors.set_title("held-out residuals (dashed: baseline, solid: final)", fontsize=9)
     errors.legend(fontsize=7, ncol=2)
     _inputs(axes[-1], d, start, stop, minutes)

@@ -25,15 +25,25 @@ def workers() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
-def map_indices(task: Callable[[int], T], count: int) -> list[T]:
-    """[task(0), …, task(count - 1)], spread over forked workers where there is more than one core and task."""
+def map_indices(task: Callable[[int], T], count: int, done: Callable[[], None] = lambda: None) -> list[T]:
+    """[task(0), …, task(count - 1)], spread over forked workers where there is more than one core and task.
+
+    `done` is called in this process as each result comes back (progress).
+    """
     global _task
     n = min(count, workers())
+    results: list[T] = []
     if n <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-        return [task(i) for i in range(count)]
+        for i in range(count):
+            results.append(task(i))
+            done()
+        return results
     _task = task
     try:
         with multiprocessing.get_context("fork").Pool(n) as pool:
-            return pool.map(_run, range(count), chunksize=1)
+            for result in pool.imap(_run, range(count), chunksize=1):
+                results.append(result)
+                done()
+        return results
     finally:
         _task = None

@@ -9,6 +9,7 @@ import pandas as pd
 from benchlab.diagnose.engine import ALPHA, FOLD_S, MIN_GAIN_PCT, STEP_S, Diagnosis, Finding, diagnose_runs
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
+from benchlab.metrics import RESIDUAL_LABEL
 from benchlab.model.definition import ModelDefinition
 
 
@@ -40,7 +41,7 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                    "bic_delta": "second to the held-out test and reported, not decided on: in-sample BIC with the "
                                 "extension minus without it, n taken as the residuals' effective sample size "
                                 "n (1 - rho) / (1 + rho); negative favours the extension",
-                   "regimes": "RMSE of the held-out residuals (simulated - measured, each sample predicted by the "
+                   "regimes": f"RMSE of the held-out residuals ({RESIDUAL_LABEL}, each sample predicted by the "
                               "fold fit that did not see it) per regime and measured channel; cooldown: samples not "
                               "slipping by the time since the last slipping sample (or the run's start), "
                               f"< {COOLDOWN_SPLIT_S:g} s or >= {COOLDOWN_SPLIT_S:g} s",

@@ -4,7 +4,9 @@ The multi-start search takes each run's initial state from the data's start valu
 then fits each run's starting ϑ_F, ϑ_A and ϑ_T as well (ϑ_P starts with ϑ_F, contract §2). A start
 value carries its sensor's noise, and an initial error of a few hundredths of a kelvin in the slow
 housing decays over the whole run: held fixed, it biased C_T, R_Feng and R_Tamb by many standard
-errors (R_Feng by 9.5 % rms over ten 1 h runs, against 0.8 % with the states fitted).
+errors (R_Feng by 9.5 % rms over ten 1 h runs, against 0.8 % with the states fitted). The fitted
+starts serve the estimate only: the error figures and the residual tests are of the identified model
+as `simulate`, `report` and every user run it, from the run's measured start (identify.residuals).
 """
 
 from __future__ import annotations
@@ -18,15 +20,16 @@ import pandas as pd
 from benchlab._blas import single_threaded_blas
 from benchlab.identify.data import FIT_STEP_S, FitData, prepare
 from benchlab.identify.evaluate import evaluate
-from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
-from benchlab.identify.residuals import residual_tests
+from benchlab.identify.fit import FitResult, fit, fit_multistart
+from benchlab.identify.residuals import run_residuals
 from benchlab.identify.spec import ModelSpec, ParamSpec
 from benchlab.identify.uncertainty import Uncertainty, estimate_uncertainty, power_noise
 from benchlab.model.catalog import model_spec
 from benchlab.model.definition import ModelDefinition
 from benchlab.params import ModelParams, check_params
+from benchlab.progress import SILENT, Progress
+from benchlab.simulation import simulate
 
-RESIDUAL_INPUTS = ("friction_power", "engine_speed", "clutch_state")  # the clutch's, where a run has them
 INITIAL_STATE_RANGE_K = 20.0
 
 
@@ -74,23 +77,6 @@ def with_initial_states(spec: ModelSpec, datasets: Sequence[FitData], channels: 
     return spec.with_free(tuple(extra))
 
 
-def residual_inputs(model: ModelDefinition | None, channels: Sequence[str]) -> list[str]:
-    """The signals residuals are correlated with: the clutch's operating point where the runs have it, then
-    every channel the model's laws read."""
-    read = sorted(model.law_channels()) if model is not None else []
-    return [k for k in dict.fromkeys([*RESIDUAL_INPUTS, *read]) if k in channels]
-
-
-def _residual_analysis(result: FitResult, datasets: Sequence[FitData], labels: Sequence[str]) -> dict[str, dict]:
-    """Per run and measured channel: whiteness and input correlation of the residuals at the fitting step."""
-    out: dict[str, dict] = {}
-    for label, data in zip(labels, datasets):
-        sim = simulate_outputs(result.spec.network, result.params, data)
-        inputs = {k: data.channels[k] for k in residual_inputs(result.spec.definition, list(data.channels))}
-        out[label] = {c: residual_tests(sim[c] - target, inputs) for c, target in data.targets.items()}
-    return out
-
-
 def _labels(runs: Sequence[pd.DataFrame], prefix: str) -> list[str]:
     """Each run's source (its file), numbered where two runs share one."""
     names = [str(run.attrs.get("source", f"{prefix}{i}")) for i, run in enumerate(runs)]
@@ -100,14 +86,19 @@ def _labels(runs: Sequence[pd.DataFrame], prefix: str) -> list[str]:
 @single_threaded_blas
 def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "nonlinear",
              fixed: Mapping[str, float] | None = None, validate: Sequence[pd.DataFrame] = (), starts: int = 6,
-             seed: int = 0, step_s: float = FIT_STEP_S) -> Identification:
+             seed: int = 0, step_s: float = FIT_STEP_S, progress: Progress = SILENT) -> Identification:
     """Fit a model (a built-in name, a model file or a checked definition) to all runs at once at the fitting
-    step `step_s`, then measure it on them and on validation runs."""
+    step `step_s`, then measure it on them and on validation runs.
+
+    `progress` gets one task in fits: the multistart's scouts and polish, the fit with the start states.
+    """
     spec = model_spec(model).with_fixed(dict(fixed or {}))
     datasets = [prepare(run, step_s, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
-    search = fit_multistart(spec, datasets, starts=starts, seed=seed)
-    full = with_initial_states(spec, datasets)
-    result = fit(full.starting_point(search.params), datasets)
+    with progress.task(f"identify {spec.definition.label}", starts + 2, unit="fit") as task:
+        search = fit_multistart(spec, datasets, starts=starts, seed=seed, task=task)
+        full = with_initial_states(spec, datasets)
+        result = fit(full.starting_point(search.params), datasets)
+        task.advance()
     result.starts, result.start_costs = search.starts, search.start_costs
     model_names = [p.name for p in spec.free]
     params = check_params(spec.definition, {k: v for k, v in result.params.items() if "@" not in k}, "identify")
@@ -119,8 +110,8 @@ def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "non
                        for c in initial_channels(spec)} for label, data in zip(labels, datasets)}
     fitting = {label: evaluate(r, params) for label, r in zip(labels, runs)}
     validation = {label: evaluate(r, params) for label, r in zip(_labels(validate, "validation"), validate)}
-    return Identification(params, result, uncertainty, fitting, validation,
-                          _residual_analysis(result, datasets, labels), initial)
+    residuals = {label: run_residuals(r, simulate(r, params), params).tests for label, r in zip(labels, runs)}
+    return Identification(params, result, uncertainty, fitting, validation, residuals, initial)
 
 
 def parse_fixed(items: Sequence[str], source: str = "--fix") -> dict[str, float]:

@@ -17,6 +17,7 @@ from benchlab._blas import single_threaded_blas
 from benchlab.identify.data import FitData
 from benchlab.identify.spec import ModelSpec
 from benchlab.network import ThermalNetwork
+from benchlab.progress import Task
 from benchlab.solver import run_network
 
 KEY_RESOLUTION = 1e-12  # operating points are already exact repeats after prepare(); keep them apart exactly
@@ -113,11 +114,12 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
 
 @single_threaded_blas
 def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6, seed: int = 0,
-                   spread: float = 3.0, scout_nfev: int = 25) -> FitResult:
+                   spread: float = 3.0, scout_nfev: int = 25, task: Task = Task()) -> FitResult:
     """Scout fits from `starts` points (the priors, then log-uniform within ×/÷ spread), polish the best.
 
     Only magnitudes are spread (log parameters and signed ones scaled by their own start value);
     parameters with an absolute scale, such as start temperatures in °C, start at their prior.
+    `task` advances by one per scout and one for the polish.
     """
     rng = np.random.default_rng(seed)
     scouts = []
@@ -128,8 +130,10 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
                 factor = float(np.exp(rng.uniform(-np.log(spread), np.log(spread))))
                 start[p.name] = float(np.clip(p.initial * factor, p.lower, p.upper))
         scouts.append(fit(spec, datasets, max_nfev=scout_nfev, start=start))
+        task.advance()
     best = min(scouts, key=lambda r: r.cost)
     final = fit(spec, datasets, start={k: best.params[k] for k in best.free_names})
+    task.advance()
     final.starts = starts
     final.start_costs = sorted(r.cost for r in scouts)
     return final

@@ -9,7 +9,6 @@ edits it, and it is written back as TOML (`to_toml`) or JSON (`to_doc`) unchange
 from __future__ import annotations
 
 import json
-import math
 import os
 import re
 import tomllib
@@ -20,6 +19,7 @@ from typing import Any
 
 from benchlab.errors import InputError, read_document
 from benchlab.model.expressions import Expression, ExpressionError, affine_parts, parse
+from benchlab.values import finite_number
 
 SCHEMA = "benchlab-model/1"
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
@@ -176,9 +176,10 @@ def _keys(source: str, entry: str, table: dict, allowed: tuple[str, ...], requir
 
 
 def _number(source: str, entry: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    number = finite_number(value)
+    if number is None:
         raise _fail(source, entry, f"a finite number, got {value!r}")
-    return float(value)
+    return number
 
 
 def _expression(source: str, entry: str, text: object) -> Expression:

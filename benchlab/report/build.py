@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from typing import TypeVar
 from pathlib import Path
 
 import pandas as pd
@@ -11,11 +12,14 @@ import pandas as pd
 from benchlab.cooldown import CooldownResult, analyse
 from benchlab.errors import InputError
 from benchlab.params import ModelParams
+from benchlab.progress import SILENT, Progress
 from benchlab.report.page import Figures, render
 from benchlab.report.residuals import plot_residuals, residuals
 from benchlab.report.resistance import has_convection_law, plot_resistance
 from benchlab.report.scores import estimate
 from benchlab.report.timeseries import plot_comparison, plot_fit
+
+T = TypeVar("T")
 
 PAGE = "report.md"
 
@@ -29,9 +33,10 @@ def model_labels(params: ModelParams, compare: ModelParams | None) -> list[tuple
     return [(params.model, params), (compare.model, compare)]
 
 
-def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams) -> list[CooldownResult]:
+def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams,
+                    progress: Progress = SILENT) -> list[CooldownResult]:
     """Every cool-down of a cooldown-sweep run fitted by benchlab.cooldown with the other parameters of `params`."""
-    results = analyse(sweep, params)
+    results = analyse(sweep, params, progress=progress)
     if not results:
         raise InputError(sweep, "/events", "completed cool-downs (cooldown_start/cooldown_end of a cooldown-sweep run)")
     return results
@@ -39,7 +44,7 @@ def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams) -> lis
 
 def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.PathLike[str]",
                  compare: ModelParams | None = None, validation: Sequence[pd.DataFrame] = (),
-                 sweep: "str | os.PathLike[str] | None" = None) -> Path:
+                 sweep: "str | os.PathLike[str] | None" = None, progress: Progress = SILENT) -> Path:
     """Write Fig. 4, Fig. 5 (per validation run, else on `run`), Fig. 3, the residual figure and report.md.
 
     `run` and `validation` are loaded run files (benchlab.load_run), `sweep` the path of a cooldown-sweep
@@ -51,16 +56,23 @@ def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.Path
     convection = all(has_convection_law(p) for _, p in models)
     if sweep is not None and not convection:
         raise InputError(sweep, "--sweep", "a report of clutch models (eq. 11): the cool-down sweep fits R_FA = R_PA")
-    cooldowns = sweep_cooldowns(sweep, params) if sweep is not None else []
-    on_run = [estimate(run, p, label) for label, p in models]
-    checks = [(v, [estimate(v, p, label) for label, p in models]) for v in validation] or [(run, on_run)]
-    res = residuals(run, on_run[0], params)
-    figures = Figures(
-        fit=plot_fit(run, on_run[0], out / "fig4_fit.png"),
-        validation=[plot_comparison(v, ests, out / f"fig5_validation_{i}.png") for i, (v, ests) in enumerate(checks, 1)],
-        resistance=plot_resistance(models, cooldowns, out / "fig3_resistance.png") if convection else None,
-        residuals=plot_residuals(res, out / "residuals.png"),
-    )
+    cooldowns = sweep_cooldowns(sweep, params, progress) if sweep is not None else []
+    with progress.task("report", len(models) * (1 + len(validation)) + 2 + convection + max(len(validation), 1),
+                       unit="step") as task:
+        def step(value: T) -> T:
+            task.advance()
+            return value
+
+        on_run = [step(estimate(run, p, label)) for label, p in models]
+        checks = [(v, [step(estimate(v, p, label)) for label, p in models]) for v in validation] or [(run, on_run)]
+        res = residuals(run, on_run[0], params)
+        figures = Figures(
+            fit=step(plot_fit(run, on_run[0], out / "fig4_fit.png")),
+            validation=[step(plot_comparison(v, ests, out / f"fig5_validation_{i}.png"))
+                        for i, (v, ests) in enumerate(checks, 1)],
+            resistance=step(plot_resistance(models, cooldowns, out / "fig3_resistance.png")) if convection else None,
+            residuals=step(plot_residuals(res, out / "residuals.png")),
+        )
     rows = [(run, e) for e in on_run] + [(v, e) for v, ests in checks if v is not run for e in ests]
     page = out / PAGE
     page.write_text(render(run, models, rows, figures, cooldowns, res))

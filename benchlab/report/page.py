@@ -12,6 +12,7 @@ import pandas as pd
 
 import benchlab
 from benchlab.cooldown import COVERAGE_K, CooldownResult
+from benchlab.metrics import RESIDUAL_LABEL
 from benchlab.params import ModelParams
 from benchlab.report.plotting import run_name
 from benchlab.report.resistance import resistance, standard_errors
@@ -141,7 +142,8 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
                   "(`benchlab cooldown`):", cooldown_table(cooldowns, models)]
     parts += [
         f"## Residual analysis – {res.label} model on `{res.run}`",
-        f"Residual = measured − model at the identification step of {res.step_s:g} s (`benchlab identify`'s "
+        f"Residual = {RESIDUAL_LABEL} at the identification step of {res.step_s:g} s, the model started from the "
+        "run's measured temperatures (`benchlab identify`'s "
         "residual tests: a white residual has at most 5 % of its autocorrelations outside ±2.58/√N).",
         f"![Residuals]({figures.residuals.name})",
         residual_table(res),

@@ -1,8 +1,8 @@
 """Residual analysis of a system-identification toolbox: residual over time, its autocorrelation, and the
 residual against engine speed and friction power, with the whiteness and input-correlation tests.
 
-Residuals are measured − model at identification's step (benchlab.identify.data.prepare: measured
-temperatures as centred block means, inputs as block means), so the tests read as identify's own do.
+Residuals and tests are identify's own (benchlab.identify.residuals.run_residuals: the model from the run's
+measured start, simulated − measured at identification's step), so the page and `identify` agree.
 """
 
 from __future__ import annotations
@@ -14,9 +14,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchlab.identify.api import residual_inputs
-from benchlab.identify.data import prepare
-from benchlab.identify.residuals import autocorrelation, residual_tests
+from benchlab.identify.residuals import autocorrelation, run_residuals
+from benchlab.metrics import RESIDUAL_LABEL
 from benchlab.params import ModelParams
 from benchlab.report.plotting import colour, new_figure, run_name, save, symbol
 from benchlab.report.scores import Estimate
@@ -29,7 +28,7 @@ PANELS = {"engine_speed": (r"engine speed $\omega_e$ (rpm)", 1.0), "friction_pow
 
 @dataclass(frozen=True)
 class Residuals:
-    """Measured − model per predicted channel at the identification step, the inputs beside it, the tests."""
+    """Simulated − measured per predicted channel at the identification step, the inputs beside it, the tests."""
 
     label: str
     run: str
@@ -43,12 +42,8 @@ class Residuals:
 def residuals(run: pd.DataFrame, est: Estimate, params: ModelParams) -> Residuals:
     """Residuals of `est` (simulated with `params`) on `run` at the identification step, with identify's residual
     tests on each channel."""
-    data = prepare(run, network=params.network)
-    picks = slice(0, len(data) * data.block, data.block)
-    residual = {c: target - est.simulated[c].to_numpy()[picks] for c, target in data.targets.items()}
-    inputs = {k: data.channels[k] for k in residual_inputs(params.definition, list(data.channels))}
-    return Residuals(est.label, run_name(run), data.dt, run["time"].to_numpy()[picks], residual, inputs,
-                     {c: residual_tests(r, inputs) for c, r in residual.items()})
+    r = run_residuals(run, est.simulated, params)
+    return Residuals(est.label, run_name(run), r.step_s, r.time_s, r.residual, r.inputs, r.tests)
 
 
 def plot_residuals(res: Residuals, path: "str | os.PathLike[str]") -> Path:
@@ -68,10 +63,10 @@ def plot_residuals(res: Residuals, path: "str | os.PathLike[str]") -> Path:
             ax.scatter(res.inputs[name] * PANELS.get(name, ("", 1.0))[1], r, **dots)
     bound = max(t["confidence_bound"] for t in res.tests.values())
     acf.axhspan(-bound, bound, color="0.85", label=r"$\pm 2.58/\sqrt{N}$ (99 %, white noise)")
-    over_time.set(xlabel="time (min)", ylabel="measured − model (K)", title="residual over time")
+    over_time.set(xlabel="time (min)", ylabel=f"{RESIDUAL_LABEL} (K)", title="residual over time")
     acf.set(xlabel="lag (s)", ylabel="autocorrelation (1)", title="whiteness: residual autocorrelation")
     for ax, name in zip((vs_first, vs_second), panels):
-        ax.set(xlabel=PANELS.get(name, (name, 1.0))[0], ylabel="measured − model (K)", title=f"residual vs {name}")
+        ax.set(xlabel=PANELS.get(name, (name, 1.0))[0], ylabel=f"{RESIDUAL_LABEL} (K)", title=f"residual vs {name}")
     for ax in (over_time, acf, vs_first, vs_second):
         ax.axhline(0.0, color="k", lw=0.5)
         ax.legend(loc="best", fontsize=8, markerscale=4)

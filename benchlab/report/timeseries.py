@@ -10,11 +10,15 @@ import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 
+from benchlab.metrics import RESIDUAL_LABEL
+from benchlab.metrics import residual as model_error
 from benchlab.report.plotting import MODEL_STYLES, colour, label, minutes, new_figure, run_name, save, stride, symbol
 from benchlab.report.scores import Estimate
 
 PLATE = "T_pressure_plate"  # the clutch's unmeasured plate, drawn on the first panel where a model simulates it
-COMPARED = ("T_flywheel", "T_air")  # Fig. 5's channels for the clutch; other models show their first two
+#: What Fig. 5 plots, as the paper's does: the flywheel and the chamber air (ϑ_T is slow and in Fig. 4); another
+#: model shows its first two measured channels.
+COMPARISON_CHANNELS = ("T_flywheel", "T_air")
 
 
 def _measured(ax: Axes, run: pd.DataFrame, channel: str, k: int) -> None:
@@ -25,7 +29,7 @@ def _measured(ax: Axes, run: pd.DataFrame, channel: str, k: int) -> None:
 
 def plot_fit(run: pd.DataFrame, est: Estimate, path: "str | os.PathLike[str]") -> Path:
     """Fig. 4: measured and estimated temperatures (the clutch's ϑ_F, ϑ_A, ϑ_T) over the run, the residual
-    (measured − model) underneath."""
+    (simulated − measured) underneath."""
     t, k, sim = minutes(run), stride(len(run)), est.simulated
     channels = est.channels
     fig = new_figure(10, 2.5 * len(channels) + 2.5)
@@ -42,9 +46,10 @@ def plot_fit(run: pd.DataFrame, est: Estimate, path: "str | os.PathLike[str]") -
         ax.legend(loc="best", fontsize=8)
     residual = axes[-1]
     for i, c in enumerate(channels):
-        residual.plot(t[::k], (run[c] - sim[c]).to_numpy()[::k], color=colour(c, i), lw=0.7, label=symbol(c))
+        residual.plot(t[::k], model_error(sim[c], run[c]).to_numpy()[::k], color=colour(c, i), lw=0.7,
+                      label=symbol(c))
     residual.axhline(0.0, color="k", lw=0.5)
-    residual.set_ylabel("measured − model (K)")
+    residual.set_ylabel(f"{RESIDUAL_LABEL} (K)")
     residual.set_xlabel("time (min)")
     residual.legend(loc="best", fontsize=8, ncols=3)
     fig.suptitle(f"Fig. 4 – measured and estimated temperatures, {run_name(run)}, {est.label} model: "
@@ -57,7 +62,7 @@ def plot_comparison(run: pd.DataFrame, estimates: Sequence[Estimate], path: "str
     (RMSE in the legend), the clutch's operating point below where the run has it."""
     t, k = minutes(run), stride(len(run))
     measured = estimates[0].channels
-    channels = list(COMPARED) if set(COMPARED) <= set(measured) else list(measured[:2])
+    channels = list(COMPARISON_CHANNELS) if set(COMPARISON_CHANNELS) <= set(measured) else list(measured[:2])
     operating = "engine_speed" in run.columns and "clutch_state" in run.columns
     fig = new_figure(10, 8.5)
     axes = fig.subplots(len(channels) + operating, 1, sharex=True,
@@ -73,7 +78,8 @@ def plot_comparison(run: pd.DataFrame, estimates: Sequence[Estimate], path: "str
     if operating:
         _operating_point(axes[-1], run, t, k)
     overall = "; ".join(f"{e.label} RMSE {e.scores.rmse_k:.2f} K ({e.scores.nrmse_pct:.1f} %)" for e in estimates)
-    fig.suptitle(f"Fig. 5 – models compared on {run_name(run)} ({', '.join(symbol(c) for c in measured)}): "
+    shown = ", ".join(symbol(c) for c in channels)
+    fig.suptitle(f"Fig. 5 – {shown}: models compared on {run_name(run)}; RMSE over all measured temperatures: "
                  f"{overall}")
     return save(fig, path)
 

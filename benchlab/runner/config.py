@@ -18,6 +18,7 @@ import cantools
 from benchlab.bounds import MAX_TIMEOUT_S
 from benchlab.errors import InputError
 from benchlab.runner.devices import BenchConfig
+from benchlab.values import finite_number, positive_number
 from drivers import cvd
 from drivers.can_signals import BENCH_SIGNALS
 from protocols.limits import BenchLimits
@@ -45,7 +46,7 @@ def _str(t: Mapping[str, Any], key: str, field: str, src: str, default: str | No
 def _num(t: Mapping[str, Any], key: str, field: str, src: str, default: float, integer: bool = False,
          maximum: float = math.inf) -> float:
     value = t.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+    if positive_number(value) is None:
         raise InputError(src, field, f"a positive number, got {value!r}")
     if value > maximum:
         raise InputError(src, field, f"at most {maximum:g}, got {value!r}")
@@ -61,13 +62,21 @@ def _coefficients(t: Any, field: str, src: str) -> cvd.CvdCoefficients:
     for key in t:
         if key not in ("r0", "a", "b", "c"):
             raise InputError(src, f"{field}.{key}", "one of r0, a, b, c (unknown key)")
-        v = t[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise InputError(src, f"{field}.{key}", f"a finite number, got {v!r}")
-        values[key] = float(v)
+        number = finite_number(t[key])
+        if number is None:
+            raise InputError(src, f"{field}.{key}", f"a finite number, got {t[key]!r}")
+        values[key] = number
     if values.get("r0", 1000.0) <= 0:
         raise InputError(src, f"{field}.r0", "a positive resistance in ohm")
     return cvd.CvdCoefficients(**values)
+
+
+def _is_file(path: Path) -> bool:
+    """Whether `path` is a file; a name the system cannot even look up (too long, a NUL byte) is not."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def _check_dbc(dbc_path: Path, src: str) -> None:
@@ -100,7 +109,7 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
     channels_t = _table(inst, "channels", src)
     channels: dict[int, str] = {}
     for key, name in channels_t.items():
-        if not key.isdigit() or not 101 <= int(key) <= 999:
+        if not (key.isascii() and key.isdigit()) or not 101 <= int(key) <= 999:
             raise InputError(src, f"instrument.channels.{key}", "a channel number like 101")
         if name not in ALIGNED_TEMPERATURES:
             raise InputError(src, f"instrument.channels.{key}", f"one of {', '.join(ALIGNED_TEMPERATURES)}, got {name!r}")
@@ -114,7 +123,7 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
     calib_t = _table(inst, "calibration", src, required=False)
     calibration = {}
     for key, coef in calib_t.items():
-        if not key.isdigit() or int(key) not in channels:
+        if not (key.isascii() and key.isdigit()) or int(key) not in channels:
             raise InputError(src, f"instrument.calibration.{key}", "a configured channel number")
         calibration[int(key)] = _coefficients(coef, f"instrument.calibration.{key}", src)
     node = _table(doc, "node", src)
@@ -134,7 +143,7 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
     dbc = can_t.get("dbc")
     if dbc is not None:
         dbc_path = Path(path).parent / _str(can_t, "dbc", "can.dbc", src)
-        if not dbc_path.exists():
+        if not _is_file(dbc_path):
             raise InputError(src, "can.dbc", f"an existing DBC file ({dbc_path} not found)")
         _check_dbc(dbc_path, src)
         dbc = str(dbc_path)

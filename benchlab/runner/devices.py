@@ -20,11 +20,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
-from drivers.errors import CanLogError, DriverError
+from drivers.errors import CanLogError, ConnectionLost, DriverError
 from protocols.limits import BenchLimits
 
 RPM = math.pi / 30.0
@@ -83,8 +84,6 @@ class BenchStatus:
 
     t: float = 0.0
     T_flywheel: float = math.nan
-    t_flywheel: float = -math.inf  # run time of the last node frame with a valid temperature
-    t_node: float = 0.0  # run time of the last node frame of any kind
     T_air: float = math.nan
     engine_speed: float = math.nan
     clutch_speed: float = math.nan
@@ -94,6 +93,7 @@ class BenchStatus:
     friction_energy_j: float = 0.0  # ∫ friction power dt over the status frames at their own times
     t_frame: float = math.nan  # run time of the newest status frame
     controllers_bad: dict[str, str] = field(default_factory=dict)
+    seen: dict[str, float] = field(default_factory=dict)  # channel -> run time of its newest valid reading
 
     @property
     def slipping(self) -> bool:
@@ -103,22 +103,22 @@ class BenchStatus:
     def locked(self) -> bool:
         return self.clamp_state == CLAMP_CLAMPED
 
-    def take_frame(self, t: float, values: Mapping[str, float], gear_ratio: float) -> None:
-        """One status frame measured at run time `t`: the energy up to `t` at the power held so far, then the values."""
-        if t > self.t_frame:
-            self.friction_energy_j += self.friction_power * (t - self.t_frame)
-            self.t_frame = t
-        elif math.isnan(self.t_frame):
-            self.t_frame = t
-        if "drive.speed" in values:
-            self.engine_speed = values["drive.speed"]
-        if "load.speed" in values:
-            self.clutch_speed = values["load.speed"] * gear_ratio
-        if "clutch.torque" in values:
-            self.clutch_torque = values["clutch.torque"]
-            self.clamp_state = int(values["clutch.clamp_state"])
-        power = friction_power(self.clutch_torque, self.engine_speed, self.clutch_speed, self.clamp_state)
-        self.friction_power = power if power == power else 0.0  # unknown (NaN) counts as no power
+    def mark_seen(self, channel: str, t: float) -> None:
+        """`channel` had a valid value measured at `t` (its age, for the stale-reading interlocks, starts again)."""
+        if t > self.seen.get(channel, -math.inf):
+            self.seen[channel] = t
+
+    def take_frames(self, t: np.ndarray, engine_rpm: np.ndarray, clutch_rpm: np.ndarray, torque_nm: np.ndarray,
+                    clamp_state: np.ndarray) -> None:
+        """Status frames in the order received, at run times `t`, with the values held after each: the energy up to
+        each frame at the power held before it (a frame older than the newest adds none), then the newest values."""
+        power = friction_power(torque_nm, engine_rpm, clutch_rpm, clamp_state)
+        power[np.isnan(power)] = 0.0  # unknown (NaN) counts as no power
+        energy, self.t_frame = _energy_at_frames(t, power, self.t_frame, self.friction_power)
+        self.friction_energy_j += energy
+        self.engine_speed, self.clutch_speed = float(engine_rpm[-1]), float(clutch_rpm[-1])
+        self.clutch_torque, self.clamp_state = float(torque_nm[-1]), int(clamp_state[-1])
+        self.friction_power = float(power[-1])
 
 
 def friction_power(torque_nm: "float | np.ndarray", engine_rpm: "float | np.ndarray", clutch_rpm: "float | np.ndarray",
@@ -131,7 +131,7 @@ def friction_power(torque_nm: "float | np.ndarray", engine_rpm: "float | np.ndar
     return abs(torque_nm * (engine_rpm - clutch_rpm) * RPM) * slipping + 0.0 * clamp_state
 
 
-Reading = tuple[str, float, tuple[float, ...]]
+Reading = tuple[str, "float | np.ndarray", "tuple[float, ...] | np.ndarray"]  # one row, or a block: times, rows
 BenchEvent = tuple[float, str, str]  # (time, kind, detail)
 
 _CAN_STREAMS = {
@@ -144,7 +144,63 @@ _CAN_STREAMS = {
                  ("state", "load.state", "1"), ("fault_code", "load.fault_code", "1")),
 }
 _CAN_KEYS = {stream: tuple(key for _, key, _ in cols) for stream, cols in _CAN_STREAMS.items()}
+_SEEN_FROM = {"drive": ("drive.speed", "engine_speed"), "load": ("load.speed", "clutch_speed"),
+              "clutch": ("clutch.torque", "clutch_torque")}  # status message's controller -> (signal, channel)
 _STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_load"}
+
+
+_STATUS_HELD = ("drive.speed", "load.speed", "clutch.torque", "clutch.clamp_state")  # what BenchStatus holds
+
+
+def _held_status(blocks: list[Any], st: BenchStatus, gear_ratio: float) -> tuple[np.ndarray, ...]:
+    """The status frames of one CAN receive (drivers.can_bench.CanBlock) merged in the order received: their times,
+    and engine speed, clutch speed, clutch torque and clamp state as held after each frame (`st`'s before any)."""
+    sizes = [len(b.t) for b in blocks]
+    given = np.empty((sum(sizes), len(_STATUS_HELD)))
+    carries = np.zeros((len(blocks), len(_STATUS_HELD)), dtype=bool)  # which block brings which value
+    a = 0
+    for k, (b, size) in enumerate(zip(blocks, sizes)):
+        for j, key in enumerate(_STATUS_HELD):
+            if key in b.keys:
+                column = b.matrix[:, b.keys.index(key)]
+                given[a:a + size, j] = column * gear_ratio if key == "load.speed" else column
+                carries[k, j] = True
+        a += size
+    order = np.argsort(np.concatenate([b.index for b in blocks]), kind="stable")
+    start = np.array([st.engine_speed, st.clutch_speed, st.clutch_torque, float(st.clamp_state)])
+    held = _hold_forward(order, np.repeat(np.arange(len(blocks)), sizes), carries, given, start)
+    return (np.concatenate([b.t for b in blocks]).take(order), *held.T)
+
+
+@njit(cache=True, nogil=True)
+def _hold_forward(order: np.ndarray, block: np.ndarray, carries: np.ndarray, given: np.ndarray,
+                  start: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Values held after each frame, frames taken in `order`: frame i brings given[i, j] where its block carries j."""
+    held = np.empty((order.shape[0], start.shape[0]))
+    current = start.copy()
+    for k in range(order.shape[0]):
+        i = order[k]
+        for j in range(start.shape[0]):
+            if carries[block[i], j]:
+                current[j] = given[i, j]
+            held[k, j] = current[j]
+    return held
+
+
+@njit(cache=True, nogil=True)
+def _energy_at_frames(t: np.ndarray, power: np.ndarray, t_frame: float,
+                      power_before: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """Σ power held × time to each frame from the newest frame before it (frames in the order received, a frame
+    older than the newest adds nothing); returns (energy, newest frame time). `t_frame` NaN: no frame before."""
+    energy = 0.0
+    for i in range(t.shape[0]):
+        if t[i] > t_frame:
+            energy += power_before * (t[i] - t_frame)
+            t_frame = t[i]
+        elif np.isnan(t_frame):
+            t_frame = t[i]
+        power_before = power[i]
+    return energy, t_frame
 
 
 def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -168,7 +224,8 @@ ALIGNED_UNITS = {"engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": 
                  "T_ambient": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC"}
 
 
-CAN_HOLD_CYCLES = 2.5  # a status value holds on the grid for one lost frame, not for two
+CAN_HOLD_CYCLES = 2.5
+REPEAT_EVENT_S = 10.0  # a device error repeating (a port gone, a muted instrument) is one event per this long  # a status value holds on the grid for one lost frame, not for two
 
 
 @functools.lru_cache(maxsize=8)
@@ -226,6 +283,7 @@ def bench_layout(config: BenchConfig) -> Layout:
 
 
 BLF_OBJECT_BYTES = 48  # one classic CAN frame in a BLF container (object headers + CAN_MESSAGE)
+BLF_COMPRESSION = 1  # zlib's fastest: a quarter of level 6's time per container, the log 12 % larger
 
 
 def open_can_log(path: "str | os.PathLike[str]", config: BenchConfig) -> Any:
@@ -240,7 +298,8 @@ def open_can_log(path: "str | os.PathLike[str]", config: BenchConfig) -> Any:
     if suffix not in (".blf", ".asc"):
         raise CanLogError(f"{path}: a CAN log ends in .blf or .asc")
     frames_per_s = sum(1000.0 / m.cycle_time for m in bench_dbc(config).messages if m.cycle_time)
-    options = {"max_container_size": max(4096, int(frames_per_s * BLF_OBJECT_BYTES))} if suffix == ".blf" else {}
+    options = {"max_container_size": max(4096, int(frames_per_s * BLF_OBJECT_BYTES)),
+               "compression_level": BLF_COMPRESSION} if suffix == ".blf" else {}
     try:
         return can.Logger(str(path), **options)
     except OSError as exc:
@@ -283,6 +342,7 @@ class DriverBench:
         self._next_scan = clock()
         self._setpoints: tuple[float, ...] | None = None
         self._last_error_t = -math.inf
+        self._repeats: dict[str, tuple[float, int]] = {}  # kind -> (time last said, errors since)
         self._next_clock_row = -math.inf
 
     # -- commands ----------------------------------------------------------------------------------
@@ -319,9 +379,11 @@ class DriverBench:
         now = self.clock()
         self.status.t = now
         self._poll_node(now)
-        if now >= self._next_scan - 1e-9:
-            self._poll_instrument(now)
+        if not self.scanner.scanning and now >= self._next_scan - 1e-9:
             self._next_scan = max(self._next_scan + self.config.instrument_period_s, now + 1e-9)
+            self._poll_instrument(now, start=True)
+        elif self.scanner.scanning:
+            self._poll_instrument(now)
         self._poll_can(now)
         readings, events = self.readings, self.events
         self.readings, self.events = [], []
@@ -341,30 +403,44 @@ class DriverBench:
                    STATUS_CODES.get(s.sensor_status[0], 4.0), STATUS_CODES.get(s.sensor_status[1], 4.0),
                    s.supply_mv / 1000.0, float(s.rssi_dbm), float(s.lqi), float(s.flags))
             self.readings.append(("node", t, row))
-            self.status.t_node = max(self.status.t_node, t)
             valid = [v for v in temps if np.isfinite(v)]
             if valid:
                 self.status.T_flywheel = sum(valid) / len(valid)
-                self.status.t_flywheel = t
+                self.status.mark_seen("T_flywheel", t)
         for ev in self.gateway.pop_events():
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:
                 detail += f", span {ev.span_s:.3f} s, lost {ev.lost_frames} frames"
+            if ev.kind == "frame_errors":  # the window's counts, so the run file adds up to the gateway's counters
+                detail += f": crc_errors {ev.crc_errors}, malformed {ev.malformed}, resyncs {ev.resyncs}"
             self.events.append((ev.t_host, ev.kind, detail))
 
-    def _poll_instrument(self, now: float) -> None:
+    def _poll_instrument(self, now: float, start: bool = False) -> None:
+        """Start a scan (at its period) and take its readings once they are there: the loop never waits for them.
+
+        A silent instrument is a time-out on the loop's clock (its readings go stale, the interlock trips); only
+        a lost port is reconnected (a reset of a silent instrument would block the loop for its time-outs).
+        """
         try:
-            readings = self.scanner.read()
-        except DriverError as exc:
+            if start:
+                self.scanner.start_scan()
+            readings = self.scanner.collect()
+        except ConnectionLost as exc:
             self._error(now, "instrument_error", str(exc), self.scanner.reconnect)
             return
+        except DriverError as exc:
+            self._error(now, "instrument_error", str(exc), None)
+            return
+        if readings is None:
+            return
         row: list[float] = []
+        t = readings[0].t_host if readings else now
         for r, name in zip(readings, self._names):
             row += [math.nan if r.temperature_c is None else r.temperature_c,
                     math.nan if r.resistance_ohm is None else r.resistance_ohm, STATUS_CODES[r.status]]
             if name == "T_air" and r.temperature_c is not None:
                 self.status.T_air = r.temperature_c
-        t = readings[0].t_host if readings else now
+                self.status.mark_seen("T_air", t)
         self.readings.append(("instrument", t, tuple(row)))
         for rec in self.scanner.error_log:
             self.events.append((rec.t_host, "instrument_error", f"{rec.code},{rec.text}"))
@@ -372,20 +448,24 @@ class DriverBench:
 
     def _poll_can(self, now: float) -> None:
         try:
-            samples = self.can.receive()
+            blocks = self.can.receive_blocks()
         except CanLogError:
             raise
         except Exception as exc:  # noqa: BLE001 - a bus error is an event, the watchdog does the rest
             self._error(now, "can_error", str(exc), None)
             return
-        st, gear, nan = self.status, self.config.gear_ratio, math.nan
-        for s in samples:
-            stream = _STATUS_MESSAGE.get(s.controller)
-            if stream is None or not s.message.endswith("_Status"):
-                continue
-            get = s.values.get
-            self.readings.append((stream, s.t, [get(key, nan) for key in _CAN_KEYS[stream]]))
-            st.take_frame(s.t, s.values, gear)
+        st = self.status
+        status = [b for b in blocks if b.controller in _STATUS_MESSAGE and b.message.endswith("_Status")]
+        for b in status:  # one block of rows per stream, each frame at its own time
+            stream = _STATUS_MESSAGE[b.controller]
+            self.readings.append((stream, b.t, b.columns(_CAN_KEYS[stream])))
+        if status:
+            st.take_frames(*_held_status(status, st, self.config.gear_ratio))
+        for b in status:  # the stale-reading interlocks: the newest valid value of each status channel
+            key, channel = _SEEN_FROM[b.controller]
+            valid = np.isfinite(b.matrix[:, b.keys.index(key)])
+            if valid.any():
+                st.mark_seen(channel, float(b.t[valid].max()))
         for ev in self.can.pop_events():
             self.events.append((ev.t, f"controller_{ev.kind}", f"{ev.controller}: {ev.detail}"))
         st.controllers_bad = {**{c: "silent" for c in self.can.silent}, **{c: "fault" for c in self.can.faulted}}
@@ -394,13 +474,24 @@ class DriverBench:
             self._next_clock_row = now + 1.0
 
     def _error(self, now: float, kind: str, detail: str, reconnect: Callable[[], None] | None) -> None:
-        self.events.append((now, kind, detail))
+        """A device error: an event (the same one repeating is summarised), and a reconnect at most once a second."""
+        self._event(now, kind, detail)
         if reconnect is not None and now - self._last_error_t > 1.0:
             self._last_error_t = now
             try:
                 reconnect()
             except DriverError as exc:
-                self.events.append((now, kind, f"reconnect failed: {exc}"))
+                self._event(now, kind, f"reconnect failed: {exc}")
+
+    def _event(self, now: float, kind: str, detail: str) -> None:
+        """An event, at most one per kind every REPEAT_EVENT_S: the errors in between are counted in the next one."""
+        last = self._repeats.get(kind)
+        if last is not None and now - last[0] < REPEAT_EVENT_S:
+            self._repeats[kind] = (last[0], last[1] + 1)
+            return
+        repeated = f" (and {last[1]} more {kind} in {now - last[0]:.0f} s)" if last is not None and last[1] else ""
+        self.events.append((now, kind, detail + repeated))
+        self._repeats[kind] = (now, 0)
 
     def close(self) -> None:
         for closer in (self.scanner.close, self.gateway.close, self.can.close):

@@ -13,18 +13,20 @@ from __future__ import annotations
 import collections
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
 from benchlab.acquire import RunWriter
+from benchlab.progress import Task
 from benchlab.runner.devices import BenchStatus
+from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
-from protocols.schedule import Condition, Step
+from protocols.schedule import Condition, Step, setpoints
 
-STATE_FIELDS = ("cycle", "next_step", "resumes", "energy_j")
+STATE_FIELDS = ("cycle", "next_step", "resumes", "energy_j", "held")  # held: 1 while an interlock holds the bench
 
 
 class Bench(Protocol):
@@ -53,59 +55,6 @@ class Stopped(Exception):
 
 class _SkipCycle(Exception):
     pass
-
-
-@dataclass
-class Interlocks:
-    """Watches the limits that hold whatever the protocol does; tracks engagements (slip intervals)."""
-
-    limits: BenchLimits
-    slip_start: float | None = None
-    slip_energy: float = 0.0
-    total_energy: float = 0.0
-    engagements: int = 0
-    _last_energy: float | None = None
-
-    def update(self, st: BenchStatus, now: float, events: list[tuple[str, str]]) -> None:
-        """Engagement starts/ends at this tick; energy from the bench's frame-by-frame integral (not tick × power)."""
-        energy = st.friction_energy_j - (self._last_energy if self._last_energy is not None else st.friction_energy_j)
-        self._last_energy = st.friction_energy_j
-        self.total_energy += energy
-        if self.slip_start is not None:
-            self.slip_energy += energy
-        if st.slipping:
-            if self.slip_start is None:
-                self.slip_start, self.slip_energy = now, energy
-                self.engagements += 1
-                events.append(("engagement_start", ""))
-        elif self.slip_start is not None:
-            events.append(("engagement_end", f"slip {now - self.slip_start:.2f} s, {self.slip_energy / 1e3:.1f} kJ"))
-            self.slip_start = None
-
-    def tripped(self, st: BenchStatus, now: float) -> list[tuple[str, str]]:
-        lim, out = self.limits, []
-        if np.isfinite(st.T_flywheel) and st.T_flywheel > lim.max_flywheel_c:
-            out.append(("flywheel_over_temperature", f"T_flywheel {st.T_flywheel:.1f} > {lim.max_flywheel_c:g} degC"))
-        if np.isfinite(st.T_air) and st.T_air > lim.max_air_c:
-            out.append(("air_over_temperature", f"T_air {st.T_air:.1f} > {lim.max_air_c:g} degC"))
-        if lim.heartbeat and st.controllers_bad:
-            out.append(("controller_lost", ", ".join(f"{c} {why}" for c, why in sorted(st.controllers_bad.items()))))
-        silence = now - st.t_node
-        if silence > lim.radio_silence_s:
-            out.append(("radio_silence", f"no flywheel frame for {silence:.1f} s > {lim.radio_silence_s:g} s"))
-        if self.slip_start is not None:
-            if now - self.slip_start > lim.max_slip_time_s:
-                out.append(("slip_time", f"slipping {now - self.slip_start:.1f} s > {lim.max_slip_time_s:g} s"))
-            if self.slip_energy > lim.max_slip_energy_j:
-                out.append(("slip_energy", f"{self.slip_energy / 1e3:.1f} kJ > {lim.max_slip_energy_j / 1e3:g} kJ"))
-        return out
-
-    def clear(self, st: BenchStatus, now: float) -> bool:
-        lim = self.limits
-        hot = np.isfinite(st.T_flywheel) and st.T_flywheel > lim.max_flywheel_c - lim.clear_margin_k
-        hot_air = np.isfinite(st.T_air) and st.T_air > lim.max_air_c - lim.clear_margin_k
-        radio = now - st.t_node > min(1.0, lim.radio_silence_s)
-        return not (hot or hot_air or (lim.heartbeat and st.controllers_bad) or radio or st.slipping)
 
 
 @dataclass
@@ -142,16 +91,20 @@ class Runner:
 
     def __init__(self, bench: Bench, clock: Clock, steps: Sequence[Step], writer: RunWriter, limits: BenchLimits, *,
                  tick_s: float = 0.2, fast_tick_s: float = 0.05, dt: float = 0.01,
-                 progress: Callable[[str], None] | None = None, progress_every_s: float = 2.0) -> None:
+                 progress: Task = Task(), progress_every_s: float = 0.5) -> None:
         self.bench, self.clock, self.steps, self.writer, self.limits = bench, clock, tuple(steps), writer, limits
         self.tick_s, self.fast_tick_s, self.dt = tick_s, fast_tick_s, dt
         self.progress, self.progress_every_s = progress, progress_every_s
-        self.interlocks = Interlocks(limits)
+        self.engagements = Engagements()
+        self.interlocks = InterlockSet(limits, armed_at=clock())
         self.summary = RunSummary(len({s.cycle for s in self.steps}))
         self.stop_request: str | None = None
         self.cycle = -1
         self.synced = True
         self._last_progress = -math.inf
+        self._planned_before = np.concatenate([[0.0], np.cumsum([s.expected_s for s in self.steps])])
+        self._reported = 0.0
+        self._t_step_start = clock()
         self._history: collections.deque[tuple[float, float]] = collections.deque()
         self._step_index = 0
         self._commanded = False
@@ -168,8 +121,9 @@ class Runner:
             self.summary.energy_j = 0.0
         energy0 = self.summary.energy_j
         self.summary.cycles_done = len({s.cycle for s in self.steps[:start_step]})
+        self.writer.state["held"] = 0.0
         self.bench.safe_state()
-        self._tick()
+        self._tick(interlocks=False)  # the first readings; the steps' ticks watch the interlocks
         try:
             i = start_step
             while i < len(self.steps):
@@ -186,17 +140,18 @@ class Runner:
                     self.writer.event(self.clock(), "cycle_skipped", cycle, "after an interlock")
                     self.summary.events["cycle_skipped"] += 1
             self.bench.safe_state()
-            self._tick()
+            self._tick(interlocks=False)  # already safe: nothing left to interlock
             self.writer.event(self.clock(), "run_complete", self.cycle)
+            self.progress.advance(self._planned_before[-1] - self._reported)
         except Stopped as stop:
             self.bench.safe_state()
             self.writer.event(self.clock(), "run_aborted", self.cycle, stop.reason)
             self._tick(interlocks=False)
             self.summary.status, self.summary.reason = "aborted", stop.reason
             self.summary.exit_code = stop.code  # type: ignore[attr-defined]
-        self.summary.energy_j = energy0 + self.interlocks.total_energy
+        self.summary.energy_j = energy0 + self.engagements.total_energy
         self.writer.state["energy_j"] = self.summary.energy_j
-        self.summary.engagements = self.interlocks.engagements
+        self.summary.engagements = self.engagements.count
         stats = getattr(getattr(self.bench, "gateway", None), "stats", None)
         if stats is not None:
             self.summary.frames_ok, self.summary.frames_lost = stats.frames_ok, stats.lost
@@ -261,15 +216,7 @@ class Runner:
 
     def _apply(self, step: Step, heat: "_Pulses | None") -> None:
         self._commanded = True  # the next tick comes soon: the controllers take the new set-points at once
-        if step.phase == "launch":
-            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm, False, step.load_torque_nm)
-        elif step.phase == "drive":
-            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm, not self.synced, step.load_torque_nm)
-        elif step.phase == "heat":
-            on = heat is not None and heat.on
-            self.bench.command(step.engine_speed_rpm, step.clutch_torque_nm if on else 0.0, not on, step.load_torque_nm)
-        else:
-            self.bench.command(step.engine_speed_rpm, 0.0, True, step.load_torque_nm)
+        self.bench.command(*setpoints(step, self.synced, heat is not None and heat.on))
 
     @staticmethod
     def _target(step: Step) -> float:
@@ -327,55 +274,67 @@ class Runner:
         if np.isfinite(st.T_air):
             self.summary.peak["T_air"] = max(self.summary.peak["T_air"], st.T_air)
         eng: list[tuple[str, str]] = []
-        self.interlocks.update(st, now, eng)
+        self.engagements.update(st, now, eng)
         for kind, detail in eng:
             w.event(now, kind, self.cycle, detail)
-        w.state["energy_j"] = self.summary.energy_j + self.interlocks.total_energy
+        w.state["energy_j"] = self.summary.energy_j + self.engagements.total_energy
         w.advance(now)
         self._report(now)
         if interlocks:
-            causes = self.interlocks.tripped(st, now)
-            if causes:
-                self._handle_interlock(causes)
+            trips = self.interlocks.check(st, self.engagements, now)
+            if trips:
+                self._hold(trips)
 
-    def _handle_interlock(self, causes: list[tuple[str, str]]) -> None:
-        now = self.clock()
+    def _trip(self, trips: list[Trip], now: float) -> None:
+        """Safe state at once, an `interlock` event per trip; abort if any of them says so."""
         self.bench.safe_state()
-        for kind, detail in causes:
-            self.writer.event(now, "interlock", self.cycle, f"{kind}: {detail}")
-            self.summary.events[f"interlock {kind}"] += 1
-        names = ", ".join(k for k, _ in causes)
-        if self.limits.on_interlock == "abort":
-            raise Stopped(f"interlock {names}", 1)
-        t_trip, t_clear = now, None
+        for trip in trips:
+            self.writer.event(now, "interlock", self.cycle, f"{trip.name}: {trip.detail} ({trip.action})")
+            self.summary.events[f"interlock {trip.name}"] += 1
+        aborting = [t.name for t in trips if t.action == "abort"]
+        if aborting:
+            raise Stopped(f"interlock {', '.join(aborting)}", 1)
+
+    def _hold(self, trips: list[Trip]) -> None:
+        """Safe state until every active interlock has cleared for `resume_after_s`, then the next cycle."""
+        now = t_trip = self.clock()
+        self._trip(trips, now)
+        self.writer.state["held"] = 1.0
+        t_clear = None
         while True:
             self._tick(interlocks=False)
             if self.stop_request is not None:
                 raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))
-            now = self.clock()
-            if self.interlocks.clear(self.bench.status, now):
+            now, st = self.clock(), self.bench.status
+            more = self.interlocks.check(st, self.engagements, now)
+            if more:
+                self._trip(more, now)
+            if self.interlocks.release(st, self.engagements, now) and not st.slipping:
                 t_clear = now if t_clear is None else t_clear
                 if now - t_clear >= self.limits.resume_after_s:
                     break
             else:
                 t_clear = None
             if now - t_trip > self.limits.max_wait_s:
+                names = ", ".join(self.interlocks.active)
                 raise Stopped(f"interlock {names} did not clear within {self.limits.max_wait_s:g} s", 1)
-        self.writer.event(self.clock(), "interlock_cleared", self.cycle, names)
+        self.writer.state["held"] = 0.0
+        self.writer.event(self.clock(), "interlock_cleared", self.cycle, ", ".join(t.name for t in trips))
         raise _SkipCycle()
 
     def _report(self, now: float) -> None:
-        if self.progress is None:
-            return
+        """The progress bar: planned seconds done (finished steps, the current one up to its expected length)."""
         wall = time.perf_counter()
         if wall - self._last_progress < self.progress_every_s:
             return
         self._last_progress = wall
-        step = self.steps[min(self._step_index, len(self.steps) - 1)]
-        left = sum(s.expected_s for s in self.steps[self._step_index + 1:])
-        cycles = self.summary.cycles_planned
-        self.progress(f"cycle {step.cycle + 1}/{cycles}  {step.phase:6s} {step.label:10s} t={now:8.1f} s  "
-                      f"T_flywheel {self.bench.status.T_flywheel:6.2f} degC  left ~{left:7.0f} s")
+        index = min(self._step_index, len(self.steps) - 1)
+        step = self.steps[index]
+        done = self._planned_before[index] + min(max(now - self._t_step_start, 0.0), step.expected_s)
+        self.progress.advance(done - self._reported)
+        self._reported = done
+        self.progress.note(f"cycle {step.cycle + 1}/{self.summary.cycles_planned} {step.phase} {step.label} "
+                           f"T_flywheel {self.bench.status.T_flywheel:.1f} degC")
 
 
 class _Pulses:

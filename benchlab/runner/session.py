@@ -10,8 +10,8 @@ import math
 import signal
 import subprocess
 import sys
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -20,13 +20,14 @@ import h5py
 import numpy as np
 
 from benchlab.acquire import RunWriter, read_progress
+from benchlab.progress import SILENT, Progress
 from benchlab.errors import InputError
 from benchlab.runner.devices import BenchConfig, DriverBench
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
 from drivers.errors import CanLogError
 from protocols import catalog
-from protocols.limits import BenchLimits, check_schedule
-from protocols.schedule import Step, describe, duration_s, step_from_dict
+from protocols.limits import BenchLimits, check_schedule, schedule_problems
+from protocols.schedule import Step, describe, duration_s, steps_from_rows
 
 SCHEDULE_UNITS = {"duration_s": "s", "engine_speed_rpm": "rpm", "clutch_torque_nm": "N*m",
                   "load_torque_nm": "N*m", "cycle": "1", "estimate_s": "s", "pulse_s": "s", "rest_s": "s"}
@@ -47,7 +48,7 @@ class RunRequest:
     faults: Sequence[Any] = ()  # sim only: sim_bench.faults.Fault
     sim_options: dict[str, Any] | None = None  # sim only: SimBenchConfig overrides
     limits: BenchLimits | None = None  # sim only: limits (hardware: from BENCH.toml)
-    progress: Callable[[str], None] | None = None
+    progress: Progress = SILENT  # a bar over the planned bench time (benchlab.progress.for_terminal in commands)
     install_signals: bool = True
     steps: tuple[Step, ...] | None = None  # a custom schedule instead of the named protocol's (tests, scripts)
     keep: dict[str, Any] | None = None  # if given, execute() leaves "sim", "bench", "runner" in it (tests)
@@ -90,11 +91,23 @@ def plan(request: RunRequest) -> tuple[tuple[Step, ...], BenchConfig, dict[str, 
         except ValueError as exc:
             field = "--grid" if request.grid and "grid" in str(exc) else "protocol"
             raise InputError(request.protocol, field, str(exc)) from None
-    problems = check_schedule(protocol.steps, config.limits)
-    if problems and not request.dry_run:
-        raise InputError(request.protocol, "schedule", f"within the bench limits: {problems[0]}"
-                         + (f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""))
+    if not request.dry_run:
+        refuse_over_limits(protocol.steps, config.limits, request.protocol, "schedule")
     return protocol.steps, config, protocol.options
+
+
+def refuse_over_limits(steps: Sequence[Step], limits: BenchLimits, source: "str | Path", where: str) -> None:
+    """InputError naming `source`, the step and the field of the first limit problem; nothing if there is none.
+
+    The one gate between a schedule and the bench: a new run's (`where` "schedule") and a resumed one's
+    ("/schedule", read back from the run file) alike.
+    """
+    problems = schedule_problems(steps, limits)
+    if problems:
+        first = problems[0]
+        field = f"{where} step {first.step} {first.field}" if first.step is not None else f"{where} {first.field}"
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise InputError(source, field, f"within the bench limits: {first.text}{more}")
 
 
 def dry_run(request: RunRequest, out: Any = None) -> int:
@@ -137,6 +150,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
         steps = resume_state["steps"]
         options: dict[str, Any] = resume_state["options"]
         config = bench_config(request)
+        refuse_over_limits(steps, config.limits, request.out, "/schedule")  # before anything is opened or moved
         request = replace(request, protocol=resume_state["protocol"], seed=resume_state["seed"])
     else:
         steps, config, options = plan(request)
@@ -186,6 +200,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                      "can_log": can_log.name, "can_log_time_base": config.can_timestamps}
             if sim is not None:
                 attrs["sim_bench"] = json.dumps(sim.cfg.as_dict(), default=str)
+                attrs["sim_faults"] = json.dumps([asdict(fault) for fault in request.faults])
                 attrs["sim_truth"] = json.dumps({"params": dict(sim.physics.truth_params),
                                                  "effects": [e.name for e in sim.physics.plant.effects
                                                              if not e.name.startswith("fault heater")]})
@@ -194,8 +209,10 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                                planned_s=duration_s(steps), flush_every_s=config.flush_every_s,
                                state_fields=STATE_FIELDS, durable=sim is None)
             writer.state["resumes"] = 0
+        task = request.progress.task(f"{request.protocol} on the {'simulated ' if sim is not None else ''}bench",
+                                     duration_s(steps), unit="s")
         runner = Runner(bench, clock, steps, writer, config.limits, tick_s=config.tick_s,
-                        fast_tick_s=config.fast_tick_s, dt=config.dt, progress=request.progress)
+                        fast_tick_s=config.fast_tick_s, dt=config.dt, progress=task)
         if request.keep is not None:
             request.keep.update(sim=sim, bench=bench, runner=runner)
         previous = {}
@@ -208,13 +225,14 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             try:
                 bench.safe_state()
                 writer.event(clock(), "run_aborted", runner.cycle, f"failure: {type(exc).__name__}: {exc}")
-                writer.close("aborted")
+                writer.close("aborted", groups=_truth_groups(sim, writer, resume_state))
             finally:
                 raise
         finally:
+            task.close()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
-        writer.close(summary.status)
+        writer.close(summary.status, groups=_truth_groups(sim, writer, resume_state))
     finally:
         bench.close()
         if sim is not None:
@@ -223,6 +241,34 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             can_log.unlink(missing_ok=True)
     code = 0 if summary.status == "complete" else getattr(summary, "exit_code", 1)
     return code, summary
+
+
+def _stored_steps(f: h5py.File, path: Path) -> tuple[Step, ...]:
+    """The schedule stored in a run file, read back by the one schedule parser (types and field names checked)."""
+    text = f["schedule"].attrs.get("steps_json")
+    try:
+        rows = json.loads(text) if isinstance(text, (str, bytes)) else None
+    except ValueError:
+        rows = None
+    if rows is None:
+        raise InputError(path, "/schedule steps_json", "the schedule as a JSON list of steps (missing or not JSON)")
+    return steps_from_rows(rows, str(path))
+
+
+def _truth_groups(sim: Any, writer: RunWriter, resume_state: dict[str, Any] | None) -> dict[str, Any]:
+    """The simulated bench's /truth for the writer's close: the plant's true temperatures (degC) on the run's
+    grid, the rows before a resume as the file held them; nothing on hardware."""
+    if sim is None:
+        return {}
+    rows = writer.rows
+    before = resume_state["truth"] if resume_state else {}
+    columns = {"time": (np.arange(rows) * writer.layout.dt, "s")}
+    for name, values in sim.physics.true_states(rows).items():
+        head = np.full(rows - len(values), np.nan)
+        kept = before.get(name, head)[:len(head)]
+        head[:len(kept)] = kept
+        columns[name] = (np.concatenate([head, values]), "degC")
+    return {"truth": columns}
 
 
 def _resume_state(request: RunRequest) -> dict[str, Any]:
@@ -243,7 +289,7 @@ def _resume_state(request: RunRequest) -> dict[str, Any]:
         if bench != request.bench:
             raise InputError(path, "bench", f"the same bench as the run ({bench!r}), got --bench {request.bench!r}")
         progress = read_progress(f)
-        steps = tuple(step_from_dict(row) for row in json.loads(f["schedule"].attrs["steps_json"]))
+        steps = _stored_steps(f, path)
         rows = int(progress["aligned_rows"])
         dt = float(f["aligned"].attrs["dt"])
         cycle = progress.get("state/cycle", math.nan)
@@ -255,9 +301,10 @@ def _resume_state(request: RunRequest) -> dict[str, Any]:
         protocol = str(f.attrs.get("protocol"))
         options = json.loads(f.attrs.get("protocol_options", "{}"))
         seed = int(f.attrs.get("seed", request.seed))
+        truth = {name: ds[:rows] for name, ds in f["truth"].items() if name != "time"} if "truth" in f else {}
     f_init = initial["T_flywheel"] if math.isfinite(initial["T_flywheel"]) else 22.0
     states = {"P": f_init, "F": f_init, "A": initial["T_air"] if math.isfinite(initial["T_air"]) else f_init,
               "T": initial["T_housing"] if math.isfinite(initial["T_housing"]) else f_init}
     return {"steps": steps, "start": start, "cycle": cycle, "t0": rows * dt, "initial": states,
             "resumes": int(resumes if math.isfinite(resumes) else 0) + 1, "protocol": protocol,
-            "options": options, "seed": seed}
+            "options": options, "seed": seed, "truth": truth}

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from benchlab.errors import InputError, read_document
+from benchlab.values import finite_number
 from benchlab.wear.maps import Map1D, make_map
 from benchlab.wear.state import WearState
 
@@ -91,7 +92,7 @@ def _scalar(doc: dict[str, Any], source: str, section: str, key: str) -> float:
     if not isinstance(table, dict) or key not in table:
         raise InputError(source, field, f"{expected} (missing)")
     value = table[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if finite_number(value) is None:
         raise InputError(source, field, f"{expected}, got {value!r}")
     positive = "positive" in expected or key == "friction_faces"
     if (positive and value <= 0) or (key == "min_height_mm" and value < 0):

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from benchlab.errors import InputError
+from benchlab.values import finite_number
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ def _numbers(source: str, field: str, values: object) -> list[float]:
         raise InputError(source, field, f"a list of numbers, got {values!r}")
     out = []
     for v in values:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        if finite_number(v) is None:
             raise InputError(source, field, f"a list of finite numbers, got {v!r} in it")
         out.append(float(v))
     return out

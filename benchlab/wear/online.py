@@ -31,6 +31,29 @@ def interp(xs: Sequence[float], ys: Sequence[float], v: float) -> float:
     return ys[i - 1] + (ys[i] - ys[i - 1]) * (v - xs[i - 1]) / (xs[i] - xs[i - 1])
 
 
+class LiningWear:
+    """Eq. (3) sample by sample, in scalars: wear = [s_P, s_F, δ_P, δ_F] (mm per face, fraction) from the friction
+    power and the two lining temperatures; the one online wear update (OnlineWear, the observer)."""
+
+    def __init__(self, spec: ClutchSpec, dt: float, split: float = 0.5) -> None:
+        self.split = split
+        start = spec.initial  # the wear the clutch already has
+        self.wear = [start.wear_plate_mm, start.wear_flywheel_mm, start.loss_plate, start.loss_flywheel]
+        self.wear_rate = spec.maps["wear_rate"].as_lists()
+        self.loss_rate = spec.maps["friction_loss"].as_lists()
+        self.per_face = dt / spec.faces_per_side
+        self.inv_area = 1.0 / spec.area_mm2
+
+    def add(self, power_w: float, plate_c: float, flywheel_c: float) -> None:
+        """Add one sample's wear: `split`·P on the plate side at ϑ_P, the rest on the flywheel side at ϑ_F."""
+        if power_w > 0.0:
+            wear = self.wear
+            for side, share, temperature in ((0, self.split, plate_c), (1, 1.0 - self.split, flywheel_c)):
+                energy = share * power_w * self.per_face
+                wear[side] += interp(*self.wear_rate, temperature) * energy * self.inv_area
+                wear[side + 2] += interp(*self.loss_rate, temperature) * energy * 1e-6
+
+
 class OnlineWear:
     """State: temperatures x = [ϑ_P, ϑ_F, ϑ_A, ϑ_T] (degC) and wear = [s_P, s_F, δ_P, δ_F] (mm per face, fraction)."""
 
@@ -46,20 +69,13 @@ class OnlineWear:
         self.inv_step, self.last = 1.0 / speed_step_rpm, len(grid) - 1
         self.dt, self.split = dt, split
         self.x = [float(v) for v in x0]
-        self.wear = [0.0, 0.0, 0.0, 0.0]
-        self.wear_rate = spec.maps["wear_rate"].as_lists()
-        self.loss_rate = spec.maps["friction_loss"].as_lists()
-        self.per_face = dt / spec.faces_per_side
-        self.inv_area = 1.0 / spec.area_mm2
+        self.lining = LiningWear(spec, dt, split)
+        self.wear = self.lining.wear
 
     def step(self, engine_rpm: float, clamped: bool, power_w: float, t_engine: float, t_ambient: float) -> None:
         """Advance one sample: wear at the current lining temperatures, then the ZOH temperature update."""
-        x, wear = self.x, self.wear
-        if power_w > 0.0:
-            for side, share in ((0, self.split), (1, 1.0 - self.split)):
-                energy = share * power_w * self.per_face
-                wear[side] += interp(*self.wear_rate, x[side]) * energy * self.inv_area
-                wear[side + 2] += interp(*self.loss_rate, x[side]) * energy * 1e-6
+        x = self.x
+        self.lining.add(power_w, x[0], x[1])
         i = min(max(int(engine_rpm * self.inv_step + 0.5), 0), self.last)
         ad, bd = self.tables[1 if clamped else 0][i]
         u = (self.split * power_w, (1.0 - self.split) * power_w, t_engine, t_ambient)

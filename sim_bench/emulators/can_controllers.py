@@ -2,31 +2,40 @@
 
 Speaks the frames of drivers/bench.dbc through the same logical signal map as the driver. `poll()` takes the
 waiting command frames and, in time order, applies each at its time stamp, then sends every status frame and
-heartbeat that fell due up to now at its DBC cycle time, stamped with the instant it fell due and carrying
-the drivetrain's actual values at that instant (a controller samples and sends on its own cycle, whenever the
-PC reads the bus). A controller that is disabled, faulted, without commands for `command_timeout_s`
-(default 3 command cycles; fault 16 while it lasts) or under emergency stop gets safe set-points (drive
-0 rpm, clutch open, load 0 N·m). Fault hooks: `silence`, `set_fault`, `clear_fault`, `freeze_alive`,
-`send_raw`.
+heartbeat that fell due up to now at its DBC cycle time, stamped with the instant it fell due and carrying the
+drivetrain's actual values at that instant (a controller samples and sends on its own cycle, whenever the PC
+reads the bus); the frames of one poll go out as one array of FRAME records (drivers/can_frames.py) onto a bus
+that takes arrays (the simulated bus), else one can.Message at a time. A controller that is disabled, faulted,
+without commands for `command_timeout_s` (default 3 command cycles; fault 16 while it lasts) or under
+emergency stop gets safe set-points (drive 0 rpm, clutch open, load 0 N·m). Fault hooks: `silence`,
+`set_fault`, `clear_fault`, `freeze_alive`, `send_raw`.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import can
-import numpy as np
 import cantools
+import numpy as np
+from numba import njit
 
 from drivers import can_signals as sig
-from drivers.can_codec import compile_codecs
+from drivers.can_codec import CodecTable, compile_codecs
+from drivers.can_frames import make_frames
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
+from sim_bench.emulators.sim_can_bus import send_frames
 
 
 COMMAND_LATENCY_S = 1e-6  # a command takes effect this long after the newest frame already sent, at the earliest
+_ACTUAL_OF = {"drive.speed": "drive_speed_rpm", "drive.torque": "drive_torque_nm", "clutch.torque": "clutch_torque_nm",
+              "clutch.position": "clutch_position_mm", "clutch.clamp_state": "clamp_state",
+              "load.torque": "load_torque_nm", "load.speed": "load_speed_rpm"}  # signal → DrivetrainActuals field
+_ACTUALS = list(DrivetrainActuals.__dataclass_fields__)
 
 
 @dataclass(slots=True)
@@ -76,8 +85,22 @@ class CanBenchEmulator:
         self._t = self.origin  # frames due before this instant have been sent
         for ctrl in self.controllers.values():
             for key in (f"{ctrl.name}.alive", f"{ctrl.name}.hb_alive"):
-                ctrl.sent_cycles[key] = 0
+                ctrl.sent_cycles[key] = 1  # the first frame one cycle after start-up (a time stamp of 0.0 means "unset")
                 ctrl.alive[key] = 0
+        # every message the controllers send (status and heartbeat, keyed by its alive counter) as one codec table
+        sent = [f"{name}.{alive}" for name in sig.CONTROLLERS for alive in ("alive", "hb_alive")]
+        self._slot = {key: i for i, key in enumerate(sent)}
+        self._table = CodecTable([self._codec_of[key] for key in sent])
+        self._frame_id = np.array([self._codec_of[key].message.frame_id for key in sent])
+        self._extended = np.array([self._codec_of[key].message.is_extended_frame for key in sent])
+        self._length = np.array([self._codec_of[key].length for key in sent])
+        self._cycle = {key: self._codec_of[key].message.cycle_time / 1000 for key in sent}
+        # where each column of each sent message comes from: an actual value (index into _ACTUALS), else -1
+        columns = [self._codec_of[key].columns for key in sent]
+        self._source = np.array([[_ACTUALS.index(_ACTUAL_OF[c]) if c in _ACTUAL_OF else -1 for c in cols]
+                                 + [-1] * (self._table.width - len(cols)) for cols in columns])
+        self._alive_col = np.array([cols.index(key) for cols, key in zip(columns, sent)])
+        self._column = [{c: j for j, c in enumerate(cols) if c is not None} for cols in columns]
 
     # -- fault hooks ---------------------------------------------------------------------------------
     def silence(self, controller: str, on: bool = True) -> None:
@@ -202,51 +225,83 @@ class CanBenchEmulator:
     def _emit_segment(self, t_end: float, inclusive: bool) -> None:
         """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now."""
         eps = 1e-9 if inclusive else -1e-9
-        plan: list[tuple[_Controller, str, np.ndarray]] = []
+        plan: list[tuple[_Controller, str, int, int]] = []  # controller, message (its alive key), cycles k0 ≤ k < k1
         for ctrl in self.controllers.values():
             for key in (f"{ctrl.name}.alive", f"{ctrl.name}.hb_alive"):
-                cycle = self._codec_of[key].message.cycle_time / 1000
                 k0 = ctrl.sent_cycles[key]
-                k1 = int(np.floor((t_end + eps - self.origin) / cycle)) + 1
+                k1 = math.floor((t_end + eps - self.origin) / self._cycle[key]) + 1
                 if k1 > k0:
-                    plan.append((ctrl, key, self.origin + np.arange(k0, k1) * cycle))
+                    if not ctrl.silent:
+                        plan.append((ctrl, key, k0, k1))
                     ctrl.sent_cycles[key] = k1
         self._t = max(self._t, t_end)
         if not plan:
             return
-        times = np.unique(np.concatenate([due for *_, due in plan]))
+        slots = np.array([self._slot[key] for _, key, _, _ in plan])
+        item, local, stamps, times, row = _due_frames(
+            np.array([k0 for _, _, k0, _ in plan]), np.array([k1 - k0 for _, _, k0, k1 in plan]),
+            np.array([self._cycle[key] for _, key, _, _ in plan]), self._frame_id.take(slots), self.origin)
         actuals = self.provider.actuals_at(times)
-        frames: list[tuple[float, int, can.Message]] = []
-        for ctrl, key, due in plan:
-            if ctrl.silent:
-                continue
-            frames += self._frames(ctrl, key, due, actuals, np.searchsorted(times, due))
-        frames.sort(key=lambda f: (f[0], f[1]))
-        for _, _, msg in frames:
-            self.bus.send(msg)
+        constant = np.zeros((len(plan), self._table.width))  # state, fault code, heartbeat state per message
+        start, frozen, modulo = [], [], []
+        for p, (ctrl, key, k0, k1) in enumerate(plan):
+            state, code = self.state(ctrl.name, self.origin + k0 * self._cycle[key])
+            column = self._column[self._slot[key]]
+            for name, value in ((f"{ctrl.name}.state", state), (f"{ctrl.name}.fault_code", code),
+                                (f"{ctrl.name}.hb_state", state)):
+                if name in column:
+                    constant[p, column[name]] = value
+            start.append(ctrl.alive[key])
+            frozen.append(ctrl.alive_frozen)
+            modulo.append(self._modulo[key])
+            if not ctrl.alive_frozen:
+                ctrl.alive[key] = (ctrl.alive[key] + k1 - k0) % self._modulo[key]
+        values = _frame_values(item, local, row, np.array([getattr(actuals, name) for name in _ACTUALS]),
+                               self._source.take(slots, axis=0), constant, self._alive_col.take(slots),
+                               np.array(start), np.array(frozen), np.array(modulo))
+        slot = slots.take(item)
+        frames = make_frames(stamps, self._frame_id.take(slot), self._table.encode(slot, values),
+                             self._length.take(slot), extended=self._extended.take(slot))
+        send_frames(self.bus, frames)
         self.stats.sent += len(frames)
 
-    def _frames(self, ctrl: _Controller, key: str, due: np.ndarray, actuals: DrivetrainActuals,
-                rows: np.ndarray) -> list[tuple[float, int, can.Message]]:
-        n = ctrl.name
-        state, code = self.state(n, float(due[0]))
-        columns: dict[str, np.ndarray | float] = {f"{n}.state": state, f"{n}.fault_code": code, f"{n}.hb_state": state}
-        if n == "drive":
-            columns |= {"drive.speed": actuals.drive_speed_rpm[rows], "drive.torque": actuals.drive_torque_nm[rows]}
-        elif n == "clutch":
-            columns |= {"clutch.torque": actuals.clutch_torque_nm[rows], "clutch.position": actuals.clutch_position_mm[rows],
-                        "clutch.clamp_state": actuals.clamp_state[rows]}
-        else:
-            columns |= {"load.torque": actuals.load_torque_nm[rows], "load.speed": actuals.load_speed_rpm[rows]}
-        count, modulo = len(due), self._modulo[key]
-        if ctrl.alive_frozen:
-            columns[key] = np.full(count, ctrl.alive[key])
-        else:
-            columns[key] = (ctrl.alive[key] + 1 + np.arange(count)) % modulo
-            ctrl.alive[key] = int(columns[key][-1])
-        codec = self._codec_of[key]
-        payload = codec.encode_array(columns, count)
-        ident, extended = codec.message.frame_id, codec.message.is_extended_frame
-        return [(float(t), ident, can.Message(timestamp=float(t), arbitration_id=ident, data=payload[i].tobytes(),
-                                               is_extended_id=extended, check=False))
-                for i, t in enumerate(due)]
+
+@njit(cache=True, nogil=True)
+def _due_frames(first: np.ndarray, count: np.ndarray, cycle: np.ndarray, frame_id: np.ndarray,
+                origin: float) -> tuple:  # pragma: no cover - compiled
+    """The frames of messages p = 0.. due at origin + (first[p] + l)·cycle[p], l < count[p], merged in time order
+    (ties by frame id): each frame's message p and number l, its time; the distinct times, each frame's among them."""
+    n = count.sum()
+    item, local = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    stamps, times, row = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
+    taken = np.zeros(count.shape[0], dtype=np.int64)
+    distinct = 0
+    for k in range(n):
+        best, best_t = -1, 0.0
+        for p in range(count.shape[0]):
+            if taken[p] < count[p]:
+                t = origin + (first[p] + taken[p]) * cycle[p]
+                if best < 0 or t < best_t or (t == best_t and frame_id[p] < frame_id[best]):
+                    best, best_t = p, t
+        item[k], local[k], stamps[k] = best, taken[best], best_t
+        taken[best] += 1
+        if distinct == 0 or best_t != times[distinct - 1]:
+            times[distinct] = best_t
+            distinct += 1
+        row[k] = distinct - 1
+    return item, local, stamps, times[:distinct].copy(), row
+
+
+@njit(cache=True, nogil=True)
+def _frame_values(item: np.ndarray, local: np.ndarray, row: np.ndarray, measured: np.ndarray, source: np.ndarray,
+                  constant: np.ndarray, alive_col: np.ndarray, start: np.ndarray, frozen: np.ndarray,
+                  modulo: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Each frame's signal values: a measured actual (source ≥ 0, at the frame's time `row`) or its message's
+    constant, and the alive counter counting on from `start` (held while frozen)."""
+    values = np.empty((item.shape[0], source.shape[1]))
+    for k in range(item.shape[0]):
+        p = item[k]
+        for j in range(source.shape[1]):
+            values[k, j] = measured[source[p, j], row[k]] if source[p, j] >= 0 else constant[p, j]
+        values[k, alive_col[p]] = start[p] if frozen[p] else (start[p] + 1 + local[k]) % modulo[p]
+    return values

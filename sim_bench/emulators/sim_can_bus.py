@@ -1,10 +1,15 @@
 """In-process CAN bus for simulated time: python-can's virtual interface without the per-frame copy and locks.
 
 A `can.BusABC`, so drivers cannot tell it from real hardware. Every bus on the same channel name receives the
-frames the others send (the same Message object: receivers must not modify frames). Like a hardware interface
-it stamps each frame: a frame sent without a time stamp gets the channel's clock (the simulated clock when one
-is given, else `time.monotonic`; python-can's default stamp 0.0 counts as none); a frame sent with one (an emulated controller back-dating a frame to the
-instant it fell due) keeps it. Tests may use python-can's `virtual` interface instead; this one exists because
+frames the others send (the same Message object or frame array: receivers must not modify frames). Like a
+hardware interface it stamps each frame: a frame sent without a time stamp gets the channel's clock (the
+simulated clock when one is given, else `time.monotonic`; python-can's default stamp 0.0 counts as none); a
+frame sent with one (an emulated controller back-dating a frame to the instant it fell due) keeps it.
+
+Besides python-can's `send`/`recv` of one `can.Message`, it carries frames in bulk as FRAME records
+(drivers/can_frames.py): `send_frames()` (the emulated controllers' status frames of a poll) and
+`recv_frames()` (everything waiting, which `drivers.can_frames.drain` takes); a frame sent one way is received
+either way, in the order sent. Tests may use python-can's `virtual` interface instead; this one exists because
 the simulated bench must run hundreds of times faster than real time.
 """
 
@@ -16,6 +21,9 @@ from collections.abc import Callable
 from typing import Any
 
 import can
+import numpy as np
+
+from drivers.can_frames import frames_from_messages, join, messages_from_frames, recv_each
 
 _channels: dict[str, list["SimCanBus"]] = {}
 _clocks: dict[str, Callable[[], float]] = {}
@@ -30,37 +38,83 @@ class SimCanBus(can.BusABC):
         super().__init__(channel=channel, **kwargs)
         self.channel_info = f"sim-can {channel}"
         self.receive_own_messages = receive_own_messages
-        self._queue: deque[can.Message] = deque()
+        self._queue: deque[can.Message | np.ndarray] = deque()
+        self._head = 0  # frames of the first queued array already received one by one
         self._peers = _channels.setdefault(channel, [])
         self._peers.append(self)
         if clock is not None:
             _clocks[channel] = clock
         self._channel = channel
 
+    def _now(self) -> float:
+        return _clocks.get(self._channel, time.monotonic)()
+
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         if not msg.timestamp:
-            msg.timestamp = _clocks.get(self._channel, time.monotonic)()
+            msg.timestamp = self._now()
+        self._deliver(msg)
+
+    def send_frames(self, frames: np.ndarray) -> None:
+        """Put FRAME records on the bus in their order (unstamped ones get the channel's clock)."""
+        if not len(frames):
+            return
+        unstamped = frames["timestamp"] == 0
+        if unstamped.any():
+            frames = frames.copy()
+            frames["timestamp"][unstamped] = self._now()
+        frames.flags.writeable = False
+        self._deliver(frames)
+
+    def _deliver(self, item: "can.Message | np.ndarray") -> None:
         for bus in self._peers:
             if bus is not self or self.receive_own_messages:
-                bus._queue.append(msg)
+                bus._queue.append(item)
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """Next frame; with a timeout, wait for one in wall-clock time (filters honoured via python-can)."""
         if self._filters:
             return super().recv(timeout)
-        if self._queue:
-            return self._queue.popleft()
         deadline = None if timeout is None else time.monotonic() + timeout
-        while deadline is None or time.monotonic() < deadline:
-            if self._queue:
-                return self._queue.popleft()
-            if timeout == 0:
-                break
+        while True:
+            msg = self._next()
+            if msg is not None or timeout == 0 or (deadline is not None and time.monotonic() >= deadline):
+                return msg
             time.sleep(_WAIT_S)
-        return None
+
+    def recv_frames(self) -> np.ndarray:
+        """Every waiting frame as FRAME records, in the order sent."""
+        if self._filters:
+            return recv_each(self)
+        parts, messages = [], []
+        while self._queue:
+            item = self._queue.popleft()
+            if isinstance(item, can.Message):
+                messages.append(item)
+                continue
+            if messages:
+                parts.append(frames_from_messages(messages))
+                messages = []
+            parts.append(item[self._head:])
+            self._head = 0
+        if messages:
+            parts.append(frames_from_messages(messages))
+        return join(parts)
+
+    def _next(self) -> can.Message | None:
+        if not self._queue:
+            return None
+        item = self._queue[0]
+        if isinstance(item, can.Message):
+            return self._queue.popleft()
+        (msg,) = messages_from_frames(item[self._head:self._head + 1])
+        self._head += 1
+        if self._head == len(item):
+            self._queue.popleft()
+            self._head = 0
+        return msg
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        return (self._queue.popleft() if self._queue else None), False
+        return self._next(), False
 
     def shutdown(self) -> None:
         if self in self._peers:
@@ -69,3 +123,13 @@ class SimCanBus(can.BusABC):
             _channels.pop(self._channel, None)
             _clocks.pop(self._channel, None)
         super().shutdown()
+
+
+def send_frames(bus: can.BusABC, frames: np.ndarray) -> None:
+    """FRAME records onto any python-can bus: in one piece where it takes arrays, else one message at a time."""
+    bulk = getattr(bus, "send_frames", None)
+    if bulk is not None:
+        bulk(frames)
+        return
+    for msg in messages_from_frames(frames):
+        bus.send(msg)

@@ -1,0 +1,156 @@
+"""`benchlab observe RUN.h5 --params P.json [--model FILE.toml|linear|nonlinear] [--sensors T_air,…] [--initial-offset K]
+--out EST.h5 [--plot FIG.png]` (and --reinit, --adapt, noise overrides: docs/observer.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+import numpy as np
+
+from benchlab import cliargs
+from benchlab.errors import InputError
+from benchlab.observer.batch import STD_SUFFIX, WEAR_UNITS, estimated_wear, observe
+from benchlab.observer.model import Reset
+from benchlab.observer.noise import tune_noise, with_overrides
+from benchlab.model.options import add_model_option, load_model_params
+from benchlab.model.runs import load_runs
+from benchlab.runfile import load_truth, write_results
+from benchlab.wear.clutchfile import default_clutch, load_clutch
+
+NAME = "observe"
+HELP = "Kalman observer: every temperature (the pressure plate too) with its spread, from the sensors chosen"
+#: Largest start offset, noise figure and re-initialisation time the command takes (typos, not clutches).
+MAX_OFFSET_K = 500.0
+MAX_HEAT_FLOW_W = 1e6
+MAX_SENSOR_K = 100.0
+MAX_TIME_S = 7 * 24 * 3600.0
+#: Truth scores skip the first seconds: a start made wrong on purpose needs them to converge.
+SETTLE_S = 300.0
+
+
+def _sensors(text: str) -> list[str]:
+    """`T_air,T_flywheel` -> channel names; `none` (or empty) -> no sensor: the model alone, open loop."""
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    return [] if names == ["none"] else names
+
+
+def _reset(text: str) -> Reset:
+    """`CHANNEL@SECONDS` -> a re-initialisation of the state CHANNEL reads, from its reading at that time."""
+    channel, at, seconds = text.partition("@")
+    try:
+        value = float(seconds)
+    except ValueError:
+        value = math.nan
+    if not at or not channel.strip() or not (math.isfinite(value) and 0 <= value <= MAX_TIME_S):
+        raise argparse.ArgumentTypeError(f"CHANNEL@SECONDS with 0 <= SECONDS <= {MAX_TIME_S:g}, e.g. "
+                                         f"T_housing@0, got {text!r}")
+    return Reset(channel.strip(), value)
+
+
+def _offset(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and abs(value) <= MAX_OFFSET_K):
+        raise argparse.ArgumentTypeError(f"a temperature offset in K within ±{MAX_OFFSET_K:g}, got {text!r}")
+    return value
+
+
+def _sensor_noise(text: str) -> tuple[str, float]:
+    channel, _, value = text.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        number = math.nan
+    if not channel.strip() or not (math.isfinite(number) and 0 < number <= MAX_SENSOR_K):
+        raise argparse.ArgumentTypeError(f"CHANNEL=K with a positive noise up to {MAX_SENSOR_K:g} K, got {text!r}")
+    return channel.strip(), number
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
+    parser.add_argument("--params", required=True, help="parameter file (JSON); its residual statistics tune the noise")
+    add_model_option(parser)
+    parser.add_argument("--sensors", type=_sensors, default=["T_air"],
+                        help="measured channels the observer uses, comma-separated (default T_air, the paper's extra "
+                             "sensor; 'none' for the model alone)")
+    parser.add_argument("--reinit", type=_reset, action="append", default=[], metavar="CHANNEL@SECONDS",
+                        help="re-initialise the state CHANNEL reads from its reading at that time, without using it as "
+                             "an observer input (e.g. an oil temperature at engine start); repeatable")
+    parser.add_argument("--adapt", action="append", default=[], metavar="LINK",
+                        help="correct the resistance law of this link online (e.g. R_PA: eq. 11, shared with R_FA); "
+                             "an extended Kalman filter; repeatable")
+    parser.add_argument("--initial-offset", type=_offset, default=0.0, metavar="K",
+                        help="start every estimate K away from where simulate starts it (the start is then known to "
+                             "within |K| at best)")
+    parser.add_argument("--initial-std", type=cliargs.positive_float("an initial spread in K", MAX_OFFSET_K),
+                        metavar="K", help="spread of every state at the start (default: 2 K, or |--initial-offset|)")
+    parser.add_argument("--process-noise", type=cliargs.positive_float("a heat-flow noise in W*sqrt(s)",
+                                                                       MAX_HEAT_FLOW_W),
+                        metavar="W", help="heat-flow noise density on every node (default: from the residuals)")
+    parser.add_argument("--sensor-noise", type=_sensor_noise, action="append", default=[], metavar="CHANNEL=K",
+                        help="reading noise of a sensor (default: its residual RMS); repeatable")
+    parser.add_argument("--clutch", help="clutch file (TOML) for the online wear; default: documented assumptions")
+    parser.add_argument("--out", required=True, type=cliargs.output_file, help="output HDF5 file with /estimated")
+    parser.add_argument("--plot", type=cliargs.output_file, help="figure (PNG): estimates, ±2σ band, measurement, "
+                                                                  "truth where the run has it")
+
+
+def run(args: argparse.Namespace) -> int:
+    params = load_model_params(args.params, args.model)
+    measured = load_runs([args.run], params.definition)[0]
+    clutch = load_clutch(args.clutch) if args.clutch else default_clutch()
+    network = params.network
+    channels = [*args.sensors, *(r.channel for r in args.reinit)]
+    for channel, _ in args.sensor_noise:
+        if channel not in channels:
+            raise InputError("--sensor-noise", channel, f"one of the sensors or re-initialising channels "
+                                                        f"({', '.join(channels) or 'none given'})")
+    noise = with_overrides(tune_noise(network, params, channels, args.initial_offset), args.process_noise,
+                           dict(args.sensor_noise), args.initial_std)
+    result = observe(measured, params, args.sensors, network, args.reinit, args.initial_offset, noise, args.adapt)
+    truth = load_truth(args.run)
+    units = {name: ("K/W" if name in result.model.adapted else "degC") for name in result.estimate.columns
+             if not name.endswith(STD_SUFFIX)}
+    columns = {}
+    for name, unit in units.items():
+        columns[name] = (result.estimate[name].to_numpy(), unit)
+        columns[name + STD_SUFFIX] = (result.estimate[name + STD_SUFFIX].to_numpy(), "K/W" if unit == "K/W" else "K")
+    wear = estimated_wear(measured, result, params, clutch)
+    for name, values in (wear or {}).items():
+        columns[name] = (values, WEAR_UNITS[name])
+    seen = result.observability
+    write_results(args.out, "estimated", measured["time"].to_numpy(), columns, {
+        "source_run": str(args.run), "params": str(args.params), "model": params.model,
+        "sensors": json.dumps(list(result.model.sensors)),
+        "reinit": json.dumps([[r.channel, r.time_s] for r in args.reinit]), "adapt": json.dumps(result.model.adapted),
+        "initial_offset_K": float(args.initial_offset), "noise": json.dumps(noise.as_dict()),
+        "observability": json.dumps(seen.as_dict())})
+    print(f"{args.out}: {len(measured)} samples, {params.model} model, sensors "
+          f"{', '.join(result.model.sensors) or 'none (open loop)'}, noise from {noise.origin}")
+    observable = [s for s in seen.states if seen.observable[s]]
+    print(f"observability: rank {seen.rank} of {len(seen.states)} from {', '.join(seen.sensors) or 'no sensor'}; "
+          f"observable: {', '.join(observable) or 'none'}")
+    for line in seen.warnings():
+        print(f"warning: {line}")
+    time = measured["time"].to_numpy()
+    for name, unit in units.items():
+        value, spread = result.estimate[name].to_numpy(), result.estimate[name + STD_SUFFIX].to_numpy()
+        text = f"  {name:18s} at the end {value[-1]:9.4g} ± {2 * spread[-1]:.3g} {unit} (2σ)"
+        if truth is not None and name in truth.columns:
+            late = time >= min(SETTLE_S, time[-1] / 2)
+            error = value - truth[name].to_numpy()
+            text += (f"; against /truth after {time[late][0]:.0f} s: RMS {np.sqrt(np.mean(error[late] ** 2)):.3f} K, "
+                     f"±2σ band covers {100 * np.mean(np.abs(error[late]) <= 2 * spread[late]):.1f} %")
+        print(text)
+    if wear:
+        print(f"  wear at the estimated temperatures: plate {wear['wear_plate_mm'][-1]:.3g} mm, flywheel "
+              f"{wear['wear_flywheel_mm'][-1]:.3g} mm per face")
+    if args.plot:
+        from benchlab.observer.plot import plot_observation
+
+        print(f"figure: {plot_observation(measured, result, truth, args.plot)}")
+    return 0

@@ -1,0 +1,207 @@
+"""The main job's one page (`index.html`): run → identification → diagnosis → wear, with the figures.
+
+It reads what the job wrote (run files, parameter files, the diagnosis summary, the wear report) and
+tells the story in order, the paper's published figures beside benchlab's own, and says plainly which
+parts come from the simulated bench and how far the identified model is from the simulated plant's truth.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from benchlab.metrics import nrmse_pct, rmse_k
+from benchlab.params import ModelParams
+from benchlab.report.scores import estimate
+from benchlab.runfile import load_attrs, load_events
+
+PAGE = "index.html"
+#: The paper's published error figures (section 4): Table 1 identification, five validation runs, and the
+#: Fig. 5 cool-downs with the engine speed changing (linear against nonlinear model).
+PAPER = {"fit": "2.5 %", "validation": "< 10 %", "cooldown_linear": "8.4 %", "cooldown_nonlinear": "3.8 %"}
+COOLDOWN_LABEL = "validation_cooldown"
+
+
+@dataclass(frozen=True)
+class Cooldown:
+    """One long cool-down of the validation protocol (Fig. 5): its span and each model's error over it."""
+
+    cycle: int
+    t_start: float
+    t_end: float
+    description: str
+    nrmse_pct: dict[str, float]
+    rmse_k: dict[str, float]
+
+
+def validation_cooldowns(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, str]]:
+    """(cycle, start s, end s, set-points) of each long cool-down of a validation run, from its step events."""
+    spans: dict[int, list[Any]] = {}
+    for t, cycle, kind, detail in load_events(path):
+        if kind not in ("step_start", "cycle_start", "run_complete", "run_aborted"):
+            continue
+        inside = kind == "step_start" and COOLDOWN_LABEL in detail
+        for c, span in spans.items():  # any other step, or a new cycle, ends an open cool-down
+            if span[2] is None and (c != cycle or not inside):
+                span[2] = t
+        if inside:
+            span = spans.setdefault(cycle, [t, [], None])
+            span[1].append(detail.split()[0])
+            span[2] = None
+    return [(c, s[0], s[2], " → ".join(s[1])) for c, s in sorted(spans.items()) if s[2] is not None]
+
+
+def cooldown_scores(run: pd.DataFrame, path: "str | os.PathLike[str]",
+                    models: Sequence[tuple[str, ModelParams]]) -> list[Cooldown]:
+    """Each model's error over each long cool-down (Fig. 5), from its simulation of the whole validation run.
+
+    The whole run, not each cool-down from its own start: the unmeasured pressure plate is known at the run's
+    start (everything at ambient), not at the end of a heat-up.
+    """
+    time = run["time"].to_numpy()
+    sims = {label: estimate(run, params, label).simulated for label, params in models}
+    out = []
+    for cycle, t0, t1, text in validation_cooldowns(path):
+        inside = (time >= t0) & (time <= t1)
+        piece = run[inside]
+        rpm = piece["engine_speed"].to_numpy()
+        text = f"{text} ({rpm.min():.0f}–{rpm.max():.0f} rpm)"
+        parts = {label: sim[inside] for label, sim in sims.items()}
+        out.append(Cooldown(cycle, t0, t1, text, {k: nrmse_pct(piece, s) for k, s in parts.items()},
+                            {k: rmse_k(piece, s) for k, s in parts.items()}))
+    return out
+
+
+def _num(value: Any, digits: int, suffix: str = "") -> str:
+    ok = isinstance(value, (int, float)) and math.isfinite(value)
+    return f"{value:.{digits}f}{suffix}" if ok else "—"
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _figure(out: Path, path: Path, caption: str) -> str:
+    if not path.exists():
+        return ""
+    rel = html.escape(os.path.relpath(path, out))
+    return f'<figure><a href="{rel}"><img src="{rel}" alt="{html.escape(caption)}"></a>' \
+           f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+
+
+def _run_section(runs: Mapping[str, tuple[Path, pd.DataFrame]], out: Path) -> str:
+    rows = []
+    for label, (path, run) in runs.items():
+        duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
+        attrs = load_attrs(path)
+        rows.append([html.escape(label), f'<a href="{html.escape(os.path.relpath(path, out))}">{path.name}</a>',
+                     html.escape(attrs.get("protocol", "")), _num(duration / 3600, 2, " h"), str(len(run)),
+                     _num(float(run["T_flywheel"].max()), 1, " °C"),
+                     _num(float(run["friction_power"].sum()) * float(run.attrs["dt"]) / 1e6, 2, " MJ"),
+                     html.escape(attrs.get("can_log", "—"))])
+    return _table(("run", "file", "protocol", "duration", "samples", "flywheel max", "friction energy",
+                   "raw CAN log"), rows)
+
+
+def _identify_section(figures: Mapping[str, Mapping[str, Mapping[str, float]]],
+                      cooldowns: Sequence[Cooldown]) -> str:
+    rows = []
+    for model, fig in figures.items():
+        rows.append([model, _num(fig["fit"]["rmse_K"], 3, " K"), _num(fig["fit"]["nrmse_pct"], 2, " %"),
+                     _num(fig["validation"]["rmse_K"], 3, " K"), _num(fig["validation"]["nrmse_pct"], 2, " %"),
+                     _num(sum(c.nrmse_pct[model] for c in cooldowns) / len(cooldowns), 2, " %")
+                     if cooldowns else "—"])
+    rows.append(["<i>paper (nonlinear / linear)</i>", "—", PAPER["fit"], "—", PAPER["validation"],
+                 f"{PAPER['cooldown_nonlinear']} / {PAPER['cooldown_linear']}"])
+    main = _table(("model", "fit RMSE", "fit NRMSE", "validation RMSE", "validation NRMSE",
+                   "mean NRMSE over the long cool-downs"), rows)
+    per = _table(["cool-down (cycle)", "set-points"] + [f"NRMSE {m}" for m in figures] + [f"RMSE {m}" for m in figures],
+                 [[str(c.cycle), html.escape(c.description)] + [_num(c.nrmse_pct[m], 2, " %") for m in figures]
+                  + [_num(c.rmse_k[m], 3, " K") for m in figures] for c in cooldowns])
+    return main + "<h3>Per long cool-down of the validation run (as in Fig. 5)</h3>" + per
+
+
+def _truth_section(params: ModelParams, truth: Mapping[str, float], standard_errors: Mapping[str, float]) -> str:
+    rows = []
+    for name, value in params.items():
+        if name not in truth:
+            continue
+        true = float(truth[name])
+        se = standard_errors.get(name, math.nan)
+        rows.append([f"<code>{html.escape(name)}</code>", _num(value, 5), _num(se, 3), _num(true, 5),
+                     _num(100 * (value - true) / true if true else math.nan, 2, " %"),
+                     _num(abs(value - true) / se if se and se > 0 else math.nan, 1)])
+    return _table(("parameter", "identified", "± SE", "plant truth", "error", "error / SE"), rows)
+
+
+def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd.DataFrame]],
+                identification: Mapping[str, Mapping[str, Mapping[str, float]]], cooldowns: Sequence[Cooldown],
+                nonlinear: ModelParams, standard_errors: Mapping[str, float], diagnosis: Mapping[str, Any],
+                wear: Mapping[str, Any]) -> Path:
+    """Write `index.html` in `out` from the job's results; the figures are linked where the job wrote them."""
+    out = Path(out)
+    fitting_path = next(iter(runs.values()))[0]
+    attrs = load_attrs(fitting_path)
+    truth = json.loads(attrs["sim_truth"]) if "sim_truth" in attrs else None
+    simulated = attrs.get("bench") == "sim"
+    findings = diagnosis.get("findings", [])
+    found = "".join(f"<li><b>{html.escape(f['candidate'])}</b> ({html.escape(f['signal'])} / "
+                    f"{html.escape(f['mechanism'])}): held-out gain {_num(f['gain_pct'], 0, ' %')}, "
+                    f"p = {f.get('p_value', math.nan):.2g}</li>" for f in findings) or "<li>none</li>"
+    base, best = diagnosis["baseline"], diagnosis["best"]
+    life, health = wear["life"], wear["health"]
+    p50 = life["engagements"].get("p50")
+    sections = [
+        "<h1>benchlab: the whole job</h1>",
+        "<p class='sim'>" + ("<b>Everything on this page comes from the simulated bench</b> (<code>sim_bench</code>): "
+                             "the drivers talked to emulated devices whose plant is the paper's nonlinear clutch model"
+                             + (f" (effects added to it: {', '.join(truth.get('effects', [])) or 'none'})" if truth else "")
+                             + ". The numbers say how well benchlab recovers a known plant, not how a real clutch "
+                               "behaves." if simulated else "Measured on the bench described in the run files.")
+        + "</p>",
+        "<h2>1. The runs</h2>", _run_section(runs, out),
+        _figure(out, out / "report" / "fig4_fit.png", "Fig. 4: the nonlinear model against the Table 1 run"),
+        "<h2>2. Identification: linear against nonlinear (eq. 6–11)</h2>",
+        "<p>NRMSE = 100 · RMSE / (max − min of the measured channel), averaged over ϑ_F, ϑ_A, ϑ_T (contract §5). "
+        "The paper's percentages are its own error measure on its own bench; they are shown for orientation.</p>",
+        _identify_section(identification, cooldowns),
+    ]
+    sections += [_figure(out, p, f"Fig. 5: validation {i}")
+                 for i, p in enumerate(sorted((out / "report").glob("fig5_validation_*.png")), 1)]
+    sections.append(_figure(out, out / "report" / "fig3_resistance.png", "Fig. 3: convection resistance R(ω_e, S)"))
+    if truth is not None:
+        sections += ["<h3>The nonlinear model against the simulated plant's truth</h3>",
+                     _truth_section(nonlinear, truth.get("params", {}), standard_errors)]
+    sections += [
+        "<p>The full report with parameters, residual tests and error tables: <a href='report/report.md'>"
+        "report/report.md</a>.</p>",
+        "<h2>3. What diagnose found (linear baseline)</h2>",
+        f"<p>Held-out RMSE {_num(base['rmse_K'], 3, ' K')} → best model <b>{html.escape(str(best['model']))}</b> "
+        f"{_num(best['rmse_K'], 3, ' K')}.</p><ul>{found}</ul>",
+        '<p>Evidence, regimes and figures: <a href="diagnose/diagnose.md">diagnose/diagnose.md</a>, JSON: '
+        '<a href="diagnose.json">diagnose.json</a>.</p>',
+        "<h2>4. Wear (eq. 1–3) from the estimated lining temperatures</h2>",
+        f"<p>{wear['engagements']} engagements, {_num(wear['friction_energy_J'] / 1e6, 2, ' MJ')} of friction "
+        f"energy; health {_num(health['health'], 4)} ({'WORN' if health['worn'] else 'ok'}); remaining life "
+        f"P50 {_num(p50, 0) if p50 is not None else 'beyond the horizon'} engagements; "
+        f"P(worn within {life['horizon_engagements']}) = {_num(life['p_fail_within_horizon'], 3)}.</p>",
+        _figure(out, out / "wear.png", "Energy, lining temperatures, wear per side and remaining-life distribution"),
+        '<p>All numbers: <a href="wear.json">wear.json</a>.</p>',
+    ]
+    style = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}table{border-collapse:collapse;"
+             "margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}th{background:#eee}"
+             "img{max-width:100%}figure{margin:1em 0}.sim{background:#fff4d6;padding:0.6em;border:1px solid #e0c060}")
+    page = out / PAGE
+    page.write_text("<!DOCTYPE html><html><head><meta charset='utf-8'><title>benchlab: the whole job</title>"
+                    f"<style>{style}</style></head><body>{''.join(sections)}</body></html>")
+    return page

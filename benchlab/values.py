@@ -1,0 +1,26 @@
+"""Numbers read from user files (TOML, JSON): what counts as a finite number.
+
+TOML and JSON integers have any size, and `math.isfinite` raises OverflowError on one beyond a float's range,
+so every check of a number from a file goes through `finite_number` (bools are not numbers either).
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def finite_number(value: object) -> float | None:
+    """`value` as a finite float, or None if it is not one (a bool, a string, NaN, ±inf, an int beyond a float)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
+
+
+def positive_number(value: object) -> float | None:
+    """`value` as a finite float > 0, or None if it is not one."""
+    number = finite_number(value)
+    return number if number is not None and number > 0 else None

@@ -1,0 +1,182 @@
+"""`benchlab export`: a run file reopened as MDF4 by asammdf, as CSV by pandas, as Parquet by pyarrow."""
+
+from __future__ import annotations
+
+import sys
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+from asammdf import MDF
+
+from benchlab.acquire import AlignedSource, Layout, RunWriter, StreamSpec, read_progress
+from benchlab.cli import main
+from benchlab.runfile import ALIGNED_UNITS, REQUIRED, load_run
+from benchlab.runner.session import RunRequest, execute
+from protocols.schedule import Step
+
+#: Ten seconds of bench: idle, one launch, open again; every raw stream and a few events.
+STEPS = (Step("open", 3.0, 1500.0, 0.0, 0.0, 0), Step("launch", 4.0, 1500.0, 60.0, 100.0, 1),
+         Step("open", 3.0, 1500.0, 0.0, 100.0, 1))
+
+
+@pytest.fixture(scope="module")
+def bench_run(tmp_path_factory):
+    """A run file written by the runner on the simulated bench: /aligned, /raw/<stream>, /events."""
+    path = tmp_path_factory.mktemp("export") / "run.h5"
+    code, _ = execute(RunRequest("custom", path, steps=STEPS, install_signals=False))
+    assert code == 0
+    return path
+
+
+def _one_line_exit_2(argv, capsys, *words):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    for word in words:
+        assert word in err
+    return err
+
+
+def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_path, capsys):
+    out = tmp_path / "run.mf4"
+    assert main(["export", str(bench_run), "--to", str(out)]) == 0
+    assert str(out) in capsys.readouterr().out
+    mdf = MDF(out)
+    try:
+        names = [ch.name for group in mdf.groups for ch in group.channels]
+        assert len(names) == len(set(names))  # unique across the file, masters included
+        acq = [group.channel_group.acq_name for group in mdf.groups]
+        with h5py.File(bench_run, "r") as f:
+            streams = list(f["raw"])
+            assert acq == ["/aligned", *(f"/raw/{s}" for s in streams), "/events"]
+            for name, ds in f["aligned"].items():
+                sig = mdf.get(name)
+                np.testing.assert_array_equal(sig.samples, ds[()])
+                np.testing.assert_array_equal(sig.timestamps, f["aligned/time"][()])
+                assert sig.unit == ds.attrs["units"]
+            assert "ϑ_F" in mdf.get("T_flywheel").comment and "node.T_flywheel_1" in mdf.get("T_flywheel_1").comment
+            for stream in streams:
+                group = f["raw"][stream]
+                order = np.argsort(group["time"][()], kind="stable")
+                for column, ds in group.items():
+                    if column == "time":
+                        continue
+                    sig = mdf.get(f"{stream}.{column}")
+                    np.testing.assert_array_equal(sig.samples, ds[()][order])
+                    np.testing.assert_array_equal(sig.timestamps, group["time"][()][order])
+                    assert sig.unit == ds.attrs["units"]
+            kinds = mdf.get("events.kind")
+            np.testing.assert_array_equal(kinds.samples, f["events/kind"][()])
+            np.testing.assert_array_equal(kinds.timestamps, f["events/time"][()])
+            np.testing.assert_array_equal(mdf.get("events.cycle").samples, f["events/cycle"][()])
+        assert "run_complete" in {k.decode() for k in kinds.samples}
+        assert 'name="schema">benchlab-run/1<' in mdf.header.comment
+    finally:
+        mdf.close()
+
+
+def test_mf4_of_a_crashed_run_stops_at_its_progress_record(tmp_path):
+    channels = {k: ALIGNED_UNITS[k] for k in REQUIRED if k != "time"}
+    layout = Layout((StreamSpec("bench", tuple(channels.items()), 50.0, 0.05),),
+                    tuple(AlignedSource(k, "bench", k) for k in channels), channels, None, 0.01)
+    run = tmp_path / "crashed.h5"
+    writer = RunWriter(run, layout, protocol="custom", planned_s=600.0)
+    writer.event(0.5, "cycle_start", 0)
+    for k in range(1, 151):
+        writer.add("bench", k * 0.02, [0.0 if c == "clutch_state" else 20.0 + k for c in channels])
+        writer.advance(k * 0.02)
+    writer.abandon()  # as a kill leaves it: status running, room for 10 minutes, data for 3 s
+    with h5py.File(run, "r") as f:
+        progress = read_progress(f)
+        assert f.attrs["status"] == "running" and f["aligned/time"].shape[0] > 10 * progress["aligned_rows"]
+    out = tmp_path / "crashed.mf4"
+    assert main(["export", str(run), "--to", str(out)]) == 0
+    mdf = MDF(out)
+    try:
+        assert len(mdf.get("engine_speed").samples) == progress["aligned_rows"]
+        speed = mdf.get("bench.engine_speed")
+        assert len(speed.samples) == progress["rows/bench"] == 150 and np.isfinite(speed.timestamps).all()
+        assert list(mdf.get("events.kind").samples) == [b"cycle_start"]
+    finally:
+        mdf.close()
+
+
+def test_csv_opens_in_pandas_with_units_in_the_header(run_file, tmp_path):
+    out = tmp_path / "run.csv"
+    assert main(["export", str(run_file), "--to", str(out)]) == 0
+    run = load_run(run_file)
+    table = pd.read_csv(out)
+    assert list(table.columns) == [f"{c} [{run.attrs['units'][c]}]" for c in run.columns]
+    for c in run.columns:
+        np.testing.assert_array_equal(table[f"{c} [{run.attrs['units'][c]}]"].to_numpy(), run[c].to_numpy())
+
+
+def test_parquet_opens_in_pandas_with_units_in_the_schema(run_file, tmp_path):
+    pq = pytest.importorskip("pyarrow.parquet")
+    out = tmp_path / "run.parquet"
+    assert main(["export", str(run_file), "--to", str(out)]) == 0
+    run = load_run(run_file)
+    table = pd.read_parquet(out)
+    assert list(table.columns) == list(run.columns)
+    pd.testing.assert_frame_equal(table, pd.DataFrame(run), check_like=False)
+    schema = pq.read_schema(out)
+    for c in run.columns:
+        assert schema.field(c).metadata[b"unit"].decode() == run.attrs["units"][c]
+    assert b"benchlab-run/1" in schema.metadata[b"benchlab"]
+
+
+def test_csv_goes_back_into_a_run_file_with_import(run_file, tmp_path):
+    csv, back = tmp_path / "run.csv", tmp_path / "back.h5"
+    assert main(["export", str(run_file), "--to", str(csv)]) == 0
+    assert main(["import", str(csv), "--out", str(back)]) == 0
+    before, after = load_run(run_file), load_run(back)
+    for c in before.columns:
+        np.testing.assert_allclose(after[c].to_numpy(), before[c].to_numpy(), rtol=1e-15, atol=0)
+
+
+def test_bad_targets_and_inputs_are_one_line_exit_2(run_file, tmp_path, capsys):
+    _one_line_exit_2(["export", str(run_file), "--to", str(tmp_path / "run.xlsx")], capsys, "--to", ".mf4")
+    _one_line_exit_2(["export", str(tmp_path / "none.h5"), "--to", str(tmp_path / "a.mf4")], capsys, "not found")
+    junk = tmp_path / "junk.h5"
+    junk.write_text("not hdf5")
+    _one_line_exit_2(["export", str(junk), "--to", str(tmp_path / "a.csv")], capsys, "junk.h5", "HDF5")
+    plain = tmp_path / "plain.h5"
+    with h5py.File(plain, "w") as f:
+        f["x"] = np.arange(3.0)
+    _one_line_exit_2(["export", str(plain), "--to", str(tmp_path / "a.mf4")], capsys, "plain.h5", "schema")
+    assert not any(tmp_path.glob("a.*")) and not any(tmp_path.glob(".a.*"))
+
+
+def test_an_existing_output_needs_force(run_file, tmp_path, capsys):
+    out = tmp_path / "run.csv"
+    out.write_text("keep me\n")
+    _one_line_exit_2(["export", str(run_file), "--to", str(out)], capsys, "--force")
+    assert out.read_text() == "keep me\n"
+    assert main(["export", str(run_file), "--to", str(out), "--force"]) == 0
+    assert out.read_text().startswith("time [s],")
+
+
+def test_parquet_without_pyarrow_says_what_to_install(run_file, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # import pyarrow now raises ImportError
+    out = tmp_path / "run.parquet"
+    _one_line_exit_2(["export", str(run_file), "--to", str(out)], capsys, "pyarrow", "benchlab[export]")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.h5"]  # no output, no half-made copy
+
+
+def test_mf4_of_a_simulate_output_puts_model_beside_measurement(run_file, params_file, tmp_path):
+    sim, out = tmp_path / "sim.h5", tmp_path / "sim.mf4"
+    assert main(["simulate", str(run_file), "--params", str(params_file), "--out", str(sim)]) == 0
+    assert main(["export", str(sim), "--to", str(out)]) == 0
+    mdf = MDF(out)
+    try:
+        assert [g.channel_group.acq_name for g in mdf.groups] == ["/aligned", "/simulated"]
+        with h5py.File(sim, "r") as f:
+            for name in ("T_flywheel", "T_pressure_plate"):
+                model = mdf.get(f"simulated.{name}")
+                np.testing.assert_array_equal(model.samples, f["simulated"][name][()])
+                assert model.unit == "degC"
+            np.testing.assert_array_equal(mdf.get("T_flywheel").samples, f["aligned/T_flywheel"][()])
+    finally:
+        mdf.close()

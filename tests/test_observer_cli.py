@@ -1,0 +1,94 @@
+"""`benchlab observe` on the command line: /estimated with units and spreads, the figure, what it says about
+observability, and bad input as one line and exit 2. A two-minute run on the simulated bench (drivers, /truth)."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from benchlab.cli import main
+from benchlab.params import paper_params, save_params
+from benchlab.runner.session import RunRequest, execute
+from protocols.schedule import Step
+
+STEPS = (Step("open", 40.0, 2000.0, 0.0, 0.0, 0), Step("launch", 10.0, 2000.0, 60.0, 100.0, 1),
+         Step("drive", 30.0, 2000.0, 60.0, 100.0, 1), Step("open", 30.0, 1500.0, 0.0, 100.0, 2))
+STATES = ("T_pressure_plate", "T_flywheel", "T_air", "T_housing")
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    root = tmp_path_factory.mktemp("observe")
+    code, _ = execute(RunRequest("custom", root / "run.h5", steps=STEPS, install_signals=False))
+    assert code == 0
+    save_params(root / "p.json", paper_params())
+    return root
+
+
+def _observe(files, *extra):
+    return main(["observe", str(files / "run.h5"), "--params", str(files / "p.json"), *extra])
+
+
+def test_writes_estimates_spreads_wear_and_the_figure(files, capsys):
+    out, figure = files / "est.h5", files / "est.png"
+    assert _observe(files, "--sensors", "T_air", "--initial-offset", "5", "--out", str(out), "--plot",
+                    str(figure)) == 0
+    text = capsys.readouterr().out
+    assert "observability: rank 4 of 4 from T_air" in text and "against /truth" in text
+    with h5py.File(out, "r") as f:
+        group = f["estimated"]
+        units = {name: group[name].attrs["units"] for name in group}
+        assert units == {"time": "s", **{s: "degC" for s in STATES}, **{f"{s}_std": "K" for s in STATES},
+                         "wear_plate_mm": "mm", "wear_flywheel_mm": "mm", "loss_plate": "1", "loss_flywheel": "1"}
+        plate, spread = group["T_pressure_plate"][()], group["T_pressure_plate_std"][()]
+        assert json.loads(f.attrs["sensors"]) == ["T_air"] and f.attrs["initial_offset_K"] == 5.0
+        assert json.loads(f.attrs["observability"])["rank"] == 4
+        with h5py.File(files / "run.h5", "r") as run:
+            assert len(plate) == len(run["aligned/time"])
+            truth = run["truth/T_pressure_plate"][()]
+    assert abs(plate[0] - truth[0]) > 4.0  # started 5 K wrong
+    assert np.all(spread > 0) and spread[-1] < spread[0]
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_no_sensor_says_the_states_are_not_observable(files, capsys):
+    assert _observe(files, "--sensors", "none", "--out", str(files / "open.h5")) == 0
+    text = capsys.readouterr().out
+    assert "rank 0 of 4" in text and "warning: not observable from no sensor" in text and "open loop" in text
+
+
+def test_reinit_and_adapt_are_written_down(files, capsys):
+    out = files / "reinit.h5"
+    assert _observe(files, "--sensors", "T_air", "--reinit", "T_housing@60", "--adapt", "R_PA", "--out",
+                    str(out)) == 0
+    capsys.readouterr()
+    with h5py.File(out, "r") as f:
+        assert json.loads(f.attrs["reinit"]) == [["T_housing", 60.0]]
+        assert json.loads(f.attrs["adapt"]) == ["R_PA_correction"]
+        assert f["estimated/R_PA_correction"].attrs["units"] == "K/W"
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--sensors", "T_plate"], "/aligned/T_plate"),  # a sensor name the run lacks
+    (["--sensors", "T_ambient"], "--sensors: T_ambient: a channel the model predicts"),  # the model lacks it
+    (["--process-noise", "0"], "--process-noise"),
+    (["--process-noise", "-3"], "--process-noise"),
+    (["--sensor-noise", "T_air=0"], "--sensor-noise"),
+    (["--sensor-noise", "T_flywheel=0.1"], "--sensor-noise: T_flywheel"),  # not a sensor of this observer
+    (["--initial-std", "0"], "--initial-std"),
+    (["--initial-offset", "nan"], "--initial-offset"),
+    (["--reinit", "T_housing@-1"], "--reinit"),
+    (["--reinit", "T_housing@3600"], "--reinit T_housing@3600"),  # after the run's end
+    (["--adapt", "R_XY"], "--adapt: R_XY"),
+])
+def test_bad_input_is_one_line_and_exit_2(files, capsys, args, says):
+    try:
+        code = _observe(files, *args, "--out", str(files / "bad.h5"))
+    except SystemExit as exc:  # argparse refuses a bad number at parse time
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err and "Traceback" not in err
