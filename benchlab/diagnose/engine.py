@@ -55,7 +55,7 @@ MAX_ROUNDS = 3
 FITTED_STARTS = ("T_flywheel",)
 
 
-def model_spec(model: ModelDefinition, datasets: Sequence[FitData]) -> ModelSpec:
+def diagnosed_spec(model: ModelDefinition, datasets: Sequence[FitData]) -> ModelSpec:
     """What diagnose fits for a model: its parameters plus each run's fitted start of FITTED_STARTS channels."""
     spec = build_spec(model)
     starts = [c for c in FITTED_STARTS if c in set(spec.network.initial.values())]
@@ -204,7 +204,7 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     parameters to absorb it, and the new term pays off only once they are released (a plate share
     of 0.35 screened alone lowered the cost by 0 %, with all parameters free by 40 %).
     """
-    specs = [model_spec(cand.build(current.spec.definition, channels), datasets) for cand in cands]
+    specs = [diagnosed_spec(cand.build(current.spec.definition, channels), datasets) for cand in cands]
 
     def screen_one(i: int) -> tuple[float, dict[str, float]]:
         result = fit(specs[i], datasets, max_nfev=SCREEN_NFEV,
@@ -246,7 +246,7 @@ def _combined(base: ModelSpec, cands: Sequence[Candidate], channels: dict[str, n
     model = base.definition
     for cand in cands:
         model = cand.build(model, channels)
-    return model_spec(model, datasets)
+    return diagnosed_spec(model, datasets)
 
 
 def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], final: FitResult,
@@ -288,7 +288,7 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels if k in shared}
     units = {**ALIGNED_UNITS, **runs[0].attrs.get("units", {})}
     with progress.task(f"diagnose: {model.label} baseline", starts + 1, unit="fit") as task:
-        base = fit_multistart(model_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
+        base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
     library = candidates(model, channels, units)
     current, current_held, findings = base, base_held, []

@@ -141,7 +141,7 @@ def prepare(run: pd.DataFrame, step_s: float = FIT_STEP_S, name: str | None = No
     _quantised(channels, units, network.measured)
     targets = {c: _centred_mean(values, block, n_blocks) for c, values in raw.items()}
     if block > 1 and SLIP_POWER in full:
-        kinked = _slip_windows(run[SLIP_POWER].to_numpy(np.float64), block, n_blocks)
+        kinked = _slip_windows(full[SLIP_POWER], block, n_blocks)
         for c in SLIP_HEATED_CHANNELS:
             if c in targets:
                 targets[c][kinked] = np.nan
