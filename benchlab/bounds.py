@@ -29,3 +29,5 @@ MAX_WEAR_PATHS = 100_000
 MAX_WEAR_HORIZON = 1_000_000_000
 #: Longest residual sampling period of the cool-down analysis: one sample an hour still shows a trend.
 MAX_SAMPLE_PERIOD_S = 3600.0
+#: Most worker processes of a local batch cluster: each takes a core and a run in memory; more is a typo.
+MAX_LOCAL_WORKERS = 256
