@@ -78,10 +78,12 @@ def _map_in_worker() -> dict:
     """What map_indices does where it runs: its results and the processes they came from."""
     results = map_indices(_pid_and_square, 4)
     return {"pid": os.getpid(), "daemon": multiprocessing.current_process().daemon,
-            "pids": {pid for pid, _ in results}, "squares": [sq for _, sq in results]}
+            "pids": {pid for pid, _ in results}, "squares": [sq for _, sq in results],
+            "malloc_trim": os.environ.get("MALLOC_TRIM_THRESHOLD_")}
 
 
-def test_map_indices_in_a_dask_worker_process_runs_serially_and_the_cluster_is_loopback_only():
+def test_map_indices_in_a_dask_worker_process_runs_serially_and_the_cluster_is_loopback_only(monkeypatch):
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
     with connect(None, 1, 10.0) as conn:
         addresses = list(conn.client.scheduler_info()["workers"])
         assert conn.scheduler.startswith(f"tcp://{LOOPBACK}:")
@@ -90,6 +92,7 @@ def test_map_indices_in_a_dask_worker_process_runs_serially_and_the_cluster_is_l
     assert seen["daemon"], "a dask worker process is daemonic: the case that broke the fork pool"
     assert seen["squares"] == [0, 1, 4, 9]
     assert seen["pids"] == {seen["pid"]}
+    assert seen["malloc_trim"] is None  # dask's 65536 would make every fit's large arrays mmap'ed afresh
 
 
 def test_map_indices_in_a_dask_worker_thread_runs_serially_where_it_would_fork_elsewhere(scheduler):

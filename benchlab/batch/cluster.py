@@ -3,7 +3,11 @@
 dask is an optional extra (`pip install -e '.[cluster]'`); without it `benchlab batch` is bad usage (exit 2)
 and names the extra. The local cluster's scheduler, workers and dashboard listen on 127.0.0.1 only, on
 ports the system picks; one single-threaded worker process per core (the fits are CPU-bound Python and
-numba: threads of one process would share one interpreter lock).
+numba: threads of one process would share one interpreter lock). Its logs are silenced below CRITICAL:
+a task's failure comes back as its row, and a heartbeat cut short as the cluster closes is no news.
+Its workers start without dask's MALLOC_TRIM_THRESHOLD_=65536: a fixed trim threshold also fixes glibc's
+mmap threshold, so every large array of a fit is mapped and unmapped afresh; measured, identify took
+1.6x the CPU time and 2x the wall time in such a worker (benchmarks/README.md, bench_batch.py).
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from benchlab.errors import InputError
 
 LOOPBACK = "127.0.0.1"
 EXTRA = "pip install -e '.[cluster]'"
+#: dask config for the local cluster's worker processes: None unsets the variable (see the module's docstring).
+WORKER_ENVIRONMENT = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
 def require_distributed() -> ModuleType:
@@ -55,9 +61,12 @@ def connect(scheduler: str | None, workers: int, timeout_s: float) -> Iterator[C
     """
     distributed = require_distributed()
     if scheduler is None:
-        with distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
-                                      dashboard_address=f"{LOOPBACK}:0", silence_logs=logging.ERROR) as cluster, \
-                distributed.Client(cluster) as client:
+        import dask
+
+        with dask.config.set(WORKER_ENVIRONMENT):  # read as the nannies are made, kept for restarts
+            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
+                                               dashboard_address=f"{LOOPBACK}:0", silence_logs=logging.CRITICAL)
+        with cluster, distributed.Client(cluster) as client:
             dashboard = client.dashboard_link if importlib.util.find_spec("bokeh") else None
             yield Connection(client, cluster.scheduler_address, dashboard, workers, local=True)
         return
