@@ -35,3 +35,5 @@ MIN_CAN_BITRATE = 5_000
 MAX_CAN_BITRATE = 1_000_000
 #: Longest residual sampling period of the cool-down analysis: one sample an hour still shows a trend.
 MAX_SAMPLE_PERIOD_S = 3600.0
+#: Most worker processes of a local batch cluster: each takes a core and a run in memory; more is a typo.
+MAX_LOCAL_WORKERS = 256

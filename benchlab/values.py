@@ -24,3 +24,14 @@ def positive_number(value: object) -> float | None:
     """`value` as a finite float > 0, or None if it is not one."""
     number = finite_number(value)
     return number if number is not None and number > 0 else None
+
+
+def json_ready(value: object) -> object:
+    """`value` (nested dicts and lists) with NaN and infinities as None: JSON has no such numbers, null says "none"."""
+    if isinstance(value, dict):
+        return {k: json_ready(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [json_ready(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

@@ -103,9 +103,12 @@ def _probe_can(args: argparse.Namespace) -> dict[str, Any]:
     samples = []
     try:
         deadline = time.monotonic() + args.timeout
-        while len(samples) < (args.count or 10) and time.monotonic() < deadline:
+        while True:  # the last poll starts after the deadline, so the watchdog has seen the whole time-out
+            past = time.monotonic() >= deadline
             new = bench.poll()
             samples += new
+            if past or len(samples) >= (args.count or 10):
+                break
             if not new:
                 time.sleep(0.002)
     finally:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 
 from benchlab import cliargs
 from benchlab.bounds import MAX_WEAR_HORIZON, MAX_WEAR_PATHS
@@ -13,6 +12,7 @@ from benchlab.errors import InputError
 from benchlab.model.options import add_model_option, load_model_params
 from benchlab.model.runs import load_runs
 from benchlab.runfile import REQUIRED
+from benchlab.values import json_ready
 from benchlab.wear.analysis import DEFAULT_HORIZON, DEFAULT_PATHS, WearReport, analyse_wear
 from benchlab.wear.clutchfile import default_clutch, load_clutch
 
@@ -35,17 +35,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the result as one JSON object")
     parser.add_argument("--plot", metavar="OUT.png", type=cliargs.output_file,
                         help="write a figure of energy, temperature, wear and life")
-
-
-def _finite(value: object) -> object:
-    """JSON has no NaN or infinity: write them as null."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_finite(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def _percentiles(values: dict[str, float | None]) -> str:
@@ -90,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.wear.plot import plot_wear
         plot_wear(report, args.plot)
     if args.json:
-        print(json.dumps(_finite(report.as_dict()), default=float))
+        print(json.dumps(json_ready(report.as_dict()), default=float))
     else:
         print(_summary(report))
     return 0

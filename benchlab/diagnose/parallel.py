@@ -1,13 +1,18 @@
-"""Independent candidate fits on every core the process may use.
+"""Independent candidate fits on every core the process may use, or serially where it may not fork.
 
 Fork-based: a worker inherits the networks, whose laws are closures that cannot be pickled, so
-only an index goes out and plain numbers and arrays come back.
+only an index goes out and plain numbers and arrays come back. No pool is started inside a
+daemonic process (multiprocessing forbids it children: a Dask worker process is one) nor inside
+a Dask worker thread (forking a process whose other threads hold locks can hang the child); there
+the fits run one after another in the caller's thread: `benchlab batch` already keeps every worker
+busy with one run each, and the closures could not be shipped to the worker's other threads anyway.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -25,15 +30,34 @@ def workers() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
+def in_dask_worker() -> bool:
+    """Whether this thread runs a task of a dask.distributed worker (only asked when distributed is loaded)."""
+    distributed = sys.modules.get("distributed")
+    if distributed is None:
+        return False
+    try:
+        distributed.get_worker()
+    except ValueError:  # "No worker found": not a worker's task thread
+        return False
+    return True
+
+
+def may_fork() -> bool:
+    """Whether a pool of forked processes may be started here: fork exists, not a daemon, not a Dask worker."""
+    return ("fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
+            and not in_dask_worker())
+
+
 def map_indices(task: Callable[[int], T], count: int, done: Callable[[], None] = lambda: None) -> list[T]:
-    """[task(0), …, task(count - 1)], spread over forked workers where there is more than one core and task.
+    """[task(0), …, task(count - 1)], spread over forked workers where there is more than one core and task
+    and forking is allowed (may_fork), else in this thread.
 
     `done` is called in this process as each result comes back (progress).
     """
     global _task
     n = min(count, workers())
     results: list[T] = []
-    if n <= 1 or "fork" not in multiprocessing.get_all_start_methods():
+    if n <= 1 or not may_fork():
         for i in range(count):
             results.append(task(i))
             done()

@@ -20,6 +20,7 @@ import pandas as pd
 
 from benchlab.metrics import nrmse_pct, rmse_k
 from benchlab.params import ModelParams
+from benchlab.report.page import number
 from benchlab.report.scores import estimate
 from benchlab.runfile import load_attrs, load_events
 
@@ -81,8 +82,9 @@ def cooldown_scores(run: pd.DataFrame, path: "str | os.PathLike[str]",
 
 
 def _num(value: Any, digits: int, suffix: str = "") -> str:
-    ok = isinstance(value, (int, float)) and math.isfinite(value)
-    return f"{value:.{digits}f}{suffix}" if ok else "—"
+    """The report's table cell (`number`), with a unit where there is a number."""
+    text = number(value, digits)
+    return text if text == "—" else text + suffix
 
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
