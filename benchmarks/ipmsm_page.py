@@ -55,8 +55,9 @@ def write_page(runs: dict[int, Path], params: Path, rmse: dict[str, float], per_
 
     FIGURES.mkdir(parents=True, exist_ok=True)
     first, second = HELD_OUT
-    subprocess.run([*BENCHLAB, "report", str(runs[first]), "--params", str(params), "--validate", str(runs[second]),
-                    "--out", str(FIGURES / "report")], check=True, capture_output=True)
+    # run from the work directory with relative names, so the page names the files, not where they sat
+    subprocess.run([*BENCHLAB, "report", runs[first].name, "--params", params.name, "--validate", runs[second].name,
+                    "--out", str(FIGURES.resolve() / "report")], check=True, capture_output=True, cwd=args.work)
     held = _targets_figure(runs, args.work, TARGETS, per_profile)
     fitted = json.loads(params.read_text())
     fixed = {name for name, p in load_model(MODEL).parameters.items() if p.fixed is not None}
