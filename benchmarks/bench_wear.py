@@ -24,7 +24,7 @@ from numba import njit
 from benchlab.params import paper_params
 from benchlab.simulation import simulate
 from benchlab.wear.clutchfile import default_clutch
-from benchlab.wear.energy import engagement_spans, friction_power
+from benchlab.wear.energy import engagement_spans, run_friction_power
 from benchlab.wear.model import wear_history
 from benchlab.wear.online import OnlineWear
 from protocols.table1 import table1_schedule
@@ -106,7 +106,7 @@ def main() -> None:
     n = len(run) - 1  # steps from row 0 to the last row of the offline simulation
     speed = run["engine_speed"].to_numpy()
     clamped = run["clutch_state"].to_numpy() >= 0.5
-    power = friction_power(run)
+    power = run_friction_power(run)
     amb = run["T_ambient"].to_numpy()
     offline = simulate(run, params)
     x0 = offline.iloc[0].to_numpy()

@@ -8,16 +8,15 @@ idle) when one is crossed.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any
 
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
+from benchlab.drivetrain import RPM, DrivetrainFacts
 from benchlab.values import positive_number
 from protocols.schedule import CONDITION_CHANNELS, OPERATORS, PHASES, Step, duration_s
 
-RPM = math.pi / 30.0
 ACTIONS = ("hold", "abort")
 # A reading older than this (s) is an unknown reading: its `stale_<channel>` interlock trips. The node's radio
 # loses a few frames in a row routinely (seconds), the scanner reads every 0.2 s and may time out once (2 s),
@@ -48,9 +47,8 @@ class BenchLimits:
     resume_after_s: float = 30.0
     clear_margin_k: float = 10.0  # an over-temperature clears this far below its limit
     max_wait_s: float = 1800.0  # "hold" gives up (abort) after this long
-    # drivetrain facts used for estimates
-    gear_ratio: float = 15.0
-    load_inertia_kgm2: float = 70.0
+    # the bench's drivetrain (BENCH.toml [drivetrain]), for the launch estimates; not a [limits] key
+    drivetrain: DrivetrainFacts = DrivetrainFacts()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "max_age_s", {**DEFAULT_MAX_AGE_S, **self.max_age_s})
@@ -64,7 +62,7 @@ class BenchLimits:
         """Build from a config table, raising InputError naming the first bad field."""
         from benchlab.errors import InputError
 
-        known = {f.name: f for f in fields(cls)}
+        known = {f.name: f for f in fields(cls) if f.name != "drivetrain"}
         clean: dict[str, Any] = {}
         for key, value in values.items():
             if key not in known:
@@ -87,7 +85,8 @@ class BenchLimits:
         return cls(**clean)
 
     def as_dict(self) -> dict[str, Any]:
-        return {f.name: (dict(v) if isinstance(v := getattr(self, f.name), Mapping) else v) for f in fields(self)}
+        return {f.name: (dict(v) if isinstance(v := getattr(self, f.name), Mapping)
+                         else dict(v.__dict__) if isinstance(v, DrivetrainFacts) else v) for f in fields(self)}
 
 
 def _table(value: Any, keys: Any, source: str, name: str, check: Any) -> dict[str, Any]:
@@ -121,8 +120,8 @@ def _action(value: Any, source: str, name: str) -> str:
 def launch_estimate(step: Step, limits: BenchLimits) -> tuple[float, float, bool]:
     """(slip time s, slip energy J, synchronises) of a launch from standstill with constant torques."""
     omega = step.engine_speed_rpm * RPM
-    reaction = step.load_torque_nm / limits.gear_ratio
-    inertia = limits.load_inertia_kgm2 / limits.gear_ratio ** 2
+    reaction = step.load_torque_nm / limits.drivetrain.gear_ratio
+    inertia = limits.drivetrain.inertia_at_clutch
     net = step.clutch_torque_nm - reaction
     if net > 0:
         t_sync = omega * inertia / net
@@ -196,7 +195,7 @@ def schedule_problems(steps: Sequence[Step], limits: BenchLimits) -> list[Schedu
                                f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
             if not s.rest_s > 0:
                 add("rest_s", "heat pulses need a rest between them (rest_s > 0)")
-            if not s.clutch_torque_nm < s.load_torque_nm / limits.gear_ratio:
+            if not s.clutch_torque_nm < s.load_torque_nm / limits.drivetrain.gear_ratio:
                 add("load_torque_nm", f"load torque {s.load_torque_nm:g} N*m cannot hold the output against "
                                       f"{s.clutch_torque_nm:g} N*m clutch torque")
         for j, c in enumerate(s.until):

@@ -19,7 +19,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -27,7 +27,8 @@ import numpy as np
 from drivers import cvd
 from drivers.can_signals import CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING
 from sim_bench.clock import SimClock
-from sim_bench.drivetrain import Drivetrain, DrivetrainConfig
+from benchlab.drivetrain import DrivetrainFacts
+from sim_bench.drivetrain import Drivetrain
 from sim_bench.emulators import registry
 from sim_bench.emulators.can_controllers import CanBenchEmulator
 from sim_bench.emulators.clutch_node import ClutchNodeEmulator
@@ -53,7 +54,7 @@ class SimBenchConfig:
     chunk_s: float = 2.0
     sensors: SensorConfig = SensorConfig()
     ambient: AmbientConfig = AmbientConfig()
-    drivetrain: DrivetrainConfig = DrivetrainConfig()
+    drivetrain: DrivetrainFacts = DrivetrainFacts()
     node_period_s: float = 0.05
     dmm_channels: Mapping[int, str] = field(default_factory=lambda: dict(DMM_CHANNELS))
     initial_c: float | Mapping[str, float] | None = None  # None: everything at ambient
@@ -63,8 +64,7 @@ class SimBenchConfig:
 
     def as_dict(self) -> dict[str, Any]:
         return {"seed": self.seed, "dt": self.dt, "chunk_s": self.chunk_s, "sensors": self.sensors.__dict__,
-                "ambient": self.ambient.__dict__, "gear_ratio": self.drivetrain.gear_ratio,
-                "load_inertia_kgm2": self.drivetrain.load_inertia_kgm2, "node_period_s": self.node_period_s,
+                "ambient": self.ambient.__dict__, "drivetrain": dict(self.drivetrain.__dict__), "node_period_s": self.node_period_s,
                 "dmm_channels": {str(k): v for k, v in self.dmm_channels.items()}, "dropouts": self.dropouts}
 
 

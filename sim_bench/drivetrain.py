@@ -7,24 +7,11 @@ integration steps. Speeds in rpm outside, rad/s inside.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-RPM = np.pi / 30.0  # rad/s per rpm
+from benchlab.drivetrain import RPM, DrivetrainFacts
+
 SYNC_TOLERANCE_RPM = 1e-6
-
-
-@dataclass(frozen=True)
-class DrivetrainConfig:
-    """Gear ratio between input shaft and load machine, and the load inertia at the load machine."""
-
-    gear_ratio: float = 15.0
-    load_inertia_kgm2: float = 70.0
-
-    @property
-    def inertia_at_clutch(self) -> float:
-        return self.load_inertia_kgm2 / self.gear_ratio ** 2
 
 
 CHANNELS = ("engine_speed", "clutch_speed", "clutch_torque", "clutch_state", "friction_power", "load_torque")
@@ -33,7 +20,7 @@ CHANNELS = ("engine_speed", "clutch_speed", "clutch_torque", "clutch_state", "fr
 class Drivetrain:
     """State of the shafts plus the controllers' set-points; `advance` returns sampled channels."""
 
-    def __init__(self, config: DrivetrainConfig = DrivetrainConfig(), engine_rpm: float = 0.0) -> None:
+    def __init__(self, config: DrivetrainFacts = DrivetrainFacts(), engine_rpm: float = 0.0) -> None:
         self.config = config
         self.engine_rpm = engine_rpm
         self.clutch_rpm = 0.0

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from benchlab.drivetrain import DrivetrainFacts, friction_power, slipping_by_speed
 from protocols.schedule import Step, setpoints
-from sim_bench.drivetrain import CHANNELS, Drivetrain, DrivetrainConfig
+from sim_bench.drivetrain import CHANNELS, Drivetrain
 from sim_bench.plant import ThermalPlant
 
-SLIP_THRESHOLD_RPM = 5.0
 
 
 @dataclass(frozen=True)
@@ -45,7 +45,7 @@ class AmbientConfig:
     period_s: float = 5400.0
 
 
-def drive_schedule(steps: Sequence[Step], dt: float, config: DrivetrainConfig = DrivetrainConfig(),
+def drive_schedule(steps: Sequence[Step], dt: float, config: DrivetrainFacts = DrivetrainFacts(),
                    ) -> tuple[dict[str, np.ndarray], list[dict[str, object]]]:
     """True drivetrain channels over the schedule, plus events (step starts, launch outcomes).
 
@@ -117,9 +117,9 @@ def run_schedule(steps: Sequence[Step], plant: ThermalPlant, seed: int, dt: floa
     out["clutch_speed"] = np.maximum(truth["clutch_speed"] + rng.normal(0, sensors.speed_noise_rpm, n), 0.0)
     out["clutch_torque"] = truth["clutch_torque"] + rng.normal(0, sensors.torque_noise_nm, n)
     out["clutch_state"] = truth["clutch_state"].copy()
-    slip_rpm = out["engine_speed"] - out["clutch_speed"]
-    slipping = (out["clutch_state"] > 0.5) & (np.abs(slip_rpm) > SLIP_THRESHOLD_RPM) & (truth["friction_power"] > 0)
-    out["friction_power"] = np.where(slipping, np.abs(out["clutch_torque"] * slip_rpm * np.pi / 30.0), 0.0)
+    slipping = ((out["clutch_state"] > 0.5) & slipping_by_speed(out["engine_speed"], out["clutch_speed"])
+                & (truth["friction_power"] > 0))
+    out["friction_power"] = friction_power(out["clutch_torque"], out["engine_speed"], out["clutch_speed"], slipping)
     radio_lost = _dropout_mask(n, dt, sensors, rng)
     for name in ("T_flywheel_1", "T_flywheel_2"):
         out[name] = _held_readings(at_sensor["T_flywheel"], node, rng, sensors.node_noise_k, sensors.quantum_k)

@@ -201,6 +201,32 @@ def test_bench_file_absurd_timeout_is_refused(value, tmp_path, capsys):
              "instrument.timeout_s", capsys)
 
 
+def test_bench_file_drivetrain_is_the_one_the_limits_estimate_launches_with(tmp_path):
+    """[drivetrain] is the only home of gear ratio and load inertia: the CAN bench and the limits read the same."""
+    bench = tmp_path / "bench.toml"
+    bench.write_text(EXAMPLE_BENCH.read_text().replace("gear_ratio = 15.0", "gear_ratio = 10.0")
+                     .replace("load_inertia_kgm2 = 70.0", "load_inertia_kgm2 = 40.0"))
+    config = load_bench_config(bench)
+    assert config.drivetrain.gear_ratio == config.limits.drivetrain.gear_ratio == 10.0
+    assert config.limits.drivetrain.inertia_at_clutch == pytest.approx(40.0 / 10.0 ** 2)
+
+
+@pytest.mark.parametrize("table, line, field", [("drivetrain", "inertia = 70.0", "drivetrain.inertia"),
+                                                 ("limits", "gear_ratio = 15.0", "limits.gear_ratio"),
+                                                 ("drivetrain", "gear_ratio = -15.0", "drivetrain.gear_ratio")])
+def test_bench_file_drivetrain_fact_in_the_wrong_place_or_sign_is_refused(table, line, field, tmp_path, capsys):
+    text = EXAMPLE_BENCH.read_text()
+    if table == "drivetrain":
+        text = text.replace("gear_ratio = 15.0", line)
+    else:
+        text = text.replace("[limits]", f"[limits]\n{line}")
+    bench = tmp_path / "bench.toml"
+    bench.write_text(text)
+    err = _refused(["run", "table1", "--bench", str(bench), "--cycles", "1", "--out", str(tmp_path / "r.h5")],
+                   field, capsys)
+    assert str(bench) in err and not (tmp_path / "r.h5").exists()
+
+
 @pytest.mark.parametrize("channel, value",
                          [("engine_speed", "inf"), ("friction_power", "1e300"), ("clutch_state", "2")])
 def test_import_refuses_what_load_run_would_refuse(channel, value, foreign_run, tmp_path, capsys):

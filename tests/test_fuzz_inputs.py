@@ -79,7 +79,7 @@ def _paths(doc: dict[str, Any], prefix: tuple[str, ...] = ()) -> list[tuple[str,
 
 KNOWN_PATHS = sorted(set(_paths(EXAMPLE_DOC)) | {("can", "dbc"), ("instrument", "channels", "104"),
                                                  ("node", "calibration", "2"), ("limits", "clear_margin_k"),
-                                                 ("limits", "max_wait_s"), ("limits", "gear_ratio")})
+                                                 ("limits", "max_wait_s"), ("drivetrain", "load_inertia_kgm2")})
 
 TABLE_PATHS = [path for path in KNOWN_PATHS if isinstance(_get(EXAMPLE_DOC, path), dict)]
 scalars = st.one_of(
@@ -134,7 +134,7 @@ def _assert_checked(config: BenchConfig) -> None:
     for name, value in config.limits.as_dict().items():
         if isinstance(value, float):
             assert math.isfinite(value) and value > 0, (name, value)
-    for value in (config.dt, config.tick_s, config.fast_tick_s, config.flush_every_s, config.gear_ratio,
+    for value in (config.dt, config.tick_s, config.fast_tick_s, config.flush_every_s, *config.drivetrain.__dict__.values(),
                   config.instrument_period_s, config.node_period_s, config.instrument_timeout_s):
         assert math.isfinite(value) and value > 0
 

@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 
 from benchlab.runfile import load_run
-from benchlab.runner.devices import BenchStatus, _held_status, friction_power
+from benchlab.drivetrain import friction_power
+from benchlab.runner.devices import BenchStatus, _held_status
 from benchlab.runner.session import RunRequest, execute
 from drivers.can_bench import CanBlock
-from drivers.can_signals import CLAMP_OPEN
+from drivers.can_signals import CLAMP_OPEN, CLAMP_SLIPPING
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
 from sim_bench.faults import Fault
@@ -118,14 +119,16 @@ def test_interlock_hold_then_next_cycle(tmp_path):
     assert "dropout_start" in kinds and "dropout_end" in kinds
 
 
-def test_sigterm_puts_bench_safe_and_file_aborted(tmp_path):
+@pytest.mark.parametrize("after_s", [0.0, 1.5])  # 0: while the run file is being made, before the loop starts
+def test_sigterm_puts_bench_safe_and_file_aborted(after_s, tmp_path):
     out = tmp_path / "term.h5"
     proc = subprocess.Popen([sys.executable, "-m", "benchlab.cli", "run", "table1", "--bench", "sim", "--duration",
                              "7200", "--out", str(out), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    deadline = time.time() + 60
-    while time.time() < deadline and not out.exists():
-        time.sleep(0.05)
-    time.sleep(1.5)
+    deadline = time.time() + 600  # start-up on a loaded machine; what is tested starts with the run file
+    while time.time() < deadline and not out.exists() and proc.poll() is None:
+        time.sleep(0.005)
+    assert out.exists(), proc.communicate(timeout=60)
+    time.sleep(after_s)
     proc.send_signal(signal.SIGTERM)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 143, stderr
@@ -182,7 +185,7 @@ def test_real_time_loop_on_emulated_devices(tmp_path):
     writer = RunWriter(tmp_path / "rt.h5", bench.layout, protocol="rt", planned_s=5, state_fields=STATE_FIELDS,
                        durable=True)
     try:
-        summary = Runner(bench, clock, steps, writer, BenchLimits(), tick_s=0.1, fast_tick_s=0.02).run()
+        summary = Runner(bench, clock, steps, writer, BenchLimits(), tick_s=0.1, fast_tick_s=0.02, dt=0.01).run()
         writer.close(summary.status)
         # the steps last at least the launch's synchronisation (~1.1 s) plus the open step, on the real clock;
         # no upper bound: a loaded machine only makes the loop late, never the run shorter
@@ -205,7 +208,7 @@ def _frame_by_frame(st: BenchStatus, t: float, values: dict, gear: float) -> Non
     st.clutch_speed = values["load.speed"] * gear if "load.speed" in values else st.clutch_speed
     if "clutch.torque" in values:
         st.clutch_torque, st.clamp_state = values["clutch.torque"], int(values["clutch.clamp_state"])
-    power = friction_power(st.clutch_torque, st.engine_speed, st.clutch_speed, st.clamp_state)
+    power = friction_power(st.clutch_torque, st.engine_speed, st.clutch_speed, st.clamp_state == CLAMP_SLIPPING)
     st.friction_power = power if power == power else 0.0
 
 

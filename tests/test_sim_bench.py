@@ -6,7 +6,8 @@ import numpy as np
 
 from sim_bench.bench import SimBenchConfig, SimPhysics
 from sim_bench.clock import SimClock
-from sim_bench.drivetrain import Drivetrain, DrivetrainConfig
+from benchlab.drivetrain import DrivetrainFacts
+from sim_bench.drivetrain import Drivetrain
 
 SCRIPT = [(0.0, "drive", 1500.0), (0.0, "clutch", (45.0, False)), (0.0, "load", 300.0), (7.3, "clutch", (0.0, True)),
           (9.0, "drive", 1000.0), (20.0, "clutch", (30.0, False)), (20.0, "load", 500.0), (31.0, "clutch", (0.0, True))]
@@ -40,7 +41,7 @@ def test_chunks_and_cuts_do_not_change_the_physics():
 
 
 def test_stalled_clutch_keeps_slipping():
-    dt = Drivetrain(DrivetrainConfig())
+    dt = Drivetrain(DrivetrainFacts())
     dt.set_points(1500.0, True, 20.0, 500.0)  # 20 N*m cannot move 500 N*m / 15
     for _ in range(3):
         cols = dt.advance(100, 0.01)

@@ -11,7 +11,8 @@ from benchlab.errors import InputError
 from benchlab.params import load_params, paper_params
 from benchlab.wear import WearState, analyse_wear, default_clutch
 from benchlab.wear.compare import temperature_sensitivity
-from benchlab.wear.energy import RPM_TO_RAD_S, engagement_spans, friction_power
+from benchlab.drivetrain import RPM
+from benchlab.wear.energy import engagement_spans, run_friction_power
 from benchlab.wear.health import assess
 from benchlab.wear.life import remaining_life
 from benchlab.wear.model import side_increments, wear_history
@@ -51,7 +52,7 @@ def hot_report(hot_run):
 def test_friction_energy_is_the_zoh_integral_of_power(short_run, report):
     dt = short_run.attrs["dt"]
     recorded = float(np.sum(short_run["friction_power"]) * dt)
-    slip = (short_run["engine_speed"] - short_run["clutch_speed"]).to_numpy() * RPM_TO_RAD_S
+    slip = (short_run["engine_speed"] - short_run["clutch_speed"]).to_numpy() * RPM
     slipping = (short_run["clutch_state"].to_numpy() == 1) & (short_run["friction_power"].to_numpy() > 0)
     independent = float(np.trapezoid(np.where(slipping, np.abs(short_run["clutch_torque"].to_numpy() * slip), 0.0),
                                      dx=dt))
@@ -86,7 +87,7 @@ def test_engagement_gaps_are_bridged_only_when_tiny():
 
 
 def test_engagement_count_on_hot_run(hot_run):  # launches that never synchronise
-    spans = engagement_spans(friction_power(hot_run) > 0, hot_run.attrs["dt"])
+    spans = engagement_spans(run_friction_power(hot_run) > 0, hot_run.attrs["dt"])
     assert len(spans) == sum(e["event"] == "launch_start" for e in hot_run.attrs["events"])
 
 

@@ -15,7 +15,10 @@ from typing import Any
 
 import cantools
 
+from dataclasses import replace
+
 from benchlab.bounds import MAX_TIMEOUT_S
+from benchlab.drivetrain import DrivetrainFacts
 from benchlab.errors import InputError
 from benchlab.runner.devices import BenchConfig
 from benchlab.values import finite_number, positive_number
@@ -25,6 +28,7 @@ from protocols.limits import BenchLimits
 
 ALIGNED_TEMPERATURES = ("T_air", "T_housing", "T_ambient", "T_engine")
 _SECTIONS = ("instrument", "node", "can", "drivetrain", "acquisition", "limits")
+ACQUISITION_KEYS = ("dt", "tick_s", "fast_tick_s", "flush_every_s")  # [acquisition]; defaults: BenchConfig's
 
 
 def _table(doc: Mapping[str, Any], key: str, src: str, required: bool = True) -> Mapping[str, Any]:
@@ -150,6 +154,12 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
     drive = _table(doc, "drivetrain", src, required=False)
     acq = _table(doc, "acquisition", src, required=False)
     limits = BenchLimits.from_mapping(_table(doc, "limits", src, required=False), src)
+    for key in drive:
+        if key not in DrivetrainFacts.__dataclass_fields__:
+            raise InputError(src, f"drivetrain.{key}", f"one of {', '.join(DrivetrainFacts.__dataclass_fields__)} "
+                                                       "(unknown key)")
+    drivetrain = DrivetrainFacts(*(_num(drive, key, f"drivetrain.{key}", src, getattr(DrivetrainFacts, key))
+                                   for key in DrivetrainFacts.__dataclass_fields__))
     return BenchConfig(
         instrument_url=_str(inst, "url", "instrument.url", src), node_url=_str(node, "url", "node.url", src),
         can=can_cfg, instrument_channels=channels, instrument_mode=mode,
@@ -160,9 +170,6 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         node_baudrate=int(_num(node, "baudrate", "node.baudrate", src, 921600, True)),
         node_period_s=_num(node, "period_s", "node.period_s", src, 0.05),
         node_calibration=(node_coefs[0], node_coefs[1]), dbc=dbc,
-        gear_ratio=_num(drive, "gear_ratio", "drivetrain.gear_ratio", src, 15.0),
-        dt=_num(acq, "dt", "acquisition.dt", src, 0.01),
-        tick_s=_num(acq, "tick_s", "acquisition.tick_s", src, 0.1),
-        fast_tick_s=_num(acq, "fast_tick_s", "acquisition.fast_tick_s", src, 0.02),
-        flush_every_s=_num(acq, "flush_every_s", "acquisition.flush_every_s", src, 1.0),
-        limits=limits, source=src)
+        drivetrain=drivetrain,
+        **{key: _num(acq, key, f"acquisition.{key}", src, getattr(BenchConfig, key)) for key in ACQUISITION_KEYS},
+        limits=replace(limits, drivetrain=drivetrain), source=src)

@@ -23,12 +23,12 @@ import numpy as np
 from numba import njit
 
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
+from benchlab.drivetrain import DrivetrainFacts, friction_power
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
 from drivers.errors import CanLogError, ConnectionLost, DriverError
 from protocols.limits import BenchLimits
 
-RPM = math.pi / 30.0
 STATUS_CODES = {"ok": 0.0, "open": 1.0, "short": 2.0, "range": 3.0, "fault": 4.0}
 
 
@@ -51,10 +51,10 @@ class BenchConfig:
     node_calibration: tuple[cvd.CvdCoefficients, cvd.CvdCoefficients] = (cvd.PT1000, cvd.PT1000)
     dbc: str | None = None
     can_timestamps: str = "interface"  # drivers.can_bench.TimestampSource: "run" for the simulated bus
-    gear_ratio: float = 15.0
+    drivetrain: DrivetrainFacts = DrivetrainFacts()
     dt: float = 0.01
-    tick_s: float = 0.2
-    fast_tick_s: float = 0.05
+    tick_s: float = 0.1  # poll period while nothing slips
+    fast_tick_s: float = 0.02  # poll period during launches, slips and right after new set-points
     flush_every_s: float = 1.0
     limits: BenchLimits = BenchLimits()
     source: str = "sim"
@@ -68,7 +68,7 @@ class BenchConfig:
                 "node": {"url": self.node_url, "period_s": self.node_period_s,
                          "calibration": [_coef(c) for c in self.node_calibration]},
                 "can": {k: v for k, v in self.can.items()}, "dbc": self.dbc, "can_timestamps": self.can_timestamps,
-                "gear_ratio": self.gear_ratio,
+                "drivetrain": dict(self.drivetrain.__dict__),
                 "acquisition": {"dt": self.dt, "tick_s": self.tick_s, "fast_tick_s": self.fast_tick_s,
                                 "flush_every_s": self.flush_every_s},
                 "limits": self.limits.as_dict()}
@@ -112,7 +112,7 @@ class BenchStatus:
                     clamp_state: np.ndarray) -> None:
         """Status frames in the order received, at run times `t`, with the values held after each: the energy up to
         each frame at the power held before it (a frame older than the newest adds none), then the newest values."""
-        power = friction_power(torque_nm, engine_rpm, clutch_rpm, clamp_state)
+        power = friction_power(torque_nm, engine_rpm, clutch_rpm, actuator_slipping(clamp_state))
         power[np.isnan(power)] = 0.0  # unknown (NaN) counts as no power
         energy, self.t_frame = _energy_at_frames(t, power, self.t_frame, self.friction_power)
         self.friction_energy_j += energy
@@ -121,14 +121,9 @@ class BenchStatus:
         self.friction_power = float(power[-1])
 
 
-def friction_power(torque_nm: "float | np.ndarray", engine_rpm: "float | np.ndarray", clutch_rpm: "float | np.ndarray",
-                   clamp_state: "float | np.ndarray") -> "float | np.ndarray":
-    """P = T_c · |Δω| (eq. 4) while the actuator reports slipping, else 0; NaN where an input is unknown.
-
-    Plain arithmetic, so one frame (floats) and a whole grid (arrays) take the same formula.
-    """
-    slipping = clamp_state == CLAMP_SLIPPING
-    return abs(torque_nm * (engine_rpm - clutch_rpm) * RPM) * slipping + 0.0 * clamp_state
+def actuator_slipping(clamp_state: np.ndarray) -> np.ndarray:
+    """1 where the clutch actuator reports slipping, 0 where clamped or open, NaN where its state is unknown."""
+    return np.where(np.isnan(clamp_state), np.nan, clamp_state == CLAMP_SLIPPING)
 
 
 Reading = tuple[str, "float | np.ndarray", "tuple[float, ...] | np.ndarray"]  # one row, or a block: times, rows
@@ -211,7 +206,7 @@ def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """
     clamp = out["_clamp_state"]
     state = np.where(np.isnan(clamp), np.nan, (clamp == CLAMP_SLIPPING) | (clamp == CLAMP_CLAMPED)).astype(float)
-    power = friction_power(out["clutch_torque"], out["engine_speed"], out["clutch_speed"], clamp)
+    power = friction_power(out["clutch_torque"], out["engine_speed"], out["clutch_speed"], actuator_slipping(clamp))
     f1, f2 = out["T_flywheel_1"], out["T_flywheel_2"]
     both = np.column_stack([f1, f2])
     count = np.sum(np.isfinite(both), axis=1)
@@ -268,7 +263,7 @@ def bench_layout(config: BenchConfig) -> Layout:
     streams.append(StreamSpec("setpoints", (("engine_speed", "rpm"), ("clutch_torque", "N*m"), ("clutch_open", "1"),
                                             ("load_torque", "N*m")), 5.0, math.inf))
     sources = [AlignedSource("engine_speed", "can_drive", "speed"),
-               AlignedSource("clutch_speed", "can_load", "speed", config.gear_ratio),
+               AlignedSource("clutch_speed", "can_load", "speed", config.drivetrain.gear_ratio),
                AlignedSource("clutch_torque", "can_clutch", "torque"),
                AlignedSource("_clamp_state", "can_clutch", "clamp_state"),
                AlignedSource("load_torque", "can_load", "torque"),
@@ -460,7 +455,7 @@ class DriverBench:
             stream = _STATUS_MESSAGE[b.controller]
             self.readings.append((stream, b.t, b.columns(_CAN_KEYS[stream])))
         if status:
-            st.take_frames(*_held_status(status, st, self.config.gear_ratio))
+            st.take_frames(*_held_status(status, st, self.config.drivetrain.gear_ratio))
         for b in status:  # the stale-reading interlocks: the newest valid value of each status channel
             key, channel = _SEEN_FROM[b.controller]
             valid = np.isfinite(b.matrix[:, b.keys.index(key)])

@@ -90,7 +90,7 @@ class Runner:
     """Runs `steps` on `bench`, writing into `writer`; `run()` returns the summary (status complete/aborted)."""
 
     def __init__(self, bench: Bench, clock: Clock, steps: Sequence[Step], writer: RunWriter, limits: BenchLimits, *,
-                 tick_s: float = 0.2, fast_tick_s: float = 0.05, dt: float = 0.01,
+                 tick_s: float, fast_tick_s: float, dt: float,
                  progress: Task = Task(), progress_every_s: float = 0.5) -> None:
         self.bench, self.clock, self.steps, self.writer, self.limits = bench, clock, tuple(steps), writer, limits
         self.tick_s, self.fast_tick_s, self.dt = tick_s, fast_tick_s, dt

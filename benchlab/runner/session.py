@@ -162,7 +162,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
 
         sim_opts = dict(request.sim_options or {})
         seed = request.seed + (7919 * resume_state["resumes"] if resume_state else 0)
-        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0,
+        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0, drivetrain=config.drivetrain,
                              initial_c=resume_state["initial"] if resume_state else None, **sim_opts)
         sim = SimBench(cfg, plant=request.plant, faults=request.faults)
         clock = sim.clock
@@ -184,6 +184,20 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
         raise RuntimeError(f"cannot open the bench: {exc}") from exc  # cannot reach the devices: exit 1
     layout = bench.layout
+    runner: Runner | None = None
+    pending: list[tuple[str, int]] = []  # a signal that came before the runner existed
+
+    def stop(signum: int, code: int) -> None:
+        name = signal.Signals(signum).name
+        if runner is None:
+            pending.append((name, code))
+        else:
+            runner.request_stop(name, code)
+
+    previous = {}
+    if request.install_signals:  # before the run file exists: a signal from then on ends it as aborted
+        for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
+            previous[sig] = signal.signal(sig, lambda s, f, c=code: stop(s, c))
     try:
         if resume_state:
             writer = RunWriter.resume(request.out, layout, extra_s=duration_s(steps[resume_state["start"]:]),
@@ -215,10 +229,8 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                         fast_tick_s=config.fast_tick_s, dt=config.dt, progress=task)
         if request.keep is not None:
             request.keep.update(sim=sim, bench=bench, runner=runner)
-        previous = {}
-        if request.install_signals:
-            for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
-                previous[sig] = signal.signal(sig, lambda s, f, c=code: runner.request_stop(signal.Signals(s).name, c))
+        for name, code in pending:
+            runner.request_stop(name, code)
         try:
             summary = runner.run(resume_state["start"] if resume_state else 0)
         except Exception as exc:  # an unexpected failure: bench safe, file closed as aborted, then report it
@@ -230,10 +242,10 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                 raise
         finally:
             task.close()
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
         writer.close(summary.status, groups=_truth_groups(sim, writer, resume_state))
     finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         bench.close()
         if sim is not None:
             sim.close()

@@ -10,7 +10,7 @@ import pandas as pd
 from benchlab.params import ModelParams
 from benchlab.wear.clutchfile import ClutchSpec, default_clutch
 from benchlab.wear.energy import (DEFAULT_GAP_S, engagement_spans, engagement_table, friction_energy,
-                                  friction_power, held, slip_rad_s)
+                                  held, run_friction_power, slip_rad_s)
 from benchlab.wear.health import Health, assess
 from benchlab.wear.life import STATE_FIELDS, LifeDistribution, remaining_life
 from benchlab.wear.model import WearHistory, wear_history
@@ -102,7 +102,7 @@ def analyse_wear(run: pd.DataFrame, params: ModelParams, spec: ClutchSpec | None
     split = heat_split(params, params_source)
     temps = lining_temperatures(run, params, split, params_source)
     t_plate, t_fly, t_air = (temps[c].to_numpy() for c in ("T_pressure_plate", "T_flywheel", "T_air"))
-    power = friction_power(run)
+    power = run_friction_power(run)
     history = wear_history(spec, power, split, t_plate, t_fly, dt)
     spans = engagement_spans(power > 0, dt, gap_s)
     table = engagement_table(spans, dt, power, split, {"T_plate": t_plate, "T_flywheel": t_fly}, history.increments)

@@ -7,7 +7,7 @@ import pandas as pd
 
 from benchlab.params import ModelParams
 from benchlab.wear.clutchfile import ClutchSpec, default_clutch
-from benchlab.wear.energy import friction_power
+from benchlab.wear.energy import run_friction_power
 from benchlab.wear.model import wear_history
 from benchlab.wear.state import WearState
 from benchlab.wear.thermal import heat_split, lining_temperatures
@@ -25,7 +25,7 @@ def temperature_sensitivity(run: pd.DataFrame, params: ModelParams, spec: Clutch
     """
     spec = spec or default_clutch()
     dt, split = float(run.attrs["dt"]), heat_split(params)
-    power = friction_power(run)
+    power = run_friction_power(run)
     temps = lining_temperatures(run, params, split) if temperatures is None else temperatures
     constant = float(np.nanmean(run["T_air"])) if constant_c is None else float(constant_c)
     sources = {"model": (temps["T_pressure_plate"].to_numpy(), temps["T_flywheel"].to_numpy()),

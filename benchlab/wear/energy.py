@@ -7,9 +7,8 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-RPM_TO_RAD_S = np.pi / 30.0
-#: Slip that counts as slipping where the run's friction_power sample is missing (the simulated bench's threshold).
-SLIP_THRESHOLD_RPM = 5.0
+from benchlab.drivetrain import RPM, friction_power, slipping_by_speed
+
 #: Slip pauses up to this long (speed noise at synchronisation) do not split an engagement.
 DEFAULT_GAP_S = 0.2
 
@@ -21,20 +20,21 @@ def held(run: pd.DataFrame, name: str) -> np.ndarray:
 
 def slip_rad_s(run: pd.DataFrame) -> np.ndarray:
     """Δω = ω_e − ω_c in rad/s."""
-    return (held(run, "engine_speed") - held(run, "clutch_speed")) * RPM_TO_RAD_S
+    return (held(run, "engine_speed") - held(run, "clutch_speed")) * RPM
 
 
 def slipping(run: pd.DataFrame) -> np.ndarray:
     """Clamped and slipping: the run's friction_power > 0 where present, else |Δω| above the slip threshold."""
     clamped = held(run, "clutch_state") >= 0.5
     recorded = run["friction_power"].to_numpy(np.float64)
-    by_slip = np.abs(slip_rad_s(run)) > SLIP_THRESHOLD_RPM * RPM_TO_RAD_S
+    by_slip = slipping_by_speed(held(run, "engine_speed"), held(run, "clutch_speed"))
     return clamped & np.where(np.isnan(recorded), by_slip, recorded > 0)
 
 
-def friction_power(run: pd.DataFrame) -> np.ndarray:
-    """P = |T_c · Δω| in W while slipping, 0 otherwise (contract: friction_power)."""
-    return np.where(slipping(run), np.abs(held(run, "clutch_torque") * slip_rad_s(run)), 0.0)
+def run_friction_power(run: pd.DataFrame) -> np.ndarray:
+    """P = |T_c · Δω| in W while slipping, 0 otherwise (contract: friction_power), from the run's held channels."""
+    return friction_power(held(run, "clutch_torque"), held(run, "engine_speed"), held(run, "clutch_speed"),
+                          slipping(run))
 
 
 def friction_energy(power: np.ndarray, dt: float) -> float:

@@ -1,6 +1,6 @@
 """Physics behind the CAN controller emulators: the `DrivetrainProvider` interface and a stand-alone default.
 
-The default tracks each set-point with a first-order lag and integrates the load inertia (70 kg·m²) under
+The default tracks each set-point with a first-order lag and integrates the load inertia (`DrivetrainFacts`) under
 clutch and load torque, locking the clutch when the speeds meet. A thermal plant / bench model replaces it.
 """
 
@@ -12,9 +12,8 @@ from typing import Protocol
 
 import numpy as np
 
+from benchlab.drivetrain import RPM, DrivetrainFacts
 from drivers.can_signals import CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING
-
-RPM = 2 * math.pi / 60  # rad/s per rpm
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,8 +48,8 @@ class FirstOrderDrivetrain:
     """Drive speed, clutch torque and load torque follow their set-points with lags; load speed integrates."""
 
     def __init__(self, *, t0: float = 0.0, tau_speed_s: float = 0.3, tau_torque_s: float = 0.05,
-                 load_inertia: float = 70.0, stroke_mm: float = 8.0, full_torque_nm: float = 100.0,
-                 max_step_s: float = 0.01) -> None:
+                 load_inertia: float = DrivetrainFacts.load_inertia_kgm2, stroke_mm: float = 8.0,
+                 full_torque_nm: float = 100.0, max_step_s: float = 0.01) -> None:
         self.t = t0
         self.tau_speed_s, self.tau_torque_s, self.inertia = tau_speed_s, tau_torque_s, load_inertia
         self.stroke_mm, self.full_torque_nm, self.max_step_s = stroke_mm, full_torque_nm, max_step_s
