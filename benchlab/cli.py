@@ -21,7 +21,7 @@ from collections.abc import Sequence
 import benchlab
 import benchlab.commands
 from benchlab.errors import InputError
-from benchlab.interrupts import RedeliverInterrupts
+from benchlab.interrupts import RedeliverInterrupts, interrupts_held
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
 BROKEN_PIPE_EXIT = 141
@@ -104,7 +104,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _dispatch(argv: Sequence[str] | None) -> int:
     args = None
     try:
-        args = build_parser().parse_args(argv)  # imports every command module: Ctrl-C may land here too
+        with interrupts_held():  # imports every command module; a Ctrl-C meanwhile comes right after
+            parser = build_parser()
+        args = parser.parse_args(argv)
         configure_logging(args.verbose)
         code = int(args.handler(args) or 0)
         sys.stdout.flush()  # a reader that has left shows here, not in the interpreter's last flush

@@ -9,10 +9,12 @@ when the main thread is back in ordinary code (and again, should it land in a ca
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
 import threading
+from collections.abc import Iterator
 from types import TracebackType
 from typing import Any
 
@@ -58,3 +60,25 @@ class RedeliverInterrupts:
                 return
             self._timer = None
             os.kill(os.getpid(), signal.SIGINT)
+
+
+@contextlib.contextmanager
+def interrupts_held() -> Iterator[None]:
+    """Ctrl-C (SIGINT) noted during the block and raised as KeyboardInterrupt when it ends.
+
+    For imports: a Ctrl-C that lands while an extension module initialises (numpy's, importing `datetime` in C)
+    surfaces as that module's ImportError, not as KeyboardInterrupt, and the command would fail instead of
+    answering the interrupt. Noted by a handler that raises nothing, it is raised after, in ordinary code.
+    Only the main thread can set handlers; elsewhere the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught:
+            raise KeyboardInterrupt

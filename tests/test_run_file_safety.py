@@ -18,7 +18,7 @@ import pytest
 from benchlab.acquire.lock import RunFileLock
 from benchlab.cli import main
 from benchlab.errors import InputError
-from benchlab.interrupts import RedeliverInterrupts
+from benchlab.interrupts import RedeliverInterrupts, interrupts_held
 from benchlab.runfile import load_run
 
 WAIT_S = 120.0  # upper bound on any wait for a subprocess; never reached on a working machine
@@ -61,6 +61,18 @@ def test_ctrl_c_during_start_up_is_exit_130_without_a_half_made_file(tmp_path, m
     assert left in ([], ["run.blf", "run.h5"]), left  # no .tmp, no .lock, no CAN log without its run file
     if left:
         assert load_run(out).attrs["status"] in ("running", "aborted")  # readable: resumable or closed
+
+
+def test_ctrl_c_held_during_imports_arrives_when_they_end():
+    """A Ctrl-C inside an extension module's initialisation would surface as its ImportError (numpy's, seen in CI:
+    exit 1 instead of 130); the CLI holds it back while it imports the commands, and it arrives right after."""
+    reached_end_of_block = False
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_held():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)  # a delivered signal would have raised by now
+            reached_end_of_block = True
+    assert reached_end_of_block
 
 
 def test_two_runs_on_one_file_one_is_refused_and_the_other_keeps_its_data(tmp_path):
