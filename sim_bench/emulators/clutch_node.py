@@ -23,7 +23,7 @@ _SHORT = (node_frame.CH1_SHORT, node_frame.CH2_SHORT)
 
 
 class ClutchNodeEmulator:
-    """Serial endpoint producing node frames from `provider.node_inputs(t)` every `period_s` of clock time."""
+    """Serial endpoint producing node frames from `provider.node_inputs_at(times)` every `period_s` of clock time."""
 
     def __init__(self, provider: NodeInputProvider | None = None, *, period_s: float = 0.05,
                  clock: Callable[[], float] = time.monotonic, short_ohm: float = 150.0,
@@ -48,9 +48,14 @@ class ClutchNodeEmulator:
     def read_available(self) -> bytes:
         """Bytes of every frame due up to the clock's current time."""
         now = self.clock()
+        due = []
         while self._next_t <= now:
-            self._emit(self._next_t)
+            if self._next_t >= self._off_until:  # powered: the node measures and sends
+                due.append(self._next_t)
             self._next_t += self.period_s
+        if due:
+            for t, inputs in zip(due, self.provider.node_inputs_at(due)):
+                self._emit(t, inputs)
         data, self._out = bytes(self._out), bytearray()
         return data
 
@@ -81,10 +86,8 @@ class ClutchNodeEmulator:
     def _boot(self, t: float) -> None:
         self._t_boot, self._seq, self._reset_flag = t, 0, node_frame.NODE_RESET
 
-    def _emit(self, t: float) -> None:
-        if t < self._off_until:
-            return
-        frame = self._frame(t, self.provider.node_inputs(t))
+    def _emit(self, t: float, inputs: NodeInputs) -> None:
+        frame = self._frame(t, inputs)
         self._seq = (self._seq + 1) & 0xFFFF
         self._reset_flag = 0
         if t < self._silent_until:
