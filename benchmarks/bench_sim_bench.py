@@ -13,7 +13,7 @@ built and written by its BLFWriter) times the frames per second of bench time (e
 10 ms DBC cycle): the speed no stack that builds one python-can object per frame can pass. The received
 frames travel as arrays (drivers/can_frames.py: simulated bus → driver decode and watch → the BLF writer's
 containers, the same driver code a hardware interface feeds frame by frame), so the stack is not bound by it;
-the frames the PC sends are python-can Messages as on hardware. Printed beside it: the whole stack's CPU time
+so do the frames the PC sends (drivers.can_frames.send_all: one python-can Message per send on hardware). Printed beside it: the whole stack's CPU time
 per CAN frame. Target: >= 500x real time (exit 1 if missed).
 """
 

@@ -32,8 +32,8 @@ from numba import njit
 
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, MessageCodec, compile_codecs
-from drivers.can_frames import (ERROR, EXTENDED, REMOTE, RX, Record, drain, frames_from_messages,
-                                frames_from_records, join, pick, record)
+from drivers.can_frames import (ERROR, EXTENDED, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
+                                send_all)
 from drivers.can_log import log_frames
 from drivers.errors import CanBusError, CanConfigError, CanLogError
 from drivers.timebase import ClockMap
@@ -171,6 +171,18 @@ class _RxTable:
         return slot if slot < 0 or length == self.length[slot] else BAD_LENGTH
 
 
+class _TxTable:
+    """The messages the PC sends as arrays for the bulk send: codec table, ids, lengths, each one's value columns."""
+
+    def __init__(self, tx: list[_Tx]) -> None:
+        self.slot = {id(t): i for i, t in enumerate(tx)}
+        self.codecs = CodecTable([t.codec for t in tx])
+        self.columns = [tuple(t.codec.columns) + (None,) * (self.codecs.width - len(t.codec.columns)) for t in tx]
+        self.frame_id = np.array([t.codec.message.frame_id for t in tx], dtype=np.int64)
+        self.length = np.array([t.codec.length for t in tx], dtype=np.int64)
+        self.extended = np.array([t.codec.message.is_extended_frame for t in tx], dtype=bool)
+
+
 class CanBench:
     """Talks to the three bench controllers over any python-can bus."""
 
@@ -193,12 +205,13 @@ class CanBench:
         self.estop_active = False
         self._events: list[ControllerEvent] = []
         self._silent: dict[str, str] = {}
-        self._to_log: list[Record | np.ndarray] = []  # sent frames and received FRAME arrays, in order
+        self._to_log: list[np.ndarray] = []  # FRAME arrays sent and received, in order
         self._log_synced = -math.inf
         now = clock()
         self._rx, self._tx = self._compile(signals, silent_cycles, now)
         self._rx_table = _RxTable(list(self._rx.values()), list(self._rx))
         self._tx_of = {key: tx for tx in self._tx.values() for key in tx.codec.names.values()}
+        self._tx_table = _TxTable(list(self._tx.values()))
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any], **kwargs: Any) -> "CanBench":
@@ -254,6 +267,7 @@ class CanBench:
         if self.listen_only:
             return
         now = self.clock()
+        due: list[tuple[_Tx, float]] = []
         for tx in self._tx.values():
             if not tx.cycle_s or (tx is self._tx_of.get("estop.request") and not self.estop_active):
                 continue
@@ -262,8 +276,9 @@ class CanBench:
                 tx.cycles += skipped
                 self.stats.late_skipped += skipped
             while tx.next_due <= now + 1e-9:
-                self._send(tx, min(tx.next_due, now))
+                due.append((tx, min(tx.next_due, now)))
                 tx.cycles += 1
+        self._send(due)
 
     def receive(self) -> list[CanSample]:
         """Every waiting frame at its own time, decoded and watched, one CanSample per frame in arrival order."""
@@ -366,10 +381,6 @@ class CanBench:
         self._events += [event for *_, event in sorted(events, key=lambda e: e[:2])]
         return blocks
 
-    def _bus_time(self, t: float) -> float:
-        """A run time in the bus's time base (for the frames the PC sends, as logged)."""
-        return self.clock_map.to_device(t) if self.timestamps == "interface" else t
-
     def _compile(self, signals: Mapping[str, tuple[str, str]], silent_cycles: float,
                  now: float) -> tuple[dict[tuple[int, bool], _Rx], dict[str, _Tx]]:
         rx: dict[tuple[int, bool], _Rx] = {}
@@ -400,23 +411,34 @@ class CanBench:
             tx.values[key] = value
             touched[id(tx)] = tx
         now = self.clock()
-        for tx in touched.values():
-            self._send(tx, now)
+        self._send([(tx, now) for tx in touched.values()])
 
-    def _send(self, tx: _Tx, t: float) -> None:
-        if tx.alive_key is not None:
-            tx.values[tx.alive_key] = (int(tx.values[tx.alive_key]) + 1) % tx.alive_modulo
-        message = tx.codec.message
-        msg = can.Message(timestamp=self._bus_time(t), arbitration_id=message.frame_id,
-                          data=tx.codec.encode(tx.values), is_extended_id=message.is_extended_frame, is_rx=False)
-        try:
-            self.bus.send(msg)
-            self.stats.sent += 1
-        except can.CanError:
-            self.stats.send_errors += 1
+    def _send(self, due: list[tuple[_Tx, float]]) -> None:
+        """One frame per (message, run time) of `due`, in that order, each with the message's values and its alive
+        counter one on: encoded in one pass, sent as one array (drivers/can_frames.py: one python-can message per
+        frame on a bus without bulk sending), the frames that went out logged."""
+        if not due:
             return
-        if self.log is not None:
-            self._to_log.append(record(msg))
+        table = self._tx_table
+        rows, slots = [], []
+        for tx, _ in due:
+            if tx.alive_key is not None:
+                tx.values[tx.alive_key] = (int(tx.values[tx.alive_key]) + 1) % tx.alive_modulo
+            slot = table.slot[id(tx)]
+            rows.append([tx.values.get(key, 0.0) for key in table.columns[slot]])
+            slots.append(slot)
+        which = np.array(slots)
+        stamps = np.array([t for _, t in due])
+        if self.timestamps == "interface" and not math.isnan(self.clock_map.offset):
+            stamps = stamps - self.clock_map.offset  # in the bus's time base, as logged (ClockMap.to_device)
+        frames = make_frames(stamps, table.frame_id.take(which), table.codecs.encode(which, np.array(rows)),
+                             table.length.take(which), extended=table.extended.take(which), rx=False)
+        sent = send_all(self.bus, frames)
+        count = int(np.count_nonzero(sent))
+        self.stats.sent += count
+        self.stats.send_errors += len(frames) - count
+        if self.log is not None and count:
+            self._to_log.append(frames if count == len(frames) else pick(frames, np.flatnonzero(sent)))
 
     def _flush_log(self) -> None:
         if not self._to_log or self.log is None:
@@ -497,20 +519,8 @@ class CanBench:
         return {c for c, f in zip(self._rx_table.controllers, self._rx_table.faulted.tolist()) if f}
 
 
-def _in_time_order(items: list[Record | np.ndarray]) -> np.ndarray:
-    """Sent frames (records) and received FRAME arrays as one FRAME array, sorted by time (ties as given)."""
-    parts: list[np.ndarray] = []
-    records: list[Record] = []
-    for item in items:
-        if isinstance(item, tuple):
-            records.append(item)
-            continue
-        if records:
-            parts.append(frames_from_records(records))
-            records = []
-        parts.append(item)
-    if records:
-        parts.append(frames_from_records(records))
+def _in_time_order(parts: list[np.ndarray]) -> np.ndarray:
+    """FRAME arrays sent and received as one FRAME array, sorted by time (ties as given)."""
     frames = join(parts)
     return pick(frames, np.argsort(frames["timestamp"], kind="stable"))
 

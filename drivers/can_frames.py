@@ -2,7 +2,8 @@
 
 A python-can bus hands out one `can.Message` per `recv()`; `drain()` takes every waiting frame into one array
 that way, or in one piece from a bus that offers `recv_frames()` (the simulated bus does; hardware interfaces go
-frame by frame). Either way the same array goes through the same decoding and logging code. Conversions both
+frame by frame); `send_all()` is the way out, in one piece to a bus that offers `send_frames()`, else one
+`can.Message` per `send()`. Either way the same array goes through the same decoding and logging code. Conversions both
 ways keep every field a frame log needs (time stamp, id, flags, DLC, channel, the data bytes as received).
 """
 
@@ -90,6 +91,24 @@ def messages_from_frames(frames: np.ndarray) -> list[can.Message]:
 def recv_each(bus: can.BusABC) -> np.ndarray:
     """Every frame waiting on `bus`, taken with python-can's `recv()` one at a time, in arrival order."""
     return frames_from_messages(list(iter(lambda: bus.recv(timeout=0), None)))
+
+
+def send_all(bus: can.BusABC, frames: np.ndarray) -> np.ndarray:
+    """Put FRAME records on `bus` in their order: in one piece where it takes arrays (`bus.send_frames`, the simulated
+    bus), else one python-can message per `bus.send()` as on hardware. Returns which frames went out (a send that
+    raises can.CanError is that frame not sent)."""
+    bulk = getattr(bus, "send_frames", None)
+    if bulk is not None:
+        bulk(frames)
+        return np.ones(len(frames), dtype=bool)
+    sent = np.zeros(len(frames), dtype=bool)
+    for i, msg in enumerate(messages_from_frames(frames)):
+        try:
+            bus.send(msg)
+        except can.CanError:
+            continue
+        sent[i] = True
+    return sent
 
 
 def drain(bus: can.BusABC) -> np.ndarray:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from drivers import cvd
 from drivers.can_signals import CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING
@@ -51,7 +52,7 @@ class SimBenchConfig:
 
     seed: int = 1
     dt: float = 0.01
-    chunk_s: float = 2.0
+    chunk_s: float = 10.0
     sensors: SensorConfig = SensorConfig()
     ambient: AmbientConfig = AmbientConfig()
     drivetrain: DrivetrainFacts = DrivetrainFacts()
@@ -128,13 +129,15 @@ class SimPhysics:
         self._record_truth(k0, temps["_states"])
         # what the sensors read on this grid: noise per sample, resistances in one vectorised call each
         sc, rng = self.cfg.sensors, self.rng_sensor
-        for j in (1, 2):
-            temps[f"_R_node{j}"] = cvd.resistance(temps["T_flywheel"] + rng.normal(0.0, sc.node_noise_k, n))
+        temps["_R_node"] = np.column_stack([cvd.resistance(temps["T_flywheel"] + rng.normal(0.0, sc.node_noise_k, n))
+                                            for _ in range(2)])  # the node's two sensors
         for ch, name in self.cfg.dmm_channels.items():
             true = cols["T_ambient"] if name == "T_ambient" else temps[name]
             temps[f"_R_dmm{ch}"] = cvd.resistance(true + rng.normal(0.0, sc.wired_noise_k, n))
-        temps["_noise_speed"] = rng.normal(0.0, sc.speed_noise_rpm, (n, 2))
-        temps["_noise_torque"] = rng.normal(0.0, sc.torque_noise_nm, n)
+        noise_speed = rng.normal(0.0, sc.speed_noise_rpm, (n, 2))
+        noise_torque = rng.normal(0.0, sc.torque_noise_nm, n)
+        # what the controllers' actual values are made of, one row per grid point (actuals_at takes rows)
+        temps["_actuals"] = np.column_stack([cols[c] for c in _ACTUAL_SOURCES] + [noise_speed, noise_torque])
         self._chunks.append((k0, cols, temps))
         if len(self._chunks) > 3:
             self._chunks.pop(0)
@@ -230,30 +233,24 @@ class SimPhysics:
         self._ensure(self._index(t))
         self.t_setpoints = t
 
-    def actuals_at(self, times: np.ndarray) -> DrivetrainActuals:
-        """What the controllers measure at each of `times`: the drivetrain's values plus sensor noise."""
-        n = len(times)
-        engine, shaft, torque, friction, clamped, load = (np.empty(n) for _ in range(6))
-        noise_speed, noise_torque = np.empty((n, 2)), np.empty(n)
+    def _rows_at(self, times: "np.ndarray | list[float]", name: str) -> np.ndarray:
+        """Rows of the per-grid-point matrix `name` at each of `times` (increasing), computed where needed."""
         k = np.floor(np.asarray(times) / self.dt + 1e-6).astype(np.int64)
         self._ensure(int(k[-1]))
-        for k0, cols, temps in self._chunks:
-            sel = (k >= k0) & (k < k0 + len(cols["engine_speed"]))
-            if not sel.any():
-                continue
-            i = k[sel] - k0
-            engine[sel], shaft[sel] = cols["engine_speed"][i], cols["clutch_speed"][i]
-            torque[sel], friction[sel] = cols["clutch_torque"][i], cols["friction_power"][i]
-            clamped[sel], load[sel] = cols["clutch_state"][i], cols["load_torque"][i]
-            noise_speed[sel], noise_torque[sel] = temps["_noise_speed"][i], temps["_noise_torque"][i]
-        is_clamped = clamped >= 0.5
-        clamp = np.where(is_clamped & (friction > 0.0), CLAMP_SLIPPING, np.where(is_clamped, CLAMP_CLAMPED, CLAMP_OPEN))
-        torque_abs = np.abs(torque)
-        torque_meas = np.where(torque_abs > 0, np.maximum(0.0, torque_abs + noise_torque), 0.0)
-        shaft_meas = np.maximum(0.0, shaft + noise_speed[:, 1])
-        position = np.where(is_clamped, 0.0, self.cfg.position_stroke_mm)
-        return DrivetrainActuals(engine + noise_speed[:, 0], torque, torque_meas, position, clamp.astype(float),
-                                 shaft_meas / self.gear, load)
+        k0, _, temps = self._chunks[-1]
+        if k[0] >= k0:  # all in the newest chunk (the usual case)
+            return temps[name].take(k - k0, axis=0)
+        k = np.maximum(k, self._chunks[0][0])  # older than kept: the oldest sample we have
+        rows = np.empty((len(k), temps[name].shape[1]))
+        for k0, _, temps in self._chunks:
+            sel = (k >= k0) & (k < k0 + len(temps[name]))
+            rows[sel] = temps[name][k[sel] - k0]
+        return rows
+
+    def actuals_at(self, times: np.ndarray) -> DrivetrainActuals:
+        """What the controllers measure at each of `times`: the drivetrain's values plus sensor noise."""
+        measured = _measured(self._rows_at(times, "_actuals"), self.cfg.position_stroke_mm, self.gear)
+        return DrivetrainActuals(*measured)
 
     # -- ResistanceProvider (DMM) -----------------------------------------------------------------------
     def get_resistances(self) -> Mapping[int, float]:
@@ -262,8 +259,12 @@ class SimPhysics:
 
     # -- NodeInputProvider (flywheel node) -----------------------------------------------------------
     def node_inputs(self, t: float) -> NodeInputs:
-        _, temps, i = self._at(t)
-        return NodeInputs((float(temps["_R_node1"][i]), float(temps["_R_node2"][i])), 5000, -60, 200)
+        """What the flywheel node measures at `t`."""
+        return self.node_inputs_at([t])[0]
+
+    def node_inputs_at(self, times: "list[float]") -> list[NodeInputs]:
+        """What the node measures at each of `times` (increasing), in one look-up: the emulator asks once per read."""
+        return [NodeInputs((r1, r2), 5000, -60, 200) for r1, r2 in self._rows_at(times, "_R_node").tolist()]
 
     # -- truth, for tests and analysis ----------------------------------------------------------------
     def _record_truth(self, k0: int, states: np.ndarray) -> None:
@@ -292,6 +293,27 @@ class SimPhysics:
 
         ch = {"engine_speed": np.array([float(engine_rpm)]), "clutch_state": np.array([float(clutch_state)])}
         return float(np.asarray(convection_resistance(self.truth_params, ch)).ravel()[0])
+
+
+_ACTUAL_SOURCES = ("engine_speed", "clutch_speed", "clutch_torque", "friction_power", "clutch_state", "load_torque")
+
+
+@njit(cache=True, nogil=True)
+def _measured(rows: np.ndarray, stroke_mm: float, gear: float) -> np.ndarray:  # pragma: no cover - compiled
+    """DrivetrainActuals' fields (7, n) from rows of _ACTUAL_SOURCES + speed noise (2) + torque noise: noise added
+    where a sensor measures, clamp state from the clutch state and friction, torque and speeds not below 0."""
+    out = np.empty((7, rows.shape[0]))
+    for i in range(rows.shape[0]):
+        is_clamped = rows[i, 4] >= 0.5
+        torque_abs = abs(rows[i, 2])
+        out[0, i] = rows[i, 0] + rows[i, 6]
+        out[1, i] = rows[i, 2]
+        out[2, i] = max(0.0, torque_abs + rows[i, 8]) if torque_abs > 0 else 0.0
+        out[3, i] = 0.0 if is_clamped else stroke_mm
+        out[4, i] = (CLAMP_SLIPPING if rows[i, 3] > 0.0 else CLAMP_CLAMPED) if is_clamped else CLAMP_OPEN
+        out[5, i] = max(0.0, rows[i, 1] + rows[i, 7]) / gear
+        out[6, i] = rows[i, 5]
+    return out
 
 
 class SimBench:

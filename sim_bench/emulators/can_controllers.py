@@ -26,9 +26,8 @@ from numba import njit
 
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, compile_codecs
-from drivers.can_frames import make_frames
+from drivers.can_frames import EXTENDED, drain, make_frames, pick, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
-from sim_bench.emulators.sim_can_bus import send_frames
 
 
 COMMAND_LATENCY_S = 1e-6  # a command takes effect this long after the newest frame already sent, at the earliest
@@ -79,8 +78,14 @@ class CanBenchEmulator:
         self.stats = EmulatorStats()
         self.estop = False
         self.controllers = {name: _Controller(name) for name in sig.CONTROLLERS}
-        self._rx = {self._codec_of[key].message.frame_id: (key.split(".")[0], self._codec_of[key])
-                    for key in ("drive.cmd_alive", "clutch.cmd_alive", "load.cmd_alive", "estop.request", "pc.hb_alive")}
+        received = ("drive.cmd_alive", "clutch.cmd_alive", "load.cmd_alive", "estop.request", "pc.hb_alive")
+        self._rx = {self._codec_of[key].message.frame_id: (i, key.split(".")[0], self._codec_of[key])
+                    for i, key in enumerate(received)}  # frame id → (slot in the command table, owner, codec)
+        self._rx_table = CodecTable([self._codec_of[key] for key in received])
+        # per command slot the (column, key) of the values that are set-points (not the alive counter)
+        self._setpoint_columns = [[(j, c) for j, c in enumerate(self._codec_of[key].columns)
+                                   if c is not None and not c.endswith("alive")] for key in received]
+        self._taken: dict[str, list[float] | None] = {name: None for name in self.controllers}  # set-points last taken
         self.origin = clock()
         self._t = self.origin  # frames due before this instant have been sent
         for ctrl in self.controllers.values():
@@ -133,23 +138,23 @@ class CanBenchEmulator:
         time-out; the frames are then sent in whole segments between the commands that change something.
         """
         now = self.clock()
-        commands = []
-        while (msg := self.bus.recv(timeout=0)) is not None:
-            commands.append(msg)
-        commands.sort(key=lambda m: m.timestamp)
-        for msg in commands:
+        for owner, stamp, slot, row in self._commands():
             # a command acts after the last frame already reported (a frame measured when it was sent is gone)
-            t = min(max(msg.timestamp or now, self._t + COMMAND_LATENCY_S), now)
-            decoded = self._decode(msg)
-            if decoded is None:
+            t = min(max(stamp or now, self._t + COMMAND_LATENCY_S), now)
+            ctrl = self.controllers.get(owner)
+            setpoints = [row[j] for j, _ in self._setpoint_columns[slot]]
+            if ctrl is not None and setpoints == self._taken[owner] and not self._timed_out(ctrl, t):
+                ctrl.last_cmd = t  # the same set-points again: only the command time-out starts anew
                 continue
-            owner, values = decoded
+            values = {c: row[j] for j, c in enumerate(self._rx_table.codecs[slot].columns) if c is not None}
             if self._changes(owner, values, t):
                 self._emit_until(t, inclusive=False)
                 self._take(owner, values, t)
                 self._apply(t)
-            elif owner in self.controllers:
-                self.controllers[owner].last_cmd = t
+            elif ctrl is not None:
+                ctrl.last_cmd = t
+            if ctrl is not None:
+                self._taken[owner] = setpoints
         self._emit_until(now, inclusive=True)
 
     def state(self, controller: str, t: float | None = None) -> tuple[int, int]:
@@ -174,13 +179,30 @@ class CanBenchEmulator:
         deadline = self._deadline(ctrl)
         return deadline is not None and t > deadline + 1e-9
 
-    def _decode(self, msg: can.Message) -> tuple[str, dict[str, float]] | None:
-        owner, codec = self._rx.get(msg.arbitration_id, (None, None))
-        if codec is None or len(msg.data) != codec.length or msg.is_extended_id != codec.message.is_extended_frame:
-            self.stats.malformed += 1
-            return None
-        self.stats.commands_ok += 1
-        return owner, codec.decode(msg.data)
+    def _commands(self) -> list[tuple[str, float, int, list[float]]]:
+        """The waiting command frames in time order (stable), decoded in one pass: (owner, time stamp, command slot,
+        values by codec column); frames with an unknown id, a wrong length or id kind are counted as malformed."""
+        frames = drain(self.bus)
+        if not len(frames):
+            return []
+        frames = pick(frames, np.argsort(frames["timestamp"], kind="stable"))
+        known = []
+        for i, (ident, flags, length) in enumerate(zip(frames["arbitration_id"].tolist(), frames["flags"].tolist(),
+                                                       frames["length"].tolist())):
+            slot, owner, codec = self._rx.get(ident, (-1, None, None))
+            if codec is None or length != codec.length or bool(flags & EXTENDED) != codec.message.is_extended_frame:
+                self.stats.malformed += 1
+                continue
+            known.append((i, slot, owner))
+        if not known:
+            return []
+        rows = np.array([i for i, _, _ in known])
+        which = np.array([slot for _, slot, _ in known])
+        values, valid = self._rx_table.decode(which, frames["data"].take(rows, axis=0))
+        self.stats.commands_ok += int(np.count_nonzero(valid))
+        self.stats.malformed += len(known) - int(np.count_nonzero(valid))
+        return [(owner, stamp, slot, row) for (_, slot, owner), stamp, row, ok
+                in zip(known, frames["timestamp"].take(rows).tolist(), values.tolist(), valid.tolist()) if ok]
 
     def _changes(self, owner: str, values: Mapping[str, float], t: float) -> bool:
         """Whether a command changes what the controllers do (set-points, time-out ending, emergency stop)."""
@@ -262,8 +284,7 @@ class CanBenchEmulator:
         slot = slots.take(item)
         frames = make_frames(stamps, self._frame_id.take(slot), self._table.encode(slot, values),
                              self._length.take(slot), extended=self._extended.take(slot))
-        send_frames(self.bus, frames)
-        self.stats.sent += len(frames)
+        self.stats.sent += int(np.count_nonzero(send_all(self.bus, frames)))
 
 
 @njit(cache=True, nogil=True)

@@ -23,7 +23,7 @@ _SHORT = (node_frame.CH1_SHORT, node_frame.CH2_SHORT)
 
 
 class ClutchNodeEmulator:
-    """Serial endpoint producing node frames from `provider.node_inputs(t)` every `period_s` of clock time."""
+    """Serial endpoint producing node frames from `provider.node_inputs_at(times)` every `period_s` of clock time."""
 
     def __init__(self, provider: NodeInputProvider | None = None, *, period_s: float = 0.05,
                  clock: Callable[[], float] = time.monotonic, short_ohm: float = 150.0,
@@ -48,9 +48,16 @@ class ClutchNodeEmulator:
     def read_available(self) -> bytes:
         """Bytes of every frame due up to the clock's current time."""
         now = self.clock()
+        due = []
         while self._next_t <= now:
-            self._emit(self._next_t)
+            if self._next_t >= self._off_until:  # powered: the node measures and sends
+                due.append(self._next_t)
             self._next_t += self.period_s
+        if due:
+            frames: list[NodeFrame] = []  # undamaged frames not yet on the line, encoded together
+            for t, inputs in zip(due, self.provider.node_inputs_at(due)):
+                self._emit(t, inputs, frames)
+            self._out += node_frame.encode_many(frames)
         data, self._out = bytes(self._out), bytearray()
         return data
 
@@ -81,18 +88,20 @@ class ClutchNodeEmulator:
     def _boot(self, t: float) -> None:
         self._t_boot, self._seq, self._reset_flag = t, 0, node_frame.NODE_RESET
 
-    def _emit(self, t: float) -> None:
-        if t < self._off_until:
-            return
-        frame = self._frame(t, self.provider.node_inputs(t))
+    def _emit(self, t: float, inputs: NodeInputs, pending: list[NodeFrame]) -> None:
+        """The frame measured at `t` onto the line, after the undamaged ones `pending` (kept there if undamaged)."""
+        frame = self._frame(t, inputs)
         self._seq = (self._seq + 1) & 0xFFFF
         self._reset_flag = 0
         if t < self._silent_until:
             self.frames_suppressed += 1
             return
-        damage = self._damage.pop(0) if self._damage else None
-        self._out += self._wire(frame, damage)
         self.frames_sent += 1
+        if not self._damage:
+            pending.append(frame)
+            return
+        self._out += node_frame.encode_many(pending) + self._wire(frame, self._damage.pop(0))
+        pending.clear()
 
     def _frame(self, t: float, inputs: NodeInputs) -> NodeFrame:
         flags = self._reset_flag | (node_frame.LOW_SUPPLY if inputs.supply_mv < self.low_supply_mv else 0)
@@ -111,7 +120,7 @@ class ClutchNodeEmulator:
                          max(-128, min(inputs.rssi_dbm, 127)), max(0, min(inputs.lqi, 255)), flags)
 
     @staticmethod
-    def _wire(frame: NodeFrame, damage: Damage | None) -> bytes:
+    def _wire(frame: NodeFrame, damage: Damage) -> bytes:
         """Encoded frame, damaged on request: a bit flipped in the payload (CRC catches it), cut off, or garbled."""
         if damage == "flip":
             payload = bytearray(node_frame.pack(frame))

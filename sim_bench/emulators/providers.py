@@ -30,9 +30,9 @@ class NodeInputs:
 
 
 class NodeInputProvider(Protocol):
-    """The flywheel node's inputs at simulated time `t` (seconds)."""
+    """The flywheel node's inputs at each of the simulated times `times` (seconds, increasing), in one call."""
 
-    def node_inputs(self, t: float) -> NodeInputs: ...
+    def node_inputs_at(self, times: list[float]) -> list[NodeInputs]: ...
 
 
 @dataclass(slots=True)
@@ -63,5 +63,5 @@ class ConstantNodeInputs:
 
     inputs: NodeInputs = NodeInputs((1097.347, 1097.347))
 
-    def node_inputs(self, t: float) -> NodeInputs:
-        return self.inputs
+    def node_inputs_at(self, times: list[float]) -> list[NodeInputs]:
+        return [self.inputs] * len(times)

@@ -124,12 +124,3 @@ class SimCanBus(can.BusABC):
             _clocks.pop(self._channel, None)
         super().shutdown()
 
-
-def send_frames(bus: can.BusABC, frames: np.ndarray) -> None:
-    """FRAME records onto any python-can bus: in one piece where it takes arrays, else one message at a time."""
-    bulk = getattr(bus, "send_frames", None)
-    if bulk is not None:
-        bulk(frames)
-        return
-    for msg in messages_from_frames(frames):
-        bus.send(msg)
