@@ -351,9 +351,6 @@ class _Pulses:
         self.rise = 0.0
         self._t_start_temp = math.nan
 
-    def near(self, now: float) -> bool:
-        return self.on or now >= self.until - 0.2
-
     def update(self, now: float, st: BenchStatus, target: float) -> bool:
         """Advance the pulse state; True if the set-points must change."""
         if now < self.until - 1e-9:
