@@ -21,6 +21,7 @@ import numpy as np
 
 from benchlab.acquire import RunWriter
 from benchlab.progress import Task
+from benchlab.runner.clock import Clock
 from benchlab.runner.devices import BenchStatus
 from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
@@ -38,11 +39,6 @@ class Bench(Protocol):
     def command(self, engine_rpm: float, clutch_torque_nm: float, clutch_open: bool, load_nm: float) -> None: ...
     def safe_state(self) -> None: ...
     def poll(self) -> tuple[list, list]: ...
-
-
-class Clock(Protocol):
-    def __call__(self) -> float: ...
-    def sleep_until(self, t: float) -> float: ...
 
 
 class Stopped(Exception):

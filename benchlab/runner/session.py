@@ -23,6 +23,7 @@ from benchlab.progress import SILENT, Progress
 from benchlab.errors import InputError
 from benchlab.runfile.read import load_stopped_run
 from benchlab.runfile.schema import SCHEDULE_UNITS
+from benchlab.runner.clock import Clock, RealClock
 from benchlab.runner.devices import BenchConfig, DriverBench
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
 from drivers.errors import CanLogError
@@ -132,6 +133,38 @@ def can_log_path(run_path: Path, resumes: int = 0) -> Path:
     return run_path.with_suffix(f".resume{resumes}.blf" if resumes else ".blf")
 
 
+def open_bench(request: RunRequest, config: BenchConfig, can_log: Path, t0: float, seed: int,
+               initial_c: Any = None) -> tuple[DriverBench, Clock, Any, BenchConfig]:
+    """The drivers on the bench, with its clock: the hardware of BENCH.toml on real time, or the simulated bench
+    (its emulators behind the same drivers, `seed`, the request's plant and faults) on simulated time.
+
+    Returns (bench, clock, the simulated bench or None, the config with the simulated devices' addresses).
+    Exit 2 for a CAN log that cannot be made, 1 for devices that cannot be reached.
+    """
+    sim = None
+    if request.bench == "sim":
+        from sim_bench.bench import SimBench, SimBenchConfig
+
+        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0, drivetrain=config.drivetrain, initial_c=initial_c,
+                             **dict(request.sim_options or {}))
+        sim = SimBench(cfg, plant=request.plant, faults=request.faults)
+        config = replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
+                         can={"interface": "sim", "channel": sim.name + "-can"})
+    clock: Clock = sim.clock if sim is not None else RealClock(t0)
+    try:
+        if sim is not None:
+            bench = DriverBench(config, clock, bus=sim.driver_bus, service=sim.service, can_log=can_log)
+        else:
+            bench = DriverBench(config, clock, can_log=can_log)
+    except Exception as exc:  # noqa: BLE001 - no bench: the simulated one is closed, one line
+        if sim is not None:
+            sim.close()
+        if isinstance(exc, CanLogError):  # the log's path follows the user's --out: exit 2
+            raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
+        raise RuntimeError(f"cannot open the bench: {exc}") from exc  # cannot reach the devices: exit 1
+    return bench, clock, sim, config
+
+
 def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     """Run (or resume) and return (exit code, summary)."""
     if request.dry_run:
@@ -146,35 +179,11 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
         request = replace(request, protocol=resume_state["protocol"], seed=resume_state["seed"])
     else:
         steps, config, options = plan(request)
-    sim = None
-    clock: Any
     t0 = resume_state["t0"] if resume_state else 0.0
-    if request.bench == "sim":
-        from sim_bench.bench import SimBench, SimBenchConfig
-
-        sim_opts = dict(request.sim_options or {})
-        seed = request.seed + (7919 * resume_state["resumes"] if resume_state else 0)
-        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0, drivetrain=config.drivetrain,
-                             initial_c=resume_state["initial"] if resume_state else None, **sim_opts)
-        sim = SimBench(cfg, plant=request.plant, faults=request.faults)
-        clock = sim.clock
-        config = replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
-                         can={"interface": "sim", "channel": sim.name + "-can"})
+    seed = request.seed + (7919 * resume_state["resumes"] if resume_state else 0)
     can_log = can_log_path(request.out, resume_state["resumes"] if resume_state else 0)
-    try:
-        if sim is not None:
-            bench = DriverBench(config, clock, bus=sim.driver_bus, service=sim.service, can_log=can_log)
-        else:
-            from sim_bench.clock import RealClock
-
-            clock = RealClock(t0)
-            bench = DriverBench(config, clock, can_log=can_log)
-    except Exception as exc:  # noqa: BLE001 - no bench: the simulated one is closed, one line
-        if sim is not None:
-            sim.close()
-        if isinstance(exc, CanLogError):  # the log's path follows the user's --out: exit 2
-            raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
-        raise RuntimeError(f"cannot open the bench: {exc}") from exc  # cannot reach the devices: exit 1
+    bench, clock, sim, config = open_bench(request, config, can_log, t0, seed,
+                                           resume_state["initial"] if resume_state else None)
     layout = bench.layout
     runner: Runner | None = None
     pending: list[tuple[str, int]] = []  # a signal that came before the runner existed
