@@ -40,9 +40,11 @@ import scipy.optimize
 from benchlab.clutch import clutch_network, convection_resistance
 from benchlab.errors import InputError
 from benchlab.progress import SILENT, Progress, Task
-from benchlab.runfile import load_analysis, load_attrs, load_events, load_run, load_schedule, write_analysis
+from benchlab.runfile import (Event, load_analysis, load_attrs, load_events, load_run, load_schedule,
+                              write_analysis)
 from benchlab.simulation import initial_state, input_channels
 from benchlab.solver import run_network
+from protocols.schedule import Step
 
 COVERAGE_K = 2.0
 #: Relative standard uncertainty of R from the acquisition itself (held samples, time stamps of batched
@@ -79,31 +81,41 @@ class CooldownResult:
 def segments(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, dict[str, float]]]:
     """(cycle, t_start, t_end, point) of every completed cool-down of the run.
 
-    The times are the `cooldown_start`/`cooldown_end` events'; the operating point is the stored schedule's:
-    the n-th cool-down started in a cycle is that cycle's n-th step labelled "cooldown" (a cycle always runs
-    from its first step, resumed or not).
+    The times are the `cooldown_start`/`cooldown_end` events'; the operating point is that of the step in the
+    stored schedule the events belong to (their `step`; see `_cooldown_point` for files without it).
     """
     path = Path(path)
     events = load_events(path)
-    steps_of_cycle: dict[int, list[dict[str, float]]] = {}
-    if any(kind == "cooldown_start" for _, _, kind, _ in events):
-        for step in load_schedule(path):
-            if step.label == COOLDOWN_LABEL:
-                steps_of_cycle.setdefault(step.cycle, []).append(dict(step.point))
+    steps = load_schedule(path) if any(e.kind == "cooldown_start" for e in events) else ()
     out, open_, started = [], {}, {}
-    for t, cycle, kind, detail in events:
-        if kind == "cooldown_start":
-            n = started[cycle] = started.get(cycle, 0) + 1
-            points = steps_of_cycle.get(cycle, [])
-            if n > len(points):
-                raise InputError(path, "/schedule", f"a step labelled {COOLDOWN_LABEL!r} in cycle {cycle} for "
-                                                    f"the cooldown_start at {t:g} s (the schedule has {len(points)})")
-            open_[cycle] = (t, points[n - 1])
-        elif kind == "cooldown_end" and cycle in open_:
-            t0, point = open_.pop(cycle)
-            if detail.startswith("condition"):
-                out.append((cycle, t0, t, point))
+    for event in events:
+        if event.kind == "cooldown_start":
+            open_[event.cycle] = (event.time, _cooldown_point(path, steps, event, started))
+        elif event.kind == "cooldown_end" and event.cycle in open_:
+            t0, point = open_.pop(event.cycle)
+            if event.detail.startswith("condition"):
+                out.append((event.cycle, t0, event.time, point))
     return out
+
+
+def _cooldown_point(path: Path, steps: Sequence[Step], start: Event, started: dict[int, int]) -> dict[str, float]:
+    """The operating point of the cool-down that `start` (a cooldown_start event) begins: its step's.
+
+    A file written before events carried their step: the n-th cool-down started in a cycle is that cycle's n-th
+    step labelled "cooldown" (`started` counts them per cycle).
+    """
+    if start.step >= 0:
+        index = start.step if start.step < len(steps) and steps[start.step].label == COOLDOWN_LABEL else None
+        where = f"as step {start.step}"
+    else:
+        n = started[start.cycle] = started.get(start.cycle, 0) + 1
+        ours = [i for i, s in enumerate(steps) if s.cycle == start.cycle and s.label == COOLDOWN_LABEL]
+        index = ours[n - 1] if n <= len(ours) else None
+        where = f"(the schedule has {len(ours)})"
+    if index is None:
+        raise InputError(path, "/schedule", f"a step labelled {COOLDOWN_LABEL!r} in cycle {start.cycle} for the "
+                                            f"cooldown_start at {start.time:g} s {where}")
+    return dict(steps[index].point)
 
 
 def _noise(values: np.ndarray) -> float:

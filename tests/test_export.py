@@ -10,11 +10,13 @@ import pandas as pd
 import pytest
 from asammdf import MDF
 
-from benchlab.acquire import AlignedSource, Layout, RunWriter, StreamSpec
+from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from benchlab.cli import main
 from benchlab.runfile import ALIGNED_UNITS, REQUIRED, load_run, read_progress
 from benchlab.runner.session import RunRequest, execute
 from protocols.schedule import Step
+
+from crashed import write_then_kill  # tests/crashed.py
 
 #: Ten seconds of bench: idle, one launch, open again; every raw stream and a few events.
 STEPS = (Step("open", 3.0, 1500.0, 0.0, 0.0, 0), Step("launch", 4.0, 1500.0, 60.0, 100.0, 1),
@@ -82,12 +84,11 @@ def test_mf4_of_a_crashed_run_stops_at_its_progress_record(tmp_path):
     layout = Layout((StreamSpec("bench", tuple(channels.items()), 50.0, 0.05),),
                     tuple(AlignedSource(k, "bench", k) for k in channels), channels, None, 0.01)
     run = tmp_path / "crashed.h5"
-    writer = RunWriter(run, layout, protocol="custom", planned_s=600.0)
-    writer.event(0.5, "cycle_start", 0)
+    calls: list[tuple] = [("event", (0.5, "cycle_start", 0), {"step": 2})]
     for k in range(1, 151):
-        writer.add("bench", k * 0.02, [0.0 if c == "clutch_state" else 20.0 + k for c in channels])
-        writer.advance(k * 0.02)
-    writer.abandon()  # as a kill leaves it: status running, room for 10 minutes, data for 3 s
+        calls += [("add", ("bench", k * 0.02, [0.0 if c == "clutch_state" else 20.0 + k for c in channels])),
+                  ("advance", (k * 0.02,))]
+    write_then_kill(run, layout, calls, protocol="custom", planned_s=600.0)  # room for 10 minutes, data for 3 s
     with h5py.File(run, "r") as f:
         progress = read_progress(f)
         assert f.attrs["status"] == "running" and f["aligned/time"].shape[0] > 10 * progress["aligned_rows"]
@@ -99,6 +100,8 @@ def test_mf4_of_a_crashed_run_stops_at_its_progress_record(tmp_path):
         speed = mdf.get("bench.engine_speed")
         assert len(speed.samples) == progress["rows/bench"] == 150 and np.isfinite(speed.timestamps).all()
         assert list(mdf.get("events.kind").samples) == [b"cycle_start"]
+        step = mdf.get("events.step")
+        assert list(step.samples) == [2] and step.unit == "1"
     finally:
         mdf.close()
 

@@ -31,6 +31,8 @@ from benchlab.watch.live import LiveRun, Schedule, choose_level
 from benchlab.watch.server import WatchServer, listen
 from protocols.schedule import Condition, Step
 
+from crashed import write_then_kill  # tests/crashed.py
+
 LAYOUT = Layout(streams=(StreamSpec("s", (("a", "degC"), ("b", "rpm")), rate_hz=10.0, hold_s=0.15),),
                 sources=(AlignedSource("T_air", "s", "a"), AlignedSource("engine_speed", "s", "b")),
                 aligned_units={"T_air": "degC", "engine_speed": "rpm"})
@@ -81,9 +83,13 @@ def test_level_puts_the_span_on_at_most_one_bucket_per_pixel():
 
 
 # -- following a run as it is written -------------------------------------------------------------------------
+def _writer_options(path, planned_s=5.0):
+    return {"protocol": "test", "attrs": {"created_utc": str(path)}, "planned_s": planned_s,
+            "schedule": [s.as_dict() for s in STEPS], "state_fields": ("cycle", "next_step", "held")}
+
+
 def _writer(path, planned_s=5.0):
-    return RunWriter(path, LAYOUT, protocol="test", attrs={"created_utc": str(path)}, planned_s=planned_s,
-                     schedule=[s.as_dict() for s in STEPS], state_fields=("cycle", "next_step", "held"))
+    return RunWriter(path, LAYOUT, **_writer_options(path, planned_s))
 
 
 def test_follows_the_writer_through_growth_and_close_reading_only_what_is_new(tmp_path, monkeypatch):
@@ -101,17 +107,17 @@ def test_follows_the_writer_through_growth_and_close_reading_only_what_is_new(tm
     assert fcntl.fcntl(live.version.fd, fcntl.F_GETFL) & os.O_ACCMODE == os.O_RDONLY  # it cannot write
     inodes, have, level, seen_t = {live.version.inode}, 0, None, []
     writer.state.update(cycle=0, next_step=0, held=0)
-    writer.event(0.0, "step_start", 0, "drive")
+    writer.event(0.0, "step_start", 0, "drive", step=0)
     for second in range(1, 101):
         for k in range(10):
             t = second - 1 + k / 10
             writer.add("s", t, (20.0 + t / 10, 1500.0 if k != 3 else np.nan))
         if second == 40:
-            writer.event(39.5, "step_end", 0, "drive: time")
+            writer.event(39.5, "step_end", 0, "drive: time", step=0)
             writer.state["next_step"] = 1
-            writer.event(39.5, "step_start", 0, "open")
+            writer.event(39.5, "step_start", 0, "open", step=1)
         if second == 60:
-            writer.event(59.5, "interlock", 0, "stale_T_air: no valid reading for 5.2 s (hold)")
+            writer.event(59.5, "interlock", 0, "stale_T_air: no valid reading for 5.2 s (hold)", step=1)
             writer.state["held"] = 1
         if second == 70:
             writer.event(69.5, "interlock_cleared", 0, "stale_T_air")
@@ -138,6 +144,8 @@ def test_follows_the_writer_through_growth_and_close_reading_only_what_is_new(tm
     assert len(inodes) >= 2  # grew past its capacity: a new file under the same name, followed
     step = live.update()["status"]["step"]
     assert (step["index"], step["phase"], step["until"]) == (1, "open", "T_flywheel <= 60")
+    assert [(e["kind"], e["step"]) for e in live.events] == [
+        ("step_start", 0), ("step_end", 0), ("step_start", 1), ("interlock", 1), ("interlock_cleared", -1)]
     assert step["elapsed_s"] == pytest.approx(100.0 - 39.5) and step["left_s"] == pytest.approx(200 - 60.5)
     writer.close("complete")  # compacted and compressed: read through h5py from now on
     answer = live.update(width=400, level=level, have=have)
@@ -157,13 +165,10 @@ def test_follows_the_writer_through_growth_and_close_reading_only_what_is_new(tm
 
 def test_another_run_under_the_same_name_starts_again_and_a_deleted_file_keeps_what_was_read(tmp_path):
     path = tmp_path / "run.h5"
-    writer = _writer(path, planned_s=100.0)
-    for k in range(300):
-        writer.add("s", k / 10, (21.0, 900.0))
-    writer.advance(30.0)
+    calls = [("add", ("s", k / 10, (21.0, 900.0))) for k in range(300)] + [("advance", (30.0,))]
+    rows = write_then_kill(path, LAYOUT, calls, **_writer_options(path, planned_s=100.0))  # a crashed run
     live = LiveRun(path)
-    assert live.update()["status"]["rows"] == writer.rows
-    writer.abandon()
+    assert live.update()["status"]["rows"] == rows
     other = tmp_path / "other.h5"
     frame = pd.DataFrame({"time": np.arange(50) * 0.1, "T_air": np.full(50, 30.0)})
     write_run(other, frame, 0.1, protocol="imported")

@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from benchlab.runfile.read import read_progress
-from benchlab.runfile.schema import EVENT_COLUMNS, EVENT_DETAIL_LEN, EVENT_KIND_LEN, SCHEMA
+from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA
 
 _EPS = 1e-9
 
@@ -121,6 +121,11 @@ class _Readings:
 
 def _str_array(values: Sequence[str], length: int) -> np.ndarray:
     return np.array([v.encode("utf-8", "replace")[:length] for v in values], dtype=f"S{length}")
+
+
+def _column_of(values: Sequence[Any], dtype: np.dtype) -> np.ndarray:
+    """Values as a stored column of `dtype` (text cut to its fixed length in UTF-8)."""
+    return _str_array(values, dtype.itemsize) if dtype.kind == "S" else np.asarray(values, dtype=dtype)
 
 
 class AlignedBuilder:
@@ -216,7 +221,7 @@ class RunWriter:
         self.builder = AlignedBuilder(layout)
         self._raw = {s.name: _Readings(len(s.columns)) for s in layout.streams}
         self._raw_rows = {s.name: 0 for s in layout.streams}
-        self._events: list[tuple[float, int, str, str]] = []
+        self._events: list[tuple[float, int, str, str, int]] = []  # rows of /events, columns as EVENT_FIELDS
         self._event_rows = 0
         self._last_flush_t = 0.0
         self._now = 0.0
@@ -240,9 +245,10 @@ class RunWriter:
         or a block of readings: `t` an array of N times, `row` an (N, columns) array."""
         self._raw[stream].add(t, row)
 
-    def event(self, t: float, kind: str, cycle: int = -1, detail: str = "") -> None:
-        """An entry of the events table (cycle start, engagement, interlock, fault, drop-out, ...)."""
-        self._events.append((float(t), int(cycle), kind, detail))
+    def event(self, t: float, kind: str, cycle: int = -1, detail: str = "", *, step: int = -1) -> None:
+        """An entry of the events table (cycle start, engagement, interlock, fault, drop-out, ...); `step` is the
+        row of /schedule it belongs to (-1: none)."""
+        self._events.append((float(t), int(cycle), kind, detail, int(step)))
 
     def advance(self, now: float, force: bool = False) -> bool:
         """Data up to `now` is complete; flush once `flush_every_s` of data has accumulated. True if flushed."""
@@ -272,10 +278,8 @@ class RunWriter:
                 self._raw_rows[name] += len(data)
         if self._events:
             a, ev = self._event_rows, self._events
-            self._put("events/time", a, np.array([e[0] for e in ev], dtype=float))
-            self._put("events/cycle", a, np.array([e[1] for e in ev], dtype=np.int64))
-            self._put("events/kind", a, _str_array([e[2] for e in ev], EVENT_KIND_LEN))
-            self._put("events/detail", a, _str_array([e[3] for e in ev], EVENT_DETAIL_LEN))
+            for j, (name, (dtype, _, _)) in enumerate(EVENT_FIELDS.items()):
+                self._put(f"events/{name}", a, _column_of([e[j] for e in ev], np.dtype(dtype)))
             self._event_rows = a + len(ev)
             self._events = []
         if self.durable:  # power loss too: data on disk before the progress record that covers it
@@ -301,10 +305,6 @@ class RunWriter:
         self._close_fd()
         self._closing_groups = dict(groups or {})
         self._rebuild(None, compact=True, status=status, attrs=attrs)
-
-    def abandon(self) -> None:
-        """Close the handle without compacting (the file stays 'running', valid up to its progress)."""
-        self._close_fd()
 
     @property
     def rows(self) -> int:
@@ -445,9 +445,7 @@ class RunWriter:
                 raw[s.name].attrs.update(rate_hz=s.rate_hz, hold_s=s.hold_s)
             ev = f.create_group("events")
             n_ev = len(data.get("events/time", ())) if compact else capacity["events"]
-            for name, dtype, units in (("time", "f8", "s"), ("cycle", "i8", "1"),
-                                       ("kind", f"S{EVENT_KIND_LEN}", ""), ("detail", f"S{EVENT_DETAIL_LEN}", "")):
-                fill = np.nan if name == "time" else (-1 if name == "cycle" else b"")
+            for name, (dtype, units, fill) in EVENT_FIELDS.items():
                 arr = np.full(n_ev, fill, dtype=dtype)
                 src = data.get(f"events/{name}")
                 if src is not None:
@@ -513,8 +511,9 @@ class RunWriter:
             for col in ("time", *s.names):
                 data[f"raw/{s.name}/{col}"] = src["raw"][s.name][col][:n]
         n_ev = int(progress["event_rows"])
-        for name in EVENT_COLUMNS:
-            data[f"events/{name}"] = src["events"][name][:n_ev]
+        for name in EVENT_FIELDS:
+            if name in src["events"]:  # a column newer than the file (`step`) is written as not known
+                data[f"events/{name}"] = src["events"][name][:n_ev]
         meta_attrs = {k: v for k, v in src.attrs.items()}
         meta_attrs["status"] = status
         meta_attrs.update(dict(attrs or {}))

@@ -46,7 +46,7 @@ class Cooldown:
 def validation_cooldowns(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, str]]:
     """(cycle, start s, end s, set-points) of each long cool-down of a validation run, from its step events."""
     spans: dict[int, list[Any]] = {}
-    for t, cycle, kind, detail in load_events(path):
+    for t, cycle, kind, detail, _ in load_events(path):
         if kind not in ("step_start", "cycle_start", "run_complete", "run_aborted"):
             continue
         inside = kind == "step_start" and COOLDOWN_LABEL in detail

@@ -25,7 +25,7 @@ import numpy as np
 
 from benchlab.errors import InputError
 from benchlab.runfile.read import grid_step, read_schedule, text
-from benchlab.runfile.schema import EVENT_COLUMNS, SCHEMA
+from benchlab.runfile.schema import EVENT_FIELDS, EVENT_REQUIRED, SCHEMA
 from protocols.schedule import Step
 
 
@@ -129,8 +129,9 @@ class RunFileVersion:
             self.columns[name] = _column(ds, self.fd)
         self.events: dict[str, Column] = {}
         events = f.get("events")
-        if isinstance(events, h5py.Group) and all(isinstance(events.get(c), h5py.Dataset) for c in EVENT_COLUMNS):
-            self.events = {c: _column(events[c], self.fd) for c in EVENT_COLUMNS}
+        if isinstance(events, h5py.Group) and all(isinstance(events.get(c), h5py.Dataset) for c in EVENT_REQUIRED):
+            self.events = {c: _column(events[c], self.fd) for c in EVENT_FIELDS
+                           if isinstance(events.get(c), h5py.Dataset)}
         self.progress_fields: list[str] = []
         self._progress: Column | None = None
         progress = f.get("acquire/progress")
@@ -193,12 +194,13 @@ class RunFileVersion:
         return out
 
     def read_events(self, start: int, stop: int) -> list[dict[str, Any]]:
-        """Events [start, stop) as dicts time (s), cycle, kind, detail."""
+        """Events [start, stop) as dicts time (s), cycle, kind, detail, step (-1 in a file without `step`)."""
         if not self.events or stop <= start:
             return []
-        cols = {c: self.events[c].read(start, stop) for c in EVENT_COLUMNS}
-        return [{"time": float(t), "cycle": int(c), "kind": text(k).rstrip("\x00"), "detail": text(d).rstrip("\x00")}
-                for t, c, k, d in zip(cols["time"], cols["cycle"], cols["kind"], cols["detail"])]
+        cols = {c: self.events[c].read(start, stop) if c in self.events else np.full(stop - start, fill)
+                for c, (_, _, fill) in EVENT_FIELDS.items()}
+        return [{"time": float(t), "cycle": int(c), "kind": text(k).rstrip("\x00"), "detail": text(d).rstrip("\x00"),
+                 "step": int(s)} for t, c, k, d, s in zip(*cols.values())]
 
     def replaced(self) -> bool:
         """Whether the run's name now points to another file (the writer's os.replace), or to none."""

@@ -10,13 +10,13 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import h5py
 import numpy as np
 
 from benchlab.errors import InputError
-from benchlab.runfile.schema import (ALIGNED_UNITS, EVENT_COLUMNS, REQUIRED, SCHEMA, time_step_tolerance,
+from benchlab.runfile.schema import (ALIGNED_UNITS, EVENT_FIELDS, REQUIRED, SCHEMA, time_step_tolerance,
                                      unmeasurable_sample)
 from protocols.schedule import Step, steps_from_rows
 
@@ -58,8 +58,19 @@ def load_progress(path: "str | os.PathLike[str]") -> dict[str, float]:
         return read_progress(f) if "acquire/progress" in f else {}
 
 
-def load_events(path: "str | os.PathLike[str]") -> list[tuple[float, int, str, str]]:
-    """The run's /events as (time s, cycle, kind, detail), up to the progress record of a file still running."""
+class Event(NamedTuple):
+    """One row of /events (docs/runfile.md): `step` is the row of /schedule it belongs to, -1 for none."""
+
+    time: float
+    cycle: int
+    kind: str
+    detail: str
+    step: int
+
+
+def load_events(path: "str | os.PathLike[str]") -> list[Event]:
+    """The run's /events, up to the progress record of a file still running; `step` -1 throughout in a file
+    written before events carried it."""
     path = Path(path)
     with open_run(path) as f:
         if "events" not in f:
@@ -68,8 +79,8 @@ def load_events(path: "str | os.PathLike[str]") -> list[tuple[float, int, str, s
         n = len(g["time"])
         if "acquire/progress" in f:
             n = min(n, int(read_progress(f).get("event_rows", n)))
-        columns = [g[c][:n] for c in EVENT_COLUMNS]
-        return [(float(t), int(c), text(k), text(d)) for t, c, k, d in zip(*columns)]
+        columns = [g[c][:n] if c in g else np.full(n, fill) for c, (_, _, fill) in EVENT_FIELDS.items()]
+        return [Event(float(t), int(c), text(k), text(d), int(s)) for t, c, k, d, s in zip(*columns)]
 
 
 def read_schedule(f: h5py.File, path: Path) -> tuple[Step, ...]:

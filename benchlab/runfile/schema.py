@@ -25,10 +25,17 @@ ALIGNED_MEANING: dict[str, str] = {
     "T_housing": "ϑ_T, transmission housing", "T_ambient": "ϑ_amb, ambient", "T_engine": "ϑ_eng, engine",
     "load_torque": "load machine torque", "T_flywheel_1": "flywheel sensor 1", "T_flywheel_2": "flywheel sensor 2",
 }
-#: /events: one dataset per column, in this order (time s, cycle, kind and detail as fixed-length UTF-8 text).
-EVENT_COLUMNS = ("time", "cycle", "kind", "detail")
 EVENT_KIND_LEN = 32
 EVENT_DETAIL_LEN = 160
+#: /events: one dataset per column, in this order, as (dtype, units, value of a row not written). `cycle` and
+#: `step` (the row of /schedule the event belongs to) are -1 outside a cycle or step; kind and detail are
+#: fixed-length UTF-8 text.
+EVENT_FIELDS: dict[str, tuple[str, str, object]] = {
+    "time": ("f8", "s", float("nan")), "cycle": ("i8", "1", -1), "kind": (f"S{EVENT_KIND_LEN}", "", b""),
+    "detail": (f"S{EVENT_DETAIL_LEN}", "", b""), "step": ("i8", "1", -1)}
+EVENT_COLUMNS = tuple(EVENT_FIELDS)
+#: The columns every /events holds; files written before `step` existed lack it (read as -1, "no step").
+EVENT_REQUIRED = ("time", "cycle", "kind", "detail")
 #: /schedule: units of the Step fields that have one (the rest are stored with units "").
 SCHEDULE_UNITS = {"duration_s": "s", "engine_speed_rpm": "rpm", "clutch_torque_nm": "N*m",
                   "load_torque_nm": "N*m", "cycle": "1", "estimate_s": "s", "pulse_s": "s", "rest_s": "s"}

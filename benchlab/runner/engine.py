@@ -96,6 +96,7 @@ class Runner:
         self.summary = RunSummary(len({s.cycle for s in self.steps}))
         self.stop_request: str | None = None
         self.cycle = -1
+        self.current_step = -1  # index in `steps` of the step under way (its events carry it), -1 between steps
         self.synced = True
         self._last_progress = -math.inf
         self._planned_before = np.concatenate([[0.0], np.cumsum([s.expected_s for s in self.steps])])
@@ -133,15 +134,17 @@ class Runner:
                     cycle = step.cycle
                     while i < len(self.steps) and self.steps[i].cycle == cycle:
                         i += 1
-                    self.writer.event(self.clock(), "cycle_skipped", cycle, "after an interlock")
+                    self.writer.event(self.clock(), "cycle_skipped", cycle, "after an interlock",
+                                      step=self.current_step)
                     self.summary.events["cycle_skipped"] += 1
+                    self.current_step = -1
             self.bench.safe_state()
             self._tick(interlocks=False)  # already safe: nothing left to interlock
             self.writer.event(self.clock(), "run_complete", self.cycle)
             self.progress.advance(self._planned_before[-1] - self._reported)
         except Stopped as stop:
             self.bench.safe_state()
-            self.writer.event(self.clock(), "run_aborted", self.cycle, stop.reason)
+            self.writer.event(self.clock(), "run_aborted", self.cycle, stop.reason, step=self.current_step)
             self._tick(interlocks=False)
             self.summary.status, self.summary.reason = "aborted", stop.reason
             self.summary.exit_code = stop.code  # type: ignore[attr-defined]
@@ -158,18 +161,18 @@ class Runner:
     # -- steps ----------------------------------------------------------------------------------------
     def _run_step(self, index: int, step: Step) -> None:
         now = self.clock()
+        self.current_step = self._step_index = index
         if step.cycle != self.cycle:
             self.cycle = step.cycle
             self.synced = True
             self.writer.state["cycle"] = step.cycle
-            self.writer.event(now, "cycle_start", step.cycle, _point_text(step))
-        self._step_index = index
+            self.writer.event(now, "cycle_start", step.cycle, _point_text(step), step=index)
         self.writer.state["next_step"] = index
         self._history.clear()
         detail = step.phase + (f" {step.label}" if step.label else "") + (f" {_point_text(step)}" if step.point else "")
-        self.writer.event(now, "step_start", step.cycle, detail)
+        self.writer.event(now, "step_start", step.cycle, detail, step=index)
         if step.label == "cooldown":
-            self.writer.event(now, "cooldown_start", step.cycle, _point_text(step))
+            self.writer.event(now, "cooldown_start", step.cycle, _point_text(step), step=index)
         t_end = now + step.duration_s
         self._t_step_start = now
         heat = _Pulses(step, now) if step.phase == "heat" else None
@@ -182,7 +185,7 @@ class Runner:
             now = self.clock()
             st = self.bench.status
             if step.phase == "launch" and st.locked and now > self._step_t0 + 2 * self.fast_tick_s:
-                self.writer.event(now, "synchronised", step.cycle, f"after {now - self._step_t0:.2f} s")
+                self.writer.event(now, "synchronised", step.cycle, f"after {now - self._step_t0:.2f} s", step=index)
                 reason = "synchronised"
                 break
             if step.until and self._conditions_met(step.until, now):
@@ -192,19 +195,20 @@ class Runner:
                 if step.phase == "launch":
                     self.synced = False
                     self.writer.event(now, "slip_time_limit", step.cycle,
-                                      f"not synchronous after {step.duration_s:g} s: clutch opened")
+                                      f"not synchronous after {step.duration_s:g} s: clutch opened", step=index)
                     self.summary.events["slip_time_limit"] += 1
                 elif step.until:
                     self.writer.event(now, "timeout", step.cycle, "condition not reached: " +
-                                      " or ".join(c.describe() for c in step.until))
+                                      " or ".join(c.describe() for c in step.until), step=index)
                     self.summary.events["timeout"] += 1
                 break
             if heat is not None and heat.update(now, st, self._target(step)):
                 self._apply(step, heat)
         if step.label == "cooldown":
-            self.writer.event(self.clock(), "cooldown_end", step.cycle, f"{reason}; {_point_text(step)}")
-        self.writer.event(self.clock(), "step_end", step.cycle, f"{step.phase}: {reason}")
+            self.writer.event(self.clock(), "cooldown_end", step.cycle, f"{reason}; {_point_text(step)}", step=index)
+        self.writer.event(self.clock(), "step_end", step.cycle, f"{step.phase}: {reason}", step=index)
         self.writer.state["next_step"] = index + 1
+        self.current_step = -1
 
     @property
     def _step_t0(self) -> float:
@@ -259,7 +263,7 @@ class Runner:
         for stream, t, row in readings:
             w.add(stream, t, row)
         for t, kind, detail in events:
-            w.event(t, kind, self.cycle, detail)
+            w.event(t, kind, self.cycle, detail, step=self.current_step)
             self.summary.events[kind] += 1
         st = self.bench.status
         if np.isfinite(st.T_flywheel):
@@ -272,7 +276,7 @@ class Runner:
         eng: list[tuple[str, str]] = []
         self.engagements.update(st, now, eng)
         for kind, detail in eng:
-            w.event(now, kind, self.cycle, detail)
+            w.event(now, kind, self.cycle, detail, step=self.current_step)
         w.state["energy_j"] = self.summary.energy_j + self.engagements.total_energy
         w.advance(now)
         self._report(now)
@@ -285,7 +289,8 @@ class Runner:
         """Safe state at once, an `interlock` event per trip; abort if any of them says so."""
         self.bench.safe_state()
         for trip in trips:
-            self.writer.event(now, "interlock", self.cycle, f"{trip.name}: {trip.detail} ({trip.action})")
+            self.writer.event(now, "interlock", self.cycle, f"{trip.name}: {trip.detail} ({trip.action})",
+                              step=self.current_step)
             self.summary.events[f"interlock {trip.name}"] += 1
         aborting = [t.name for t in trips if t.action == "abort"]
         if aborting:
@@ -315,7 +320,8 @@ class Runner:
                 names = ", ".join(self.interlocks.active)
                 raise Stopped(f"interlock {names} did not clear within {self.limits.max_wait_s:g} s", 1)
         self.writer.state["held"] = 0.0
-        self.writer.event(self.clock(), "interlock_cleared", self.cycle, ", ".join(t.name for t in trips))
+        self.writer.event(self.clock(), "interlock_cleared", self.cycle, ", ".join(t.name for t in trips),
+                          step=self.current_step)
         raise _SkipCycle()
 
     def _report(self, now: float) -> None:

@@ -204,9 +204,10 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             writer = RunWriter.resume(request.out, layout, extra_s=duration_s(steps[resume_state["start"]:]),
                                       flush_every_s=config.flush_every_s)
             writer.state["resumes"] = resume_state["resumes"]
+            start = resume_state["start"]
             writer.event(t0, "resume", int(resume_state["cycle"]),
-                         f"resume {resume_state['resumes']}: continuing with step {resume_state['start']}; "
-                         f"CAN log {can_log.name}")
+                         f"resume {resume_state['resumes']}: continuing with step {start}; CAN log {can_log.name}",
+                         step=start if start < len(steps) else -1)
         else:
             attrs = {"seed": request.seed, "software_version": software_version(), "bench": request.bench,
                      "bench_config": json.dumps(config.as_dict(), default=str),
@@ -237,7 +238,8 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
         except Exception as exc:  # an unexpected failure: bench safe, file closed as aborted, then report it
             try:
                 bench.safe_state()
-                writer.event(clock(), "run_aborted", runner.cycle, f"failure: {type(exc).__name__}: {exc}")
+                writer.event(clock(), "run_aborted", runner.cycle, f"failure: {type(exc).__name__}: {exc}",
+                             step=runner.current_step)
                 writer.close("aborted", groups=_truth_groups(sim, writer, resume_state))
             finally:
                 raise

@@ -290,7 +290,7 @@ function renderEvents() {
   $("events").innerHTML = last.map((e) => {
     const cls = ALARM.test(e.kind) ? "alarm" : e.kind === "interlock_cleared" ? "ok" : "";
     return `<tr class="${cls}"><td>${fmtTime(e.time)}</td><td>${e.cycle >= 0 ? e.cycle + 1 : ""}</td>` +
-      `<td>${esc(e.kind)}</td><td>${esc(e.detail)}</td></tr>`;
+      `<td>${e.step >= 0 ? e.step + 1 : ""}</td><td>${esc(e.kind)}</td><td>${esc(e.detail)}</td></tr>`;
   }).join("");
 }
 
