@@ -75,7 +75,7 @@ def test_two_effects_from_the_linear_baseline_are_both_named_and_the_model_reach
 
 
 def test_a_cover_between_plate_and_air_is_named_as_a_node_bridging_them():
-    plant, run = _bench([_cover(600.0, 0.3, 0.3)], seed=221)
+    plant, run = _bench([_cover(800.0, 0.5, 0.2)], seed=221)
     result = diagnose([run], baseline="nonlinear")
     _accepted_as_documented(result)
     first = result["findings"][0]

@@ -288,8 +288,10 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     chosen = [scored[k] for k in np.argsort(predicted)[:SCORED_FITS]] + [i for i, c in enumerate(cands) if c.structural]
 
     def screen_one(k: int) -> tuple[float, dict[str, float]]:
-        spec = specs[chosen[k]]
-        result = fit(spec, datasets, max_nfev=SCREEN_NFEV, start=_nested_start(spec, current))
+        spec, cand = specs[chosen[k]], cands[chosen[k]]
+        nested = _nested_start(spec, current)
+        starts = [nested] + [{**nested, **probe} for probe in (cand.probes(current.params) if cand.probes else [])]
+        result = min((fit(spec, datasets, max_nfev=SCREEN_NFEV, start=s) for s in starts), key=lambda r: r.cost)
         return result.cost, result.params
 
     with progress.task(what, len(chosen), unit="fit") as task:
@@ -358,9 +360,15 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
         return None
     best = max(passing, key=lambda t: t.gain_pct)
     alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, best.held))
-                    for t in passing if t is not best]
+                    for t in passing if _explains(t.candidate) != _explains(best.candidate)]
     return _finding(best.candidate, best.spec, best.params, best.cost, best.residuals, current, current_held,
                     best.held, [a for a in alternatives if a.p_vs_winner >= ALPHA])
+
+
+def _explains(cand: Candidate) -> tuple:
+    """What a finding tells the user: signal, mechanism and the nodes it acts on; candidates alike in these are
+    forms of one explanation, not alternatives to it."""
+    return cand.signal, cand.mechanism, frozenset(cand.nodes)
 
 
 def _finding(cand: Candidate, spec: ModelSpec, params: dict[str, float], cost: float, residuals: np.ndarray,

@@ -65,6 +65,9 @@ class Candidate:
     physical: bool = True
     nodes: tuple[str, ...] = ()  # the nodes it changes (where a sensor would see it first)
     structural: bool = False
+    #: further screening starts from the current values (an extra node of a tenth or all of its neighbour's
+    #: capacity): a structural candidate's nested start is flat, and the screen keeps the best of all its starts
+    probes: Callable[[Mapping[str, float]], list[dict[str, float]]] | None = None
 
 
 def signal_values(name: str, ch: Channels) -> np.ndarray:
@@ -205,6 +208,19 @@ def extra_node(ends: tuple[str, ...], key: str, mass: str) -> Build:
     return build
 
 
+def node_probes(model: ModelDefinition, ends: tuple[str, ...], mass: str) -> Callable[[Mapping[str, float]],
+                                                                                   list[dict[str, float]]]:
+    """Screening starts of an extra node: its capacity a tenth of and equal to its (first) neighbour's, each link the
+    geometric mean of the model's plain link resistances (a parameter named as the whole law)."""
+    plain = [l.resistance.text for l in model.links if l.resistance.text in model.parameters]
+
+    def probes(values: Mapping[str, float]) -> list[dict[str, float]]:
+        r = float(np.exp(np.mean([np.log(values[name]) for name in plain]))) if plain else 1.0
+        capacity = values.get(model.nodes[ends[0]], 1000.0)
+        return [{f"C_{mass}": share * capacity, **{f"R_{end}{mass}": r for end in ends}} for share in (0.1, 1.0)]
+    return probes
+
+
 def sensor_lag(output: str, node: str) -> Build:
     """The sensor of `output` follows its node with a first-order lag, from NESTED_LAG_S."""
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
@@ -296,11 +312,13 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     for node in nodes:
         out.append(Candidate(f"extra_mass_{node}", None, "capacity", f"extra node X{node}: C_X{node} linked to {node}",
                              f"a thermal mass the model lacks stores and returns heat behind node {node}",
-                             extra_node((node,), f"extra_mass_{node}", f"X{node}"), nodes=(node,), structural=True))
+                             extra_node((node,), f"extra_mass_{node}", f"X{node}"), nodes=(node,), structural=True,
+                             probes=node_probes(model, (node,), f"X{node}")))
     for a, b in combinations(nodes, 2):
         out.append(Candidate(f"bridge_{a}_{b}", None, "capacity", f"extra node X{a}{b} linked to {a} and to {b}",
                              f"a thermal mass the model lacks sits between {a} and {b}",
-                             extra_node((a, b), f"bridge_{a}_{b}", f"X{a}{b}"), nodes=(a, b), structural=True))
+                             extra_node((a, b), f"bridge_{a}_{b}", f"X{a}{b}"), nodes=(a, b), structural=True,
+                             probes=node_probes(model, (a, b), f"X{a}{b}")))
     lagged = {g.output for g in model.lags}
     for output, node in model.outputs.items():
         if output not in lagged:
@@ -392,7 +410,7 @@ CLUTCH_NAMED = {
     "extra_mass_F": Candidate(
         "extra_mass", None, "capacity", "extra node XF: C_XF linked to the flywheel by R_FXF",
         "a thermal mass the model lacks stores and returns heat slowly", extra_node(("F",), "extra_mass", "XF"),
-        nodes=("F",), structural=True),
+        nodes=("F",), structural=True),  # its probes are set from the model in clutch_candidates
     "sensor_lag_T_flywheel": Candidate(
         "sensor_lag", "T_flywheel", "sensor", "T_flywheel measured = first-order lag tau_F of the flywheel",
         "the flywheel sensor lags the flywheel temperature", sensor_lag("T_flywheel", "F"), nodes=("F",),
@@ -416,7 +434,7 @@ def clutch_candidates(model: ModelDefinition, channels: Channels) -> list[Candid
         nodes=("P", "F", "A"))]
     for cand in generated(model, signals, channels, _clutch_mechanism):
         named = CLUTCH_NAMED.get(cand.key)
-        out.append(named or replace(cand, summary=_clutch_words(cand.summary)))
+        out.append(replace(named, probes=cand.probes) if named else replace(cand, summary=_clutch_words(cand.summary)))
     out += [Candidate("clamped_conduction", "clutch_state", "conduction", "R_PF between plate and flywheel when S = 1",
                       "plate and flywheel exchange heat through the clamped disc",
                       new_link("P", "F", "R_PF", gate="clutch_state"), nodes=("P", "F")),
