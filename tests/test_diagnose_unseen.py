@@ -4,7 +4,7 @@ Each effect (`sim_bench.unseen`) is hidden at one magnitude chosen before diagno
 the baseline's in-sample RMSE over the noise floor about 2.5-3.5 on a 40 min run of another seed (baseline fitted
 alone, no diagnose). What naming it right means was written from the physics before looking at diagnose's output
 and was not changed after (issue 18): the first finding's mechanism and signal must be the effect's
-(`Unseen.named`); the cover must in addition sit at the plate or the air, where it is. Diagnose runs as a user runs
+(`Hidden.named`); the cover must in addition sit at the plate or the air, where it is. Diagnose runs as a user runs
 it: a run file on disk, `benchlab diagnose RUN.h5 --baseline M --json --save-model OUT.toml`.
 """
 
@@ -26,7 +26,7 @@ from sim_bench.plant import ThermalPlant
 from sim_bench.virtual_run import run_schedule
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from accuracy_diagnose import floor_k  # noqa: E402 - what a perfect model scores, one home
+from accuracy_diagnose import batch_floor_k  # noqa: E402 - what a perfect model scores, one home
 
 RUN_S = 2400.0  # 40 min of bench time: four held-out folds of 600 s
 VISIBLE = 1.5  # baseline held-out RMSE over the floor below which the case would not test what it claims
@@ -43,7 +43,7 @@ def _diagnose(tmp_path: Path, capsys, effects, seed: int, truth: str, baseline: 
     capsys.readouterr()
     assert main(["diagnose", str(path), "--baseline", baseline, "--json", "--save-model", str(best), "-q"]) == 0
     result = json.loads(capsys.readouterr().out)
-    return result, tomllib.loads(best.read_text()), floor_k(plant, run)
+    return result, tomllib.loads(best.read_text()), batch_floor_k(plant, run)
 
 
 def _described(result: dict) -> str:
