@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -68,14 +69,23 @@ def _floor(pairs) -> float:
     return float(np.sqrt(np.mean(np.concatenate(squared))))
 
 
-def _timed(runs) -> tuple[float, dict]:
-    start = time.perf_counter()
+def cpu_seconds() -> float:
+    """User + system CPU time of this process and of every child it has waited for (forked fit workers, the peer's
+    process and its own workers): the cost on a shared machine, where wall time is the other agents' load."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def _timed(runs) -> tuple[float, float, dict]:
+    """Wall seconds, CPU seconds and the JSON of one diagnosis."""
+    start, cpu = time.perf_counter(), cpu_seconds()
     result = diagnose(runs, baseline="nonlinear")
-    return time.perf_counter() - start, result
+    return time.perf_counter() - start, cpu_seconds() - cpu, result
 
 
-def _peer(ref: str, runs) -> tuple[float, str]:
-    """Wall time and findings of the engine at git `ref` on the same runs (its benchlab exported, run apart)."""
+def _peer(ref: str, runs) -> tuple[float, float, str]:
+    """Wall time, CPU time and findings of the engine at git `ref` on the same runs (its benchlab exported, run
+    apart; the CPU time is its process's with its workers, reading the files included)."""
     with tempfile.TemporaryDirectory() as tmp:
         archive = subprocess.run(["git", "archive", ref, "benchlab", "models"], cwd=ROOT, check=True,
                                  capture_output=True).stdout
@@ -84,10 +94,12 @@ def _peer(ref: str, runs) -> tuple[float, str]:
         for i, run in enumerate(runs):
             paths.append(str(Path(tmp) / f"run{i}.h5"))
             write_run(paths[-1], run, run.attrs["dt"], protocol="table1")
+        cpu = cpu_seconds()
         out = subprocess.run([sys.executable, "-c", PEER_SCRIPT, *paths], cwd=tmp, check=True, capture_output=True,
                              text=True, env={**os.environ, "PYTHONPATH": tmp}).stdout.strip()
+        cpu = cpu_seconds() - cpu
     seconds, findings = out.split(" ", 1)
-    return float(seconds), findings
+    return float(seconds), cpu, findings
 
 
 def _naive_zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -106,15 +118,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="two 45 min runs instead of two 2 h runs")
     parser.add_argument("--peer-ref", default=PEER_REF, help="git commit whose engine runs beside this one")
+    parser.add_argument("--no-slice", action="store_true", help="skip the 30 min slice with scipy's expm per point")
     args = parser.parse_args()
     duration = 2700.0 if args.quick else 7200.0
     pairs = _runs(duration, (1, 2))
     runs = [run for _, run in pairs]
     samples = sum(len(r) for r in runs)
-    elapsed, result = _timed(runs)
+    elapsed, cpu, result = _timed(runs)
     floor = _floor(pairs)
     print(f"load average {os.getloadavg()[0]:.2f}; two runs of {duration / 3600:.1f} h, {samples} samples at 10 ms")
-    print(f"diagnose: {elapsed:.1f} s, {samples / elapsed / 1e3:.0f} k samples/s, "
+    print(f"diagnose: {elapsed:.1f} s wall, {cpu:.1f} s CPU (all processes; {cpu / 2:.1f} s on 2 free cores), "
+          f"{samples / elapsed / 1e3:.0f} k samples/s, "
           f"{2 * duration / elapsed:.0f}x the bench time, {TARGET_S / elapsed:.2f}x the {TARGET_S:.0f} s target")
     base = result["baseline"]["rmse_K"]
     print(f"baseline held-out RMSE {base:.4f} K; floor (true temperatures vs targets) {floor:.4f} K; "
@@ -122,17 +136,19 @@ def main() -> None:
     for f in result["findings"]:
         print(f"  {f['signal']}/{f['mechanism']} ({f['candidate']}): {f['rmse_before_K']:.4f} -> "
               f"{f['rmse_after_K']:.4f} K, gain {f['gain_pct']:.1f} %, p = {f['p_value']:.1e}, BIC change {f['bic_delta']:.0f}")
-    peer_s, peer_findings = _peer(args.peer_ref, runs)
-    print(f"peer engine at {args.peer_ref} on the same runs: {peer_s:.1f} s (this engine {elapsed:.1f} s, "
-          f"{elapsed / peer_s:.1f}x), findings {peer_findings}")
+    peer_s, peer_cpu, peer_findings = _peer(args.peer_ref, runs)
+    print(f"peer engine at {args.peer_ref} on the same runs: {peer_s:.1f} s wall, {peer_cpu:.1f} s CPU (this engine "
+          f"{elapsed:.1f} s, {cpu:.1f} s CPU: {cpu / peer_cpu:.2f}x the peer's CPU), findings {peer_findings}")
+    if args.no_slice:
+        return
     slice_runs = [run.iloc[: int(PEER_SLICE_S / run.attrs["dt"])].copy() for run in runs]
     for piece, run in zip(slice_runs, runs):
         piece.attrs.update(run.attrs)
-    fast_slice, _ = _timed(slice_runs)
+    fast_slice, _, _ = _timed(slice_runs)
     compiled = solver._zoh
     solver._zoh = _naive_zoh  # the solver looks its ZOH up by name at each call
     try:
-        naive_slice, _ = _timed(slice_runs)
+        naive_slice, _, _ = _timed(slice_runs)
     finally:
         solver._zoh = compiled
     print(f"peer on the first {PEER_SLICE_S / 60:.0f} min of each run: compiled ZOH {fast_slice:.1f} s, "

@@ -61,6 +61,7 @@ HELD_OUT_NFEV = 60
 POLISH_NFEV = 80  # the all-data fit of a screened candidate: near convergence, so its gain is not underrated
 SCOUT_NFEV = 25  # the fit from a neutral start before it is polished (where it beats the warm start)
 CROSS_VALIDATED = 3
+MAX_VALIDATED = 6  # screened candidates polished at most per round, failed fits (on a bound) included
 GLOBAL_STARTS = 2  # the refit after an acceptance: scouts from the model file's neutral start, beside the warm one
 BOUND_TOL = 1e-3  # a fitted coordinate this close to a bound, as a share of its range, is on it
 MAX_ROUNDS = 3
@@ -237,7 +238,8 @@ def _nested_start(spec: ModelSpec, current: FitResult) -> dict[str, float]:
     return {**{p.name: p.initial for p in spec.free}, **{k: current.params[k] for k in current.free_names}}
 
 
-def _score(specs: Sequence[ModelSpec], current: FitResult, datasets: Sequence[FitData]) -> list[float]:
+def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitResult,
+           datasets: Sequence[FitData]) -> list[float]:
     """Per candidate, the in-sample cost one Gauss-Newton step from its nested start would reach, every parameter free.
 
     The current model's Jacobian is the fit's own; the new parameters' columns are forward differences at the
@@ -250,17 +252,19 @@ def _score(specs: Sequence[ModelSpec], current: FitResult, datasets: Sequence[Fi
     def project(v: np.ndarray) -> np.ndarray:
         return v - basis @ (basis.T @ v)
 
+    parent = residual_vector(current.spec.network, {**current.spec.fixed, **current.params}, datasets)
+
     def score_one(i: int) -> float:
-        spec = specs[i]
+        spec, cand = specs[i], cands[i]
         start = _nested_start(spec, current)
         x0 = to_coordinates(spec, start)
-        new = [j for j, p in enumerate(spec.free) if p.name not in current.params]
-        r0 = residual_vector(spec.network, {**spec.fixed, **start}, datasets)
+        new = [j for j, p in enumerate(spec.free) if p.name not in current.params and p.name not in cand.inert]
+        r0 = parent if cand.exact else residual_vector(spec.network, {**spec.fixed, **start}, datasets)
         columns = []
         for j in new:
             x = x0.copy()
             x[j] += SCORE_STEP
-            columns.append(residual_vector(spec.network, from_coordinates(spec, x), datasets) - r0)
+            columns.append(residual_vector(spec.network, {**spec.fixed, **from_coordinates(spec, x)}, datasets) - r0)
         rest = project(r0)
         if not columns:
             return float(rest @ rest)
@@ -284,7 +288,7 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     base = current.spec.definition
     specs = [diagnosed_spec(cand.build(base, channels), datasets) for cand in cands]
     scored = [i for i, c in enumerate(cands) if not c.structural]
-    predicted = _score([specs[i] for i in scored], current, datasets)
+    predicted = _score([specs[i] for i in scored], [cands[i] for i in scored], current, datasets)
     chosen = [scored[k] for k in np.argsort(predicted)[:SCORED_FITS]] + [i for i, c in enumerate(cands) if c.structural]
 
     def screen_one(k: int) -> tuple[float, dict[str, float]]:
@@ -334,27 +338,28 @@ class Tried:
 
 def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, datasets: Sequence[FitData],
          failed: list[tuple[str, tuple[str, ...]]]) -> Finding | None:
-    """Polish and cross-validate the best-screened candidates; the significant one with the largest gain, if any,
-    with the others that are not significantly worse as its alternatives. Failed fits are appended to `failed`."""
-    top = scored[:CROSS_VALIDATED]
-
+    """Polish and cross-validate the best-screened candidates, down the list past failed fits until CROSS_VALIDATED
+    have a good fit (at most MAX_VALIDATED tried); the significant one with the largest gain, if any, with the others
+    that are not significantly worse as its alternatives. Failed fits are appended to `failed`."""
     def validate(i: int) -> tuple:  # plain values: a worker's result is pickled, the networks' laws cannot be
-        _, _, spec, params = top[i]
+        _, _, spec, params = batch[i]
         result, bound = _polished(spec, params, current, datasets)
         if result is None:
             return None, bound
         held = _held_out(spec, result.params, datasets)
         return (result.params, result.cost, result.residuals, held.predictions, held.params), bound
 
-    tried = []
-    for (_, cand, spec, _), (values, bound) in zip(top, map_indices(validate, len(top))):
-        if values is None:
-            failed.append((cand.key, bound))
-            continue
-        params, cost, residuals, predictions, fold_params = values
-        held = HeldOut(datasets, predictions, fold_params)
-        tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
-                           100.0 * (1.0 - held.rmse / current_held.rmse)))
+    tried, offered = [], list(scored[:MAX_VALIDATED])
+    while offered and len(tried) < CROSS_VALIDATED:
+        batch, offered = offered[:CROSS_VALIDATED - len(tried)], offered[CROSS_VALIDATED - len(tried):]
+        for (_, cand, spec, _), (values, bound) in zip(batch, map_indices(validate, len(batch))):
+            if values is None:
+                failed.append((cand.key, bound))
+                continue
+            params, cost, residuals, predictions, fold_params = values
+            held = HeldOut(datasets, predictions, fold_params)
+            tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
+                               100.0 * (1.0 - held.rmse / current_held.rmse)))
     passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
     if not passing:
         return None
@@ -368,7 +373,7 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
 def _explains(cand: Candidate) -> tuple:
     """What a finding tells the user: signal, mechanism and the nodes it acts on; candidates alike in these are
     forms of one explanation, not alternatives to it."""
-    return cand.signal, cand.mechanism, frozenset(cand.nodes)
+    return frozenset(cand.reads), cand.mechanism, frozenset(cand.nodes)
 
 
 def _finding(cand: Candidate, spec: ModelSpec, params: dict[str, float], cost: float, residuals: np.ndarray,

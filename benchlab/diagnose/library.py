@@ -40,9 +40,14 @@ SPEED_UNIT = "rpm"
 NESTED_CAPACITY = 1.0
 NESTED_RESISTANCE = 1.0e4
 NESTED_LAG_S = 0.005
+OPEN_CIRCUIT = 1.0e6  # K/W of a gated link while it is open: no heat crosses
+EXPONENT_RANGE = (0.05, 8.0)  # of a signal in a law or a source: from nearly a step (x^0.05) to a steep rise
+#: Screening starts of a sensor lag (s): a lag of 5 ms is flat to first order, so its screen starts also here
+LAG_PROBES_S = (1.0, 10.0, 100.0)
 LAWS = ("linear", "power", "exponential")  # a link's resistance against a signal; an on/off signal gets one factor
 #: The clutch's signals a missing effect may depend on (where the runs hold them and they vary).
-CLUTCH_SIGNALS = ("engine_speed", "clutch_speed", "slip_speed", "clutch_state", "clutch_torque", "friction_power")
+CLUTCH_SIGNALS = ("engine_speed", "clutch_speed", "slip_speed", "clutch_state", "clutch_torque", "friction_power",
+                  "load_torque")
 
 Doc = dict
 Build = Callable[[ModelDefinition, Channels], ModelDefinition]
@@ -68,6 +73,19 @@ class Candidate:
     #: further screening starts from the current values (an extra node of a tenth or all of its neighbour's
     #: capacity): a structural candidate's nested start is flat, and the screen keeps the best of all its starts
     probes: Callable[[Mapping[str, float]], list[dict[str, float]]] | None = None
+    #: parameters with no first-order effect at the nested start (an exponent while its factor is zero): the score
+    #: test skips their columns, which are zero there
+    inert: tuple[str, ...] = ()
+    #: at its nested start the extension is exactly its parent (a zero factor, not a link of 1e4 K/W): the score
+    #: test takes the parent's residuals instead of simulating it once more
+    exact: bool = True
+    #: every signal the extension reads (a product of two reads both; `signal` names the first)
+    signals: tuple[str, ...] = ()
+
+    @property
+    def reads(self) -> tuple[str, ...]:
+        """Every signal the extension depends on."""
+        return self.signals or ((self.signal,) if self.signal else ())
 
 
 def signal_values(name: str, ch: Channels) -> np.ndarray:
@@ -126,6 +144,26 @@ def is_on_off(signal: str, ch: Channels) -> bool:
     return len(np.unique(signal_values(signal, ch)[np.isfinite(signal_values(signal, ch))])) <= 2
 
 
+def gated(signal: str, ch: Channels, on: bool, value: str, otherwise: str) -> str:
+    """`value` while an on/off signal is on (at its higher value; `on` False: while off), else `otherwise`."""
+    values = np.unique(signal_values(signal, ch)[np.isfinite(signal_values(signal, ch))])
+    middle = float(values.mean()) if len(values) else 0.5
+    first, second = (value, otherwise) if on else (otherwise, value)
+    return f"where({signal_expression(signal)} >= {middle!r}, {first}, {second})"
+
+
+def gate_expression(signal: str, ch: Channels, on: bool) -> str:
+    """1 while an on/off signal is on, else 0; or the other way round."""
+    return gated(signal, ch, on, "1.0", "0.0")
+
+
+def factor_expression(signal: str, ch: Channels, exponent: str, gate: bool | None = None) -> str:
+    """A signal as a source factor: an on/off signal as its gate (on or off), any other as (|s|/max)^n."""
+    if gate is not None:
+        return gate_expression(signal, ch, gate)
+    return f"(abs({signal_expression(signal)}) / {_reference(signal, ch)!r}) ** {exponent}"
+
+
 # --- generated from the structure ------------------------------------------------------------------------------
 
 def link_law(links: tuple[str, ...], signal: str, law: str) -> Build:
@@ -141,7 +179,7 @@ def link_law(links: tuple[str, ...], signal: str, law: str) -> Build:
             if law == "linear":
                 template, extra = f"({{r}}) / (1.0 + {g} * {x})", {}
             elif law == "power":
-                template, extra = f"({{r}}) / (1.0 + {g} * ({x}) ** n_{tag})", {f"n_{tag}": (2.0, 0.25, 4.0, "1 (exponent)")}
+                template, extra = f"({{r}}) / (1.0 + {g} * ({x}) ** n_{tag})", {f"n_{tag}": (2.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)")}
             else:
                 template, extra = (f"({{r}}) * (1.0 - {g} + {g} * exp(-k_{tag} * {x}))",
                                    {f"k_{tag}": (3.0, 0.1, 30.0, "1 (rate over the signal's range)")})
@@ -157,34 +195,52 @@ def link_law(links: tuple[str, ...], signal: str, law: str) -> Build:
     return build
 
 
-def channel_source(signal: str, node: str) -> Build:
-    """Heat q·(|s|/max)^n into `node` (q·s for an on/off signal), q from 0 W: engine or gearbox losses, a heater."""
+def source_name(signals: tuple[str, ...], node: str, gates: tuple[bool | None, ...]) -> str:
+    """The key of a heat source into `node` that reads `signals` (an on/off one while on or off)."""
+    parts = [f"{_slug(s)}" + ("" if g is None else ("_on" if g else "_off")) for s, g in zip(signals, gates)]
+    return f"source_{'_'.join(parts)}_{node}"
+
+
+def channel_source(signals: tuple[str, ...], node: str, gates: tuple[bool | None, ...]) -> Build:
+    """Heat q·Π factor(s) into `node`, q from 0 W: a continuous signal as (|s|/max)^n, an on/off one as its gate
+    (while on or while off). One signal: engine or gearbox losses, a heater; two: a loss in proportion to a
+    torque times a speed, or a drag only while the clutch is open."""
+    key = source_name(signals, node, gates)
+
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-        k, n = f"q_{signal}_{node}", f"n_{signal}_{node}"
-        on_off = is_on_off(signal, ch)
-        heat = (f"{k} * {signal_expression(signal)}" if on_off else
-                f"{k} * (abs({signal_expression(signal)}) / {_reference(signal, ch)!r}) ** {n}")
+        tag = key.removeprefix("source_")
+        k = f"q_{tag}"
+        exponents = [f"n{i + 1 if len(signals) > 1 else ''}_{tag}" for i in range(len(signals))]
+        heat = " * ".join([k] + [factor_expression(s, ch, n, g) for s, n, g in zip(signals, exponents, gates)])
 
         def edit(doc: Doc) -> None:
-            doc["sources"].append({"name": f"{signal} source {node}", "node": node, "heat": heat})
-            _parameter(doc, k, 0.0, -1e4, 1e4, "W (at the signal's maximum)", scale=10.0)
-            if not on_off:
-                _parameter(doc, n, 1.0, 0.25, 4.0, "1 (exponent)")
-        return revise(model, f"source_{signal}_{node}", edit)
+            doc["sources"].append({"name": key, "node": node, "heat": heat})
+            _parameter(doc, k, 0.0, -1e4, 1e4, "W (at the signals' maxima)", scale=10.0)
+            for n, g in zip(exponents, gates):
+                if g is None:
+                    _parameter(doc, n, 1.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)")
+        return revise(model, key, edit)
     return build
 
 
-def new_link(a: str, b: str, name: str | None = None, gate: str | None = None) -> Build:
-    """A link between two nodes the model does not link, from NESTED_RESISTANCE (none); `gate`: only while on."""
-    resistance = name or f"R_{a}{b}"
+def source_exponents(signals: tuple[str, ...], node: str, gates: tuple[bool | None, ...]) -> tuple[str, ...]:
+    """The exponents of channel_source: inert while q is zero."""
+    tag = source_name(signals, node, gates).removeprefix("source_")
+    return tuple(f"n{i + 1 if len(signals) > 1 else ''}_{tag}" for i, g in enumerate(gates) if g is None)
+
+
+def new_link(a: str, b: str, key: str, name: str | None = None, gate: str | None = None, on: bool = True) -> Build:
+    """A link between two nodes the model does not link, from NESTED_RESISTANCE (none); `gate`: an on/off signal,
+    the link there only while it is on (`on`) or off (a path that opens and closes with the clutch)."""
+    resistance = name or (f"R_{a}{b}" if gate is None else f"R_{a}{b}_{_slug(gate)}_{'on' if on else 'off'}")
 
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-        law = f"where({gate} >= 0.5, {resistance}, 1000000.0)" if gate else resistance
+        law = gated(gate, ch, on, resistance, repr(OPEN_CIRCUIT)) if gate else resistance
 
         def edit(doc: Doc) -> None:
             doc["links"].append({"name": resistance, "between": [a, b], "resistance": law})
             _parameter(doc, resistance, NESTED_RESISTANCE, 1e-3, 10 * NESTED_RESISTANCE, "K/W")
-        return revise(model, "clamped_conduction" if gate else f"link_{a}_{b}", edit)
+        return revise(model, key, edit)
     return build
 
 
@@ -208,29 +264,49 @@ def extra_node(ends: tuple[str, ...], key: str, mass: str) -> Build:
     return build
 
 
+def typical_resistance(model: ModelDefinition, values: Mapping[str, float]) -> float:
+    """The geometric mean of the model's fitted plain link resistances (a parameter named as the whole law), K/W."""
+    plain = [l.resistance.text for l in model.links if l.resistance.text in model.parameters]
+    return float(np.exp(np.mean([np.log(values[name]) for name in plain]))) if plain else 1.0
+
+
 def node_probes(model: ModelDefinition, ends: tuple[str, ...], mass: str) -> Callable[[Mapping[str, float]],
                                                                                    list[dict[str, float]]]:
     """Screening starts of an extra node: its capacity a tenth of and equal to its (first) neighbour's, each link the
-    geometric mean of the model's plain link resistances (a parameter named as the whole law)."""
-    plain = [l.resistance.text for l in model.links if l.resistance.text in model.parameters]
-
+    model's typical resistance."""
     def probes(values: Mapping[str, float]) -> list[dict[str, float]]:
-        r = float(np.exp(np.mean([np.log(values[name]) for name in plain]))) if plain else 1.0
+        r = typical_resistance(model, values)
         capacity = values.get(model.nodes[ends[0]], 1000.0)
         return [{f"C_{mass}": share * capacity, **{f"R_{end}{mass}": r for end in ends}} for share in (0.1, 1.0)]
     return probes
 
 
+def link_probes(model: ModelDefinition, resistance: str) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening start of a new link: the model's typical resistance. From NESTED_RESISTANCE a short fit moves its
+    logarithm too little (a path of 0.3 K/W reached 0.86 of the parent's cost in 8 evaluations, 0.07 from here)."""
+    return lambda values: [{resistance: typical_resistance(model, values)}]
+
+
 def sensor_lag(output: str, node: str) -> Build:
     """The sensor of `output` follows its node with a first-order lag, from NESTED_LAG_S."""
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-        tau = "tau_F" if output == "T_flywheel" else f"tau_{output}"
+        tau = lag_time_constant(output)
 
         def edit(doc: Doc) -> None:
             doc["lags"].append({"output": output, "node": node, "time_constant": tau})
             _parameter(doc, tau, NESTED_LAG_S, 0.001, 600.0, "s")
         return revise(model, "sensor_lag" if output == "T_flywheel" else f"sensor_lag_{output}", edit)
     return build
+
+
+def lag_time_constant(output: str) -> str:
+    """The time constant of a lag on `output` (tau_F for the clutch's flywheel, its earlier name)."""
+    return "tau_F" if output == "T_flywheel" else f"tau_{output}"
+
+
+def lag_probes(output: str) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening starts of a sensor lag at LAG_PROBES_S: at 5 ms its effect is flat to first order."""
+    return lambda values: [{lag_time_constant(output): tau} for tau in LAG_PROBES_S]
 
 
 def moved_heat(first: str, second: str) -> Build:
@@ -285,11 +361,45 @@ def link_groups(model: ModelDefinition) -> list[tuple[str, ...]]:
     return [tuple(names) for names in groups.values()]
 
 
+def _link_inert(links: tuple[str, ...], signal: str, law: str) -> tuple[str, ...]:
+    """The parameter of link_law that has no effect while its factor g is zero."""
+    tag = f"{_slug(signal)}_{_slug(links[0])}"
+    return {"power": (f"n_{tag}",), "exponential": (f"k_{tag}",)}.get(law, ())
+
+
+def _sources(signals: list[str], nodes: list[str], channels: Channels) -> list[Candidate]:
+    """Heat sources into each node: one signal (an on/off one while on and while off), and the product of two (a
+    continuous signal with another, or gated by an on/off one). A product names its first signal."""
+    on_off = {s for s in signals if is_on_off(s, channels)}
+    forms: list[tuple[tuple[str, ...], tuple[bool | None, ...]]] = []
+    for s in signals:
+        forms += [((s,), (g,)) for g in (True, False)] if s in on_off else [((s,), (None,))]
+    for first, second in combinations(signals, 2):
+        if first in on_off and second in on_off:
+            continue
+        gates = [(g, None) for g in (True, False)] if first in on_off else (
+            [(None, g) for g in (True, False)] if second in on_off else [(None, None)])
+        forms += [((first, second), g) for g in gates]
+    out = []
+    for node in nodes:
+        for used, gates in forms:
+            words = " x ".join(f"{s} ({'on' if g else 'off'})" if g is not None else s for s, g in zip(used, gates))
+            law = "*".join(f"[{s} {'on' if g else 'off'}]" if g is not None else
+                           (f"(|{s}|/max)^n{i + 1}" if len(used) > 1 else f"(|{s}|/max)^n")
+                           for i, (s, g) in enumerate(zip(used, gates)))
+            out.append(Candidate(source_name(used, node, gates), used[0], "heat_source",
+                                 f"heat into {node} = q*{law}", f"a heat source driven by {words} "
+                                 f"warms node {node}", channel_source(used, node, gates), nodes=(node,),
+                                 inert=source_exponents(used, node, gates), signals=used))
+    return out
+
+
 def generated(model: ModelDefinition, signals: list[str], channels: Channels,
               link_mechanism: Callable[[tuple[str, ...]], str] = lambda links: "convection") -> list[Candidate]:
     """Every extension of the model's structure (module docstring), physical ones first, learned flows last."""
     nodes = list(model.nodes)
     link_nodes = {l.name: tuple(n for n in l.between if n in model.nodes) for l in model.links}
+    on_off = [s for s in signals if is_on_off(s, channels)]
     out = []
     for group in link_groups(model):
         where = tuple(dict.fromkeys(n for name in group for n in link_nodes[name]))
@@ -298,33 +408,41 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
                 out.append(Candidate(f"{signal}_{law}_{'_'.join(group)}", signal, link_mechanism(group),
                                      f"{' = '.join(group)} = R * f({signal}), {law}",
                                      f"heat crosses {' and '.join(group)} at a rate that depends on {signal}",
-                                     link_law(group, signal, law), nodes=where))
-    for signal in signals:
-        for node in nodes:
-            out.append(Candidate(f"source_{signal}_{node}", signal, "heat_source", f"heat into {node} = q*({signal}/max)^n",
-                                 f"a heat source driven by {signal} warms node {node}", channel_source(signal, node),
-                                 nodes=(node,)))
+                                     link_law(group, signal, law), nodes=where, inert=_link_inert(group, signal, law),
+                                     signals=(signal,)))
+    out += _sources(signals, nodes, channels)
     linked = {frozenset(l.between) for l in model.links}
     for a, b in combinations(nodes, 2):
         if frozenset((a, b)) not in linked:
             out.append(Candidate(f"link_{a}_{b}", None, "conduction", f"new link R_{a}{b} between {a} and {b}",
-                                 f"nodes {a} and {b} exchange heat directly", new_link(a, b), nodes=(a, b)))
+                                 f"nodes {a} and {b} exchange heat directly", new_link(a, b, f"link_{a}_{b}"), nodes=(a, b),
+                                 exact=False, probes=link_probes(model, f"R_{a}{b}")))
+            for gate in on_off:
+                for on in (True, False):
+                    state = "on" if on else "off"
+                    out.append(Candidate(f"link_{a}_{b}_{gate}_{state}", gate, "conduction",
+                                         f"new link R_{a}{b} between {a} and {b} while {gate} is {state}",
+                                         f"nodes {a} and {b} exchange heat directly while {gate} is {state}",
+                                         new_link(a, b, f"link_{a}_{b}_{gate}_{state}", gate=gate, on=on),
+                                         nodes=(a, b), exact=False, signals=(gate,),
+                                         probes=link_probes(model, f"R_{a}{b}_{_slug(gate)}_{state}")))
     for node in nodes:
         out.append(Candidate(f"extra_mass_{node}", None, "capacity", f"extra node X{node}: C_X{node} linked to {node}",
                              f"a thermal mass the model lacks stores and returns heat behind node {node}",
                              extra_node((node,), f"extra_mass_{node}", f"X{node}"), nodes=(node,), structural=True,
-                             probes=node_probes(model, (node,), f"X{node}")))
+                             probes=node_probes(model, (node,), f"X{node}"), exact=False))
     for a, b in combinations(nodes, 2):
         out.append(Candidate(f"bridge_{a}_{b}", None, "capacity", f"extra node X{a}{b} linked to {a} and to {b}",
                              f"a thermal mass the model lacks sits between {a} and {b}",
                              extra_node((a, b), f"bridge_{a}_{b}", f"X{a}{b}"), nodes=(a, b), structural=True,
-                             probes=node_probes(model, (a, b), f"X{a}{b}")))
+                             probes=node_probes(model, (a, b), f"X{a}{b}"), exact=False))
     lagged = {g.output for g in model.lags}
     for output, node in model.outputs.items():
         if output not in lagged:
             out.append(Candidate(f"sensor_lag_{output}", output, "sensor", f"{output} measured = first-order lag of {node}",
                                  f"the {output} sensor lags its node's temperature", sensor_lag(output, node),
-                                 nodes=(node,), structural=True))
+                                 nodes=(node,), structural=True, probes=lag_probes(output), exact=False,
+                                 signals=(output,)))
     for a, b in combinations(model.sources, 2):
         if a.node != b.node:
             signal = next(iter(sorted((a.heat.names | b.heat.names) - set(model.parameters) - set(model.nodes))), None)
@@ -415,6 +533,11 @@ CLUTCH_NAMED = {
         "sensor_lag", "T_flywheel", "sensor", "T_flywheel measured = first-order lag tau_F of the flywheel",
         "the flywheel sensor lags the flywheel temperature", sensor_lag("T_flywheel", "F"), nodes=("F",),
         structural=True),
+    "link_P_F_clutch_state_on": Candidate(
+        "clamped_conduction", "clutch_state", "conduction", "R_PF between plate and flywheel when S = 1",
+        "plate and flywheel exchange heat through the clamped disc",
+        new_link("P", "F", "clamped_conduction", "R_PF", gate="clutch_state"), nodes=("P", "F"), exact=False),  # probes
+        # set from the model in clutch_candidates
 }
 CLUTCH_PARTS = {"P": "pressure plate", "F": "flywheel", "A": "chamber air", "T": "housing"}
 
@@ -431,15 +554,15 @@ def clutch_candidates(model: ModelDefinition, channels: Channels) -> list[Candid
     out = [] if "a1" in model.parameters else [Candidate(
         "speed_convection", "engine_speed", "convection", "R_FA = R_PA = a*exp(b*engine_speed) + R0",
         "cool-down rate depends on engine speed: convection grows with engine speed", engine_speed_convection,
-        nodes=("P", "F", "A"))]
+        nodes=("P", "F", "A"), inert=("b1", "b2"))]
     for cand in generated(model, signals, channels, _clutch_mechanism):
         named = CLUTCH_NAMED.get(cand.key)
-        out.append(replace(named, probes=cand.probes) if named else replace(cand, summary=_clutch_words(cand.summary)))
-    out += [Candidate("clamped_conduction", "clutch_state", "conduction", "R_PF between plate and flywheel when S = 1",
-                      "plate and flywheel exchange heat through the clamped disc",
-                      new_link("P", "F", "R_PF", gate="clutch_state"), nodes=("P", "F")),
-            Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",
-                      "hot plate and flywheel lose heat by radiation to the housing", radiation, nodes=("P", "F", "T"))]
+        probes = link_probes(model, "R_PF") if named and named.key == "clamped_conduction" else cand.probes
+        out.append(replace(named, probes=probes, exact=cand.exact, signals=cand.signals) if named
+                   else replace(cand, summary=_clutch_words(cand.summary)))
+    out += [Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",
+                      "hot plate and flywheel lose heat by radiation to the housing", radiation, nodes=("P", "F", "T"),
+                      exact=False)]
     return out + learned([s for s in CLUTCH_FALLBACK_SIGNALS if _available(s, channels)], ["F", "A"])
 
 
@@ -481,7 +604,7 @@ def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, s
     else:
         signals = network_signals(model, channels, units)
         found = generated(model, signals, channels) + learned(signals, list(model.nodes))
-    return [c for c in found if _available(c.signal, channels)]
+    return [c for c in found if all(_available(s, channels) for s in c.reads)]
 
 
 def telling_apart(model: ModelDefinition, first: Candidate, second: Candidate) -> str:

@@ -15,14 +15,22 @@ from benchlab.metrics import RESIDUAL_LABEL
 from benchlab.model.definition import ModelDefinition
 
 
+def _unit(f: Finding, name: str) -> str:
+    """A parameter's unit as the extended model file gives it (the library writes one for each it adds)."""
+    found = f.spec.definition.parameters.get(name)
+    return found.unit if found is not None else ""
+
+
 def _finding_json(f: Finding, model: ModelDefinition) -> dict:
     """Contract §3 keys, then the test figures, the fitted extension, and the alternatives the data cannot rule out
     with the measurement that would."""
     c = f.candidate
     out = {"signal": c.signal, "mechanism": c.mechanism, "summary": c.summary, "extension": c.extension,
+           "signals": list(c.reads),
            "rmse_before_K": f.before.rmse, "rmse_after_K": f.after.rmse, "gain_pct": f.gain_pct,
            "p_value": f.p_value, "bic_delta": f.bic_delta, "candidate": c.key,
-           "params": {name: f.params[name] for name in f.added}, "at_bound": list(f.at_bound),
+           "params": {name: f.params[name] for name in f.added},
+           "units": {name: _unit(f, name) for name in f.added}, "at_bound": list(f.at_bound),
            "ambiguous": bool(f.alternatives),
            "alternatives": [{"candidate": a.candidate.key, "signal": a.candidate.signal,
                              "mechanism": a.candidate.mechanism, "extension": a.candidate.extension,
