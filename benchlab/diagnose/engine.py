@@ -55,12 +55,16 @@ BLOCK_S = 300.0
 MIN_GAIN_PCT = 5.0
 ALPHA = 0.01
 SCORE_STEP = 0.05  # forward-difference step of a new parameter's column, in fitted coordinates
-SCORED_FITS = 6  # best-scored candidates screened by a short fit (beside every structural one)
+SCORED_FITS = 6  # best-scored candidates screened by a short fit
+STRUCTURAL_FITS = 3  # best-scored extra nodes and lags screened by a short fit beside them
 SCREEN_NFEV = 8
 HELD_OUT_NFEV = 60
 POLISH_NFEV = 80  # the all-data fit of a screened candidate: near convergence, so its gain is not underrated
 SCOUT_NFEV = 25  # the fit from a neutral start before it is polished (where it beats the warm start)
 CROSS_VALIDATED = 3
+#: a polished fit whose in-sample RMSE is not lower by this share of MIN_GAIN_PCT is not cross-validated: the
+#: held-out gain of a fit is below its in-sample gain (its folds see half the data)
+IN_SAMPLE_SHARE = 0.5
 MAX_VALIDATED = 6  # screened candidates polished at most per round, failed fits (on a bound) included
 GLOBAL_STARTS = 2  # the refit after an acceptance: scouts from the model file's neutral start, beside the warm one
 BOUND_TOL = 1e-3  # a fitted coordinate this close to a bound, as a share of its range, is on it
@@ -238,13 +242,23 @@ def _nested_start(spec: ModelSpec, current: FitResult) -> dict[str, float]:
     return {**{p.name: p.initial for p in spec.free}, **{k: current.params[k] for k in current.free_names}}
 
 
+def _starts(cand: Candidate, spec: ModelSpec, current: FitResult) -> list[dict[str, float]]:
+    """Where a candidate is screened from: its screening starts where it has them (a node of 1 J/K, a link of
+    1e4 K/W or a lag of 5 ms is flat there), else its nested start."""
+    nested = _nested_start(spec, current)
+    return [{**nested, **probe} for probe in cand.probes(current.params)] if cand.probes else [nested]
+
+
 def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitResult,
-           datasets: Sequence[FitData]) -> list[float]:
-    """Per candidate, the in-sample cost one Gauss-Newton step from its nested start would reach, every parameter free.
+           datasets: Sequence[FitData]) -> list[tuple[float, int]]:
+    """Per candidate, the in-sample cost one Gauss-Newton step from its best start would reach, every parameter
+    free, and which start that is.
 
     The current model's Jacobian is the fit's own; the new parameters' columns are forward differences at the
-    nested start (one simulation each), projected off the current columns (the current parameters are released
-    with them). Where a new column vanishes (an exponent while its factor is zero) it adds nothing.
+    start (one simulation each). At the nested start they are projected off the current columns (the current
+    parameters are released with them) and only what they add beyond them counts; at a screening start, away from
+    the parent, the whole step counts. Columns that vanish at the nested start (an exponent while its factor is
+    zero) are skipped, and a candidate that is its parent exactly there takes the parent's residuals.
     """
     jac = current.jacobian / np.maximum(np.linalg.norm(current.jacobian, axis=0), 1e-300)
     basis, _ = np.linalg.qr(jac)
@@ -254,12 +268,11 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
 
     parent = residual_vector(current.spec.network, {**current.spec.fixed, **current.params}, datasets)
 
-    def score_one(i: int) -> float:
-        spec, cand = specs[i], cands[i]
-        start = _nested_start(spec, current)
+    def at(spec: ModelSpec, cand: Candidate, start: dict[str, float], nested: bool) -> float:
         x0 = to_coordinates(spec, start)
-        new = [j for j, p in enumerate(spec.free) if p.name not in current.params and p.name not in cand.inert]
-        r0 = parent if cand.exact else residual_vector(spec.network, {**spec.fixed, **start}, datasets)
+        new = [j for j, p in enumerate(spec.free)
+               if p.name not in current.params and not (nested and p.name in cand.inert)]
+        r0 = parent if nested and cand.exact else residual_vector(spec.network, {**spec.fixed, **start}, datasets)
         columns = []
         for j in new:
             x = x0.copy()
@@ -267,19 +280,25 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
             columns.append(residual_vector(spec.network, {**spec.fixed, **from_coordinates(spec, x)}, datasets) - r0)
         rest = project(r0)
         if not columns:
-            return float(rest @ rest)
+            return float(r0 @ r0)
         a = project(np.column_stack(columns))
         step, *_ = np.linalg.lstsq(a, rest, rcond=1e-10)
         left = rest - a @ step
-        return float(left @ left + (r0 @ r0 - rest @ rest))
+        return float(left @ left + (0.0 if not nested else r0 @ r0 - rest @ rest))
+
+    def score_one(i: int) -> tuple[float, int]:
+        spec, cand = specs[i], cands[i]
+        costs = [at(spec, cand, start, cand.probes is None) for start in _starts(cand, spec, current)]
+        return min(costs), int(np.argmin(costs))
 
     return map_indices(score_one, len(specs))
 
 
 def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[FitData],
             channels: dict[str, np.ndarray], progress: Progress, what: str) -> list[Screened]:
-    """Score every candidate, then a short in-sample fit of the best-scored and the structural ones, every
-    parameter free, from the nested start; those that lower the current cost, by cost, best first.
+    """Score every candidate, then a short in-sample fit, every parameter free, of the SCORED_FITS best-scored and
+    the STRUCTURAL_FITS best-scored structural ones (extra nodes, lags: the score's first step is rougher there)
+    from the start that scored best; those that lower the current cost, by cost, best first.
 
     Every parameter, not only the new ones: a model that lacks an effect has bent its other
     parameters to absorb it, and the new term pays off only once they are released (a plate share
@@ -287,15 +306,15 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     """
     base = current.spec.definition
     specs = [diagnosed_spec(cand.build(base, channels), datasets) for cand in cands]
-    scored = [i for i, c in enumerate(cands) if not c.structural]
-    predicted = _score([specs[i] for i in scored], [cands[i] for i in scored], current, datasets)
-    chosen = [scored[k] for k in np.argsort(predicted)[:SCORED_FITS]] + [i for i, c in enumerate(cands) if c.structural]
+    scores = _score(specs, cands, current, datasets)
+    order = list(np.argsort([cost for cost, _ in scores]))
+    structural = [i for i in order if cands[i].structural]
+    chosen = list(dict.fromkeys(order[:SCORED_FITS] + structural[:STRUCTURAL_FITS]))
 
     def screen_one(k: int) -> tuple[float, dict[str, float]]:
-        spec, cand = specs[chosen[k]], cands[chosen[k]]
-        nested = _nested_start(spec, current)
-        starts = [nested] + [{**nested, **probe} for probe in (cand.probes(current.params) if cand.probes else [])]
-        result = min((fit(spec, datasets, max_nfev=SCREEN_NFEV, start=s) for s in starts), key=lambda r: r.cost)
+        i = chosen[k]
+        start = _starts(cands[i], specs[i], current)[scores[i][1]]
+        result = fit(specs[i], datasets, max_nfev=SCREEN_NFEV, start=start)
         return result.cost, result.params
 
     with progress.task(what, len(chosen), unit="fit") as task:
@@ -346,15 +365,20 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
         result, bound = _polished(spec, params, current, datasets)
         if result is None:
             return None, bound
+        if 100.0 * (1.0 - np.sqrt(result.cost / current.cost)) < IN_SAMPLE_SHARE * MIN_GAIN_PCT:
+            return (), ()  # cannot gain MIN_GAIN_PCT held out: not cross-validated
         held = _held_out(spec, result.params, datasets)
         return (result.params, result.cost, result.residuals, held.predictions, held.params), bound
 
-    tried, offered = [], list(scored[:MAX_VALIDATED])
-    while offered and len(tried) < CROSS_VALIDATED:
-        batch, offered = offered[:CROSS_VALIDATED - len(tried)], offered[CROSS_VALIDATED - len(tried):]
+    tried, good, offered = [], 0, list(scored[:MAX_VALIDATED])
+    while offered and good < CROSS_VALIDATED:
+        batch, offered = offered[:CROSS_VALIDATED - good], offered[CROSS_VALIDATED - good:]
         for (_, cand, spec, _), (values, bound) in zip(batch, map_indices(validate, len(batch))):
             if values is None:
                 failed.append((cand.key, bound))
+                continue
+            good += 1
+            if not values:
                 continue
             params, cost, residuals, predictions, fold_params = values
             held = HeldOut(datasets, predictions, fold_params)
