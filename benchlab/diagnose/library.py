@@ -215,7 +215,8 @@ def channel_source(signals: tuple[str, ...], node: str, gates: tuple[bool | None
 
         def edit(doc: Doc) -> None:
             doc["sources"].append({"name": key, "node": node, "heat": heat})
-            _parameter(doc, k, 0.0, -1e4, 1e4, "W (at the signals' maxima)", scale=10.0)
+            at = "W (at the signal's maximum)" if len(signals) == 1 else "W (at the signals' maxima)"
+            _parameter(doc, k, 0.0, -1e4, 1e4, at, scale=10.0)
             for n, g in zip(exponents, gates):
                 if g is None:
                     _parameter(doc, n, 1.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)")

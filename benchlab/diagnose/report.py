@@ -6,7 +6,8 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-from benchlab.diagnose.engine import (ALPHA, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT, SCORED_FITS, STEP_S, Diagnosis,
+from benchlab.diagnose.engine import (ALPHA, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT, SCORED_FITS, STEP_S,
+                                     STRUCTURAL_FITS, Diagnosis,
                                      Finding, diagnose_runs)
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.library import telling_apart
@@ -55,8 +56,9 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                                  "fit on one fold of each run, score on the other",
                    "step_s": STEP_S, "min_gain_pct": MIN_GAIN_PCT, "alpha": ALPHA,
                    "search": f"candidates generated from the model's structure, each starting nested (no effect); "
-                             f"a score test (one Gauss-Newton step, every parameter free) ranks them, the "
-                             f"{SCORED_FITS} best and every extra node and lag get a short fit, the "
+                             f"a score test (one Gauss-Newton step, every parameter free; extra nodes, new links and "
+                             f"lags from screening starts) ranks them, the {SCORED_FITS} best and the "
+                             f"{STRUCTURAL_FITS} best extra nodes and lags get a short fit, the "
                              f"{CROSS_VALIDATED} best of those are fitted from the warm and the neutral start and "
                              "cross-validated; after each acceptance the whole model is refitted with multistart",
                    "failed_fits": [{"candidate": key, "at_bound": list(names)} for key, names in result.failed_fits],
