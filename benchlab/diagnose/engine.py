@@ -356,10 +356,14 @@ class Tried:
 
 
 def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, datasets: Sequence[FitData],
-         failed: list[tuple[str, tuple[str, ...]]]) -> Finding | None:
+         failed: list[tuple[str, tuple[str, ...]]], pool: Sequence[Candidate] = (),
+         channels: dict[str, np.ndarray] | None = None) -> Finding | None:
     """Polish and cross-validate the best-screened candidates, down the list past failed fits until CROSS_VALIDATED
     have a good fit (at most MAX_VALIDATED tried); the significant one with the largest gain, if any, with the others
-    that are not significantly worse as its alternatives. Failed fits are appended to `failed`."""
+    that are not significantly worse as its alternatives. Where the winner reads several signals, its simpler forms
+    in `pool` (the same mechanism at the same nodes on fewer of them) are validated too, and the simplest one it
+    does not beat at ALPHA is the finding: a product is named only where the data ask for it. Failed fits are
+    appended to `failed`."""
     def validate(i: int) -> tuple:  # plain values: a worker's result is pickled, the networks' laws cannot be
         _, _, spec, params = batch[i]
         result, bound = _polished(spec, params, current, datasets)
@@ -388,6 +392,26 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
     if not passing:
         return None
     best = max(passing, key=lambda t: t.gain_pct)
+    simpler = [c for c in pool if c.mechanism == best.candidate.mechanism and c.nodes == best.candidate.nodes
+               and set(c.reads) < set(best.candidate.reads) and c.key not in {t.candidate.key for t in tried}]
+    if simpler and channels is not None:
+        base = current.spec.definition
+        batch = [(0.0, c, spec, _nested_start(spec, current))
+                 for c in simpler for spec in [diagnosed_spec(c.build(base, channels), datasets)]]
+        for (_, cand, spec, _), (values, bound) in zip(batch, map_indices(validate, len(batch))):
+            if values is None:
+                failed.append((cand.key, bound))
+            elif values:
+                params, cost, residuals, predictions, fold_params = values
+                held = HeldOut(datasets, predictions, fold_params)
+                tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
+                                   100.0 * (1.0 - held.rmse / current_held.rmse)))
+        passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
+        plain = [t for t in passing if set(t.candidate.reads) < set(best.candidate.reads)
+                 and t.candidate.mechanism == best.candidate.mechanism and t.candidate.nodes == best.candidate.nodes
+                 and _block_test(t.held, best.held) >= ALPHA]
+        if plain:
+            best = max(plain, key=lambda t: t.gain_pct)
     alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, best.held))
                     for t in passing if _explains(t.candidate) != _explains(best.candidate)]
     return _finding(best.candidate, best.spec, best.params, best.cost, best.residuals, current, current_held,
@@ -498,7 +522,8 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
             if finding is None:
                 pool = [c for c in remaining if c.physical == physical]
                 finding = _try(_screen(pool, current, datasets, channels, progress,
-                                       f"diagnose round {round_}: {what}"), current, current_held, datasets, failed)
+                                       f"diagnose round {round_}: {what}"), current, current_held, datasets, failed,
+                               pool, channels)
         if finding is None:
             break
         parent, current = current, global_fit(finding.spec, finding.params, datasets, seed + round_)
