@@ -502,6 +502,18 @@ def unequal_split(model: ModelDefinition, ch: Channels) -> ModelDefinition:
     return revise(model, "heat_split", edit)
 
 
+RADIATION_PROBE_T_K = 323.15  # the temperature at which the radiation's screening start is set (50 degC)
+
+
+def radiation_probes(model: ModelDefinition) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening start of radiation: a linearised conductance a tenth of the model's typical link's (at its nested
+    1e-5 m² the term is absorbed, to first order, by the links the model has)."""
+    def probes(values: Mapping[str, float]) -> list[dict[str, float]]:
+        per_m2 = STEFAN_BOLTZMANN * 4 * RADIATION_PROBE_T_K ** 3
+        return [{"eps_area": 0.1 / typical_resistance(model, values) / per_m2}]
+    return probes
+
+
 def radiation(model: ModelDefinition, ch: Channels) -> ModelDefinition:
     """Grey-body exchange linearised about the measured temperatures: ε·A·σ·4·T̄³ per kelvin of difference."""
     law = f"1 / (eps_area * {STEFAN_BOLTZMANN!r} * 4 * ((T_flywheel + T_housing) / 2 + 273.15) ** 3)"
@@ -537,7 +549,7 @@ CLUTCH_NAMED = {
     "link_P_F_clutch_state_on": Candidate(
         "clamped_conduction", "clutch_state", "conduction", "R_PF between plate and flywheel when S = 1",
         "plate and flywheel exchange heat through the clamped disc",
-        new_link("P", "F", "clamped_conduction", "R_PF", gate="clutch_state"), nodes=("P", "F"), exact=False),  # probes
+        new_link("P", "F", "clamped_conduction", "R_PF_clamped", gate="clutch_state"), nodes=("P", "F"), exact=False),  # probes
         # set from the model in clutch_candidates
 }
 CLUTCH_PARTS = {"P": "pressure plate", "F": "flywheel", "A": "chamber air", "T": "housing"}
@@ -558,12 +570,12 @@ def clutch_candidates(model: ModelDefinition, channels: Channels) -> list[Candid
         nodes=("P", "F", "A"), inert=("b1", "b2"))]
     for cand in generated(model, signals, channels, _clutch_mechanism):
         named = CLUTCH_NAMED.get(cand.key)
-        probes = link_probes(model, "R_PF") if named and named.key == "clamped_conduction" else cand.probes
+        probes = link_probes(model, "R_PF_clamped") if named and named.key == "clamped_conduction" else cand.probes
         out.append(replace(named, probes=probes, exact=cand.exact, signals=cand.signals) if named
                    else replace(cand, summary=_clutch_words(cand.summary)))
     out += [Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",
                       "hot plate and flywheel lose heat by radiation to the housing", radiation, nodes=("P", "F", "T"),
-                      exact=False)]
+                      exact=False, probes=radiation_probes(model))]
     return out + learned([s for s in CLUTCH_FALLBACK_SIGNALS if _available(s, channels)], ["F", "A"])
 
 
