@@ -19,6 +19,9 @@ the acquisition's own systematic effects (see SYSTEMATIC_REL).
 Eq. (11): R = a1·exp(b1·ω_e) + R0 for S = 1 and a2·exp(b2·ω_e) + R0 for S = 0, fitted to the table by
 weighted least squares (weights 1/SE²), standard errors from the covariance (scaled by the reduced
 chi-square when it exceeds 1).
+
+Each cool-down's operating point is its step's `point` in the run's stored schedule (/schedule); the table and
+the fit are stored in /analysis and read back from there (benchlab.runfile.analysis).
 """
 
 from __future__ import annotations
@@ -26,19 +29,18 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pandas as pd
 import scipy.optimize
 
 from benchlab.clutch import clutch_network, convection_resistance
+from benchlab.errors import InputError
 from benchlab.progress import SILENT, Progress, Task
-from benchlab.runfile import load_events, load_run
+from benchlab.runfile import load_analysis, load_attrs, load_events, load_run, load_schedule, write_analysis
 from benchlab.simulation import initial_state, input_channels
 from benchlab.solver import run_network
 
@@ -49,13 +51,14 @@ COVERAGE_K = 2.0
 SYSTEMATIC_REL = 0.0025
 FIT_CHANNELS = ("T_flywheel", "T_air", "T_housing")
 INIT_S = 10.0  # initial measured states: a straight line through the first INIT_S of readings
-TABLE_UNITS = {"cycle": "1", "engine_speed": "rpm", "clutch_state": "1", "slip_speed": "rpm", "t_start": "s",
-               "t_end": "s", "R": "K/W", "R_se": "K/W", "R_u": "K/W", "T_P0": "degC", "T_P0_se": "K",
-               "rmse_K": "K", "n": "1", "chi2_red": "1", "R_true": "K/W"}
+COOLDOWN_LABEL = "cooldown"  # the schedule's label of a cool-down step (protocols/cooldown_sweep.py)
+METHOD = "4-state model, R and T_P0 free"  # how the stored table was fitted (/analysis/cooldowns attribute)
 
 
 @dataclass
 class CooldownResult:
+    """One cool-down's row of the table (/analysis/cooldowns: benchlab.runfile.schema.COOLDOWN_UNITS)."""
+
     cycle: int
     engine_speed: float
     clutch_state: int
@@ -73,17 +76,29 @@ class CooldownResult:
     R_true: float = math.nan
 
 
-def _point(detail: str) -> dict[str, float]:
-    return {k: float(v) for k, v in re.findall(r"(\w+)=([-+0-9.eE]+)", detail)}
-
-
 def segments(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, dict[str, float]]]:
-    """(cycle, t_start, t_end, point) of every completed cool-down of the run."""
+    """(cycle, t_start, t_end, point) of every completed cool-down of the run.
+
+    The times are the `cooldown_start`/`cooldown_end` events'; the operating point is the stored schedule's:
+    the n-th cool-down started in a cycle is that cycle's n-th step labelled "cooldown" (a cycle always runs
+    from its first step, resumed or not).
+    """
     path = Path(path)
-    out, open_ = [], {}
-    for t, cycle, kind, detail in load_events(path):
+    events = load_events(path)
+    steps_of_cycle: dict[int, list[dict[str, float]]] = {}
+    if any(kind == "cooldown_start" for _, _, kind, _ in events):
+        for step in load_schedule(path):
+            if step.label == COOLDOWN_LABEL:
+                steps_of_cycle.setdefault(step.cycle, []).append(dict(step.point))
+    out, open_, started = [], {}, {}
+    for t, cycle, kind, detail in events:
         if kind == "cooldown_start":
-            open_[cycle] = (t, _point(detail))
+            n = started[cycle] = started.get(cycle, 0) + 1
+            points = steps_of_cycle.get(cycle, [])
+            if n > len(points):
+                raise InputError(path, "/schedule", f"a step labelled {COOLDOWN_LABEL!r} in cycle {cycle} for "
+                                                    f"the cooldown_start at {t:g} s (the schedule has {len(points)})")
+            open_[cycle] = (t, points[n - 1])
         elif kind == "cooldown_end" and cycle in open_:
             t0, point = open_.pop(cycle)
             if detail.startswith("condition"):
@@ -198,10 +213,8 @@ def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_
     """Every cool-down of a cooldown-sweep run, fitted (one progress step each); R_true filled in for a simulated bench."""
     path = Path(path)
     run = load_run(path)
-    truth = None
-    with h5py.File(path, "r") as f:
-        if "sim_truth" in f.attrs:
-            truth = json.loads(f.attrs["sim_truth"]).get("params")
+    sim_truth = load_attrs(path).get("sim_truth")
+    truth = json.loads(sim_truth).get("params") if sim_truth is not None else None
     found = segments(path)
     with progress.task("cool-downs", len(found), unit="fit") as task:
         return [_fit_cooldown(run, params, sample_s, truth, *segment, task) for segment in found]
@@ -257,25 +270,28 @@ def fit_eq11(results: Sequence[CooldownResult]) -> dict[str, float]:
 def store(path: "str | os.PathLike[str]", results: Sequence[CooldownResult], eq11: Mapping[str, float] | None,
           params_source: str = "") -> None:
     """Write /analysis/cooldowns (one dataset per column, with units) and /analysis/eq11 into the run file."""
-    with h5py.File(path, "r+") as f:
-        group = f.require_group("analysis")
-        if "cooldowns" in group:
-            del group["cooldowns"]
-        table = group.create_group("cooldowns")
-        table.attrs.update(coverage_k=COVERAGE_K, params=params_source, method="4-state model, R and T_P0 free")
-        rows = [asdict(r) for r in results]
-        for key, units in TABLE_UNITS.items():
-            ds = table.create_dataset(key, data=np.array([row[key] for row in rows], dtype=float))
-            ds.attrs["units"] = units
-        if "eq11" in group:
-            del group["eq11"]
-        if eq11 is not None:
-            g = group.create_group("eq11")
-            units = {"a1": "K/W", "a2": "K/W", "R0": "K/W", "b1": "1/rpm", "b2": "1/rpm"}
-            for k, v in eq11.items():
-                ds = g.create_dataset(k, data=float(v))
-                base = k.removesuffix("_se")
-                ds.attrs["units"] = units.get(base, "1")
+    write_analysis(path, [asdict(r) for r in results], eq11,
+                   {"coverage_k": COVERAGE_K, "params": params_source, "method": METHOD})
+
+
+@dataclass(frozen=True)
+class StoredCooldowns:
+    """The cool-downs `store` wrote into a run file, with the parameter file they were fitted with."""
+
+    results: list[CooldownResult]
+    eq11: dict[str, float] | None
+    params_source: str
+
+
+def stored(path: "str | os.PathLike[str]") -> StoredCooldowns | None:
+    """The run file's /analysis as `store` wrote it; None when the run has none (not analysed yet)."""
+    analysis = load_analysis(path)
+    if analysis is None:
+        return None
+    integers = {"cycle", "clutch_state", "n"}
+    results = [CooldownResult(**{f.name: int(row[f.name]) if f.name in integers else row[f.name]
+                                 for f in fields(CooldownResult)}) for row in analysis.cooldowns]
+    return StoredCooldowns(results, analysis.eq11, analysis.attrs.get("params", ""))
 
 
 def table_lines(results: Sequence[CooldownResult], eq11: Mapping[str, float] | None) -> list[str]:

@@ -98,10 +98,6 @@ class ThermalNetwork:
         return replace(self, lags=self.lags + (lag,), outputs={**self.outputs, output: lag.name},
                        initial={**self.initial, lag.name: self.initial.get(lag.node, output)})
 
-    def parameter_names(self) -> set[str]:
-        """Capacity and lag parameters named by the structure (link/source laws may use more)."""
-        return {n.capacity for n in self.nodes} | {lag.time_constant for lag in self.lags}
-
     def validate(self) -> None:
         """Raise ValueError for links or outputs that name unknown nodes."""
         known = set(self.state_names) | {b.name for b in self.boundaries}

@@ -198,11 +198,15 @@ class Pt1000Scanner:
     def _scan(self, query: str) -> list[Pt1000Reading]:
         reply = self._query(query)
         t_host = self.clock()
+        return self._readings(reply, t_host, self.drain_errors())
+
+    def _readings(self, reply: bytes, t_host: float, errors: list[tuple[int, str]]) -> list[Pt1000Reading]:
+        """A scan's reply as readings, its error-queue entries logged; a reply that is not a scan raises them."""
         try:
             values = scpi.parse_values(reply, len(self.channels))
         except InstrumentError as exc:
-            raise InstrumentError(str(exc), tuple(self.drain_errors())) from None
-        self.error_log.extend(ErrorRecord(t_host, code, text) for code, text in self.drain_errors())
+            raise InstrumentError(str(exc), tuple(errors)) from None
+        self.error_log.extend(ErrorRecord(t_host, code, text) for code, text in errors)
         return [self.convert(ch, v, t_host) for ch, v in zip(self.channels, values)]
 
     def _scan_without_waiting(self, deadline: float) -> Generator[None, None, list[Pt1000Reading]]:
@@ -217,12 +221,7 @@ class Pt1000Scanner:
             if code == 0:
                 break
             entries.append((code, text))
-        try:
-            values = scpi.parse_values(reply, len(self.channels))
-        except InstrumentError as exc:  # a reply that is not a scan: with what the error queue said
-            raise InstrumentError(str(exc), tuple(entries)) from None
-        self.error_log.extend(ErrorRecord(t_host, code, text) for code, text in entries)
-        return [self.convert(ch, v, t_host) for ch, v in zip(self.channels, values)]
+        return self._readings(reply, t_host, entries)
 
     def _line(self, command: str, deadline: float) -> Generator[None, None, bytes]:
         """The next reply line, taking only the bytes already there; yields while it is incomplete."""

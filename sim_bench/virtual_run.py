@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from benchlab.drivetrain import DrivetrainFacts, friction_power, slipping_by_speed
+from benchlab.runfile.schema import SCHEMA
 from protocols.schedule import Step, setpoints
 from sim_bench.drivetrain import CHANNELS, Drivetrain
 from sim_bench.plant import ThermalPlant
@@ -130,7 +131,7 @@ def run_schedule(steps: Sequence[Step], plant: ThermalPlant, seed: int, dt: floa
         out[name] = _held_readings(values, wired, rng, sensors.wired_noise_k, sensors.quantum_k)
     out["load_torque"] = truth["load_torque"]
     frame = pd.DataFrame(out)
-    frame.attrs.update(dt=dt, schema="benchlab-run/1", status="complete", protocol="virtual", events=events,
+    frame.attrs.update(dt=dt, schema=SCHEMA, status="complete", protocol="virtual", events=events,
                        truth={"params": dict(plant.params), "effects": [e.name for e in plant.effects]},
                        true_states=states, source="<simulated bench>")
     return frame

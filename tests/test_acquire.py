@@ -14,8 +14,8 @@ import h5py
 import numpy as np
 import pytest
 
-from benchlab.acquire import AlignedBuilder, AlignedSource, Layout, RunWriter, StreamSpec, read_progress
-from benchlab.runfile import ALIGNED_UNITS, load_run
+from benchlab.acquire import AlignedBuilder, AlignedSource, Layout, RunWriter, StreamSpec
+from benchlab.runfile import ALIGNED_UNITS, load_run, read_progress
 
 CHANNELS = {k: v for k, v in ALIGNED_UNITS.items() if k not in ("time", "T_engine")}
 

@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 from asammdf import MDF
 
-from benchlab.acquire import AlignedSource, Layout, RunWriter, StreamSpec, read_progress
+from benchlab.acquire import AlignedSource, Layout, RunWriter, StreamSpec
 from benchlab.cli import main
-from benchlab.runfile import ALIGNED_UNITS, REQUIRED, load_run
+from benchlab.runfile import ALIGNED_UNITS, REQUIRED, load_run, read_progress
 from benchlab.runner.session import RunRequest, execute
 from protocols.schedule import Step
 

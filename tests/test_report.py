@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 
 import numpy as np
 import pytest
@@ -12,9 +13,10 @@ import pytest
 import benchlab
 from benchlab.cli import main
 from benchlab.clutch import PREDICTED_CHANNELS
+from benchlab.cooldown import CooldownResult, store
 from benchlab.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
 from benchlab.params import paper_params, save_params
-from benchlab.report import write_report
+from benchlab.report import build, write_report
 from benchlab.report.resistance import resistance
 from benchlab.runfile import write_run
 from benchlab.runner.session import RunRequest, execute
@@ -95,6 +97,7 @@ def test_fig3_table_has_the_sweeps_cooldowns_near_the_true_law(report):
     rows = [[c.strip() for c in line.strip("|").split("|")] for line in page.splitlines()
             if re.match(r"\| \d+ \| \d+ \| [01] \|", line)]
     assert [(float(r[1]), int(r[2])) for r in rows] == [(800.0, 1), (2000.0, 0)]
+    assert "fitted here" in page and "has no `/analysis`" in page  # the sweep was not analysed: fitted, and said so
     truth = paper_params("nonlinear")
     for r in rows:
         true_r = float(resistance(truth, np.array([float(r[1])]), int(r[2]))[0][0])
@@ -202,3 +205,16 @@ def test_residuals_are_simulated_minus_measured(short_run):
 def test_page_states_the_residual_sign_and_start(report):
     text = (report / "report.md").read_text()
     assert "Residual = simulated − measured" in text and "measured temperatures" in text
+
+
+def test_a_sweeps_stored_analysis_is_read_not_fitted_again(bench, tmp_path, monkeypatch):
+    """`benchlab cooldown` stored /analysis: the report shows that table and says so; no cool-down is fitted."""
+    sweep = tmp_path / "sweep.h5"
+    shutil.copy(bench / "sweep.h5", sweep)
+    rows = [CooldownResult(0, 800.0, 1, 0.0, 100.0, 700.0, 0.1234, 0.001, 0.0025, 75.0, 0.5, 0.04, 600, 1.1, 0.12),
+            CooldownResult(1, 2000.0, 0, 2000.0, 1500.0, 2100.0, 0.2345, 0.002, 0.004, 74.0, 0.6, 0.05, 600, 0.9)]
+    store(sweep, rows, None, "identified.json")
+    monkeypatch.setattr(build, "analyse", lambda *a, **k: pytest.fail("fitted although /analysis is stored"))
+    results, source = build.sweep_cooldowns(sweep, paper_params("nonlinear"))
+    assert results[0] == rows[0] and results[1].R == 0.2345 and np.isnan(results[1].R_true)
+    assert "`/analysis`" in source and "identified.json" in source

@@ -19,6 +19,7 @@ import pytest
 
 import benchlab.runner.session as session
 from benchlab.cli import main
+from benchlab.runfile import read_progress
 from benchlab.runner.session import RunRequest, execute
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
@@ -142,9 +143,9 @@ def test_an_untouched_schedule_resumes_and_moves_the_bench(aborted_run, tmp_path
     """The control: the same file unedited is resumed, set-points are sent, the run completes."""
     out = _copy(aborted_run, tmp_path)
     with h5py.File(out, "r") as f:
-        setpoint_rows_before = int(session.read_progress(f)["rows/setpoints"])
+        setpoint_rows_before = int(read_progress(f)["rows/setpoints"])
     code, summary = execute(RunRequest("", out, resume=True, install_signals=False))
     assert code == 0 and summary.status == "complete" and len(bench_opened) == 1
     with h5py.File(out, "r") as f:
-        assert int(session.read_progress(f)["rows/setpoints"]) > setpoint_rows_before
+        assert int(read_progress(f)["rows/setpoints"]) > setpoint_rows_before
         assert max(f["raw/setpoints/engine_speed"][:]) == pytest.approx(1500.0)

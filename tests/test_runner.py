@@ -174,7 +174,7 @@ def test_real_time_loop_on_emulated_devices(tmp_path):
     from benchlab.runner.devices import BenchConfig, DriverBench
     from benchlab.runner.engine import STATE_FIELDS, Runner
     from sim_bench.bench import SimBench, SimBenchConfig
-    from sim_bench.clock import RealClock
+    from benchlab.runner.clock import RealClock
 
     clock = RealClock()
     sim = SimBench(SimBenchConfig(seed=1, dropouts=False), clock=clock)

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import h5py
 import numpy as np
 import pytest
 
 from benchlab.clutch import convection_resistance
-from benchlab.cooldown import COVERAGE_K, SYSTEMATIC_REL, analyse, store
+from benchlab.cooldown import COVERAGE_K, SYSTEMATIC_REL, CooldownResult, analyse, segments, store, stored
+from benchlab.errors import InputError
 from benchlab.runner.session import RunRequest, execute
 from sim_bench.plant import ThermalPlant
 
@@ -60,3 +62,41 @@ def test_heating_reaches_a_steady_70(sweep):
     for t_end in ends:
         window = (t > t_end - 120) & (t <= t_end)
         assert abs(np.nanmean(tf[window]) - 70.0) <= 1.0
+
+
+def test_operating_points_come_from_the_stored_schedule_not_the_event_text(sweep, tmp_path):
+    out, _ = sweep
+    copy = tmp_path / "sweep.h5"
+    shutil.copy(out, copy)
+    with h5py.File(copy, "r+") as f:  # every event's text gone: no point left to read from it
+        f["events/detail"][...] = b"condition"
+    points = [(p["engine_speed"], p["clutch_state"], p["slip_speed"]) for *_, p in segments(copy)]
+    assert points == [(800.0, 1.0, 0.0), (2500.0, 1.0, 0.0), (1200.0, 0.0, 1200.0)]
+    with h5py.File(copy, "r+") as f:  # a schedule without its cool-down steps cannot place the cool-downs
+        rows = json.loads(f["schedule"].attrs["steps_json"])
+        f["schedule"].attrs["steps_json"] = json.dumps([{**r, "label": ""} for r in rows])
+    with pytest.raises(InputError) as exc:
+        segments(copy)
+    assert exc.value.field == "/schedule" and "cycle 0" in str(exc.value)
+
+
+def test_stored_analysis_reads_back_as_written(sweep, tmp_path):
+    out, _ = sweep
+    copy = tmp_path / "sweep.h5"
+    shutil.copy(out, copy)
+    with h5py.File(copy, "r+") as f:  # as the run left it (the first test may have stored its analysis)
+        if "analysis" in f:
+            del f["analysis"]
+    assert stored(copy) is None  # not analysed yet
+    rows = [CooldownResult(0, 800.0, 1, 0.0, 100.0, 700.0, 0.1234, 0.001, 0.0025, 75.0, 0.5, 0.04, 600, 1.1, 0.12),
+            CooldownResult(2, 1200.0, 0, 1200.0, 1500.0, 2100.0, 0.2345, 0.002, 0.004, 74.0, 0.6, 0.05, 611, 0.9, 0.2)]
+    eq11 = {"a1": 0.35, "a1_se": 0.01, "b1": -0.001, "b1_se": 1e-4, "chi2_red": 1.2, "points": 2}
+    store(copy, rows, eq11, "p.json")
+    back = stored(copy)
+    assert back.results == rows and back.eq11 == eq11 and back.params_source == "p.json"
+    with h5py.File(copy, "r+") as f:
+        assert f["analysis/eq11/b1"].attrs["units"] == "1/rpm" and f["analysis/cooldowns/T_P0"].attrs["units"] == "degC"
+        del f["analysis/cooldowns/R"]
+    with pytest.raises(InputError) as exc:
+        stored(copy)
+    assert exc.value.field == "/analysis/cooldowns/R"

@@ -16,8 +16,7 @@ import can
 import h5py
 import numpy as np
 
-from benchlab.acquire import read_progress
-from benchlab.runfile import load_run
+from benchlab.runfile import load_run, read_progress
 from benchlab.runner.session import can_log_path
 
 

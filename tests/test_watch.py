@@ -25,7 +25,7 @@ import pytest
 from benchlab.acquire import AlignedSource, Layout, RunWriter, StreamSpec
 from benchlab.cli import main
 from benchlab.runfile import write_run
-from benchlab.watch import follow
+from benchlab.runfile import live as follow
 from benchlab.watch.decimate import BASE_LEVEL, MinMaxPyramid, minmax
 from benchlab.watch.live import LiveRun, Schedule, choose_level
 from benchlab.watch.server import WatchServer, listen

@@ -29,9 +29,9 @@ import h5py
 import numpy as np
 from numba import njit
 
-SCHEMA = "benchlab-run/1"
-EVENT_KIND_LEN = 32
-EVENT_DETAIL_LEN = 160
+from benchlab.runfile.read import read_progress
+from benchlab.runfile.schema import EVENT_COLUMNS, EVENT_DETAIL_LEN, EVENT_KIND_LEN, SCHEMA
+
 _EPS = 1e-9
 
 
@@ -310,10 +310,6 @@ class RunWriter:
     def rows(self) -> int:
         return self.builder.rows
 
-    @property
-    def event_count(self) -> int:
-        return self._event_rows + len(self._events)
-
     # -- resume ------------------------------------------------------------------------------------
     @classmethod
     def resume(cls, path: "str | os.PathLike[str]", layout: Layout, *, extra_s: float,
@@ -517,7 +513,7 @@ class RunWriter:
             for col in ("time", *s.names):
                 data[f"raw/{s.name}/{col}"] = src["raw"][s.name][col][:n]
         n_ev = int(progress["event_rows"])
-        for name in ("time", "cycle", "kind", "detail"):
+        for name in EVENT_COLUMNS:
             data[f"events/{name}"] = src["events"][name][:n_ev]
         meta_attrs = {k: v for k, v in src.attrs.items()}
         meta_attrs["status"] = status
@@ -555,12 +551,6 @@ def _compression(compact: bool, arr: np.ndarray) -> dict[str, Any]:
         return {}
     chunk = int(min(arr.size, 65536))
     return {"chunks": (chunk,), "compression": "gzip", "compression_opts": 1, "shuffle": True}
-
-
-def read_progress(f: h5py.File) -> dict[str, float]:
-    """The progress record of a run file written by RunWriter: field -> value."""
-    ds = f["acquire/progress"]
-    return dict(zip(json.loads(ds.attrs["fields"]), (float(v) for v in ds[()])))
 
 
 def describe_layout(layout: Layout) -> dict[str, Any]:

@@ -8,8 +8,6 @@ import math
 from dataclasses import asdict
 from pathlib import Path
 
-import h5py
-
 from benchlab import cliargs
 from benchlab.bounds import MAX_SAMPLE_PERIOD_S
 from benchlab.errors import InputError
@@ -31,10 +29,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
     if spec == "sim-truth":
-        with h5py.File(run, "r") as f:
-            if "sim_truth" not in f.attrs:
-                raise InputError(run, "sim_truth", "a run of the simulated bench for --params sim-truth")
-            return dict(json.loads(f.attrs["sim_truth"])["params"])
+        from benchlab.runfile import load_attrs
+
+        truth = load_attrs(run).get("sim_truth")
+        if truth is None:
+            raise InputError(run, "sim_truth", "a run of the simulated bench for --params sim-truth")
+        return dict(json.loads(truth)["params"])
     from benchlab.model.catalog import builtin
     from benchlab.params import load_params
 

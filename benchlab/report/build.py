@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchlab.cooldown import CooldownResult, analyse
+from benchlab.cooldown import CooldownResult, analyse, stored
 from benchlab.errors import InputError
 from benchlab.params import ModelParams
 from benchlab.progress import SILENT, Progress
@@ -34,12 +34,19 @@ def model_labels(params: ModelParams, compare: ModelParams | None) -> list[tuple
 
 
 def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams,
-                    progress: Progress = SILENT) -> list[CooldownResult]:
-    """Every cool-down of a cooldown-sweep run fitted by benchlab.cooldown with the other parameters of `params`."""
+                    progress: Progress = SILENT) -> tuple[list[CooldownResult], str]:
+    """Every cool-down of a cooldown-sweep run and where the page says they come from: the run file's /analysis
+    as `benchlab cooldown` stored it, else fitted here by benchlab.cooldown with the other parameters of `params`."""
+    analysed = stored(sweep)
+    if analysed is not None and analysed.results:
+        source = analysed.params_source or "a parameter file not named in the run"
+        return analysed.results, (f"Cool-downs of the sweep as `benchlab cooldown` stored them in the run file's "
+                                  f"`/analysis` (fitted with the other parameters of `{source}`):")
     results = analyse(sweep, params, progress=progress)
     if not results:
         raise InputError(sweep, "/events", "completed cool-downs (cooldown_start/cooldown_end of a cooldown-sweep run)")
-    return results
+    return results, ("Cool-downs of the sweep, fitted here with the other parameters of the first model (the run "
+                     "file has no `/analysis`: `benchlab cooldown` stores one):")
 
 
 def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.PathLike[str]",
@@ -56,7 +63,7 @@ def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.Path
     convection = all(has_convection_law(p) for _, p in models)
     if sweep is not None and not convection:
         raise InputError(sweep, "--sweep", "a report of clutch models (eq. 11): the cool-down sweep fits R_FA = R_PA")
-    cooldowns = sweep_cooldowns(sweep, params, progress) if sweep is not None else []
+    cooldowns, cooldowns_source = sweep_cooldowns(sweep, params, progress) if sweep is not None else ([], "")
     with progress.task("report", len(models) * (1 + len(validation)) + 2 + convection + max(len(validation), 1),
                        unit="step") as task:
         def step(value: T) -> T:
@@ -75,5 +82,5 @@ def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.Path
         )
     rows = [(run, e) for e in on_run] + [(v, e) for v, ests in checks if v is not run for e in ests]
     page = out / PAGE
-    page.write_text(render(run, models, rows, figures, cooldowns, res))
+    page.write_text(render(run, models, rows, figures, cooldowns, cooldowns_source, res))
     return page

@@ -112,8 +112,9 @@ def residual_table(res: Residuals) -> str:
 
 def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
            rows: Sequence[tuple[pd.DataFrame, Estimate]], figures: Figures,
-           cooldowns: Sequence[CooldownResult], res: Residuals) -> str:
-    """The whole page: error figures, parameters, Fig. 4, Fig. 5, Fig. 3 (with the sweep's cool-downs), residuals."""
+           cooldowns: Sequence[CooldownResult], cooldowns_source: str, res: Residuals) -> str:
+    """The whole page: error figures, parameters, Fig. 4, Fig. 5, Fig. 3 (with the sweep's cool-downs, introduced
+    by `cooldowns_source`: where they come from), residuals."""
     duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
     models_text = ", ".join(f"**{label}** (`{params.model}`)" for label, params in models)
     parts = [
@@ -138,8 +139,7 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
     if figures.resistance is not None:
         parts += ["## Fig. 3 – convection resistance against engine speed", f"![Fig. 3]({figures.resistance.name})"]
     if cooldowns:
-        parts += ["Cool-downs of the sweep, fitted with the other parameters of the first model "
-                  "(`benchlab cooldown`):", cooldown_table(cooldowns, models)]
+        parts += [cooldowns_source, cooldown_table(cooldowns, models)]
     parts += [
         f"## Residual analysis – {res.label} model on `{res.run}`",
         f"Residual = {RESIDUAL_LABEL} at the identification step of {res.step_s:g} s, the model started from the "

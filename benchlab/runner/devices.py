@@ -24,6 +24,7 @@ from numba import njit
 
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from benchlab.drivetrain import DrivetrainFacts, friction_power
+from benchlab.runfile.schema import ALIGNED_UNITS
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
 from drivers.errors import CanLogError, ConnectionLost, DriverError
@@ -214,9 +215,9 @@ def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {"clutch_state": state, "friction_power": power, "T_flywheel": mean}
 
 
-ALIGNED_UNITS = {"engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": "N*m", "clutch_state": "1",
-                 "friction_power": "W", "T_flywheel": "degC", "T_air": "degC", "T_housing": "degC",
-                 "T_ambient": "degC", "load_torque": "N*m", "T_flywheel_1": "degC", "T_flywheel_2": "degC"}
+#: The /aligned channels the bench writes, in file order, with the contract's units (time is the grid's own;
+#: T_engine is not measured: the contract's ϑ_eng = ϑ_amb).
+BENCH_CHANNELS = {name: unit for name, unit in ALIGNED_UNITS.items() if name not in ("time", "T_engine")}
 
 
 CAN_HOLD_CYCLES = 2.5
@@ -271,7 +272,7 @@ def bench_layout(config: BenchConfig) -> Layout:
                AlignedSource("T_flywheel_2", "node", "T_flywheel_2")]
     for name in config.instrument_channels.values():
         sources.append(AlignedSource(name, "instrument", name))
-    units = dict(ALIGNED_UNITS)
+    units = dict(BENCH_CHANNELS)
     for name in config.instrument_channels.values():
         units.setdefault(name, "degC")
     return Layout(tuple(streams), tuple(sources), units, derive_aligned, config.dt)

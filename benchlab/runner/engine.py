@@ -21,6 +21,7 @@ import numpy as np
 
 from benchlab.acquire import RunWriter
 from benchlab.progress import Task
+from benchlab.runner.clock import Clock
 from benchlab.runner.devices import BenchStatus
 from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
@@ -38,11 +39,6 @@ class Bench(Protocol):
     def command(self, engine_rpm: float, clutch_torque_nm: float, clutch_open: bool, load_nm: float) -> None: ...
     def safe_state(self) -> None: ...
     def poll(self) -> tuple[list, list]: ...
-
-
-class Clock(Protocol):
-    def __call__(self) -> float: ...
-    def sleep_until(self, t: float) -> float: ...
 
 
 class Stopped(Exception):
@@ -350,9 +346,6 @@ class _Pulses:
         self.until = now + 2.0  # let the shaft come to rest under the holding load first
         self.rise = 0.0
         self._t_start_temp = math.nan
-
-    def near(self, now: float) -> bool:
-        return self.on or now >= self.until - 0.2
 
     def update(self, now: float, st: BenchStatus, target: float) -> bool:
         """Advance the pulse state; True if the set-points must change."""

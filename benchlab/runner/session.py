@@ -16,21 +16,20 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 
-from benchlab.acquire import RunWriter, read_progress
+from benchlab.acquire import RunWriter
 from benchlab.progress import SILENT, Progress
 from benchlab.errors import InputError
+from benchlab.runfile.read import load_stopped_run
+from benchlab.runfile.schema import SCHEDULE_UNITS
+from benchlab.runner.clock import Clock, RealClock
 from benchlab.runner.devices import BenchConfig, DriverBench
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
 from drivers.errors import CanLogError
 from protocols import catalog
 from protocols.limits import BenchLimits, check_schedule, schedule_problems
-from protocols.schedule import Step, describe, duration_s, steps_from_rows
-
-SCHEDULE_UNITS = {"duration_s": "s", "engine_speed_rpm": "rpm", "clutch_torque_nm": "N*m",
-                  "load_torque_nm": "N*m", "cycle": "1", "estimate_s": "s", "pulse_s": "s", "rest_s": "s"}
+from protocols.schedule import Step, describe, duration_s
 
 
 @dataclass
@@ -134,10 +133,36 @@ def can_log_path(run_path: Path, resumes: int = 0) -> Path:
     return run_path.with_suffix(f".resume{resumes}.blf" if resumes else ".blf")
 
 
-def _last_valid(f: h5py.File, name: str, rows: int) -> float:
-    values = f["aligned"][name][:rows]
-    valid = values[np.isfinite(values)]
-    return float(valid[-1]) if valid.size else math.nan
+def open_bench(request: RunRequest, config: BenchConfig, can_log: Path, t0: float, seed: int,
+               initial_c: Any = None) -> tuple[DriverBench, Clock, Any, BenchConfig]:
+    """The drivers on the bench, with its clock: the hardware of BENCH.toml on real time, or the simulated bench
+    (its emulators behind the same drivers, `seed`, the request's plant and faults) on simulated time.
+
+    Returns (bench, clock, the simulated bench or None, the config with the simulated devices' addresses).
+    Exit 2 for a CAN log that cannot be made, 1 for devices that cannot be reached.
+    """
+    sim = None
+    if request.bench == "sim":
+        from sim_bench.bench import SimBench, SimBenchConfig
+
+        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0, drivetrain=config.drivetrain, initial_c=initial_c,
+                             **dict(request.sim_options or {}))
+        sim = SimBench(cfg, plant=request.plant, faults=request.faults)
+        config = replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
+                         can={"interface": "sim", "channel": sim.name + "-can"})
+    clock: Clock = sim.clock if sim is not None else RealClock(t0)
+    try:
+        if sim is not None:
+            bench = DriverBench(config, clock, bus=sim.driver_bus, service=sim.service, can_log=can_log)
+        else:
+            bench = DriverBench(config, clock, can_log=can_log)
+    except Exception as exc:  # noqa: BLE001 - no bench: the simulated one is closed, one line
+        if sim is not None:
+            sim.close()
+        if isinstance(exc, CanLogError):  # the log's path follows the user's --out: exit 2
+            raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
+        raise RuntimeError(f"cannot open the bench: {exc}") from exc  # cannot reach the devices: exit 1
+    return bench, clock, sim, config
 
 
 def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
@@ -154,35 +179,11 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
         request = replace(request, protocol=resume_state["protocol"], seed=resume_state["seed"])
     else:
         steps, config, options = plan(request)
-    sim = None
-    clock: Any
     t0 = resume_state["t0"] if resume_state else 0.0
-    if request.bench == "sim":
-        from sim_bench.bench import SimBench, SimBenchConfig
-
-        sim_opts = dict(request.sim_options or {})
-        seed = request.seed + (7919 * resume_state["resumes"] if resume_state else 0)
-        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0, drivetrain=config.drivetrain,
-                             initial_c=resume_state["initial"] if resume_state else None, **sim_opts)
-        sim = SimBench(cfg, plant=request.plant, faults=request.faults)
-        clock = sim.clock
-        config = replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
-                         can={"interface": "sim", "channel": sim.name + "-can"})
+    seed = request.seed + (7919 * resume_state["resumes"] if resume_state else 0)
     can_log = can_log_path(request.out, resume_state["resumes"] if resume_state else 0)
-    try:
-        if sim is not None:
-            bench = DriverBench(config, clock, bus=sim.driver_bus, service=sim.service, can_log=can_log)
-        else:
-            from sim_bench.clock import RealClock
-
-            clock = RealClock(t0)
-            bench = DriverBench(config, clock, can_log=can_log)
-    except Exception as exc:  # noqa: BLE001 - no bench: the simulated one is closed, one line
-        if sim is not None:
-            sim.close()
-        if isinstance(exc, CanLogError):  # the log's path follows the user's --out: exit 2
-            raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
-        raise RuntimeError(f"cannot open the bench: {exc}") from exc  # cannot reach the devices: exit 1
+    bench, clock, sim, config = open_bench(request, config, can_log, t0, seed,
+                                           resume_state["initial"] if resume_state else None)
     layout = bench.layout
     runner: Runner | None = None
     pending: list[tuple[str, int]] = []  # a signal that came before the runner existed
@@ -255,18 +256,6 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     return code, summary
 
 
-def _stored_steps(f: h5py.File, path: Path) -> tuple[Step, ...]:
-    """The schedule stored in a run file, read back by the one schedule parser (types and field names checked)."""
-    text = f["schedule"].attrs.get("steps_json")
-    try:
-        rows = json.loads(text) if isinstance(text, (str, bytes)) else None
-    except ValueError:
-        rows = None
-    if rows is None:
-        raise InputError(path, "/schedule steps_json", "the schedule as a JSON list of steps (missing or not JSON)")
-    return steps_from_rows(rows, str(path))
-
-
 def _truth_groups(sim: Any, writer: RunWriter, resume_state: dict[str, Any] | None) -> dict[str, Any]:
     """The simulated bench's /truth for the writer's close: the plant's true temperatures (degC) on the run's
     grid, the rows before a resume as the file held them; nothing on hardware."""
@@ -287,36 +276,25 @@ def _resume_state(request: RunRequest) -> dict[str, Any]:
     path = request.out
     if not path.exists():
         raise InputError(path, "file", "an existing run file to resume (not found)")
-    try:
-        f = h5py.File(path, "r")
-    except OSError:
-        raise InputError(path, "file", "an HDF5 run file (cannot be opened)") from None
-    with f:
-        if "acquire/progress" not in f or "schedule" not in f:
-            raise InputError(path, "/acquire/progress", "a run file written by benchlab run (no progress record)")
-        status = str(f.attrs.get("status", ""))
-        if status == "complete":
-            raise InputError(path, "status", "a run that is not complete ('running' or 'aborted'), got 'complete'")
-        bench = str(f.attrs.get("bench", ""))
-        if bench != request.bench:
-            raise InputError(path, "bench", f"the same bench as the run ({bench!r}), got --bench {request.bench!r}")
-        progress = read_progress(f)
-        steps = _stored_steps(f, path)
-        rows = int(progress["aligned_rows"])
-        dt = float(f["aligned"].attrs["dt"])
-        cycle = progress.get("state/cycle", math.nan)
-        cycle = -1 if not math.isfinite(cycle) else int(cycle)
-        start = next((i for i, s in enumerate(steps) if s.cycle > cycle), len(steps))
-        initial = {"T_flywheel": _last_valid(f, "T_flywheel", rows), "T_air": _last_valid(f, "T_air", rows),
-                   "T_housing": _last_valid(f, "T_housing", rows)}
-        resumes = progress.get("state/resumes", 0.0)
-        protocol = str(f.attrs.get("protocol"))
-        options = json.loads(f.attrs.get("protocol_options", "{}"))
-        seed = int(f.attrs.get("seed", request.seed))
-        truth = {name: ds[:rows] for name, ds in f["truth"].items() if name != "time"} if "truth" in f else {}
+    stopped = load_stopped_run(path, ("T_flywheel", "T_air", "T_housing"))
+    status = stopped.attrs.get("status", "")
+    if status == "complete":
+        raise InputError(path, "status", "a run that is not complete ('running' or 'aborted'), got 'complete'")
+    bench = stopped.attrs.get("bench", "")
+    if bench != request.bench:
+        raise InputError(path, "bench", f"the same bench as the run ({bench!r}), got --bench {request.bench!r}")
+    steps = stopped.steps()
+    progress, rows, initial = stopped.progress, stopped.rows, stopped.last_valid
+    cycle = progress.get("state/cycle", math.nan)
+    cycle = -1 if not math.isfinite(cycle) else int(cycle)
+    start = next((i for i, s in enumerate(steps) if s.cycle > cycle), len(steps))
+    resumes = progress.get("state/resumes", 0.0)
+    protocol = stopped.attrs.get("protocol", "None")
+    options = json.loads(stopped.attrs.get("protocol_options", "{}"))
+    seed = int(stopped.attrs.get("seed", request.seed))
     f_init = initial["T_flywheel"] if math.isfinite(initial["T_flywheel"]) else 22.0
     states = {"P": f_init, "F": f_init, "A": initial["T_air"] if math.isfinite(initial["T_air"]) else f_init,
               "T": initial["T_housing"] if math.isfinite(initial["T_housing"]) else f_init}
-    return {"steps": steps, "start": start, "cycle": cycle, "t0": rows * dt, "initial": states,
+    return {"steps": steps, "start": start, "cycle": cycle, "t0": rows * stopped.dt, "initial": states,
             "resumes": int(resumes if math.isfinite(resumes) else 0) + 1, "protocol": protocol,
-            "options": options, "seed": seed, "truth": truth}
+            "options": options, "seed": seed, "truth": stopped.truth}

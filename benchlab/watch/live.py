@@ -2,8 +2,8 @@
 
 Each update of the page asks for what is new since its last one: the buckets from the last (still filling) one
 on, at the level (bucket size) its plot needs, and the events after the last it has. Before answering, the run
-file is read for what the writer has added since the previous request (follow.py), so one update costs what
-arrived plus what is sent, however long the run is.
+file is read for what the writer has added since the previous request (benchlab/runfile/live.py), so one
+update costs what arrived plus what is sent, however long the run is.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 
 from benchlab.errors import InputError
 from benchlab.watch.decimate import BASE_LEVEL, TOP_LEVEL, MinMaxPyramid, minmax
-from benchlab.watch.follow import RunFileVersion
+from benchlab.runfile.live import RunFileVersion
 from protocols.schedule import Step
 
 #: At most this many buckets per answer (the page asks again for the rest), and at most this many grid rows read

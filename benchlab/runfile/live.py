@@ -1,4 +1,5 @@
-"""Reading a run file while `benchlab run` writes it, without ever writing to it, and only what is new.
+"""Reading a run file while `benchlab run` writes it, without ever writing to it, and only what is new
+(`benchlab watch`).
 
 While a run acquires, the writer (benchlab/acquire/writer.py, docs/runfile.md "Crash safety") never changes the
 file's structure: it overwrites bytes inside datasets allocated when the file was made, then the progress record
@@ -23,10 +24,9 @@ import h5py
 import numpy as np
 
 from benchlab.errors import InputError
-from benchlab.runfile import SCHEMA
-from protocols.schedule import Step, step_from_dict
-
-EVENT_COLUMNS = ("time", "cycle", "kind", "detail")
+from benchlab.runfile.read import grid_step, read_schedule, text
+from benchlab.runfile.schema import EVENT_COLUMNS, SCHEMA
+from protocols.schedule import Step
 
 
 class _PreadColumn:
@@ -63,10 +63,6 @@ class _H5Column:
 
 
 Column = _PreadColumn | _H5Column
-
-
-def _text(value: object) -> str:
-    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
 
 
 def _column(dataset: h5py.Dataset, fd: int) -> Column:
@@ -110,17 +106,14 @@ class RunFileVersion:
 
     def _index(self) -> None:
         f = self._h5
-        self.attrs = {k: _text(v) if isinstance(v, (bytes, str)) else v for k, v in f.attrs.items()}
+        self.attrs = {k: text(v) if isinstance(v, (bytes, str)) else v for k, v in f.attrs.items()}
         schema = str(self.attrs.get("schema", ""))
         if not schema.startswith(SCHEMA):
             raise InputError(self.path, "schema", f"root attribute {SCHEMA!r} of a run file, got {schema or None!r}")
         group = f.get("aligned")
         if not isinstance(group, h5py.Group) or not isinstance(group.get("time"), h5py.Dataset):
             raise InputError(self.path, "/aligned", "a group of channels on one time grid with a 'time' dataset")
-        dt = group.attrs.get("dt")
-        if not isinstance(dt, (int, float, np.integer, np.floating)) or not np.isfinite(dt) or float(dt) <= 0:
-            raise InputError(self.path, "/aligned.dt", f"a positive time step in seconds, got {dt!r}")
-        self.dt = float(dt)
+        self.dt = grid_step(self.path, group)
         time = group["time"]
         self.capacity = int(time.shape[0]) if time.ndim == 1 else 0
         self.t0 = float(time[0]) if self.capacity else 0.0
@@ -132,7 +125,7 @@ class RunFileVersion:
             if (name == "time" or not isinstance(ds, h5py.Dataset) or ds.ndim != 1
                     or ds.shape[0] != self.capacity or not np.issubdtype(ds.dtype, np.number)):
                 continue
-            self.channels[name] = _text(ds.attrs.get("units", ""))
+            self.channels[name] = text(ds.attrs.get("units", ""))
             self.columns[name] = _column(ds, self.fd)
         self.events: dict[str, Column] = {}
         events = f.get("events")
@@ -142,24 +135,19 @@ class RunFileVersion:
         self._progress: Column | None = None
         progress = f.get("acquire/progress")
         if isinstance(progress, h5py.Dataset) and "fields" in progress.attrs:
-            self.progress_fields = list(json.loads(_text(progress.attrs["fields"])))
+            self.progress_fields = list(json.loads(text(progress.attrs["fields"])))
             self._progress = _column(progress, self.fd)
-        self.steps = self._schedule(f)
+        self.steps: tuple[Step, ...]
+        try:
+            self.steps = read_schedule(f, self.path)
+        except InputError:  # none, or of another version: the page shows no step, nothing else changes
+            self.steps = ()
         if all(isinstance(c, _PreadColumn) for c in self._all_columns()):
             self._h5.close()  # everything is read by pread: hold no HDF5 handle on a file being written
             self._handle.close()
 
     def _all_columns(self) -> list[Column]:
         return [*self.columns.values(), *self.events.values(), *([self._progress] if self._progress else [])]
-
-    def _schedule(self, f: h5py.File) -> tuple[Step, ...]:
-        group = f.get("schedule")
-        if not isinstance(group, h5py.Group) or "steps_json" not in group.attrs:
-            return ()
-        try:
-            return tuple(step_from_dict(row) for row in json.loads(_text(group.attrs["steps_json"])))
-        except (ValueError, TypeError):  # a schedule of another version: the page shows no step, nothing else changes
-            return ()
 
     @property
     def identity(self) -> tuple[Any, ...]:
@@ -209,7 +197,7 @@ class RunFileVersion:
         if not self.events or stop <= start:
             return []
         cols = {c: self.events[c].read(start, stop) for c in EVENT_COLUMNS}
-        return [{"time": float(t), "cycle": int(c), "kind": _text(k).rstrip("\x00"), "detail": _text(d).rstrip("\x00")}
+        return [{"time": float(t), "cycle": int(c), "kind": text(k).rstrip("\x00"), "detail": text(d).rstrip("\x00")}
                 for t, c, k, d in zip(cols["time"], cols["cycle"], cols["kind"], cols["detail"])]
 
     def replaced(self) -> bool:

@@ -1,0 +1,55 @@
+"""Run files (contract section 1, docs/runfile.md): the one home of their reading and writing.
+
+Nothing outside this package and the acquisition writer opens a run file. Organised like python-can's can/io,
+by what each module reads or writes:
+
+- schema.py: schema string, channels and units, the tables' columns, which stored values are valid (numpy only)
+- read.py: open_run, root attributes, /aligned (load_run), /events, progress record, /schedule, /truth, and
+  where a stopped run stands (`--resume`)
+- groups.py: the time-stamped groups besides /aligned (/raw/<stream>, /events, /simulated) for an export
+- analysis.py: /analysis (`benchlab cooldown` writes it, `benchlab report` reads it)
+- write.py: whole files at once (`benchlab import`, `simulate`, `observe`)
+- live.py: a file still being written, read without HDF5's caches (`benchlab watch`)
+- benchlab/acquire/writer.py: the crash-safe file `benchlab run` writes as data arrives
+
+The names below load their module on first use, so `benchlab.runfile.schema` costs no pandas or h5py.
+"""
+
+import importlib as _importlib
+import typing as _typing
+
+if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` imports them on first use
+    from benchlab.runfile.analysis import StoredAnalysis, load_analysis, write_analysis
+    from benchlab.runfile.groups import StoredColumn, StoredGroup, StoredStreams, load_streams
+    from benchlab.runfile.read import (StoppedRun, load_attrs, load_events, load_progress, load_run,
+                                       load_schedule, load_stopped_run, load_truth, open_run, read_progress,
+                                       read_schedule)
+    from benchlab.runfile.schema import (ALIGNED_MEANING, ALIGNED_UNITS, COOLDOWN_UNITS, EQ11_UNITS,
+                                         EVENT_COLUMNS, REQUIRED, SCHEDULE_UNITS, SCHEMA, time_step_tolerance,
+                                         unmeasurable_sample)
+    from benchlab.runfile.write import write_results, write_run, write_simulated
+
+_HOMES = {
+    "analysis": ("StoredAnalysis", "load_analysis", "write_analysis"),
+    "groups": ("StoredColumn", "StoredGroup", "StoredStreams", "load_streams"),
+    "read": ("StoppedRun", "load_attrs", "load_events", "load_progress", "load_run", "load_schedule",
+             "load_stopped_run", "load_truth", "open_run", "read_progress", "read_schedule"),
+    "schema": ("ALIGNED_MEANING", "ALIGNED_UNITS", "COOLDOWN_UNITS", "EQ11_UNITS", "EVENT_COLUMNS", "REQUIRED",
+               "SCHEDULE_UNITS", "SCHEMA", "time_step_tolerance", "unmeasurable_sample"),
+    "write": ("write_results", "write_run", "write_simulated"),
+}
+_MODULE_OF = {name: module for module, names in _HOMES.items() for name in names}
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str) -> _typing.Any:
+    """A name of `__all__`, imported from its module on first use."""
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module 'benchlab.runfile' has no attribute {name!r}")
+    value = getattr(_importlib.import_module(f"benchlab.runfile.{_MODULE_OF[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

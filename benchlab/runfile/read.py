@@ -1,0 +1,234 @@
+"""Reading a run file: root attributes, /aligned (checked as the contract says), /events, the progress record,
+/schedule, /truth, and what `--resume` needs. Every reader opens the file through `open_run` (one InputError
+for a missing or non-HDF5 file)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import h5py
+import numpy as np
+
+from benchlab.errors import InputError
+from benchlab.runfile.schema import (ALIGNED_UNITS, EVENT_COLUMNS, REQUIRED, SCHEMA, time_step_tolerance,
+                                     unmeasurable_sample)
+from protocols.schedule import Step, steps_from_rows
+
+if TYPE_CHECKING:  # pandas loads where a frame is built: the run and watch paths read no frame
+    import pandas as pd
+
+
+def text(value: object) -> str:
+    """An HDF5 attribute or fixed-length string as text (bytes decoded as UTF-8)."""
+    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+
+
+def open_run(path: "str | os.PathLike[str]", mode: str = "r") -> h5py.File:
+    """The run file opened with h5py; InputError if it does not exist or is not HDF5."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "file", "an existing run file (not found)")
+    try:
+        return h5py.File(path, mode)
+    except OSError:
+        raise InputError(path, "file", "an HDF5 run file (cannot be opened as HDF5)") from None
+
+
+def load_attrs(path: "str | os.PathLike[str]") -> dict[str, str]:
+    """Every root attribute of the run file as text (JSON-valued ones such as `sim_truth` stay JSON text)."""
+    with open_run(path) as f:
+        return {k: text(v) for k, v in f.attrs.items()}
+
+
+def read_progress(f: h5py.File) -> dict[str, float]:
+    """The progress record of a run file written by RunWriter: field -> value."""
+    ds = f["acquire/progress"]
+    return dict(zip(json.loads(ds.attrs["fields"]), (float(v) for v in ds[()])))
+
+
+def load_progress(path: "str | os.PathLike[str]") -> dict[str, float]:
+    """The run's progress record (field -> value); empty for a file without one (imported: every row valid)."""
+    with open_run(path) as f:
+        return read_progress(f) if "acquire/progress" in f else {}
+
+
+def load_events(path: "str | os.PathLike[str]") -> list[tuple[float, int, str, str]]:
+    """The run's /events as (time s, cycle, kind, detail), up to the progress record of a file still running."""
+    path = Path(path)
+    with open_run(path) as f:
+        if "events" not in f:
+            raise InputError(path, "/events", "an events table (a run written by benchlab run)")
+        g = f["events"]
+        n = len(g["time"])
+        if "acquire/progress" in f:
+            n = min(n, int(read_progress(f).get("event_rows", n)))
+        columns = [g[c][:n] for c in EVENT_COLUMNS]
+        return [(float(t), int(c), text(k), text(d)) for t, c, k, d in zip(*columns)]
+
+
+def read_schedule(f: h5py.File, path: Path) -> tuple[Step, ...]:
+    """The schedule stored in /schedule, read back by the one schedule parser (types and field names checked)."""
+    group = f.get("schedule")
+    return _parse_schedule(group.attrs.get("steps_json") if isinstance(group, h5py.Group) else None, path)
+
+
+def _parse_schedule(stored: object, path: Path) -> tuple[Step, ...]:
+    """/schedule's `steps_json` as Steps: JSON, then the one schedule parser (protocols.schedule)."""
+    try:
+        rows = json.loads(stored) if isinstance(stored, (str, bytes)) else None
+    except ValueError:
+        rows = None
+    if rows is None:
+        raise InputError(path, "/schedule steps_json", "the schedule as a JSON list of steps (missing or not JSON)")
+    return steps_from_rows(rows, str(path))
+
+
+def load_schedule(path: "str | os.PathLike[str]") -> tuple[Step, ...]:
+    """The run's planned schedule (/schedule); InputError naming the step and field of a malformed one."""
+    path = Path(path)
+    with open_run(path) as f:
+        return read_schedule(f, path)
+
+
+def grid_step(path: Path, group: h5py.Group) -> float:
+    """/aligned's `dt` as a float; InputError unless it is a positive finite number."""
+    dt = group.attrs.get("dt")
+    number = isinstance(dt, (int, float, np.integer, np.floating)) and not isinstance(dt, (bool, np.bool_))
+    if not number or not np.isfinite(dt) or float(dt) <= 0:
+        shown = text(dt) if isinstance(dt, bytes) else dt
+        raise InputError(path, "/aligned.dt", f"a positive time step in seconds (a number), got {shown!r}")
+    return float(dt)
+
+
+def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = (),
+             required: Sequence[str] = REQUIRED) -> pd.DataFrame:
+    """The /aligned channels as a DataFrame; attrs hold dt, units, source and the root attributes.
+
+    `measured`: channels that must hold at least one measured (not NaN) sample, e.g. the temperatures a model
+    is fitted to and started from; a file where one of them is NaN throughout is bad input for that use.
+    `required`: channels the file must hold (default the contract's section 1 list; a model file's run needs
+    `time` and the channels the model names, contract section 6).
+    """
+    import pandas as pd
+
+    path = Path(path)
+    with open_run(path) as f:
+        attrs = {k: text(v) for k, v in f.attrs.items() if k in ("schema", "status", "protocol")}
+        if not attrs.get("schema", "").startswith(SCHEMA):
+            raise InputError(path, "schema", f"root attribute {SCHEMA!r}, got {attrs.get('schema')!r}")
+        if "aligned" not in f or not isinstance(f["aligned"], h5py.Group):
+            raise InputError(path, "/aligned", "a group of channels on one time grid")
+        group = f["aligned"]
+        dt = grid_step(path, group)
+        columns, units = _read_channels(path, group, ("time", *required))
+        time_dtype = group["time"].dtype
+    frame = pd.DataFrame(columns)
+    _check_time(path, frame["time"].to_numpy(), dt, time_dtype)
+    for name in measured:
+        if np.isnan(frame[name].to_numpy()).all():
+            raise InputError(path, f"/aligned/{name}", f"at least one measured sample (all {len(frame)} are NaN)")
+    frame.attrs.update(attrs, dt=dt, units=units, source=str(path))
+    return frame
+
+
+def _read_channels(path: Path, group: h5py.Group,
+                   required: Sequence[str]) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    columns: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {}
+    for name in dict.fromkeys(required):
+        if name not in group:
+            unit = f" in {ALIGNED_UNITS[name]}" if name in ALIGNED_UNITS else " with its unit"
+            raise InputError(path, f"/aligned/{name}", f"a required channel{unit} (missing)")
+    length = None
+    for name, ds in group.items():
+        if not isinstance(ds, h5py.Dataset) or ds.ndim != 1 or not np.issubdtype(ds.dtype, np.number):
+            raise InputError(path, f"/aligned/{name}", "a 1-D numeric dataset")
+        if "units" not in ds.attrs:
+            raise InputError(path, f"/aligned/{name}.units", f"a units attribute ({ALIGNED_UNITS.get(name, 'any')})")
+        unit = text(ds.attrs["units"])
+        if name in ALIGNED_UNITS and unit != ALIGNED_UNITS[name]:
+            raise InputError(path, f"/aligned/{name}.units", f"{ALIGNED_UNITS[name]!r}, got {unit!r}")
+        if length is not None and ds.shape[0] != length:
+            raise InputError(path, f"/aligned/{name}", f"length {length} like /aligned/time, got {ds.shape[0]}")
+        length = ds.shape[0]
+        columns[name] = ds[()].astype(np.float64)
+        units[name] = unit
+        if name != "time":
+            problem = unmeasurable_sample(name, unit, columns[name])
+            if problem is not None:
+                raise InputError(path, f"/aligned/{name}", f"{problem[1]}, got {problem[2]!r} at sample {problem[0]}")
+    ordered = {k: columns[k] for k in ALIGNED_UNITS if k in columns}
+    ordered.update({k: v for k, v in columns.items() if k not in ordered})
+    return ordered, units
+
+
+def _check_time(path: Path, time: np.ndarray, dt: float, stored: np.dtype) -> None:
+    if len(time) < 2:
+        raise InputError(path, "/aligned/time", "at least two samples")
+    step_error = np.abs(np.diff(time) - dt)
+    tolerance = time_step_tolerance(time, dt, stored) if np.all(np.isfinite(time)) else 0.0
+    if not np.all(np.isfinite(time)) or np.max(step_error) > tolerance:
+        bad = int(np.argmax(~np.isfinite(np.diff(time)) | (step_error > tolerance)))
+        raise InputError(path, "/aligned/time", f"a uniform grid with step dt={dt} s (breaks at sample {bad + 1})")
+
+
+def load_truth(path: "str | os.PathLike[str]") -> pd.DataFrame | None:
+    """The simulated bench's /truth: the plant's true temperatures (degC) on the /aligned grid, named like
+    /simulated (T_pressure_plate, ...); None for a run without it (hardware, imported, killed before closing)."""
+    import pandas as pd
+
+    path = Path(path)
+    with open_run(path) as f:
+        if "truth" not in f:
+            return None
+        frame = pd.DataFrame({name: ds[()].astype(np.float64) for name, ds in f["truth"].items()})
+    frame.attrs["source"] = str(path)
+    return frame
+
+
+@dataclass(frozen=True)
+class StoppedRun:
+    """Where a run written by `benchlab run` stopped, as its file says: what `--resume` continues from."""
+
+    path: Path
+    attrs: dict[str, str]  # root attributes as text
+    progress: dict[str, float]  # the progress record
+    dt: float
+    last_valid: dict[str, float]  # newest measured value (NaN: none) of each channel asked for, up to the progress
+    truth: dict[str, np.ndarray]  # /truth's rows up to the progress record (time excluded); empty without /truth
+    _schedule: object  # /schedule's steps_json as stored, parsed by `steps()`
+
+    @property
+    def rows(self) -> int:
+        return int(self.progress["aligned_rows"])
+
+    def steps(self) -> tuple[Step, ...]:
+        """The stored schedule, read back by the one schedule parser (InputError naming step and field)."""
+        return _parse_schedule(self._schedule, self.path)
+
+
+def load_stopped_run(path: "str | os.PathLike[str]", channels: Sequence[str]) -> StoppedRun:
+    """What a run file says about where its run stopped (see StoppedRun); InputError for a file without a
+    progress record or schedule (not written by `benchlab run`)."""
+    path = Path(path)
+    with open_run(path) as f:
+        if "acquire/progress" not in f or "schedule" not in f:
+            raise InputError(path, "/acquire/progress", "a run file written by benchlab run (no progress record)")
+        progress = read_progress(f)
+        rows = int(progress["aligned_rows"])
+        last = {name: _last_valid(f[f"aligned/{name}"][:rows] if f"aligned/{name}" in f else np.empty(0))
+                for name in channels}
+        truth = {name: ds[:rows] for name, ds in f["truth"].items() if name != "time"} if "truth" in f else {}
+        return StoppedRun(path, {k: text(v) for k, v in f.attrs.items()}, progress, float(f["aligned"].attrs["dt"]),
+                          last, truth, f["schedule"].attrs.get("steps_json"))
+
+
+def _last_valid(values: np.ndarray) -> float:
+    valid = values[np.isfinite(values)]
+    return float(valid[-1]) if valid.size else math.nan
