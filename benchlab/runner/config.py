@@ -10,12 +10,11 @@ import math
 import os
 import tomllib
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import cantools
-
-from dataclasses import replace
 
 from benchlab.bounds import MAX_TIMEOUT_S
 from benchlab.drivetrain import DrivetrainFacts
