@@ -16,8 +16,10 @@ lower the parent's cost. The CROSS_VALIDATED best of those are fitted to converg
 from the model file's neutral start, and cross-validated from the better one; a fit with a parameter on its
 bound has failed (reported, not used). An extension is accepted when its held-out error is lower by at least
 MIN_GAIN_PCT and a t-test on the per-block log ratio of held-out errors (5-minute blocks, not samples, are
-the units) rejects "no gain" at ALPHA. Where another candidate is not significantly worse than the accepted
-one by the same test, the finding lists it as an alternative. After each acceptance the whole model is
+the units) rejects "no gain" at ALPHA. Of the extensions that pass, the largest gain is named only where the
+same test shows it better than each simpler explanation (fewer added parameters, then fewer signals); otherwise
+the simplest is. Where another candidate is not significantly worse than the named one by the same test, the
+finding lists it as an alternative. After each acceptance the whole model is
 refitted with multistart (warm, neutral and spread starts), so the next round starts from a fresh global fit,
 not from the parameters the previous round bent. With several findings, each is measured again against the
 combination without it and dropped if it no longer passes; no finding is reported that did not pass.
@@ -359,11 +361,11 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
          failed: list[tuple[str, tuple[str, ...]]], pool: Sequence[Candidate] = (),
          channels: dict[str, np.ndarray] | None = None) -> Finding | None:
     """Polish and cross-validate the best-screened candidates, down the list past failed fits until CROSS_VALIDATED
-    have a good fit (at most MAX_VALIDATED tried); the significant one with the largest gain, if any, with the others
-    that are not significantly worse as its alternatives. Where the winner reads several signals, its simpler forms
-    in `pool` (the same mechanism at the same nodes on fewer of them) are validated too, and the simplest one it
-    does not beat at ALPHA is the finding: a product is named only where the data ask for it. Failed fits are
-    appended to `failed`."""
+    have a good fit (at most MAX_VALIDATED tried). Of the significant ones, the simplest that the largest gain does
+    not beat at ALPHA is the finding (_simplest_equal), with the others that are not significantly worse as its
+    alternatives. Where the largest gain reads several signals, its simpler forms in `pool` (the same mechanism at
+    the same nodes on fewer of them) are validated too: a product is named only where the data ask for it. Failed
+    fits are appended to `failed`."""
     def validate(i: int) -> tuple:  # plain values: a worker's result is pickled, the networks' laws cannot be
         _, _, spec, params = batch[i]
         result, bound = _polished(spec, params, current, datasets)
@@ -407,15 +409,25 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
                 tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
                                    100.0 * (1.0 - held.rmse / current_held.rmse)))
         passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
-        plain = [t for t in passing if set(t.candidate.reads) < set(best.candidate.reads)
-                 and t.candidate.mechanism == best.candidate.mechanism and t.candidate.nodes == best.candidate.nodes
-                 and _block_test(t.held, best.held) >= ALPHA]
-        if plain:
-            best = max(plain, key=lambda t: t.gain_pct)
+    best = _simplest_equal(best, passing, current)
     alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, best.held))
                     for t in passing if _explains(t.candidate) != _explains(best.candidate)]
     return _finding(best.candidate, best.spec, best.params, best.cost, best.residuals, current, current_held,
                     best.held, [a for a in alternatives if a.p_vs_winner >= ALPHA])
+
+
+def _complexity(tried: Tried, current: FitResult) -> tuple[int, int]:
+    """How much an extension asks of the data: the parameters it adds, then the signals it reads."""
+    return sum(p.name not in current.params for p in tried.spec.free), len(tried.candidate.reads)
+
+
+def _simplest_equal(best: Tried, passing: Sequence[Tried], current: FitResult) -> Tried:
+    """The simplest passing extension that `best` does not beat at ALPHA (the same block test between the two), the
+    larger gain among equally simple ones: a parameter or a signal more is named only where the data ask for it.
+    Only other explanations compete (_explains): among the laws of one explanation the best fitting one is kept."""
+    equal = [t for t in passing if t is best or (_explains(t.candidate) != _explains(best.candidate)
+                                                 and _block_test(t.held, best.held) >= ALPHA)]
+    return min(equal, key=lambda t: (_complexity(t, current), -t.gain_pct))
 
 
 def _explains(cand: Candidate) -> tuple:

@@ -370,7 +370,8 @@ def _link_inert(links: tuple[str, ...], signal: str, law: str) -> tuple[str, ...
 
 def _sources(signals: list[str], nodes: list[str], channels: Channels) -> list[Candidate]:
     """Heat sources into each node: one signal (an on/off one while on and while off), and the product of two (a
-    continuous signal with another, or gated by an on/off one). A product names its first signal."""
+    continuous signal with another, or gated by an on/off one). A product names its first continuous signal: a gate
+    says when the heat flows, the signal how much."""
     on_off = {s for s in signals if is_on_off(s, channels)}
     forms: list[tuple[tuple[str, ...], tuple[bool | None, ...]]] = []
     for s in signals:
@@ -388,7 +389,8 @@ def _sources(signals: list[str], nodes: list[str], channels: Channels) -> list[C
             law = "*".join(f"[{s} {'on' if g else 'off'}]" if g is not None else
                            (f"(|{s}|/max)^n{i + 1}" if len(used) > 1 else f"(|{s}|/max)^n")
                            for i, (s, g) in enumerate(zip(used, gates)))
-            out.append(Candidate(source_name(used, node, gates), used[0], "heat_source",
+            driver = next((s for s, g in zip(used, gates) if g is None), used[0])
+            out.append(Candidate(source_name(used, node, gates), driver, "heat_source",
                                  f"heat into {node} = q*{law}", f"a heat source driven by {words} "
                                  f"warms node {node}", channel_source(used, node, gates), nodes=(node,),
                                  inert=source_exponents(used, node, gates), signals=used))

@@ -63,6 +63,8 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                              "cross-validated; after each acceptance the whole model is refitted with multistart",
                    "failed_fits": [{"candidate": key, "at_bound": list(names)} for key, names in result.failed_fits],
                    "baseline_at_bound": list(result.baseline_at_bound),
+                   "named": "of the extensions that pass, the simplest other explanation (fewest added parameters, "
+                            "then signals) that the largest gain does not beat at alpha, else the largest gain",
                    "alternatives": "other extensions that passed against the same parent and that the finding does "
                                    "not beat at alpha (the same block test between the two), with the measurement "
                                    "that would tell them apart",
