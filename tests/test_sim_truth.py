@@ -3,6 +3,8 @@ for a run closed normally, one aborted by an interlock, and one resumed after th
 
 from __future__ import annotations
 
+import json
+
 import h5py
 import numpy as np
 
@@ -10,7 +12,9 @@ from benchlab.runfile import load_run, load_truth
 from benchlab.runner.session import RunRequest, execute
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
+from sim_bench import unseen as U
 from sim_bench.faults import Fault
+from sim_bench.plant import ThermalPlant
 
 STEPS = (Step("open", 40.0, 2000.0, 0.0, 0.0, 0), Step("launch", 10.0, 2000.0, 60.0, 100.0, 1),
          Step("drive", 30.0, 2000.0, 60.0, 100.0, 1), Step("open", 30.0, 1500.0, 0.0, 100.0, 2))
@@ -57,3 +61,24 @@ def test_truth_kept_through_abort_and_resume(tmp_path):
     for name in NODES:  # the rows before the resume as the aborted file held them; the rest computed after it
         np.testing.assert_array_equal(truth[name].to_numpy()[:len(first)], first[name].to_numpy())
         assert not np.isnan(truth[name].to_numpy()).any()
+
+
+def test_truth_follows_the_hidden_effects_of_the_plant(tmp_path):
+    """A cover node, a lagged air sensor and a release path in the plant: /truth holds the cover (K) and the air
+    itself (A) beside the sensor's lagged temperature (T_air), the sensors read /truth, sim_truth names the effects."""
+    effects = [U.plate_cover(2500.0, 0.1, 0.1).effect, U.air_sensor_lag(10.0).effect,
+               U.release_path_conduction(0.3).effect]
+    path = tmp_path / "run.h5"
+    code, _ = _run(path, plant=ThermalPlant(effects=effects))
+    assert code == 0
+    run, truth = load_run(path), load_truth(path)
+    assert set(truth.columns) == {"time", *NODES, "K", "A"}
+    with h5py.File(path, "r") as f:
+        recorded = json.loads(f.attrs["sim_truth"])
+    assert recorded["effects"] == [e.name for e in effects]
+    assert {"C_K", "R_PK", "R_KA", "tau_A", "R_PT"} <= set(recorded["params"])
+    error = run["T_air"].to_numpy() - truth["T_air"].to_numpy()
+    assert np.sqrt(np.nanmean(error ** 2)) < 0.05
+    air, sensor = truth["A"].to_numpy(), truth["T_air"].to_numpy()  # the lag: the sensor trails the heated air
+    heating = np.flatnonzero(np.diff(air) > 0)
+    assert np.mean(air[heating] - sensor[heating]) > 0

@@ -6,18 +6,29 @@ the scored samples were never fitted). Interleaving, not halves, so that each fi
 temperature range: a fit on one half extrapolates the slow housing dynamics into the other, and
 its error then swamps the effects looked for (measured: held-out RMSE of the true model 0.028 K
 with halves, 0.014 K interleaved, against 0.014 K in-sample).
-Every candidate is screened by a short in-sample fit with all parameters free; the three best are
-polished and cross-validated. An extension is accepted when its held-out error is lower by at
-least MIN_GAIN_PCT and a t-test on the per-block log ratio of held-out errors (5-minute blocks,
-not samples, are the units, so autocorrelated residuals do not inflate the evidence) rejects
-"no gain" at ALPHA. Accepted extensions are combined greedily; with several, each is measured
-again against the combination without it and dropped if it no longer gains.
+
+Each round: every candidate of the generated library (benchlab.diagnose.library) starts nested, at the
+current model. A score test ranks the ones whose effect is first order there: the cost one Gauss-Newton
+step would reach with every parameter free (the linearised fit, the current model's parameters released
+with the new ones, so an effect the model absorbed by bending them still shows); the SCORED_FITS best and
+every structural candidate (extra nodes, lags) then get a short fit from the nested start, which can only
+lower the parent's cost. The CROSS_VALIDATED best of those are fitted to convergence from the warm start and
+from the model file's neutral start, and cross-validated from the better one; a fit with a parameter on its
+bound has failed (reported, not used). An extension is accepted when its held-out error is lower by at least
+MIN_GAIN_PCT and a t-test on the per-block log ratio of held-out errors (5-minute blocks, not samples, are
+the units) rejects "no gain" at ALPHA. Of the extensions that pass, the largest gain is named only where the
+same test shows it better than each simpler explanation (fewer added parameters, then fewer signals); otherwise
+the simplest is. Where another candidate is not significantly worse than the named one by the same test, the
+finding lists it as an alternative. After each acceptance the whole model is
+refitted with multistart (warm, neutral and spread starts), so the next round starts from a fresh global fit,
+not from the parameters the previous round bent. With several findings, each is measured again against the
+combination without it and dropped if it no longer passes; no finding is reported that did not pass.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -29,7 +40,8 @@ from benchlab.diagnose.library import Candidate, candidates
 from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
-from benchlab.identify.fit import FitResult, fit, fit_multistart, simulate_outputs
+from benchlab.identify.fit import (FitResult, coordinate_bounds, fit, fit_multistart, from_coordinates, residual_vector,
+                                   simulate_outputs, to_coordinates)
 from benchlab.identify.spec import ModelSpec
 from benchlab.metrics import nrmse_pct, residual
 from benchlab.model.build import build_spec
@@ -44,10 +56,20 @@ MIN_DURATION_S = 2 * FOLD_S  # one block in each fold
 BLOCK_S = 300.0
 MIN_GAIN_PCT = 5.0
 ALPHA = 0.01
+SCORE_STEP = 0.05  # forward-difference step of a new parameter's column, in fitted coordinates
+SCORED_FITS = 6  # best-scored candidates screened by a short fit
+STRUCTURAL_FITS = 3  # best-scored extra nodes and lags screened by a short fit beside them
 SCREEN_NFEV = 8
 HELD_OUT_NFEV = 60
-POLISH_NFEV = 200  # the all-data fit of a screened candidate: near convergence, so its gain is not underrated
+POLISH_NFEV = 80  # the all-data fit of a screened candidate: near convergence, so its gain is not underrated
+SCOUT_NFEV = 25  # the fit from a neutral start before it is polished (where it beats the warm start)
 CROSS_VALIDATED = 3
+#: a polished fit whose in-sample RMSE is not lower by this share of MIN_GAIN_PCT is not cross-validated: the
+#: held-out gain of a fit is below its in-sample gain (its folds see half the data)
+IN_SAMPLE_SHARE = 0.5
+MAX_VALIDATED = 6  # screened candidates polished at most per round, failed fits (on a bound) included
+GLOBAL_STARTS = 2  # the refit after an acceptance: scouts from the model file's neutral start, beside the warm one
+BOUND_TOL = 1e-3  # a fitted coordinate this close to a bound, as a share of its range, is on it
 MAX_ROUNDS = 3
 # The flywheel's temperature at t = 0 is fitted per run: a run that starts with a launch leaves one
 # noisy reading to start from, and the fit then bends parameters (and spurious extensions gain
@@ -119,6 +141,8 @@ class Finding:
     after: HeldOut
     p_value: float
     bic_delta: float  # in-sample BIC with the extension minus without it, on the effective sample size
+    alternatives: list["Alternative"] = field(default_factory=list)  # not significantly worse than this one
+    at_bound: tuple[str, ...] = ()  # parameters of the refit with this extension left on a bound (a failed fit)
 
     @property
     def gain_pct(self) -> float:
@@ -130,6 +154,16 @@ class Finding:
         return self.gain_pct >= MIN_GAIN_PCT and self.p_value < ALPHA
 
 
+@dataclass(frozen=True)
+class Alternative:
+    """Another extension that passed against the same parent and that the accepted one does not beat significantly."""
+
+    candidate: Candidate
+    gain_pct: float
+    p_value: float  # its own block test against the parent
+    p_vs_winner: float  # the block test that the accepted extension's held-out error is lower than this one's
+
+
 @dataclass
 class Diagnosis:
     """The baseline, the accepted findings (largest gain first) and the final model, each with held-out predictions."""
@@ -139,6 +173,8 @@ class Diagnosis:
     findings: list[Finding]
     final: FitResult
     final_held: HeldOut
+    baseline_at_bound: tuple[str, ...] = ()  # the baseline fit's parameters on a bound
+    failed_fits: list[tuple[str, tuple[str, ...]]] = field(default_factory=list)  # candidate, parameters on a bound
 
 
 def _folds(datasets: Sequence[FitData]) -> list[tuple[list[FitData], list[FitData]]]:
@@ -196,48 +232,227 @@ def _block_test(before: HeldOut, after: HeldOut) -> float:
 Screened = tuple[float, Candidate, ModelSpec, dict[str, float]]  # in-sample cost, candidate, its spec, fitted values
 
 
+def at_bound(result: FitResult) -> tuple[str, ...]:
+    """The free parameters a fit left on (within BOUND_TOL of the range of) a bound: where they sit, the fit failed."""
+    x, (lo, hi) = to_coordinates(result.spec, result.params), coordinate_bounds(result.spec)
+    near = np.minimum(x - lo, hi - x) <= BOUND_TOL * (hi - lo)
+    return tuple(p.name for p, n in zip(result.spec.free, near) if n)
+
+
+def _nested_start(spec: ModelSpec, current: FitResult) -> dict[str, float]:
+    """A candidate's start: the current model's fitted values, the new parameters at their no-effect values."""
+    return {**{p.name: p.initial for p in spec.free}, **{k: current.params[k] for k in current.free_names}}
+
+
+def _starts(cand: Candidate, spec: ModelSpec, current: FitResult) -> list[dict[str, float]]:
+    """Where a candidate is screened from: its screening starts where it has them (a node of 1 J/K, a link of
+    1e4 K/W or a lag of 5 ms is flat there), else its nested start."""
+    nested = _nested_start(spec, current)
+    return [{**nested, **probe} for probe in cand.probes(current.params)] if cand.probes else [nested]
+
+
+def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitResult,
+           datasets: Sequence[FitData]) -> list[tuple[float, int]]:
+    """Per candidate, the in-sample cost one Gauss-Newton step from its best start would reach, every parameter
+    free, and which start that is.
+
+    The current model's Jacobian is the fit's own; the new parameters' columns are forward differences at the
+    start (one simulation each). At the nested start they are projected off the current columns (the current
+    parameters are released with them) and only what they add beyond them counts; at a screening start, away from
+    the parent, the whole step counts. Columns that vanish at the nested start (an exponent while its factor is
+    zero) are skipped, and a candidate that is its parent exactly there takes the parent's residuals.
+    """
+    jac = current.jacobian / np.maximum(np.linalg.norm(current.jacobian, axis=0), 1e-300)
+    basis, _ = np.linalg.qr(jac)
+
+    def project(v: np.ndarray) -> np.ndarray:
+        return v - basis @ (basis.T @ v)
+
+    parent = residual_vector(current.spec.network, {**current.spec.fixed, **current.params}, datasets)
+
+    def at(spec: ModelSpec, cand: Candidate, start: dict[str, float], nested: bool) -> float:
+        x0 = to_coordinates(spec, start)
+        new = [j for j, p in enumerate(spec.free)
+               if p.name not in current.params and not (nested and p.name in cand.inert)]
+        r0 = parent if nested and cand.exact else residual_vector(spec.network, {**spec.fixed, **start}, datasets)
+        columns = []
+        for j in new:
+            x = x0.copy()
+            x[j] += SCORE_STEP
+            columns.append(residual_vector(spec.network, {**spec.fixed, **from_coordinates(spec, x)}, datasets) - r0)
+        rest = project(r0)
+        if not columns:
+            return float(r0 @ r0)
+        a = project(np.column_stack(columns))
+        step, *_ = np.linalg.lstsq(a, rest, rcond=1e-10)
+        left = rest - a @ step
+        return float(left @ left + (0.0 if not nested else r0 @ r0 - rest @ rest))
+
+    def score_one(i: int) -> tuple[float, int]:
+        spec, cand = specs[i], cands[i]
+        costs = [at(spec, cand, start, cand.probes is None) for start in _starts(cand, spec, current)]
+        return min(costs), int(np.argmin(costs))
+
+    return map_indices(score_one, len(specs))
+
+
 def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[FitData],
             channels: dict[str, np.ndarray], progress: Progress, what: str) -> list[Screened]:
-    """A short in-sample fit of each candidate, every parameter free, from the current model; by cost, best first.
+    """Score every candidate, then a short in-sample fit, every parameter free, of the SCORED_FITS best-scored and
+    the STRUCTURAL_FITS best-scored structural ones (extra nodes, lags: the score's first step is rougher there)
+    from the start that scored best; those that lower the current cost, by cost, best first.
 
     Every parameter, not only the new ones: a model that lacks an effect has bent its other
     parameters to absorb it, and the new term pays off only once they are released (a plate share
     of 0.35 screened alone lowered the cost by 0 %, with all parameters free by 40 %).
     """
-    specs = [diagnosed_spec(cand.build(current.spec.definition, channels), datasets) for cand in cands]
+    base = current.spec.definition
+    specs = [diagnosed_spec(cand.build(base, channels), datasets) for cand in cands]
+    scores = _score(specs, cands, current, datasets)
+    order = list(np.argsort([cost for cost, _ in scores]))
+    structural = [i for i in order if cands[i].structural]
+    chosen = list(dict.fromkeys(order[:SCORED_FITS] + structural[:STRUCTURAL_FITS]))
 
-    def screen_one(i: int) -> tuple[float, dict[str, float]]:
-        result = fit(specs[i], datasets, max_nfev=SCREEN_NFEV,
-                     start={**{p.name: p.initial for p in specs[i].free},
-                            **{k: current.params[k] for k in current.free_names}})
+    def screen_one(k: int) -> tuple[float, dict[str, float]]:
+        i = chosen[k]
+        start = _starts(cands[i], specs[i], current)[scores[i][1]]
+        result = fit(specs[i], datasets, max_nfev=SCREEN_NFEV, start=start)
         return result.cost, result.params
 
-    with progress.task(what, len(specs), unit="fit") as task:
-        screened = map_indices(screen_one, len(specs), task.advance)
-    scored = [(cost, cand, spec, params) for cand, spec, (cost, params) in zip(cands, specs, screened)
-              if cost < current.cost]
-    return sorted(scored, key=lambda item: item[0])
+    with progress.task(what, len(chosen), unit="fit") as task:
+        screened = map_indices(screen_one, len(chosen), task.advance)
+    kept = [(cost, cands[i], specs[i], params) for i, (cost, params) in zip(chosen, screened) if cost < current.cost]
+    return sorted(kept, key=lambda item: item[0])
 
 
-def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut,
-         datasets: Sequence[FitData]) -> Finding | None:
-    """Polish and cross-validate the best-screened candidates; the significant one with the largest gain, if any."""
-    start_names = set(current.free_names)
-    top = scored[:CROSS_VALIDATED]
+def _polished(spec: ModelSpec, warm: dict[str, float], current: FitResult,
+              datasets: Sequence[FitData]) -> tuple[FitResult | None, tuple[str, ...]]:
+    """A candidate fitted to convergence from its warm (screened) start, and from the model file's neutral start
+    (the new parameters nested) scouted and polished where it does better; the better fit with no parameter on a
+    bound, or None and the parameters on a bound."""
+    neutral = {**{p.name: p.initial for p in spec.free},
+               **{k: v for k, v in current.params.items() if k.startswith("init_") and k in warm}}
+    fits = [fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: warm[p.name] for p in spec.free})]
+    scout = fit(spec, datasets, max_nfev=SCOUT_NFEV, start={p.name: neutral[p.name] for p in spec.free})
+    if scout.cost < fits[0].cost or at_bound(fits[0]):
+        fits.append(fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: scout.params[p.name] for p in spec.free}))
+    good = [r for r in fits if not at_bound(r)]
+    if good:
+        return min(good, key=lambda r: r.cost), ()
+    return None, at_bound(min(fits, key=lambda r: r.cost))
 
-    def validate(i: int) -> tuple[dict[str, float], float, np.ndarray, HeldOut]:
-        _, _, spec, params = top[i]
-        result = fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: params[p.name] for p in spec.free})
-        return result.params, result.cost, result.residuals, _held_out(spec, result.params, datasets)
 
-    best: Finding | None = None
-    for (_, cand, spec, _), (params, cost, residuals, held) in zip(top, map_indices(validate, len(top))):
-        added = tuple(p.name for p in spec.free if p.name not in start_names)
-        finding = Finding(cand, spec, params, added, current_held, held, _block_test(current_held, held),
-                          _bic_delta(current.cost, cost, residuals, len(added)))
-        if finding.significant and (best is None or finding.gain_pct > best.gain_pct):
-            best = finding
-    return best
+@dataclass
+class Tried:
+    """A cross-validated candidate: its fit (values, in-sample cost and residuals), held-out predictions and block
+    test against the current model."""
+
+    candidate: Candidate
+    spec: ModelSpec
+    params: dict[str, float]
+    cost: float
+    residuals: np.ndarray
+    held: HeldOut
+    p_value: float
+    gain_pct: float
+
+
+def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, datasets: Sequence[FitData],
+         failed: list[tuple[str, tuple[str, ...]]], pool: Sequence[Candidate] = (),
+         channels: dict[str, np.ndarray] | None = None) -> Finding | None:
+    """Polish and cross-validate the best-screened candidates, down the list past failed fits until CROSS_VALIDATED
+    have a good fit (at most MAX_VALIDATED tried). Of the significant ones, the simplest that the largest gain does
+    not beat at ALPHA is the finding (_simplest_equal), with the others that are not significantly worse as its
+    alternatives. Where the largest gain reads several signals, its simpler forms in `pool` (the same mechanism at
+    the same nodes on fewer of them) are validated too: a product is named only where the data ask for it. Failed
+    fits are appended to `failed`."""
+    def validate(i: int) -> tuple:  # plain values: a worker's result is pickled, the networks' laws cannot be
+        _, _, spec, params = batch[i]
+        result, bound = _polished(spec, params, current, datasets)
+        if result is None:
+            return None, bound
+        if 100.0 * (1.0 - np.sqrt(result.cost / current.cost)) < IN_SAMPLE_SHARE * MIN_GAIN_PCT:
+            return (), ()  # cannot gain MIN_GAIN_PCT held out: not cross-validated
+        held = _held_out(spec, result.params, datasets)
+        return (result.params, result.cost, result.residuals, held.predictions, held.params), bound
+
+    tried, good, offered = [], 0, list(scored[:MAX_VALIDATED])
+    while offered and good < CROSS_VALIDATED:
+        batch, offered = offered[:CROSS_VALIDATED - good], offered[CROSS_VALIDATED - good:]
+        for (_, cand, spec, _), (values, bound) in zip(batch, map_indices(validate, len(batch))):
+            if values is None:
+                failed.append((cand.key, bound))
+                continue
+            good += 1
+            if not values:
+                continue
+            params, cost, residuals, predictions, fold_params = values
+            held = HeldOut(datasets, predictions, fold_params)
+            tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
+                               100.0 * (1.0 - held.rmse / current_held.rmse)))
+    passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
+    if not passing:
+        return None
+    best = max(passing, key=lambda t: t.gain_pct)
+    simpler = [c for c in pool if c.mechanism == best.candidate.mechanism and c.nodes == best.candidate.nodes
+               and set(c.reads) < set(best.candidate.reads) and c.key not in {t.candidate.key for t in tried}]
+    if simpler and channels is not None:
+        base = current.spec.definition
+        batch = [(0.0, c, spec, _nested_start(spec, current))
+                 for c in simpler for spec in [diagnosed_spec(c.build(base, channels), datasets)]]
+        for (_, cand, spec, _), (values, bound) in zip(batch, map_indices(validate, len(batch))):
+            if values is None:
+                failed.append((cand.key, bound))
+            elif values:
+                params, cost, residuals, predictions, fold_params = values
+                held = HeldOut(datasets, predictions, fold_params)
+                tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
+                                   100.0 * (1.0 - held.rmse / current_held.rmse)))
+        passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
+    best = _simplest_equal(best, passing, current)
+    alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, best.held))
+                    for t in passing if _explains(t.candidate) != _explains(best.candidate)]
+    return _finding(best.candidate, best.spec, best.params, best.cost, best.residuals, current, current_held,
+                    best.held, [a for a in alternatives if a.p_vs_winner >= ALPHA])
+
+
+def _complexity(tried: Tried, current: FitResult) -> tuple[int, int]:
+    """How much an extension asks of the data: the parameters it adds, then the signals it reads."""
+    return sum(p.name not in current.params for p in tried.spec.free), len(tried.candidate.reads)
+
+
+def _simplest_equal(best: Tried, passing: Sequence[Tried], current: FitResult) -> Tried:
+    """The simplest passing extension that `best` does not beat at ALPHA (the same block test between the two), the
+    larger gain among equally simple ones: a parameter or a signal more is named only where the data ask for it.
+    Only other explanations compete (_explains): among the laws of one explanation the best fitting one is kept."""
+    equal = [t for t in passing if t is best or (_explains(t.candidate) != _explains(best.candidate)
+                                                 and _block_test(t.held, best.held) >= ALPHA)]
+    return min(equal, key=lambda t: (_complexity(t, current), -t.gain_pct))
+
+
+def _explains(cand: Candidate) -> tuple:
+    """What a finding tells the user: signal, mechanism and the nodes it acts on; candidates alike in these are
+    forms of one explanation, not alternatives to it."""
+    return frozenset(cand.reads), cand.mechanism, frozenset(cand.nodes)
+
+
+def _finding(cand: Candidate, spec: ModelSpec, params: dict[str, float], cost: float, residuals: np.ndarray,
+             current: FitResult, current_held: HeldOut, held: HeldOut, alternatives: list["Alternative"]) -> Finding:
+    """The finding of an extension fitted to `params` (in-sample cost and residuals) on top of `current`."""
+    added = tuple(p.name for p in spec.free if p.name not in current.params)
+    return Finding(cand, spec, params, added, current_held, held, _block_test(current_held, held),
+                   _bic_delta(current.cost, cost, residuals, len(added)), alternatives)
+
+
+def global_fit(spec: ModelSpec, warm: dict[str, float], datasets: Sequence[FitData], seed: int) -> FitResult:
+    """The whole model refitted after an acceptance: from the warm start, and a multistart from the model file's
+    neutral start (spread scouts, the best polished); the better fit with no parameter on a bound, else the
+    better one, whose bound parameters the finding reports."""
+    warm_fit = fit(spec, datasets, start={p.name: warm[p.name] for p in spec.free})
+    neutral = fit_multistart(spec, datasets, starts=GLOBAL_STARTS, seed=seed)
+    fits = [warm_fit, neutral]
+    good = [r for r in fits if not at_bound(r)]
+    return min(good or fits, key=lambda r: r.cost)
 
 
 def _combined(base: ModelSpec, cands: Sequence[Candidate], channels: dict[str, np.ndarray],
@@ -265,14 +480,33 @@ def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], f
         return refit.cost, _held_out(spec, refit.params, datasets)
 
     return [Finding(f.candidate, final.spec, final.params, f.added, held, final_held, _block_test(held, final_held),
-                    _bic_delta(cost, final.cost, final.residuals, len(f.added)))
+                    _bic_delta(cost, final.cost, final.residuals, len(f.added)), f.alternatives, f.at_bound)
             for f, (cost, held) in zip(findings, map_indices(without, len(findings)))]
+
+
+def _accept(findings: list[Finding], current: FitResult, current_held: HeldOut, base: FitResult, base_held: HeldOut,
+            datasets: Sequence[FitData], channels: dict[str, np.ndarray]) -> tuple[list[Finding], FitResult, HeldOut]:
+    """Drop-one re-check until every remaining finding passes against the rest (gain and alpha, as documented)."""
+    while findings:
+        if len(findings) > 1:
+            findings = _recheck(base, base_held, findings, current, current_held, datasets, channels)
+        kept = [f for f in findings if f.significant]
+        if len(kept) == len(findings):
+            return findings, current, current_held
+        if not kept:
+            return [], base, base_held
+        spec = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
+        current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
+        current_held = _held_out(spec, current.params, datasets)
+        findings = _recheck(base, base_held, kept, current, current_held, datasets, channels)
+    return [], base, base_held
 
 
 @single_threaded_blas
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", starts: int = 4,
                   seed: int = 0, progress: Progress = SILENT) -> Diagnosis:
-    """Baseline fit, greedy accepted extensions, then a drop-one re-check of each against the combination.
+    """Baseline fit, greedy accepted extensions with a global refit after each, then a drop-one re-check of each
+    against the combination.
 
     `baseline`: a built-in name, a model file or a checked model; every extension is an edit of it.
     `progress` gets a task for the baseline's multistart and one per screening of candidates.
@@ -291,31 +525,26 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
     library = candidates(model, channels, units)
-    current, current_held, findings = base, base_held, []
+    current, current_held, findings, failed = base, base_held, [], []
     for round_ in range(1, MAX_ROUNDS + 1):
         used = {f.candidate.key for f in findings}
         remaining = [c for c in library if c.key not in used]
-        finding = _try(_screen([c for c in remaining if c.physical], current, datasets, channels, progress,
-                               f"diagnose round {round_}: mechanisms"), current, current_held, datasets)
-        if finding is None:
-            finding = _try(_screen([c for c in remaining if not c.physical], current, datasets, channels, progress,
-                                   f"diagnose round {round_}: learned flows"), current, current_held, datasets)
+        finding = None
+        for physical, what in ((True, "mechanisms"), (False, "learned flows")):
+            if finding is None:
+                pool = [c for c in remaining if c.physical == physical]
+                finding = _try(_screen(pool, current, datasets, channels, progress,
+                                       f"diagnose round {round_}: {what}"), current, current_held, datasets, failed,
+                               pool, channels)
         if finding is None:
             break
+        parent, current = current, global_fit(finding.spec, finding.params, datasets, seed + round_)
+        held = _held_out(current.spec, current.params, datasets)
+        finding = _finding(finding.candidate, current.spec, current.params, current.cost, current.residuals, parent,
+                           current_held, held, finding.alternatives)
+        finding.at_bound = at_bound(current)
         findings.append(finding)
-        current = fit(finding.spec, datasets, start={p.name: finding.params[p.name] for p in finding.spec.free})
-        current_held = finding.after
-    dropped = False
-    while len(findings) > 1 or (findings and dropped):  # until every finding holds against the rest (alpha, gain)
-        findings = _recheck(base, base_held, findings, current, current_held, datasets, channels)
-        kept = [f for f in findings if f.significant]
-        if len(kept) == len(findings):
-            break
-        dropped = True  # another finding covered what this one fixed: drop it, measure the rest again
-        if not kept:
-            current, current_held, findings = base, base_held, []
-            break
-        spec = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
-        current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
-        current_held, findings = _held_out(spec, current.params, datasets), kept
-    return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held)
+        current_held = held
+    findings, current, current_held = _accept(findings, current, current_held, base, base_held, datasets, channels)
+    return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held,
+                     at_bound(base), failed)

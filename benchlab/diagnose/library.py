@@ -1,19 +1,26 @@
-"""Physically named model extensions: each is an edit of the model file (its links, sources, nodes, lags and
-parameter tables), so the extended model diagnose finds can be saved, simulated and re-identified.
+"""Model extensions generated from the model's structure, each an edit of the model file (its links, sources,
+nodes, lags and parameter tables), so the extended model diagnose finds can be saved, simulated and re-identified.
 
-A candidate names the signal the missing effect depends on and its mechanism (contract §3). The paper's
-clutch gets its own library (convection laws, plate–flywheel conduction, heat split, radiation, …) where the
-model has the clutch's nodes and links; any other network gets the generic one built from its structure
-(a heat source driven by a signal into each node, a speed-dependent law on each link, an extra mass behind
-each measured node, a lag on each sensor). The generic fallback learns a missing heat flow as a
-piecewise-linear function of one signal, for effects no physical term describes.
+The generator works on any network (benchlab.model.ModelDefinition): every link group (links sharing one
+resistance law) × every varying signal under three resistance laws (linear, power, exponential in the signal;
+one factor for an on/off signal); every node × signal as a heat source; a new link between each pair of nodes
+that have none; one extra node hung on each node and one bridging each pair of nodes; a first-order lag on each
+measured output; heat moved between each pair of sources; then, last, learned piecewise-linear heat flows.
+Every candidate starts NESTED: at its start values it is its parent model (a factor of one, a source of zero
+watts, a node of 1 J/K, a link of 1e4 K/W, a lag of 5 ms), and that point lies inside its bounds, so a fit
+that starts there can only lower the parent's cost.
+The paper's clutch gets the same generator plus physical names (convection on R_PA/R_FA, conduction on R_Feng,
+`heat_split` of plate and flywheel shares, `extra_mass` behind the flywheel, `sensor_lag` of the flywheel),
+the convection law of eq. (11) where the baseline lacks it, the clamped plate–flywheel conduction and radiation.
+A candidate names the signal the missing effect depends on and its mechanism (contract §3).
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from itertools import combinations
 
 import numpy as np
 
@@ -29,21 +36,56 @@ CONVECTION_LINKS = ("R_PA", "R_FA")
 SHARES = ("plate share", "flywheel share")
 TEMPERATURE_UNIT = "degC"
 SPEED_UNIT = "rpm"
+#: Nested starts: a node this small (J/K) is no node, a link this large (K/W) is no link, a lag this short (s) no lag.
+NESTED_CAPACITY = 1.0
+NESTED_RESISTANCE = 1.0e4
+NESTED_LAG_S = 0.005
+OPEN_CIRCUIT = 1.0e6  # K/W of a gated link while it is open: no heat crosses
+EXPONENT_RANGE = (0.05, 8.0)  # of a signal in a law or a source: from nearly a step (x^0.05) to a steep rise
+#: Screening starts of a sensor lag (s): a lag of 5 ms is flat to first order, so its screen starts also here
+LAG_PROBES_S = (1.0, 10.0, 100.0)
+LAWS = ("linear", "power", "exponential")  # a link's resistance against a signal; an on/off signal gets one factor
+#: The clutch's signals a missing effect may depend on (where the runs hold them and they vary).
+CLUTCH_SIGNALS = ("engine_speed", "clutch_speed", "slip_speed", "clutch_state", "clutch_torque", "friction_power",
+                  "load_torque")
 
 Doc = dict
+Build = Callable[[ModelDefinition, Channels], ModelDefinition]
 
 
 @dataclass(frozen=True)
 class Candidate:
-    """A proposed extension: what it depends on, how, and how to build the extended model."""
+    """A proposed extension: what it depends on, how, where it acts, and how to build the extended model.
+
+    `structural`: its effect is not first order at the nested start (a node of 1 J/K is, to first order, more
+    capacity on its neighbour), so the screen fits it whatever its score.
+    """
 
     key: str
     signal: str | None
     mechanism: str
     extension: str  # the formula, as the JSON shows it
     summary: str
-    build: Callable[[ModelDefinition, Channels], ModelDefinition]
+    build: Build
     physical: bool = True
+    nodes: tuple[str, ...] = ()  # the nodes it changes (where a sensor would see it first)
+    structural: bool = False
+    #: further screening starts from the current values (an extra node of a tenth or all of its neighbour's
+    #: capacity): a structural candidate's nested start is flat, and the screen keeps the best of all its starts
+    probes: Callable[[Mapping[str, float]], list[dict[str, float]]] | None = None
+    #: parameters with no first-order effect at the nested start (an exponent while its factor is zero): the score
+    #: test skips their columns, which are zero there
+    inert: tuple[str, ...] = ()
+    #: at its nested start the extension is exactly its parent (a zero factor, not a link of 1e4 K/W): the score
+    #: test takes the parent's residuals instead of simulating it once more
+    exact: bool = True
+    #: every signal the extension reads (a product of two reads both; `signal` names the first)
+    signals: tuple[str, ...] = ()
+
+    @property
+    def reads(self) -> tuple[str, ...]:
+        """Every signal the extension depends on."""
+        return self.signals or ((self.signal,) if self.signal else ())
 
 
 def signal_values(name: str, ch: Channels) -> np.ndarray:
@@ -88,117 +130,197 @@ def _wrap_links(names: tuple[str, ...], template: str) -> Callable[[Doc], None]:
     return edit
 
 
-# --- the paper's clutch -------------------------------------------------------------------------------------
-
-def engine_speed_convection(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-    """The convection law of the nonlinear clutch model file (eq. 11) in place of the constant R0."""
-    nonlinear = builtin("nonlinear")
-    law = next(l.resistance.text for l in nonlinear.links if l.name == CONVECTION_LINKS[1])
-
-    def edit(doc: Doc) -> None:
-        for link in _links(doc, CONVECTION_LINKS):
-            link["resistance"] = re.sub(r"\bR0\b", f"({law})", link["resistance"])
-        for name in ("a1", "b1", "a2", "b2"):
-            doc["parameters"][name] = nonlinear.to_doc()["parameters"][name]
-    return revise(model, "speed_convection", edit)
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_]", "_", text)
 
 
-def state_convection(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-    def edit(doc: Doc) -> None:
-        _wrap_links(CONVECTION_LINKS, "({r}) * where(clutch_state >= 0.5, 1.0, k_open)")(doc)
-        _parameter(doc, "k_open", 1.0, 0.2, 5.0, "1")
-    return revise(model, "state_convection", edit)
+def _reference(signal: str, ch: Channels) -> float:
+    """The signal's largest magnitude in the runs: laws read |s| / reference, between 0 and 1."""
+    return float(np.nanmax(np.abs(signal_values(signal, ch)))) or 1.0
 
 
-def slip_convection(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-    def edit(doc: Doc) -> None:
-        _wrap_links(CONVECTION_LINKS, "({r}) / (1.0 + slip_gain * abs(engine_speed - clutch_speed) / 1000.0)")(doc)
-        _parameter(doc, "slip_gain", 0.1, 1e-4, 20.0, "1 per 1000 rpm of slip")
-    return revise(model, "slip_convection", edit)
+def is_on_off(signal: str, ch: Channels) -> bool:
+    """Whether the signal takes two values at most (the clutch state): one factor, not a law, describes it."""
+    return len(np.unique(signal_values(signal, ch)[np.isfinite(signal_values(signal, ch))])) <= 2
 
 
-def clamped_conduction(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-    def edit(doc: Doc) -> None:
-        doc["links"].append({"name": "R_PF", "between": ["P", "F"],
-                             "resistance": "where(clutch_state >= 0.5, R_PF, 1000000.0)"})
-        _parameter(doc, "R_PF", 1.0, 1e-3, 1e3, "K/W")
-    return revise(model, "clamped_conduction", edit)
+def gated(signal: str, ch: Channels, on: bool, value: str, otherwise: str) -> str:
+    """`value` while an on/off signal is on (at its higher value; `on` False: while off), else `otherwise`."""
+    values = np.unique(signal_values(signal, ch)[np.isfinite(signal_values(signal, ch))])
+    middle = float(values.mean()) if len(values) else 0.5
+    first, second = (value, otherwise) if on else (otherwise, value)
+    return f"where({signal_expression(signal)} >= {middle!r}, {first}, {second})"
 
 
-def unequal_split(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-    def edit(doc: Doc) -> None:
-        plate, flywheel = (next(s for s in doc["sources"] if s["name"] == name) for name in SHARES)
-        plate["heat"], flywheel["heat"] = "split*friction_power", "(1 - split)*friction_power"
-        _parameter(doc, "split", 0.5, 0.05, 0.95, "1 (plate share of P)", scale=0.5)
-    return revise(model, "heat_split", edit)
+def gate_expression(signal: str, ch: Channels, on: bool) -> str:
+    """1 while an on/off signal is on, else 0; or the other way round."""
+    return gated(signal, ch, on, "1.0", "0.0")
 
 
-def radiation(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-    """Grey-body exchange linearised about the measured temperatures: ε·A·σ·4·T̄³ per kelvin of difference."""
-    law = f"1 / (eps_area * {STEFAN_BOLTZMANN!r} * 4 * ((T_flywheel + T_housing) / 2 + 273.15) ** 3)"
-
-    def edit(doc: Doc) -> None:
-        doc["links"] += [{"name": "radiation F", "between": ["F", "T"], "resistance": law},
-                         {"name": "radiation P", "between": ["P", "T"], "resistance": law}]
-        _parameter(doc, "eps_area", 0.02, 1e-4, 2.0, "m2 (emissivity x area)")
-    return revise(model, "radiation", edit)
+def factor_expression(signal: str, ch: Channels, exponent: str, gate: bool | None = None) -> str:
+    """A signal as a source factor: an on/off signal as its gate (on or off), any other as (|s|/max)^n."""
+    if gate is not None:
+        return gate_expression(signal, ch, gate)
+    return f"(abs({signal_expression(signal)}) / {_reference(signal, ch)!r}) ** {exponent}"
 
 
-# --- any network ---------------------------------------------------------------------------------------------
+# --- generated from the structure ------------------------------------------------------------------------------
 
-def channel_source(signal: str, node: str) -> Callable[[ModelDefinition, Channels], ModelDefinition]:
-    """Heat q = k·(s/s_ref)^n into `node`, s a channel (engine or gearbox losses, iron losses, a heater)."""
+def link_law(links: tuple[str, ...], signal: str, law: str) -> Build:
+    """The links' resistance R against a signal, nested at R: linear R/(1 + g·x), power R/(1 + g·x^n),
+    exponential R·(1 − g + g·exp(−k·x)) with x = |s|/max; an on/off signal: R·(1 + g·s)."""
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-        ref = float(np.nanmax(np.abs(signal_values(signal, ch)))) or 1.0
-        k, n = f"q_{signal}_{node}", f"n_{signal}_{node}"
+        tag = f"{_slug(signal)}_{_slug(links[0])}"
+        g = f"g_{law}_{tag}"
+        if is_on_off(signal, ch):
+            template, extra = f"({{r}}) * (1.0 + {g} * {signal_expression(signal)})", {}
+        else:
+            x = f"abs({signal_expression(signal)}) / {_reference(signal, ch)!r}"
+            if law == "linear":
+                template, extra = f"({{r}}) / (1.0 + {g} * {x})", {}
+            elif law == "power":
+                template, extra = f"({{r}}) / (1.0 + {g} * ({x}) ** n_{tag})", {f"n_{tag}": (2.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)")}
+            else:
+                template, extra = (f"({{r}}) * (1.0 - {g} + {g} * exp(-k_{tag} * {x}))",
+                                   {f"k_{tag}": (3.0, 0.1, 30.0, "1 (rate over the signal's range)")})
 
         def edit(doc: Doc) -> None:
-            doc["sources"].append({"name": f"{signal} source {node}", "node": node,
-                                   "heat": f"{k} * (abs({signal_expression(signal)}) / {ref!r}) ** {n}"})
-            _parameter(doc, k, 10.0, 1e-2, 1e4, "W (at the signal's maximum)")
-            _parameter(doc, n, 1.0, 0.25, 4.0, "1 (exponent)")
-        return revise(model, f"source_{signal}_{node}", edit)
+            _wrap_links(links, template)(doc)
+            low = -0.9 if law != "exponential" else -5.0
+            high = 1e3 if law != "exponential" else 0.95
+            _parameter(doc, g, 0.0, low, high, "1 (factor on the conductance)", scale=0.5)
+            for name, (start, lo, hi, unit) in extra.items():
+                _parameter(doc, name, start, lo, hi, unit)
+        return revise(model, f"{signal}_{law}_{links[0]}", edit)
     return build
 
 
-def speed_link(link: str, signal: str) -> Callable[[ModelDefinition, Channels], ModelDefinition]:
-    """The link's resistance falling with a speed (forced convection): R / (1 + g·|s|/s_ref)."""
+def source_name(signals: tuple[str, ...], node: str, gates: tuple[bool | None, ...]) -> str:
+    """The key of a heat source into `node` that reads `signals` (an on/off one while on or off)."""
+    parts = [f"{_slug(s)}" + ("" if g is None else ("_on" if g else "_off")) for s, g in zip(signals, gates)]
+    return f"source_{'_'.join(parts)}_{node}"
+
+
+def channel_source(signals: tuple[str, ...], node: str, gates: tuple[bool | None, ...]) -> Build:
+    """Heat q·Π factor(s) into `node`, q from 0 W: a continuous signal as (|s|/max)^n, an on/off one as its gate
+    (while on or while off). One signal: engine or gearbox losses, a heater; two: a loss in proportion to a
+    torque times a speed, or a drag only while the clutch is open."""
+    key = source_name(signals, node, gates)
+
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-        ref = float(np.nanmax(np.abs(signal_values(signal, ch)))) or 1.0
-        gain = f"g_{signal}_{re.sub(r'[^A-Za-z0-9_]', '_', link)}"
+        tag = key.removeprefix("source_")
+        k = f"q_{tag}"
+        exponents = [f"n{i + 1 if len(signals) > 1 else ''}_{tag}" for i in range(len(signals))]
+        heat = " * ".join([k] + [factor_expression(s, ch, n, g) for s, n, g in zip(signals, exponents, gates)])
 
         def edit(doc: Doc) -> None:
-            _wrap_links((link,), f"({{r}}) / (1.0 + {gain} * abs({signal}) / {ref!r})")(doc)
-            _parameter(doc, gain, 0.1, 1e-4, 20.0, "1 (at the signal's maximum)")
-        return revise(model, f"{signal}_link_{link}", edit)
+            doc["sources"].append({"name": key, "node": node, "heat": heat})
+            at = "W (at the signal's maximum)" if len(signals) == 1 else "W (at the signals' maxima)"
+            _parameter(doc, k, 0.0, -1e4, 1e4, at, scale=10.0)
+            for n, g in zip(exponents, gates):
+                if g is None:
+                    _parameter(doc, n, 1.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)")
+        return revise(model, key, edit)
     return build
 
 
-def extra_mass(node: str, initial: str) -> Callable[[ModelDefinition, Channels], ModelDefinition]:
-    """A thermal mass the model lacks, linked to `node`: stores and returns heat slowly."""
+def source_exponents(signals: tuple[str, ...], node: str, gates: tuple[bool | None, ...]) -> tuple[str, ...]:
+    """The exponents of channel_source: inert while q is zero."""
+    tag = source_name(signals, node, gates).removeprefix("source_")
+    return tuple(f"n{i + 1 if len(signals) > 1 else ''}_{tag}" for i, g in enumerate(gates) if g is None)
+
+
+def new_link(a: str, b: str, key: str, name: str | None = None, gate: str | None = None, on: bool = True) -> Build:
+    """A link between two nodes the model does not link, from NESTED_RESISTANCE (none); `gate`: an on/off signal,
+    the link there only while it is on (`on`) or off (a path that opens and closes with the clutch)."""
+    resistance = name or (f"R_{a}{b}" if gate is None else f"R_{a}{b}_{_slug(gate)}_{'on' if on else 'off'}")
+
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-        mass = "X" if node == "F" else f"X{node}"  # the clutch's flywheel hub keeps its name X
-        capacity, resistance = f"C_{mass}", f"R_{node}{mass}"
+        law = gated(gate, ch, on, resistance, repr(OPEN_CIRCUIT)) if gate else resistance
+
+        def edit(doc: Doc) -> None:
+            doc["links"].append({"name": resistance, "between": [a, b], "resistance": law})
+            _parameter(doc, resistance, NESTED_RESISTANCE, 1e-3, 10 * NESTED_RESISTANCE, "K/W")
+        return revise(model, key, edit)
+    return build
+
+
+def extra_node(ends: tuple[str, ...], key: str, mass: str) -> Build:
+    """A thermal mass the model lacks: node `mass` hung on one node, or bridging two (a cover between a part and
+    the air). Nested: 1 J/K hung (to first order more capacity on its node), NESTED_RESISTANCE to either end
+    when bridging."""
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        capacity = f"C_{mass}"
+        links = [f"R_{end}{mass}" for end in ends]
+        bridging = len(ends) > 1
 
         def edit(doc: Doc) -> None:
             doc["nodes"][mass] = capacity
-            doc["links"].append({"name": resistance, "between": [node, mass], "resistance": resistance})
-            doc.setdefault("initial", {})[mass] = initial
-            _parameter(doc, capacity, 2000.0, 10.0, 1e5, "J/K")
-            _parameter(doc, resistance, 0.1, 1e-3, 100.0, "K/W")
-        return revise(model, "extra_mass" if node == "F" else f"extra_mass_{node}", edit)
+            for end, r in zip(ends, links):
+                doc["links"].append({"name": r, "between": [end, mass], "resistance": r})
+                _parameter(doc, r, NESTED_RESISTANCE if bridging else 0.1, 1e-3, 10 * NESTED_RESISTANCE, "K/W")
+            doc.setdefault("initial", {})[mass] = model.initial[ends[0]]
+            _parameter(doc, capacity, 100.0 if bridging else NESTED_CAPACITY, 0.1, 1e5, "J/K")
+        return revise(model, key, edit)
     return build
 
 
-def sensor_lag(output: str, node: str) -> Callable[[ModelDefinition, Channels], ModelDefinition]:
-    """The sensor of `output` follows its node with a first-order lag."""
+def typical_resistance(model: ModelDefinition, values: Mapping[str, float]) -> float:
+    """The geometric mean of the model's fitted plain link resistances (a parameter named as the whole law), K/W."""
+    plain = [l.resistance.text for l in model.links if l.resistance.text in model.parameters]
+    return float(np.exp(np.mean([np.log(values[name]) for name in plain]))) if plain else 1.0
+
+
+def node_probes(model: ModelDefinition, ends: tuple[str, ...], mass: str) -> Callable[[Mapping[str, float]],
+                                                                                   list[dict[str, float]]]:
+    """Screening starts of an extra node: its capacity a tenth of and equal to its (first) neighbour's, each link the
+    model's typical resistance."""
+    def probes(values: Mapping[str, float]) -> list[dict[str, float]]:
+        r = typical_resistance(model, values)
+        capacity = values.get(model.nodes[ends[0]], 1000.0)
+        return [{f"C_{mass}": share * capacity, **{f"R_{end}{mass}": r for end in ends}} for share in (0.1, 1.0)]
+    return probes
+
+
+def link_probes(model: ModelDefinition, resistance: str) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening start of a new link: the model's typical resistance. From NESTED_RESISTANCE a short fit moves its
+    logarithm too little (a path of 0.3 K/W reached 0.86 of the parent's cost in 8 evaluations, 0.07 from here)."""
+    return lambda values: [{resistance: typical_resistance(model, values)}]
+
+
+def sensor_lag(output: str, node: str) -> Build:
+    """The sensor of `output` follows its node with a first-order lag, from NESTED_LAG_S."""
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-        tau = "tau_F" if output == "T_flywheel" else f"tau_{output}"
+        tau = lag_time_constant(output)
 
         def edit(doc: Doc) -> None:
             doc["lags"].append({"output": output, "node": node, "time_constant": tau})
-            _parameter(doc, tau, 5.0, 0.05, 600.0, "s")
+            _parameter(doc, tau, NESTED_LAG_S, 0.001, 600.0, "s")
         return revise(model, "sensor_lag" if output == "T_flywheel" else f"sensor_lag_{output}", edit)
+    return build
+
+
+def lag_time_constant(output: str) -> str:
+    """The time constant of a lag on `output` (tau_F for the clutch's flywheel, its earlier name)."""
+    return "tau_F" if output == "T_flywheel" else f"tau_{output}"
+
+
+def lag_probes(output: str) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening starts of a sensor lag at LAG_PROBES_S: at 5 ms its effect is flat to first order."""
+    return lambda values: [{lag_time_constant(output): tau} for tau in LAG_PROBES_S]
+
+
+def moved_heat(first: str, second: str) -> Build:
+    """A share d of two sources' total heat moved from the second to the first, from d = 0."""
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        d = f"d_{_slug(first)}_{_slug(second)}"
+
+        def edit(doc: Doc) -> None:
+            a, b = (next(s for s in doc["sources"] if s["name"] == name) for name in (first, second))
+            total = f"(({a['heat']}) + ({b['heat']}))"
+            a["heat"], b["heat"] = f"({a['heat']}) + {d} * {total}", f"({b['heat']}) - {d} * {total}"
+            _parameter(doc, d, 0.0, -0.45, 0.45, "1 (share of the pair's heat)", scale=0.1)
+        return revise(model, f"split_{_slug(first)}_{_slug(second)}", edit)
     return build
 
 
@@ -212,7 +334,7 @@ def piecewise_linear(signal: str, knots: np.ndarray, names: list[str]) -> str:
     return " + ".join(terms)
 
 
-def fallback_source(signal: str, node: str) -> Callable[[ModelDefinition, Channels], ModelDefinition]:
+def fallback_source(signal: str, node: str) -> Build:
     """A learned heat flow into `node`: piecewise linear in the signal, knots evenly spread over its range.
 
     Even spacing, not quantiles: a signal that is mostly zero (torque, power, slip) would put most
@@ -232,10 +354,239 @@ def fallback_source(signal: str, node: str) -> Callable[[ModelDefinition, Channe
     return build
 
 
-SOURCE_SIGNALS = ("engine_speed", "clutch_speed")
-FALLBACK_SIGNALS = ("engine_speed", "slip_speed", "clutch_speed", "clutch_torque", "clutch_state",
-                    "friction_power", "load_torque", "T_flywheel")
+def link_groups(model: ModelDefinition) -> list[tuple[str, ...]]:
+    """Links sharing one resistance law (R_PA = R_FA of the clutch) as one group, in the model's order."""
+    groups: dict[str, list[str]] = {}
+    for link in model.links:
+        groups.setdefault(link.resistance.text, []).append(link.name)
+    return [tuple(names) for names in groups.values()]
 
+
+def _link_inert(links: tuple[str, ...], signal: str, law: str) -> tuple[str, ...]:
+    """The parameter of link_law that has no effect while its factor g is zero."""
+    tag = f"{_slug(signal)}_{_slug(links[0])}"
+    return {"power": (f"n_{tag}",), "exponential": (f"k_{tag}",)}.get(law, ())
+
+
+def _sources(signals: list[str], nodes: list[str], channels: Channels) -> list[Candidate]:
+    """Heat sources into each node: one signal (an on/off one while on and while off), and the product of two (a
+    continuous signal with another, or gated by an on/off one). A product names its first continuous signal: a gate
+    says when the heat flows, the signal how much."""
+    on_off = {s for s in signals if is_on_off(s, channels)}
+    forms: list[tuple[tuple[str, ...], tuple[bool | None, ...]]] = []
+    for s in signals:
+        forms += [((s,), (g,)) for g in (True, False)] if s in on_off else [((s,), (None,))]
+    for first, second in combinations(signals, 2):
+        if first in on_off and second in on_off:
+            continue
+        gates = [(g, None) for g in (True, False)] if first in on_off else (
+            [(None, g) for g in (True, False)] if second in on_off else [(None, None)])
+        forms += [((first, second), g) for g in gates]
+    out = []
+    for node in nodes:
+        for used, gates in forms:
+            words = " x ".join(f"{s} ({'on' if g else 'off'})" if g is not None else s for s, g in zip(used, gates))
+            law = "*".join(f"[{s} {'on' if g else 'off'}]" if g is not None else
+                           (f"(|{s}|/max)^n{i + 1}" if len(used) > 1 else f"(|{s}|/max)^n")
+                           for i, (s, g) in enumerate(zip(used, gates)))
+            driver = next((s for s, g in zip(used, gates) if g is None), used[0])
+            out.append(Candidate(source_name(used, node, gates), driver, "heat_source",
+                                 f"heat into {node} = q*{law}", f"a heat source driven by {words} "
+                                 f"warms node {node}", channel_source(used, node, gates), nodes=(node,),
+                                 inert=source_exponents(used, node, gates), signals=used))
+    return out
+
+
+def generated(model: ModelDefinition, signals: list[str], channels: Channels,
+              link_mechanism: Callable[[tuple[str, ...]], str] = lambda links: "convection") -> list[Candidate]:
+    """Every extension of the model's structure (module docstring), physical ones first, learned flows last."""
+    nodes = list(model.nodes)
+    link_nodes = {l.name: tuple(n for n in l.between if n in model.nodes) for l in model.links}
+    on_off = [s for s in signals if is_on_off(s, channels)]
+    out = []
+    for group in link_groups(model):
+        where = tuple(dict.fromkeys(n for name in group for n in link_nodes[name]))
+        for signal in signals:
+            for law in (LAWS[:1] if is_on_off(signal, channels) else LAWS):
+                out.append(Candidate(f"{signal}_{law}_{'_'.join(group)}", signal, link_mechanism(group),
+                                     f"{' = '.join(group)} = R * f({signal}), {law}",
+                                     f"heat crosses {' and '.join(group)} at a rate that depends on {signal}",
+                                     link_law(group, signal, law), nodes=where, inert=_link_inert(group, signal, law),
+                                     signals=(signal,)))
+    out += _sources(signals, nodes, channels)
+    linked = {frozenset(l.between) for l in model.links}
+    for a, b in combinations(nodes, 2):
+        if frozenset((a, b)) not in linked:
+            out.append(Candidate(f"link_{a}_{b}", None, "conduction", f"new link R_{a}{b} between {a} and {b}",
+                                 f"nodes {a} and {b} exchange heat directly", new_link(a, b, f"link_{a}_{b}"), nodes=(a, b),
+                                 exact=False, probes=link_probes(model, f"R_{a}{b}")))
+            for gate in on_off:
+                for on in (True, False):
+                    state = "on" if on else "off"
+                    out.append(Candidate(f"link_{a}_{b}_{gate}_{state}", gate, "conduction",
+                                         f"new link R_{a}{b} between {a} and {b} while {gate} is {state}",
+                                         f"nodes {a} and {b} exchange heat directly while {gate} is {state}",
+                                         new_link(a, b, f"link_{a}_{b}_{gate}_{state}", gate=gate, on=on),
+                                         nodes=(a, b), exact=False, signals=(gate,),
+                                         probes=link_probes(model, f"R_{a}{b}_{_slug(gate)}_{state}")))
+    for node in nodes:
+        out.append(Candidate(f"extra_mass_{node}", None, "capacity", f"extra node X{node}: C_X{node} linked to {node}",
+                             f"a thermal mass the model lacks stores and returns heat behind node {node}",
+                             extra_node((node,), f"extra_mass_{node}", f"X{node}"), nodes=(node,), structural=True,
+                             probes=node_probes(model, (node,), f"X{node}"), exact=False))
+    for a, b in combinations(nodes, 2):
+        out.append(Candidate(f"bridge_{a}_{b}", None, "capacity", f"extra node X{a}{b} linked to {a} and to {b}",
+                             f"a thermal mass the model lacks sits between {a} and {b}",
+                             extra_node((a, b), f"bridge_{a}_{b}", f"X{a}{b}"), nodes=(a, b), structural=True,
+                             probes=node_probes(model, (a, b), f"X{a}{b}"), exact=False))
+    lagged = {g.output for g in model.lags}
+    for output, node in model.outputs.items():
+        if output not in lagged:
+            out.append(Candidate(f"sensor_lag_{output}", output, "sensor", f"{output} measured = first-order lag of {node}",
+                                 f"the {output} sensor lags its node's temperature", sensor_lag(output, node),
+                                 nodes=(node,), structural=True, probes=lag_probes(output), exact=False,
+                                 signals=(output,)))
+    for a, b in combinations(model.sources, 2):
+        if a.node != b.node:
+            signal = next(iter(sorted((a.heat.names | b.heat.names) - set(model.parameters) - set(model.nodes))), None)
+            out.append(Candidate(f"split_{_slug(a.name)}_{_slug(b.name)}", signal, "heat_split",
+                                 f"{a.name} + d*(sum), {b.name} - d*(sum)",
+                                 f"the heat of {a.name} and {b.name} is shared otherwise", moved_heat(a.name, b.name),
+                                 nodes=(a.node, b.node)))
+    return out
+
+
+def learned(signals: list[str], nodes: list[str]) -> list[Candidate]:
+    """The learned piecewise-linear heat flows, one per signal and node: tried only where no physical term gains."""
+    return [Candidate(f"learned_{signal}_{node}", signal, "other", f"learned heat flow into {node} = g({signal}), "
+                      "piecewise linear", f"a heat flow into node {node} that depends on {signal}; no physical term "
+                      "fits it", fallback_source(signal, node), physical=False, nodes=(node,))
+            for signal in signals for node in nodes]
+
+
+# --- the paper's clutch: the generator plus physical names ------------------------------------------------------
+
+def engine_speed_convection(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+    """The convection law of the nonlinear clutch model file (eq. 11) in place of the constant R0, from a1 = a2 = 0
+    (no effect), fitted linearly so that the first steps reach the scale of R0."""
+    nonlinear = builtin("nonlinear")
+    law = next(l.resistance.text for l in nonlinear.links if l.name == CONVECTION_LINKS[1])
+
+    def edit(doc: Doc) -> None:
+        for link in _links(doc, CONVECTION_LINKS):
+            link["resistance"] = re.sub(r"\bR0\b", f"({law})", link["resistance"])
+        for name in ("a1", "b1", "a2", "b2"):
+            doc["parameters"][name] = nonlinear.to_doc()["parameters"][name]
+        for name in ("a1", "a2"):
+            doc["parameters"][name].update(start=0.0, min=-0.01, scale=0.1)
+    return revise(model, "speed_convection", edit)
+
+
+def state_convection(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+    def edit(doc: Doc) -> None:
+        _wrap_links(CONVECTION_LINKS, "({r}) * where(clutch_state >= 0.5, 1.0, k_open)")(doc)
+        _parameter(doc, "k_open", 1.0, 0.2, 5.0, "1")
+    return revise(model, "state_convection", edit)
+
+
+def slip_convection(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+    def edit(doc: Doc) -> None:
+        _wrap_links(CONVECTION_LINKS, "({r}) / (1.0 + slip_gain * abs(engine_speed - clutch_speed) / 1000.0)")(doc)
+        _parameter(doc, "slip_gain", 0.0, -0.2, 20.0, "1 per 1000 rpm of slip", scale=0.1)
+    return revise(model, "slip_convection", edit)
+
+
+def unequal_split(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+    def edit(doc: Doc) -> None:
+        plate, flywheel = (next(s for s in doc["sources"] if s["name"] == name) for name in SHARES)
+        plate["heat"], flywheel["heat"] = "split*friction_power", "(1 - split)*friction_power"
+        _parameter(doc, "split", 0.5, 0.05, 0.95, "1 (plate share of P)", scale=0.5)
+    return revise(model, "heat_split", edit)
+
+
+RADIATION_PROBE_T_K = 323.15  # the temperature at which the radiation's screening start is set (50 degC)
+
+
+def radiation_probes(model: ModelDefinition) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening start of radiation: a linearised conductance a tenth of the model's typical link's (at its nested
+    1e-5 m² the term is absorbed, to first order, by the links the model has)."""
+    def probes(values: Mapping[str, float]) -> list[dict[str, float]]:
+        per_m2 = STEFAN_BOLTZMANN * 4 * RADIATION_PROBE_T_K ** 3
+        return [{"eps_area": 0.1 / typical_resistance(model, values) / per_m2}]
+    return probes
+
+
+def radiation(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+    """Grey-body exchange linearised about the measured temperatures: ε·A·σ·4·T̄³ per kelvin of difference."""
+    law = f"1 / (eps_area * {STEFAN_BOLTZMANN!r} * 4 * ((T_flywheel + T_housing) / 2 + 273.15) ** 3)"
+
+    def edit(doc: Doc) -> None:
+        doc["links"] += [{"name": "radiation F", "between": ["F", "T"], "resistance": law},
+                         {"name": "radiation P", "between": ["P", "T"], "resistance": law}]
+        _parameter(doc, "eps_area", 1e-5, 1e-6, 2.0, "m2 (emissivity x area)")
+    return revise(model, "radiation", edit)
+
+
+CLUTCH_FALLBACK_SIGNALS = ("engine_speed", "slip_speed", "clutch_speed", "clutch_torque", "clutch_state",
+                           "friction_power", "load_torque", "T_flywheel")
+#: Generated keys of the clutch that keep the names (and parameters) they had before the generator.
+CLUTCH_NAMED = {
+    "clutch_state_linear_R_PA_R_FA": Candidate(
+        "state_convection", "clutch_state", "convection", "R_FA = R_PA = f_R * (k_open if S = 0)",
+        "convection differs between clamped and open clutch", state_convection, nodes=("P", "F", "A")),
+    "slip_speed_linear_R_PA_R_FA": Candidate(
+        "slip_convection", "slip_speed", "convection", "R_FA = R_PA = f_R / (1 + g*|slip_speed|/1000)",
+        "heat leaves faster while slipping: convection grows with slip speed", slip_convection, nodes=("P", "F", "A")),
+    "split_plate_share_flywheel_share": Candidate(
+        "heat_split", "friction_power", "heat_split", "P_plate = s*P, P_flywheel = (1-s)*P",
+        "friction heat is not split half and half between plate and flywheel", unequal_split, nodes=("P", "F")),
+    "extra_mass_F": Candidate(
+        "extra_mass", None, "capacity", "extra node XF: C_XF linked to the flywheel by R_FXF",
+        "a thermal mass the model lacks stores and returns heat slowly", extra_node(("F",), "extra_mass", "XF"),
+        nodes=("F",), structural=True),  # its probes are set from the model in clutch_candidates
+    "sensor_lag_T_flywheel": Candidate(
+        "sensor_lag", "T_flywheel", "sensor", "T_flywheel measured = first-order lag tau_F of the flywheel",
+        "the flywheel sensor lags the flywheel temperature", sensor_lag("T_flywheel", "F"), nodes=("F",),
+        structural=True),
+    "link_P_F_clutch_state_on": Candidate(
+        "clamped_conduction", "clutch_state", "conduction", "R_PF between plate and flywheel when S = 1",
+        "plate and flywheel exchange heat through the clamped disc",
+        new_link("P", "F", "clamped_conduction", "R_PF_clamped", gate="clutch_state"), nodes=("P", "F"), exact=False),  # probes
+        # set from the model in clutch_candidates
+}
+CLUTCH_PARTS = {"P": "pressure plate", "F": "flywheel", "A": "chamber air", "T": "housing"}
+
+
+def _clutch_mechanism(links: tuple[str, ...]) -> str:
+    """Engine-side conduction on R_Feng; every other link of the clutch is convection (to the air or ambient)."""
+    return "conduction" if links == ("R_Feng",) else "convection"
+
+
+def clutch_candidates(model: ModelDefinition, channels: Channels) -> list[Candidate]:
+    """The clutch's library: the generator on the clutch signals with the physical names, eq. (11) where the
+    baseline lacks it, the clamped plate–flywheel conduction and radiation; learned flows into flywheel and air."""
+    signals = [s for s in CLUTCH_SIGNALS if _available(s, channels) and np.ptp(signal_values(s, channels)) > 0]
+    out = [] if "a1" in model.parameters else [Candidate(
+        "speed_convection", "engine_speed", "convection", "R_FA = R_PA = a*exp(b*engine_speed) + R0",
+        "cool-down rate depends on engine speed: convection grows with engine speed", engine_speed_convection,
+        nodes=("P", "F", "A"), inert=("b1", "b2"))]
+    for cand in generated(model, signals, channels, _clutch_mechanism):
+        named = CLUTCH_NAMED.get(cand.key)
+        probes = link_probes(model, "R_PF_clamped") if named and named.key == "clamped_conduction" else cand.probes
+        out.append(replace(named, probes=probes, exact=cand.exact, signals=cand.signals) if named
+                   else replace(cand, summary=_clutch_words(cand.summary)))
+    out += [Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",
+                      "hot plate and flywheel lose heat by radiation to the housing", radiation, nodes=("P", "F", "T"),
+                      exact=False, probes=radiation_probes(model))]
+    return out + learned([s for s in CLUTCH_FALLBACK_SIGNALS if _available(s, channels)], ["F", "A"])
+
+
+def _clutch_words(text: str) -> str:
+    """A generated summary with the clutch's parts named (node P is the pressure plate, …)."""
+    return re.sub(r"\bnode ([PFAT])\b", lambda m: f"the {CLUTCH_PARTS[m.group(1)]}", text)
+
+
+# --- any network -------------------------------------------------------------------------------------------------
 
 def _available(signal: str | None, channels: Channels) -> bool:
     """Whether the runs hold the signal a candidate depends on."""
@@ -247,79 +598,9 @@ def _available(signal: str | None, channels: Channels) -> bool:
 
 
 def is_clutch(model: ModelDefinition) -> bool:
-    """Whether the model has the paper's clutch structure the clutch library edits (nodes, convection links, shares)."""
+    """Whether the model has the paper's clutch structure the clutch names refer to (nodes, convection links, shares)."""
     return (set(CLUTCH_NODES) <= set(model.nodes) and set(CONVECTION_LINKS) <= {l.name for l in model.links}
             and set(SHARES) <= {s.name for s in model.sources})
-
-
-def clutch_candidates(model: ModelDefinition) -> list[Candidate]:
-    """The clutch's library: physical extensions first, then the generic fallbacks."""
-    out = []
-    if "a1" not in model.parameters:
-        out.append(Candidate("speed_convection", "engine_speed", "convection", "R_FA = R_PA = a*exp(b*engine_speed) + R0",
-                             "cool-down rate depends on engine speed: convection grows with engine speed",
-                             engine_speed_convection))
-    out += [
-        Candidate("state_convection", "clutch_state", "convection", "R_FA = R_PA = f_R * (k_open if S = 0)",
-                  "convection differs between clamped and open clutch", state_convection),
-        Candidate("slip_convection", "slip_speed", "convection", "R_FA = R_PA = f_R / (1 + g*|slip_speed|/1000)",
-                  "heat leaves faster while slipping: convection grows with slip speed", slip_convection),
-        Candidate("clamped_conduction", "clutch_state", "conduction", "R_PF between plate and flywheel when S = 1",
-                  "plate and flywheel exchange heat through the clamped disc", clamped_conduction),
-        Candidate("heat_split", "friction_power", "heat_split", "P_plate = s*P, P_flywheel = (1-s)*P",
-                  "friction heat is not split half and half between plate and flywheel", unequal_split),
-        Candidate("extra_mass", None, "capacity", "extra node X: C_X linked to the flywheel by R_FX",
-                  "a thermal mass the model lacks stores and returns heat slowly", extra_mass("F", "T_flywheel")),
-        Candidate("sensor_lag", "T_flywheel", "sensor", "T_flywheel measured = first-order lag tau_F of the flywheel",
-                  "the flywheel sensor lags the flywheel temperature", sensor_lag("T_flywheel", "F")),
-        Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",
-                  "hot plate and flywheel lose heat by radiation to the housing", radiation),
-    ]
-    for signal in SOURCE_SIGNALS:
-        for node, where in (("F", "flywheel"), ("T", "housing")):
-            out.append(Candidate(f"source_{signal}_{node}", signal, "heat_source",
-                                 f"heat into {where} = q*({signal}/max)^n",
-                                 f"a heat source driven by {signal} warms the {where}", channel_source(signal, node)))
-    for signal in FALLBACK_SIGNALS:
-        for node, where in (("F", "flywheel"), ("A", "air")):
-            out.append(Candidate(f"learned_{signal}_{node}", signal, "other",
-                                 f"learned heat flow into {where} = g({signal}), piecewise linear",
-                                 f"a heat flow into the {where} that depends on {signal}; no physical term fits it",
-                                 fallback_source(signal, node), physical=False))
-    return out
-
-
-def network_candidates(model: ModelDefinition, signals: list[str], units: Mapping[str, str]) -> list[Candidate]:
-    """The library of any network, from its structure: sources per signal and node, speed laws per link, an extra
-    mass behind each measured node, a lag per sensor; then learned heat flows per signal and node."""
-    measured_nodes = list(dict.fromkeys(model.outputs.values()))
-    lagged = {g.output for g in model.lags}
-    out = []
-    for signal in signals:
-        for node in model.nodes:
-            out.append(Candidate(f"source_{signal}_{node}", signal, "heat_source", f"heat into {node} = q*({signal}/max)^n",
-                                 f"a heat source driven by {signal} warms node {node}", channel_source(signal, node)))
-    for signal in (s for s in signals if units.get(s) == SPEED_UNIT):
-        for link in model.links:
-            out.append(Candidate(f"{signal}_link_{link.name}", signal, "convection",
-                                 f"{link.name} = R / (1 + g*|{signal}|/max)",
-                                 f"heat crosses {link.name} faster at higher {signal}: convection grows with it",
-                                 speed_link(link.name, signal)))
-    for node in measured_nodes:
-        channel = next(c for c, n in model.outputs.items() if n == node)
-        out.append(Candidate(f"extra_mass_{node}", None, "capacity", f"extra node X{node} linked to {node}",
-                             f"a thermal mass the model lacks stores and returns heat behind node {node}",
-                             extra_mass(node, channel)))
-    for output, node in model.outputs.items():
-        if output not in lagged:
-            out.append(Candidate(f"sensor_lag_{output}", output, "sensor", f"{output} measured = first-order lag of {node}",
-                                 f"the {output} sensor lags its node's temperature", sensor_lag(output, node)))
-    for signal in signals:
-        for node in model.nodes:
-            out.append(Candidate(f"learned_{signal}_{node}", signal, "other", f"learned heat flow into {node} = g({signal})",
-                                 f"a heat flow into node {node} that depends on {signal}; no physical term fits it",
-                                 fallback_source(signal, node), physical=False))
-    return out
 
 
 def network_signals(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[str]:
@@ -333,6 +614,24 @@ def network_signals(model: ModelDefinition, channels: Channels, units: Mapping[s
 def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str] | None = None) -> list[Candidate]:
     """The library for this model, none on a channel the runs lack (`load_torque` is optional in a run file)."""
     units = dict(units or {})
-    found = (clutch_candidates(model) if is_clutch(model)
-             else network_candidates(model, network_signals(model, channels, units), units))
-    return [c for c in found if _available(c.signal, channels)]
+    if is_clutch(model):
+        found = clutch_candidates(model, channels)
+    else:
+        signals = network_signals(model, channels, units)
+        found = generated(model, signals, channels) + learned(signals, list(model.nodes))
+    return [c for c in found if all(_available(s, channels) for s in c.reads)]
+
+
+def telling_apart(model: ModelDefinition, first: Candidate, second: Candidate) -> str:
+    """The measurement that would tell two candidate extensions apart: a sensor on a node either changes that the
+    model does not measure (both change its heat balance differently); else runs in which their signals vary
+    independently; else longer runs (more blocks for the test between them)."""
+    measured = set(model.outputs.values())
+    channel_of = {node: channel for channel, node in {**model.simulated, **model.outputs}.items()}
+    unmeasured = sorted(n for n in set(first.nodes) | set(second.nodes) if n in model.nodes and n not in measured)
+    if unmeasured:
+        return "a sensor on " + " and ".join(
+            f"node {n}" + (f" ({channel_of[n]})" if n in channel_of else "") for n in unmeasured)
+    if first.signal and second.signal and first.signal != second.signal:
+        return f"runs in which {first.signal} and {second.signal} vary independently"
+    return "longer runs: more blocks for the test between the two"

@@ -19,21 +19,6 @@ from benchlab.report.plotting import run_name
 
 PAGE = "diagnose.md"
 EVIDENCE_ROWS = 15
-#: Units of the extension library's parameters (benchlab.diagnose.library); prefixes end with "_".
-EXTENSION_UNITS = {"k_open": "1 (factor on R when open)", "slip_gain": "1 per 1000 rpm of slip",
-                   "split": "1 (plate share of P)", "tau_F": "s", "eps_area": "m² (emissivity × area)",
-                   "q_": "W (at the signal's maximum)", "n_": "1 (exponent)", "g_": "W (at the knot)",
-                   "init_": "degC (fitted start)"}
-
-
-def param_unit(name: str) -> str:
-    """Unit of a fitted parameter: the extension library's, else the contract's (C in J/K, R in K/W, b in 1/rpm)."""
-    if name in EXTENSION_UNITS:
-        return EXTENSION_UNITS[name]
-    prefix = next((p for p in EXTENSION_UNITS if p.endswith("_") and name.startswith(p)), None)
-    return EXTENSION_UNITS[prefix] if prefix else unit(name)
-
-
 def _rmse(entry: dict, channel: str) -> str:
     return number(entry["channels"][channel]["rmse_K"], 4)
 
@@ -109,7 +94,8 @@ def _added(summary: dict) -> list[str]:
     if not summary["findings"]:
         return parts + ["Nothing: no extension lowers the held-out error significantly, so the model is kept as it is."]
     for f in summary["findings"]:
-        params = [(f"`{k}`", f"{v:.6g}", param_unit(k)) for k, v in f["params"].items()]
+        units = f.get("units", {})  # the extended model file's (library.py writes one for each parameter it adds)
+        params = [(f"`{k}`", f"{v:.6g}", units.get(k) or unit(k)) for k, v in f["params"].items()]
         parts += [f"**{f['candidate']}** – {f['summary']}. Signal `{f['signal']}`, mechanism `{f['mechanism']}`: "
                   f"`{f['extension']}`", table(("parameter", "value", "unit"), params)]
     return parts

@@ -42,18 +42,21 @@ class FitResult:
         return [p.name for p in self.spec.free]
 
 
-def _to_x(spec: ModelSpec, values: Mapping[str, float]) -> np.ndarray:
+def to_coordinates(spec: ModelSpec, values: Mapping[str, float]) -> np.ndarray:
+    """The fitted coordinates of parameter values: logarithms of positive ones, signed ones in steps of their scale."""
     return np.array([np.log(values[p.name]) if p.log else values[p.name] / p.linear_scale for p in spec.free])
 
 
-def _from_x(spec: ModelSpec, x: np.ndarray) -> dict[str, float]:
+def from_coordinates(spec: ModelSpec, x: np.ndarray) -> dict[str, float]:
+    """Parameter values (the fixed ones included) from fitted coordinates."""
     out = dict(spec.fixed)
     for p, xi in zip(spec.free, x):
         out[p.name] = float(np.exp(xi)) if p.log else float(xi * p.linear_scale)
     return out
 
 
-def _bounds(spec: ModelSpec) -> tuple[np.ndarray, np.ndarray]:
+def coordinate_bounds(spec: ModelSpec) -> tuple[np.ndarray, np.ndarray]:
+    """The free parameters' bounds in fitted coordinates."""
     lo = [np.log(p.lower) if p.log else p.lower / p.linear_scale for p in spec.free]
     hi = [np.log(p.upper) if p.log else p.upper / p.linear_scale for p in spec.free]
     return np.array(lo), np.array(hi)
@@ -96,16 +99,16 @@ def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
 def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = None,
         start: Mapping[str, float] | None = None) -> FitResult:
     """One local fit from the spec's starting values (or `start`)."""
-    x0 = _to_x(spec, {p.name: p.initial for p in spec.free} | dict(start or {}))
-    lo, hi = _bounds(spec)
+    x0 = to_coordinates(spec, {p.name: p.initial for p in spec.free} | dict(start or {}))
+    lo, hi = coordinate_bounds(spec)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
 
     def fun(x: np.ndarray) -> np.ndarray:
-        return residual_vector(spec.network, _from_x(spec, x), datasets)
+        return residual_vector(spec.network, from_coordinates(spec, x), datasets)
 
     sol = least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
                         xtol=1e-10, ftol=1e-10, gtol=1e-10)
-    params = _from_x(spec, sol.x)
+    params = from_coordinates(spec, sol.x)
     scale = np.array([params[p.name] if p.log else p.linear_scale for p in spec.free])
     jac = sol.jac / scale  # chain rule: d r / d p = d r / d x * d x / d p
     return FitResult(spec, params, float(2 * sol.cost), float(np.sqrt(np.mean(sol.fun ** 2))), len(sol.fun),
