@@ -51,6 +51,7 @@ from benchlab.runfile import load_run, load_truth
 from benchlab.runner.session import RunRequest, execute
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P
+from sim_bench.bench import SimulatedBench
 from sim_bench import unseen as U
 from sim_bench.virtual_run import run_schedule
 
@@ -186,7 +187,8 @@ def driver_case(seed: int, truth: str) -> Case:
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "table1.h5"
         code, summary = execute(RunRequest(protocol="table1", out=path, seed=seed, duration_s=HOUR_S,
-                                           plant=P.ThermalPlant(paper_params(truth)), install_signals=False))
+                                           bench=SimulatedBench(P.ThermalPlant(paper_params(truth))),
+                                           install_signals=False))
         if code != 0:
             raise RuntimeError(f"driver run seed {seed} ended {summary.status if summary else '?'} (exit {code})")
         run, truth_frame = load_run(path), load_truth(path)

@@ -33,9 +33,8 @@ from benchlab.export.content import read_content
 from benchlab.export.mdf import COMPRESSION, MDF_VERSION, write_mdf
 from benchlab.runfile import load_run
 from benchlab.runner.devices import bench_layout
-from benchlab.runner.session import RunRequest, _sim_bench_config
-from protocols.limits import BenchLimits
 from protocols.table1 import table1_schedule
+from sim_bench.bench import SimulatedBench
 from sim_bench.plant import ThermalPlant
 from sim_bench.virtual_run import run_schedule
 
@@ -88,7 +87,7 @@ def make_run(path: Path, hours: float, seed: int) -> None:
     """A `hours` long run file with the simulated bench's raw streams, written by RunWriter (see module doc)."""
     planned = run_schedule(table1_schedule(seed, duration_s=1.25 * hours * 3600.0), ThermalPlant(), seed=seed)
     run = planned.iloc[: int(round(hours * 3600.0 / planned.attrs["dt"])) + 1]  # launches end early: cut to `hours`
-    layout = bench_layout(_sim_bench_config(RunRequest("table1", path), BenchLimits()))
+    layout = bench_layout(SimulatedBench().bench_config())
     readings = []
     for spec in layout.streams:
         times, rows = stream_rows(run, spec.name, spec.names)

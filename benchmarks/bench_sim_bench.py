@@ -34,25 +34,36 @@ from pathlib import Path  # noqa: E402
 
 import h5py  # noqa: E402
 
+import benchlab.runner.session as session  # noqa: E402
 from benchlab.runner.session import RunRequest, execute  # noqa: E402
 
 TARGET = 500.0
 
 
 def one_run(out: Path, duration: float, seed: int) -> tuple[float, float, float, dict]:
-    keep: dict = {}
-    wall0, cpu0 = time.perf_counter(), time.process_time()
-    code, summary = execute(RunRequest("table1", out, seed=seed, duration_s=duration, install_signals=False, keep=keep))
-    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    opened: list = []  # what the session opens (its drivers' bench, the simulated bench), for the counts below
+    real_open = session.open_bench
+
+    def recording(*args, **kwargs):
+        opened.append(real_open(*args, **kwargs))
+        return opened[-1]
+
+    session.open_bench = recording
+    try:
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        code, summary = execute(RunRequest("table1", out, seed=seed, duration_s=duration, install_signals=False))
+        wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    finally:
+        session.open_bench = real_open
     assert code == 0, summary.lines()
     with h5py.File(out, "r") as f:
         counts = {k: len(f["raw"][k]["time"]) for k in f["raw"]}
         counts["aligned rows"] = len(f["aligned/time"])
         counts["events"] = len(f["events/time"])
-    sim = keep["sim"]
+    bench, _, sim, _ = opened[0]
     counts["solver calls"] = sim.physics.solver_calls
     counts["CAN frames sent by emulators"] = sim.can.stats.sent
-    counts["CAN frames sent by the driver"] = keep["bench"].can.stats.sent
+    counts["CAN frames sent by the driver"] = bench.can.stats.sent
     counts["node frames"] = sim.node.frames_sent
     return summary.sim_s, wall, cpu, counts
 

@@ -12,21 +12,26 @@ supplies what the devices measure and when:
 * Sensor noise and quantisation of every reading, ambient drift, radio drop-outs (the node emulator's
   `radio_silence`), all from one seeded generator per purpose: the same seed gives the same run.
 * Fault hooks used by `sim_bench.faults` (heaters, a stuck clutch, ...).
+
+`SimulatedBench` is the simulated bench a run asks for (`RunRequest.bench`): plant, faults, configuration
+overrides and limits in one object that opens its `SimBench` for the runner's `open_bench`.
 """
 
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numba import njit
 
 from drivers import cvd
 from drivers.can_signals import CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING
+from protocols.limits import BenchLimits
 from sim_bench.clock import SimClock
 from benchlab.drivetrain import DrivetrainFacts
 from sim_bench.drivetrain import Drivetrain
@@ -39,6 +44,10 @@ from sim_bench.emulators.scpi_instrument import ScpiInstrumentEmulator
 from sim_bench.emulators.sim_can_bus import SimCanBus
 from sim_bench.plant import Effect, ThermalPlant, custom_source
 from sim_bench.virtual_run import AmbientConfig, SensorConfig
+
+if TYPE_CHECKING:
+    from benchlab.runner.devices import BenchConfig
+    from sim_bench.faults import Fault
 
 
 _ids = itertools.count()
@@ -322,7 +331,8 @@ class SimBench:
     def __init__(self, config: SimBenchConfig = SimBenchConfig(), clock: SimClock | None = None,
                  plant: ThermalPlant | None = None, faults: Sequence[Any] = ()) -> None:
         self.cfg = config
-        self.faults = sorted(faults, key=lambda f: f.at_s)
+        self.injected = tuple(faults)  # as given, for the run file's sim_faults
+        self.faults = sorted(faults, key=lambda f: f.at_s)  # still to apply, in time order
         self.faults_applied: list[Any] = []
         self.clock = clock or SimClock(config.t0)
         self.physics = SimPhysics(config, self.clock, plant)
@@ -343,6 +353,14 @@ class SimBench:
     @property
     def urls(self) -> dict[str, str]:
         return {"instrument": f"sim://{self.name}-dmm", "node": f"sim://{self.name}-node"}
+
+    def run_attrs(self) -> dict[str, str]:
+        """The run file's attributes that describe this bench (docs/runfile.md): `sim_bench` (its configuration),
+        `sim_faults` (the faults injected) and `sim_truth` (the plant's true parameters and hidden effects)."""
+        effects = [e.name for e in self.physics.plant.effects if not e.name.startswith("fault heater")]
+        return {"sim_bench": json.dumps(self.cfg.as_dict(), default=str),
+                "sim_faults": json.dumps([asdict(fault) for fault in self.injected]),
+                "sim_truth": json.dumps({"params": dict(self.physics.truth_params), "effects": effects})}
 
     def _draw_next(self, t: float) -> float:
         if self._dropout_rate <= 0:
@@ -371,3 +389,41 @@ class SimBench:
                 bus.shutdown()
             except Exception:  # noqa: BLE001 - closing twice is fine
                 pass
+
+
+@dataclass(frozen=True)
+class SimulatedBench:
+    """The simulated bench a run asks for (`RunRequest.bench`; the string "sim" is the default one): the plant,
+    the faults to inject, `SimBenchConfig` overrides and the limits (a hardware bench's come from BENCH.toml).
+
+    The runner asks it for its `bench_config()` before anything moves and `open()`s it when the run starts, so
+    the runner never names the simulator's fields and the hardware path never imports the simulator.
+    """
+
+    plant: ThermalPlant | None = None  # None: the paper's clutch, nonlinear
+    faults: Sequence[Fault] = ()  # sim_bench.faults.Fault, applied when the clock passes their at_s
+    options: Mapping[str, Any] = field(default_factory=dict)  # SimBenchConfig overrides, e.g. {"dropouts": False}
+    limits: BenchLimits = BenchLimits()
+    name: ClassVar[str] = "sim"  # the run file's `bench` attribute and the CLI's --bench
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "faults", tuple(self.faults))  # a list given stays the caller's
+
+    def bench_config(self) -> BenchConfig:
+        """The runner's view of this bench: limits, acquisition timing, CAN stamped on the run clock; the device
+        addresses are placeholders until `open` knows them."""
+        from benchlab.runner.devices import BenchConfig
+
+        return BenchConfig(instrument_url="sim://pending", node_url="sim://pending", can={"interface": "sim"},
+                           can_timestamps="run", instrument_timeout_s=0.05, limits=self.limits, source="sim",
+                           tick_s=1.0, fast_tick_s=0.05, instrument_period_s=0.5)
+
+    def open(self, config: BenchConfig, seed: int, t0: float = 0.0,
+             initial_c: float | Mapping[str, float] | None = None) -> tuple[SimBench, BenchConfig]:
+        """The emulated devices on `config`'s grid and drivetrain, from `t0` (a resume) with `seed`, and `config`
+        with their addresses; the caller closes the SimBench."""
+        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0, drivetrain=config.drivetrain, initial_c=initial_c,
+                             **dict(self.options))
+        sim = SimBench(cfg, plant=self.plant, faults=self.faults)
+        return sim, replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
+                            can={"interface": "sim", "channel": sim.name + "-can"})

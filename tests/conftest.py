@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import h5py
 import numpy as np
 import pytest
@@ -50,3 +52,23 @@ def params_file(tmp_path):
     path = tmp_path / "p.json"
     save_params(path, paper_params("nonlinear"))
     return path
+
+
+@pytest.fixture
+def opened_benches(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
+    """Every bench the session opens (the only way a set-point reaches a controller): an entry as soon as opening
+    starts, then {"bench": its DriverBench, "sim": the SimBench or None}, readable after the run closed them."""
+    import benchlab.runner.session as session
+
+    opened: list[dict[str, Any]] = []
+    real = session.open_bench
+
+    def recording(*args: Any, **kwargs: Any) -> Any:
+        entry: dict[str, Any] = {}
+        opened.append(entry)
+        bench, clock, sim, config = real(*args, **kwargs)
+        entry.update(bench=bench, sim=sim)
+        return bench, clock, sim, config
+
+    monkeypatch.setattr(session, "open_bench", recording)
+    return opened

@@ -25,6 +25,7 @@ from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P
+from sim_bench.bench import SimulatedBench
 from sim_bench.virtual_run import run_schedule
 from tests.test_diagnose import _accepted_as_documented, _floor
 
@@ -94,7 +95,7 @@ def test_a_correct_model_gets_no_finding(seed):
 def test_a_correct_model_gets_no_finding_on_a_run_through_the_drivers(tmp_path):
     """The full stack (runner, CAN drivers, emulated bench): its run file carries the drivers' timing and noise."""
     path = tmp_path / "t1.h5"
-    code, _ = execute(RunRequest(protocol="table1", out=path, seed=241, duration_s=1500, plant=P.ThermalPlant(),
+    code, _ = execute(RunRequest(protocol="table1", out=path, seed=241, duration_s=1500, bench=SimulatedBench(P.ThermalPlant()),
                                  install_signals=False))
     assert code == 0
     result = diagnose([load_run(path)], baseline="nonlinear")

@@ -15,6 +15,7 @@ from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
+from sim_bench.bench import SimulatedBench
 from sim_bench.faults import Fault
 
 IDLE = BenchLimits().idle_speed_rpm
@@ -30,9 +31,8 @@ SOURCE = {"T_air": ("instrument", "T_air"), "T_flywheel": ("node", "T_flywheel_1
 
 def _run(tmp_path, faults, **limits):
     path = tmp_path / "run.h5"
-    code, summary = execute(RunRequest("custom", path, steps=STEPS, faults=faults, install_signals=False,
-                                       limits=BenchLimits(resume_after_s=5.0, **limits),
-                                       sim_options={"dropouts": False}))
+    sim = SimulatedBench(faults=faults, options={"dropouts": False}, limits=BenchLimits(resume_after_s=5.0, **limits))
+    code, summary = execute(RunRequest("custom", path, steps=STEPS, bench=sim, install_signals=False))
     with h5py.File(path, "r") as f:
         events = [(float(t), k.decode(), d.decode()) for t, k, d in
                   zip(f["events/time"][:], f["events/kind"][:], f["events/detail"][:])]

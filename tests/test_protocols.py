@@ -125,6 +125,7 @@ def test_one_step_interpreter_plays_the_schedule_for_the_runner_and_the_batch_si
 
     from benchlab.runner.session import RunRequest, execute
     from protocols.schedule import setpoints
+    from sim_bench.bench import SimulatedBench
     from sim_bench.virtual_run import drive_schedule
 
     # a launch that synchronises (drive clamped) and one that cannot (drive stays open: the slip limit)
@@ -132,7 +133,8 @@ def test_one_step_interpreter_plays_the_schedule_for_the_runner_and_the_batch_si
              Step("drive", 20.0, 2000.0, 70.0, 100.0, 0), Step("launch", 3.0, 2500.0, 10.0, 140.0, 1),
              Step("drive", 20.0, 2500.0, 10.0, 140.0, 1), Step("open", 20.0, 1000.0, 0.0, 50.0, 1))
     path = tmp_path / "run.h5"
-    code, _ = execute(RunRequest("custom", path, steps=steps, install_signals=False, sim_options={"dropouts": False}))
+    code, _ = execute(RunRequest("custom", path, steps=steps, install_signals=False,
+                                 bench=SimulatedBench(options={"dropouts": False})))
     assert code == 0
     with h5py.File(path, "r") as f:
         sp = f["raw/setpoints"]

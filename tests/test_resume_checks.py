@@ -23,6 +23,7 @@ from benchlab.runfile import read_progress
 from benchlab.runner.session import RunRequest, execute
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
+from sim_bench.bench import SimulatedBench
 from sim_bench.faults import Fault
 
 STEPS = (Step("open", 20.0, 1500.0, 0.0, 0.0, 0), Step("launch", 10.0, 1500.0, 45.0, 500.0, 1),
@@ -33,10 +34,9 @@ STEPS = (Step("open", 20.0, 1500.0, 0.0, 0.0, 0), Step("launch", 10.0, 1500.0, 4
 def aborted_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A run aborted in cycle 0 by a silent load controller: resumable, cycle 1 still to do."""
     out = tmp_path_factory.mktemp("aborted") / "run.h5"
-    code, summary = execute(RunRequest("custom", out, steps=STEPS, faults=[Fault(3.0, "controller_silent",
-                                                                                    target="load")],
-                                       limits=BenchLimits(on_interlock="abort"), install_signals=False,
-                                       sim_options={"dropouts": False}))
+    sim = SimulatedBench(faults=[Fault(3.0, "controller_silent", target="load")], options={"dropouts": False},
+                         limits=BenchLimits(on_interlock="abort"))
+    code, summary = execute(RunRequest("custom", out, steps=STEPS, bench=sim, install_signals=False))
     assert code == 1 and summary.status == "aborted"
     return out
 
@@ -58,20 +58,6 @@ def _edit_schedule(path: Path, edit: Callable[[list[dict[str, Any]]], Any]) -> N
 
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-@pytest.fixture
-def bench_opened(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
-    """Every DriverBench the session opens (it is the only way a set-point reaches a controller)."""
-    opened: list[Any] = []
-    real = session.DriverBench
-
-    def recording(*args: Any, **kwargs: Any) -> Any:
-        opened.append(args)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(session, "DriverBench", recording)
-    return opened
 
 
 def _set(step: int, field: str, value: Any) -> Callable[[list[dict[str, Any]]], None]:
@@ -113,7 +99,7 @@ def _drop(step: int, field: str) -> Callable[[list[dict[str, Any]]], None]:
 ], ids=["9000rpm", "2000Nm", "load", "done-step", "slip-time", "phase", "target", "str", "nan", "null", "cycle",
         "bool", "cond-str", "cond-missing", "until-str", "point", "missing", "extra", "row-list", "not-list",
         "not-json"])
-def test_a_bad_stored_schedule_is_exit_2_and_the_bench_never_moves(aborted_run, tmp_path, capsys, bench_opened,
+def test_a_bad_stored_schedule_is_exit_2_and_the_bench_never_moves(aborted_run, tmp_path, capsys, opened_benches,
                                                                     edit, field, expected):
     out = _copy(aborted_run, tmp_path)
     _edit_schedule(out, edit)
@@ -124,28 +110,28 @@ def test_a_bad_stored_schedule_is_exit_2_and_the_bench_never_moves(aborted_run, 
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in err, err
     assert f"{out}: {field}: " in lines[0] and expected in lines[0], lines[0]
-    assert bench_opened == []  # no bench, no set-point
+    assert opened_benches == []  # no bench, no set-point
     assert _digest(out) == before and not out.with_suffix(".resume1.blf").exists()
 
 
-def test_limits_of_the_resuming_bench_apply(aborted_run, tmp_path, bench_opened):
+def test_limits_of_the_resuming_bench_apply(aborted_run, tmp_path, opened_benches):
     """A schedule within the default limits is refused by a bench with tighter ones (the limits are not the file's)."""
     out = _copy(aborted_run, tmp_path)
     before = _digest(out)
     with pytest.raises(session.InputError) as exc:
-        execute(RunRequest("", out, resume=True, limits=BenchLimits(max_engine_speed_rpm=1000.0),
+        execute(RunRequest("", out, resume=True, bench=SimulatedBench(limits=BenchLimits(max_engine_speed_rpm=1000.0)),
                            install_signals=False))
-    assert exc.value.field == "/schedule step 0 engine_speed_rpm" and bench_opened == []
+    assert exc.value.field == "/schedule step 0 engine_speed_rpm" and opened_benches == []
     assert _digest(out) == before
 
 
-def test_an_untouched_schedule_resumes_and_moves_the_bench(aborted_run, tmp_path, bench_opened):
+def test_an_untouched_schedule_resumes_and_moves_the_bench(aborted_run, tmp_path, opened_benches):
     """The control: the same file unedited is resumed, set-points are sent, the run completes."""
     out = _copy(aborted_run, tmp_path)
     with h5py.File(out, "r") as f:
         setpoint_rows_before = int(read_progress(f)["rows/setpoints"])
     code, summary = execute(RunRequest("", out, resume=True, install_signals=False))
-    assert code == 0 and summary.status == "complete" and len(bench_opened) == 1
+    assert code == 0 and summary.status == "complete" and len(opened_benches) == 1
     with h5py.File(out, "r") as f:
         assert int(read_progress(f)["rows/setpoints"]) > setpoint_rows_before
         assert max(f["raw/setpoints/engine_speed"][:]) == pytest.approx(1500.0)

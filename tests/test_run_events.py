@@ -22,6 +22,7 @@ from benchlab.runner.session import RunRequest, execute
 from benchlab.watch.live import LiveRun
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
+from sim_bench.bench import SimulatedBench
 from sim_bench.faults import Fault
 
 STEPS = (Step("open", 10.0, 1500.0, 0.0, 0.0, 0), Step("launch", 5.0, 1500.0, 45.0, 500.0, 1),
@@ -33,9 +34,9 @@ OLD_COLUMNS = ("time", "cycle", "kind", "detail")  # /events before `step`
 def aborted(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A run aborted in step 0 (cycle 0) by a silent load controller; cycle 1 (steps 1-3) still to do."""
     out = tmp_path_factory.mktemp("events") / "run.h5"
-    code, _ = execute(RunRequest("custom", out, steps=STEPS, faults=[Fault(3.0, "controller_silent", target="load")],
-                                 limits=BenchLimits(on_interlock="abort"), install_signals=False,
-                                 sim_options={"dropouts": False}))
+    sim = SimulatedBench(faults=[Fault(3.0, "controller_silent", target="load")], options={"dropouts": False},
+                         limits=BenchLimits(on_interlock="abort"))
+    code, _ = execute(RunRequest("custom", out, steps=STEPS, bench=sim, install_signals=False))
     assert code == 1
     return out
 
@@ -48,7 +49,7 @@ def _resumed(aborted: Path, tmp_path: Path, drop_step: bool = False) -> Path:
         with h5py.File(out, "r+") as f:
             del f["events/step"]
     code, summary = execute(RunRequest("custom", out, resume=True, install_signals=False,
-                                       sim_options={"dropouts": False}))
+                                       bench=SimulatedBench(options={"dropouts": False})))
     assert code == 0 and summary.status == "complete"
     return out
 

@@ -25,6 +25,7 @@ from drivers.can_bench import CanBlock
 from drivers.can_signals import CLAMP_OPEN, CLAMP_SLIPPING
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
+from sim_bench.bench import SimulatedBench
 from sim_bench.faults import Fault
 
 IDLE = BenchLimits().idle_speed_rpm
@@ -64,15 +65,13 @@ STEPS = (Step("open", 40.0, 2000.0, 0.0, 0.0, 0), Step("launch", 10.0, 2000.0, 6
 
 
 def _run_with(tmp_path, faults, action="abort", **limits):
-    keep: dict = {}
     lim = BenchLimits(on_interlock=action, resume_after_s=5.0, **limits)
-    code, summary = execute(RunRequest("custom", tmp_path / "run.h5", steps=STEPS, faults=faults, limits=lim,
-                                       keep=keep, install_signals=False, sim_options={"dropouts": False}))
-    return code, summary, keep, _events(tmp_path / "run.h5")
+    sim = SimulatedBench(faults=faults, options={"dropouts": False}, limits=lim)
+    code, summary = execute(RunRequest("custom", tmp_path / "run.h5", steps=STEPS, bench=sim, install_signals=False))
+    return code, summary, _events(tmp_path / "run.h5")
 
 
-def _assert_safe(keep, path):
-    physics = keep["sim"].physics
+def _assert_safe(physics, path):
     engine, clamped, torque, load = physics._setpoints
     assert (engine, clamped, torque, load) == (IDLE, False, 0.0, 0.0)  # what the controllers apply
     with h5py.File(path, "r") as f:
@@ -91,8 +90,8 @@ def _assert_safe(keep, path):
     (Fault(3.0, "stuck_clutch", 10.0, 25.0), "slip_time"),
     (Fault(3.0, "stuck_clutch", 70.0, 25.0), "slip_energy"),
 ])
-def test_each_interlock_trips_on_its_fault_and_leaves_the_bench_safe(tmp_path, fault, kind):
-    code, summary, keep, events = _run_with(tmp_path, [fault])
+def test_each_interlock_trips_on_its_fault_and_leaves_the_bench_safe(tmp_path, opened_benches, fault, kind):
+    code, summary, events = _run_with(tmp_path, [fault])
     interlocks = [d for _, k, d in events if k == "interlock"]
     assert code == 1 and summary.status == "aborted"
     assert interlocks and interlocks[0].startswith(kind), interlocks
@@ -100,14 +99,15 @@ def test_each_interlock_trips_on_its_fault_and_leaves_the_bench_safe(tmp_path, f
     t_trip = next(t for t, k, _ in events if k == "interlock")
     assert t_fault <= t_trip < t_fault + (40.0 if kind == "flywheel_over_temperature" else 20.0)
     if fault.kind != "stuck_clutch":  # a stuck clutch obeys again only when the fault ends
-        _assert_safe(keep, tmp_path / "run.h5")
-        status = keep["bench"].status
+        [opened] = opened_benches
+        _assert_safe(opened["sim"].physics, tmp_path / "run.h5")
+        status = opened["bench"].status
         assert status.clamp_state == CLAMP_OPEN
 
 
 def test_interlock_hold_then_next_cycle(tmp_path):
     faults = [Fault(3.0, "radio_silence", duration_s=15.0)]
-    code, summary, keep, events = _run_with(tmp_path, faults, action="hold")
+    code, summary, events = _run_with(tmp_path, faults, action="hold")
     kinds = [k for _, k, _ in events]
     assert code == 0 and summary.status == "complete"
     assert kinds.index("interlock") < kinds.index("interlock_cleared") < kinds.index("cycle_skipped")
@@ -147,7 +147,7 @@ def test_sigterm_puts_bench_safe_and_file_aborted(after_s, tmp_path):
 def test_instrument_faults_are_events_and_gaps_only_while_they_last(tmp_path):
     faults = [Fault(10.0, "instrument_error", -310.0, target="System error"),
               Fault(20.0, "instrument_disconnect"), Fault(30.0, "instrument_reconnect")]
-    code, summary, keep, events = _run_with(tmp_path, faults, action="hold")
+    code, summary, events = _run_with(tmp_path, faults, action="hold")
     assert code == 0
     kinds = [(t, k, d) for t, k, d in events if k == "instrument_error"]
     assert any("-310" in d for _, _, d in kinds)  # the error queue entry, read and reported

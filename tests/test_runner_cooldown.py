@@ -13,6 +13,7 @@ from benchlab.clutch import convection_resistance
 from benchlab.cooldown import COVERAGE_K, SYSTEMATIC_REL, CooldownResult, analyse, segments, store, stored
 from benchlab.errors import InputError
 from benchlab.runner.session import RunRequest, execute
+from sim_bench.bench import SimulatedBench
 from sim_bench.plant import ThermalPlant
 
 GRID = "800:1,2500:1,1200:0"
@@ -22,7 +23,8 @@ GRID = "800:1,2500:1,1200:0"
 def sweep(tmp_path_factory):
     out = tmp_path_factory.mktemp("sweep") / "sweep.h5"
     plant = ThermalPlant()  # the paper's nonlinear clutch
-    code, summary = execute(RunRequest("cooldown-sweep", out, seed=2, grid=GRID, plant=plant, install_signals=False))
+    code, summary = execute(RunRequest("cooldown-sweep", out, seed=2, grid=GRID, bench=SimulatedBench(plant),
+                                       install_signals=False))
     assert code == 0 and summary.cycles_done == 3
     return out, plant
 

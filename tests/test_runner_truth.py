@@ -22,6 +22,7 @@ from benchlab.params import paper_params
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, can_log_path, execute
 from drivers import can_signals as sig
+from sim_bench.bench import SimulatedBench
 from sim_bench.plant import ThermalPlant
 
 FLOOR_K = 0.045  # sensor-noise floor of a Table 1 run: node 0.08 K per sensor (two averaged), wired 0.03 K
@@ -30,8 +31,8 @@ FLOOR_K = 0.045  # sensor-noise floor of a Table 1 run: node 0.08 K per sensor (
 @pytest.fixture(scope="module")
 def table1_run(tmp_path_factory):
     path = tmp_path_factory.mktemp("truth") / "t1.h5"
-    code, _ = execute(RunRequest(protocol="table1", out=path, seed=4, duration_s=2400, plant=ThermalPlant(),
-                                 install_signals=False))
+    code, _ = execute(RunRequest(protocol="table1", out=path, seed=4, duration_s=2400,
+                                 bench=SimulatedBench(ThermalPlant()), install_signals=False))
     assert code == 0
     return path
 

@@ -13,6 +13,7 @@ from benchlab.runner.session import RunRequest, execute
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
 from sim_bench import unseen as U
+from sim_bench.bench import SimulatedBench
 from sim_bench.faults import Fault
 from sim_bench.plant import ThermalPlant
 
@@ -21,9 +22,9 @@ STEPS = (Step("open", 40.0, 2000.0, 0.0, 0.0, 0), Step("launch", 10.0, 2000.0, 6
 NODES = ("T_pressure_plate", "T_flywheel", "T_air", "T_housing")
 
 
-def _run(path, **options):
-    return execute(RunRequest("custom", path, steps=STEPS, install_signals=False, sim_options={"dropouts": False},
-                              **options))
+def _run(path, **bench):
+    return execute(RunRequest("custom", path, steps=STEPS, install_signals=False,
+                              bench=SimulatedBench(options={"dropouts": False}, **bench)))
 
 
 def test_truth_on_the_run_grid_with_units(tmp_path):
@@ -53,8 +54,8 @@ def test_truth_kept_through_abort_and_resume(tmp_path):
     assert code == 1 and summary.status == "aborted"
     first = load_truth(path)
     assert first is not None and len(first) == len(load_run(path)) and not first.isna().any().any()
-    code, summary = execute(RunRequest("custom", path, resume=True, install_signals=False, limits=limits,
-                                       sim_options={"dropouts": False}))
+    code, summary = execute(RunRequest("custom", path, resume=True, install_signals=False,
+                                       bench=SimulatedBench(options={"dropouts": False}, limits=limits)))
     assert code == 0, summary
     run, truth = load_run(path), load_truth(path)
     assert len(truth) == len(run) > len(first)

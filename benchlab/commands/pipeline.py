@@ -29,7 +29,6 @@ from benchlab.progress import Progress, for_terminal
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from benchlab.wear import analyse_wear
-from sim_bench.plant import ThermalPlant
 
 NAME = "pipeline"
 HELP = "run Table 1 and the validation protocol on the simulated bench, identify, report, diagnose, estimate wear"
@@ -50,7 +49,10 @@ def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
 
 def _bench_run(label: str, path: Path, protocol: str, seed: int, progress: Progress, **options: float) -> pd.DataFrame:
     """One protocol on the simulated bench through the runner and the real drivers; the run as loaded back."""
-    code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, plant=ThermalPlant(),
+    from sim_bench.bench import SimulatedBench  # the simulator when the command runs
+    from sim_bench.plant import ThermalPlant
+
+    code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, bench=SimulatedBench(ThermalPlant()),
                                        install_signals=False, progress=progress, **options))
     if code != 0 or summary is None or summary.status != "complete":
         raise RuntimeError(f"{label} run {path} ended {summary.status if summary else 'without a summary'} "

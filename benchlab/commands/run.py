@@ -81,9 +81,14 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
     from benchlab.runner.session import RunRequest, execute
 
-    request = RunRequest(protocol=args.protocol or "", out=out, bench=args.bench, seed=args.seed, cycles=args.cycles,
+    bench = args.bench
+    if args.fault:  # --bench sim (checked above): the simulated bench with the faults to rehearse
+        from sim_bench.bench import SimulatedBench
+
+        bench = SimulatedBench(faults=tuple(args.fault))
+    request = RunRequest(protocol=args.protocol or "", out=out, bench=bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
-                         faults=tuple(args.fault), progress=for_terminal(args.quiet))
+                         progress=for_terminal(args.quiet))
     code, summary = execute(request)
     if summary is not None:
         print("\n".join(summary.lines()))

@@ -1,20 +1,23 @@
 """One `benchlab run`: protocol + bench + run file, from the checks before anything moves to the summary.
 
-Used by the CLI command and by tests (which pass a plant, faults or a smaller grid directly).
+Used by the CLI command and by tests (which pass a `sim_bench.bench.SimulatedBench` with a plant, faults or
+limits, or a smaller grid, directly). The hardware path never imports the simulator: "sim" is resolved to the
+simulated bench only when asked for, and that bench opens itself.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import subprocess
 import sys
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Union
 
 import numpy as np
 
@@ -31,26 +34,27 @@ from protocols import catalog
 from protocols.limits import BenchLimits, check_schedule, schedule_problems
 from protocols.schedule import Step, describe, duration_s
 
+if TYPE_CHECKING:
+    from sim_bench.bench import SimBench, SimulatedBench
+
+# what a run asks for: a BENCH.toml path, "sim" (the default simulated bench) or a simulated bench of its own
+BenchChoice = Union[str, "os.PathLike[str]", "SimulatedBench"]
+
 
 @dataclass
 class RunRequest:
     protocol: str
     out: Path
-    bench: str = "sim"  # "sim" or a BENCH.toml path
+    bench: BenchChoice = "sim"  # a BENCH.toml path, "sim" or a sim_bench.bench.SimulatedBench (plant, faults, limits)
     seed: int = 1
     cycles: int | None = None
     duration_s: float | None = None
     grid: str | None = None
     dry_run: bool = False
     resume: bool = False
-    plant: Any = None  # sim only: a ThermalPlant (default: the paper's clutch, nonlinear)
-    faults: Sequence[Any] = ()  # sim only: sim_bench.faults.Fault
-    sim_options: dict[str, Any] | None = None  # sim only: SimBenchConfig overrides
-    limits: BenchLimits | None = None  # sim only: limits (hardware: from BENCH.toml)
     progress: Progress = SILENT  # a bar over the planned bench time (benchlab.progress.for_terminal in commands)
     install_signals: bool = True
     steps: tuple[Step, ...] | None = None  # a custom schedule instead of the named protocol's (tests, scripts)
-    keep: dict[str, Any] | None = None  # if given, execute() leaves "sim", "bench", "runner" in it (tests)
 
 
 def software_version() -> str:
@@ -64,16 +68,30 @@ def software_version() -> str:
     return f"benchlab {benchlab.__version__}" + (f" ({rev})" if rev else "")
 
 
-def _sim_bench_config(request: RunRequest, limits: BenchLimits) -> BenchConfig:
-    return BenchConfig(instrument_url="sim://pending", node_url="sim://pending", can={"interface": "sim"},
-                       can_timestamps="run", instrument_timeout_s=0.05, limits=limits, source="sim", tick_s=1.0,
-                       fast_tick_s=0.05, instrument_period_s=0.5)
+def simulated(bench: BenchChoice) -> "SimulatedBench | None":
+    """The simulated bench `bench` asks for ("sim": the default one), or None for a BENCH.toml path.
+
+    The one place that tells the two apart; sim_bench is imported only here, and only for "sim".
+    """
+    if not isinstance(bench, (str, os.PathLike)):
+        return bench
+    if bench != "sim":
+        return None
+    from sim_bench.bench import SimulatedBench
+
+    return SimulatedBench()
+
+
+def bench_name(bench: BenchChoice) -> str:
+    """What the run file records as its `bench` (and resume compares): "sim" or the BENCH.toml path given."""
+    return os.fspath(bench) if isinstance(bench, (str, os.PathLike)) else bench.name
 
 
 def bench_config(request: RunRequest) -> BenchConfig:
     """The bench's configuration: the simulated bench's, or BENCH.toml checked field by field."""
-    if request.bench == "sim":
-        return _sim_bench_config(request, request.limits or BenchLimits())
+    sim = simulated(request.bench)
+    if sim is not None:
+        return sim.bench_config()
     from benchlab.runner.config import load_bench_config
 
     return load_bench_config(request.bench)
@@ -133,23 +151,18 @@ def can_log_path(run_path: Path, resumes: int = 0) -> Path:
     return run_path.with_suffix(f".resume{resumes}.blf" if resumes else ".blf")
 
 
-def open_bench(request: RunRequest, config: BenchConfig, can_log: Path, t0: float, seed: int,
-               initial_c: Any = None) -> tuple[DriverBench, Clock, Any, BenchConfig]:
+def open_bench(bench_choice: BenchChoice, config: BenchConfig, can_log: Path, t0: float, seed: int,
+               initial_c: Any = None) -> "tuple[DriverBench, Clock, SimBench | None, BenchConfig]":
     """The drivers on the bench, with its clock: the hardware of BENCH.toml on real time, or the simulated bench
-    (its emulators behind the same drivers, `seed`, the request's plant and faults) on simulated time.
+    (its emulators behind the same drivers, opened by the bench itself with `seed`) on simulated time.
 
     Returns (bench, clock, the simulated bench or None, the config with the simulated devices' addresses).
     Exit 2 for a CAN log that cannot be made, 1 for devices that cannot be reached.
     """
     sim = None
-    if request.bench == "sim":
-        from sim_bench.bench import SimBench, SimBenchConfig
-
-        cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0, drivetrain=config.drivetrain, initial_c=initial_c,
-                             **dict(request.sim_options or {}))
-        sim = SimBench(cfg, plant=request.plant, faults=request.faults)
-        config = replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
-                         can={"interface": "sim", "channel": sim.name + "-can"})
+    spec = simulated(bench_choice)
+    if spec is not None:
+        sim, config = spec.open(config, seed, t0, initial_c)
     clock: Clock = sim.clock if sim is not None else RealClock(t0)
     try:
         if sim is not None:
@@ -182,7 +195,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     t0 = resume_state["t0"] if resume_state else 0.0
     seed = request.seed + (7919 * resume_state["resumes"] if resume_state else 0)
     can_log = can_log_path(request.out, resume_state["resumes"] if resume_state else 0)
-    bench, clock, sim, config = open_bench(request, config, can_log, t0, seed,
+    bench, clock, sim, config = open_bench(request.bench, config, can_log, t0, seed,
                                            resume_state["initial"] if resume_state else None)
     layout = bench.layout
     runner: Runner | None = None
@@ -209,17 +222,13 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                          f"resume {resume_state['resumes']}: continuing with step {start}; CAN log {can_log.name}",
                          step=start if start < len(steps) else -1)
         else:
-            attrs = {"seed": request.seed, "software_version": software_version(), "bench": request.bench,
+            attrs = {"seed": request.seed, "software_version": software_version(), "bench": bench_name(request.bench),
                      "bench_config": json.dumps(config.as_dict(), default=str),
                      "protocol_options": json.dumps(options, default=str),
                      "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "idn": bench.idn,
                      "can_log": can_log.name, "can_log_time_base": config.can_timestamps}
             if sim is not None:
-                attrs["sim_bench"] = json.dumps(sim.cfg.as_dict(), default=str)
-                attrs["sim_faults"] = json.dumps([asdict(fault) for fault in request.faults])
-                attrs["sim_truth"] = json.dumps({"params": dict(sim.physics.truth_params),
-                                                 "effects": [e.name for e in sim.physics.plant.effects
-                                                             if not e.name.startswith("fault heater")]})
+                attrs.update(sim.run_attrs())
             writer = RunWriter(request.out, layout, protocol=request.protocol, attrs=attrs,
                                schedule=[s.as_dict() for s in steps], schedule_units=SCHEDULE_UNITS,
                                planned_s=duration_s(steps), flush_every_s=config.flush_every_s,
@@ -229,8 +238,6 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                                      duration_s(steps), unit="s")
         runner = Runner(bench, clock, steps, writer, config.limits, tick_s=config.tick_s,
                         fast_tick_s=config.fast_tick_s, dt=config.dt, progress=task)
-        if request.keep is not None:
-            request.keep.update(sim=sim, bench=bench, runner=runner)
         for name, code in pending:
             runner.request_stop(name, code)
         try:
@@ -258,7 +265,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     return code, summary
 
 
-def _truth_groups(sim: Any, writer: RunWriter, resume_state: dict[str, Any] | None) -> dict[str, Any]:
+def _truth_groups(sim: "SimBench | None", writer: RunWriter, resume_state: dict[str, Any] | None) -> dict[str, Any]:
     """The simulated bench's /truth for the writer's close: the plant's true temperatures (degC) on the run's
     grid, the rows before a resume as the file held them; nothing on hardware."""
     if sim is None:
@@ -282,9 +289,9 @@ def _resume_state(request: RunRequest) -> dict[str, Any]:
     status = stopped.attrs.get("status", "")
     if status == "complete":
         raise InputError(path, "status", "a run that is not complete ('running' or 'aborted'), got 'complete'")
-    bench = stopped.attrs.get("bench", "")
-    if bench != request.bench:
-        raise InputError(path, "bench", f"the same bench as the run ({bench!r}), got --bench {request.bench!r}")
+    bench, asked = stopped.attrs.get("bench", ""), bench_name(request.bench)
+    if bench != asked:
+        raise InputError(path, "bench", f"the same bench as the run ({bench!r}), got --bench {asked!r}")
     steps = stopped.steps()
     progress, rows, initial = stopped.progress, stopped.rows, stopped.last_valid
     cycle = progress.get("state/cycle", math.nan)
