@@ -1,12 +1,17 @@
-"""Numbers read from user files (TOML, JSON): what counts as a finite number.
+"""Fields read from user files (TOML, JSON): what counts as a finite number, which keys a table may hold.
 
 TOML and JSON integers have any size, and `math.isfinite` raises OverflowError on one beyond a float's range,
-so every check of a number from a file goes through `finite_number` (bools are not numbers either).
+so every check of a number from a file goes through `finite_number` (bools are not numbers either). A table
+whose keys are fixed goes through `check_keys`, so a misspelt key is refused rather than left at its default.
 """
 
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Iterable, Mapping
+
+from benchlab.errors import InputError
 
 
 def finite_number(value: object) -> float | None:
@@ -24,6 +29,16 @@ def positive_number(value: object) -> float | None:
     """`value` as a finite float > 0, or None if it is not one."""
     number = finite_number(value)
     return number if number is not None and number > 0 else None
+
+
+def check_keys(source: "str | os.PathLike[str]", prefix: str, table: Mapping[str, object], known: Iterable[str]
+               ) -> None:
+    """InputError on the first key of `table` not in `known`, naming it as `prefix.key` (`key` for an empty
+    prefix) and listing the known keys."""
+    known = tuple(known)
+    for key in table:
+        if key not in known:
+            raise InputError(source, f"{prefix}.{key}" if prefix else key, f"one of {', '.join(known)} (unknown key)")
 
 
 def json_ready(value: object) -> object:

@@ -14,7 +14,7 @@ from typing import Any
 
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
 from benchlab.drivetrain import RPM, DrivetrainFacts
-from benchlab.values import positive_number
+from benchlab.values import check_keys, positive_number
 from protocols.schedule import CONDITION_CHANNELS, OPERATORS, PHASES, Step, duration_s
 
 ACTIONS = ("hold", "abort")
@@ -63,10 +63,9 @@ class BenchLimits:
         from benchlab.errors import InputError
 
         known = {f.name: f for f in fields(cls) if f.name != "drivetrain"}
+        check_keys(source, prefix, values, known)
         clean: dict[str, Any] = {}
         for key, value in values.items():
-            if key not in known:
-                raise InputError(source, f"{prefix}.{key}", f"one of {', '.join(known)} (unknown key)")
             if key == "max_age_s":
                 clean[key] = _table(value, DEFAULT_MAX_AGE_S, source, f"{prefix}.{key}", _age)
                 continue
@@ -95,18 +94,17 @@ def _table(value: Any, keys: Any, source: str, name: str, check: Any) -> dict[st
 
     if not isinstance(value, Mapping):
         raise InputError(source, name, f"a table, got {value!r}")
-    for key in value:
-        if key not in keys:
-            raise InputError(source, f"{name}.{key}", f"one of {', '.join(keys)} (unknown key)")
+    check_keys(source, name, value, keys)
     return {key: check(v, source, f"{name}.{key}") for key, v in value.items()}
 
 
 def _age(value: Any, source: str, name: str) -> float:
     from benchlab.errors import InputError
 
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= MAX_AGE_LIMIT_S:
+    age = positive_number(value)
+    if age is None or age > MAX_AGE_LIMIT_S:
         raise InputError(source, name, f"an age in s, more than 0 and at most {MAX_AGE_LIMIT_S:g}, got {value!r}")
-    return float(value)
+    return age
 
 
 def _action(value: Any, source: str, name: str) -> str:

@@ -227,6 +227,32 @@ def test_bench_file_drivetrain_fact_in_the_wrong_place_or_sign_is_refused(table,
     assert str(bench) in err and not (tmp_path / "r.h5").exists()
 
 
+@pytest.mark.parametrize("line, typo, field", [
+    ("fast_tick_s = 0.02", "fast_tick = 0.005", "acquisition.fast_tick"),
+    ("tick_s = 0.1 ", "tick = 0.05 ", "acquisition.tick"),
+    ("period_s = 0.2 ", "period = 0.1 ", "instrument.period"),
+    ("timeout_s = 2.0", "timeout = 1.0", "instrument.timeout"),
+    ("period_s = 0.05", "period_ms = 20", "node.period_ms"),
+])
+def test_bench_file_misspelt_key_is_refused_not_left_at_its_default(line, typo, field, tmp_path, capsys):
+    """[acquisition] sets how often the interlocks are polled, [instrument] and [node] how often and how long the
+    temperatures they watch are read: a misspelt key there used to run the bench at the default unnoticed."""
+    text = EXAMPLE_BENCH.read_text()
+    assert text.count(line) == 1
+    bench = tmp_path / "bench.toml"
+    bench.write_text(text.replace(line, typo))
+    err = _refused(["run", "table1", "--bench", str(bench), "--cycles", "1", "--out", str(tmp_path / "r.h5")],
+                   field, capsys)
+    assert str(bench) in err and "(unknown key)" in err and not (tmp_path / "r.h5").exists()
+
+
+def test_bench_file_can_table_takes_python_can_keys(tmp_path):
+    """[can] is passed to can.Bus whole: its keys are python-can's, not benchlab's to refuse."""
+    bench = tmp_path / "bench.toml"
+    bench.write_text(EXAMPLE_BENCH.read_text().replace("bitrate = 500000", "bitrate = 500000\nreceive_own_messages = false"))
+    assert load_bench_config(bench).can["receive_own_messages"] is False
+
+
 @pytest.mark.parametrize("channel, value",
                          [("engine_speed", "inf"), ("friction_power", "1e300"), ("clutch_state", "2")])
 def test_import_refuses_what_load_run_would_refuse(channel, value, foreign_run, tmp_path, capsys):

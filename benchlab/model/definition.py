@@ -19,7 +19,7 @@ from typing import Any
 
 from benchlab.errors import InputError, read_document
 from benchlab.model.expressions import Expression, ExpressionError, affine_parts, parse
-from benchlab.values import finite_number
+from benchlab.values import check_keys, finite_number
 
 SCHEMA = "benchlab-model/1"
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
@@ -167,9 +167,7 @@ def _entries(source: str, entry: str, value: object) -> list[dict]:
 
 
 def _keys(source: str, entry: str, table: dict, allowed: tuple[str, ...], required: tuple[str, ...]) -> None:
-    for key in table:
-        if key not in allowed:
-            raise _fail(source, f"{entry}.{key}", f"one of the keys {', '.join(allowed)}")
+    check_keys(source, entry, table, allowed)
     for key in required:
         if key not in table:
             raise _fail(source, f"{entry}.{key}", "present (missing)")

@@ -22,6 +22,7 @@ import numpy as np
 
 from benchlab.errors import InputError
 from benchlab.network import Params, ThermalNetwork
+from benchlab.values import positive_number
 
 #: Reading noise of a sensor without residual statistics (K, 1σ): a PT1000 read by a scanner or the node.
 DEFAULT_SENSOR_K = 0.1
@@ -56,9 +57,10 @@ class NoiseModel:
 
 def check_positive(source: str, field: str, value: float, unit: str) -> float:
     """A noise figure must be a positive finite number: InputError naming the field otherwise."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+    number = positive_number(value)
+    if number is None:
         raise InputError(source, field, f"a positive noise in {unit}, got {value!r}")
-    return float(value)
+    return number
 
 
 def with_overrides(noise: NoiseModel, heat_flow_w: float | None = None, sensor_k: Mapping[str, float] | None = None,
@@ -82,8 +84,9 @@ def residual_rms(extra: Mapping[str, Any], channel: str) -> float | None:
     values = []
     for run in (fitting.values() if isinstance(fitting, Mapping) else ()):
         value = run.get("channels", {}).get(channel, {}).get("rmse_K") if isinstance(run, Mapping) else None
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0:
-            values.append(float(value))
+        number = positive_number(value)
+        if number is not None:
+            values.append(number)
     return float(np.sqrt(np.mean(np.square(values)))) if values else None
 
 

@@ -14,6 +14,7 @@ from benchlab.clutch import convection_resistance
 from benchlab.cooldown import COVERAGE_K, CooldownResult
 from benchlab.params import ModelParams
 from benchlab.report.plotting import MODEL_STYLES, new_figure, save
+from benchlab.values import finite_number
 
 SPEED_MAX_RPM = 3000.0
 #: clutch state -> (legend text, colour, the eq. (11) parameters of that state)
@@ -30,8 +31,8 @@ def standard_errors(params: ModelParams) -> dict[str, float]:
     found = params.extra.get("uncertainty")
     if not isinstance(found, dict):
         return {}
-    return {k: float(v) for k, v in found.items()
-            if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
+    numbers = {k: finite_number(v) for k, v in found.items()}
+    return {k: v for k, v in numbers.items() if v is not None}
 
 
 def correlations(params: ModelParams) -> dict[tuple[str, str], float]:

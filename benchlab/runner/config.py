@@ -20,7 +20,7 @@ from benchlab.bounds import MAX_TIMEOUT_S
 from benchlab.drivetrain import DrivetrainFacts
 from benchlab.errors import InputError
 from benchlab.runner.devices import BenchConfig
-from benchlab.values import finite_number, positive_number
+from benchlab.values import check_keys, finite_number, positive_number
 from drivers import cvd
 from drivers.can_signals import BENCH_SIGNALS
 from protocols.limits import BenchLimits
@@ -28,6 +28,10 @@ from protocols.limits import BenchLimits
 ALIGNED_TEMPERATURES = ("T_air", "T_housing", "T_ambient", "T_engine")
 _SECTIONS = ("instrument", "node", "can", "drivetrain", "acquisition", "limits")
 ACQUISITION_KEYS = ("dt", "tick_s", "fast_tick_s", "flush_every_s")  # [acquisition]; defaults: BenchConfig's
+# The keys of [instrument] and [node]; [can] is python-can's (passed to can.Bus) and takes any key.
+INSTRUMENT_KEYS = ("url", "channels", "mode", "calibration", "baudrate", "timeout_s", "period_s")
+NODE_KEYS = ("url", "calibration", "baudrate", "period_s")
+CVD_KEYS = ("r0", "a", "b", "c")
 
 
 def _table(doc: Mapping[str, Any], key: str, src: str, required: bool = True) -> Mapping[str, Any]:
@@ -61,10 +65,9 @@ def _num(t: Mapping[str, Any], key: str, field: str, src: str, default: float, i
 def _coefficients(t: Any, field: str, src: str) -> cvd.CvdCoefficients:
     if not isinstance(t, dict):
         raise InputError(src, field, f"a table of Callendar-Van Dusen coefficients r0, a, b, c, got {t!r}")
+    check_keys(src, field, t, CVD_KEYS)
     values = {}
     for key in t:
-        if key not in ("r0", "a", "b", "c"):
-            raise InputError(src, f"{field}.{key}", "one of r0, a, b, c (unknown key)")
         number = finite_number(t[key])
         if number is None:
             raise InputError(src, f"{field}.{key}", f"a finite number, got {t[key]!r}")
@@ -105,10 +108,9 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         raise InputError(src, "file", "an existing bench file (not found)") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(src, "file", f"TOML ({exc})") from None
-    for key in doc:
-        if key not in _SECTIONS:
-            raise InputError(src, key, f"one of the sections {', '.join(_SECTIONS)} (unknown)")
+    check_keys(src, "", doc, _SECTIONS)
     inst = _table(doc, "instrument", src)
+    check_keys(src, "instrument", inst, INSTRUMENT_KEYS)
     channels_t = _table(inst, "channels", src)
     channels: dict[int, str] = {}
     for key, name in channels_t.items():
@@ -130,6 +132,7 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
             raise InputError(src, f"instrument.calibration.{key}", "a configured channel number")
         calibration[int(key)] = _coefficients(coef, f"instrument.calibration.{key}", src)
     node = _table(doc, "node", src)
+    check_keys(src, "node", node, NODE_KEYS)
     node_cal = _table(node, "calibration", src, required=False)
     node_coefs = []
     for i in (1, 2):
@@ -152,11 +155,9 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         dbc = str(dbc_path)
     drive = _table(doc, "drivetrain", src, required=False)
     acq = _table(doc, "acquisition", src, required=False)
+    check_keys(src, "acquisition", acq, ACQUISITION_KEYS)
     limits = BenchLimits.from_mapping(_table(doc, "limits", src, required=False), src)
-    for key in drive:
-        if key not in DrivetrainFacts.__dataclass_fields__:
-            raise InputError(src, f"drivetrain.{key}", f"one of {', '.join(DrivetrainFacts.__dataclass_fields__)} "
-                                                       "(unknown key)")
+    check_keys(src, "drivetrain", drive, DrivetrainFacts.__dataclass_fields__)
     drivetrain = DrivetrainFacts(*(_num(drive, key, f"drivetrain.{key}", src, getattr(DrivetrainFacts, key))
                                    for key in DrivetrainFacts.__dataclass_fields__))
     return BenchConfig(

@@ -124,9 +124,10 @@ def _state(doc: dict[str, Any], source: str) -> WearState:
     for key in STATE_KEYS:
         value = table.get(key, 0.0)
         upper = 1.0 if key.startswith("loss") else math.inf
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < upper:
+        number = finite_number(value)
+        if number is None or not 0.0 <= number < upper:
             raise InputError(source, f"state.{key}", f"a number in [0, {upper}), got {value!r}")
-        values[key] = float(value)
+        values[key] = number
     return WearState(**values)
 
 

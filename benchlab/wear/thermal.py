@@ -12,6 +12,7 @@ from benchlab.model.definition import ModelDefinition, parse_model
 from benchlab.network import ThermalNetwork
 from benchlab.params import ModelParams
 from benchlab.simulation import simulate
+from benchlab.values import finite_number
 
 DEFAULT_SPLIT = 0.5
 #: The clutch model files' sources of the friction power P (eq. 6-7) and the channels wear reads.
@@ -22,9 +23,10 @@ LINING_CHANNELS = ("T_pressure_plate", "T_flywheel", "T_air")
 def heat_split(params: ModelParams, source: str = "<params>") -> float:
     """Fraction of the friction power going to the pressure plate: the params file's `split`, else 0.5 (eq. 6-7)."""
     value = params.get("split", getattr(params, "extra", {}).get("split", DEFAULT_SPLIT))
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+    split = finite_number(value)
+    if split is None or not 0.0 <= split <= 1.0:
         raise InputError(source, "split", f"a plate fraction in [0, 1], got {value!r}")
-    return float(value)
+    return split
 
 
 def split_model(split: float, model: ModelDefinition | None = None) -> ModelDefinition:
