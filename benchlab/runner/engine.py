@@ -103,7 +103,8 @@ class Runner:
         self._reported = 0.0
         self._t_step_start = clock()
         self._history: collections.deque[tuple[float, float]] = collections.deque()
-        self._step_index = 0
+        # the step the progress bar shows: the last one started, kept after it ends (current_step is -1 then)
+        self._progress_step = 0
         self._commanded = False
 
     # -- public ---------------------------------------------------------------------------------------
@@ -161,7 +162,7 @@ class Runner:
     # -- steps ----------------------------------------------------------------------------------------
     def _run_step(self, index: int, step: Step) -> None:
         now = self.clock()
-        self.current_step = self._step_index = index
+        self.current_step = self._progress_step = index
         if step.cycle != self.cycle:
             self.cycle = step.cycle
             self.synced = True
@@ -330,7 +331,7 @@ class Runner:
         if wall - self._last_progress < self.progress_every_s:
             return
         self._last_progress = wall
-        index = min(self._step_index, len(self.steps) - 1)
+        index = min(self._progress_step, len(self.steps) - 1)
         step = self.steps[index]
         done = self._planned_before[index] + min(max(now - self._t_step_start, 0.0), step.expected_s)
         self.progress.advance(done - self._reported)
