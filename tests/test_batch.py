@@ -55,7 +55,8 @@ def runs(tmp_path_factory):
 def scheduler():
     """A scheduler on 127.0.0.1 with one worker of two threads in this process (no processes to start)."""
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp://",
-                                  host=LOOPBACK, dashboard_address=None) as cluster:
+                                  host=LOOPBACK, dashboard_address=f"{LOOPBACK}:0") as cluster:
+        # not dashboard_address=None: the scheduler then takes dask's fixed port 8787, taken under a parallel run
         yield cluster.scheduler_address
 
 
