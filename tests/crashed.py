@@ -1,6 +1,6 @@
-"""Run files as a crash leaves them, for the tests: RunWriter writes in a child process that is then killed.
-
-`write_then_kill` runs this file as the child; the child reads its job (pickled) from stdin.
+"""Run files as a crash or an abort leaves them, for the tests: RunWriter writes in a child process that is then
+killed (`write_then_kill` runs this file as the child; the child reads its job, pickled, from stdin), or a run on the
+simulated bench stops on an interlock (`abort_on_silent_load`).
 """
 
 from __future__ import annotations
@@ -15,6 +15,19 @@ from pathlib import Path
 from typing import Any
 
 CHILD_TIMEOUT_S = 300.0  # a guard against a hung child, not a speed check
+
+
+def abort_on_silent_load(out: Path, steps: Sequence[Any]) -> tuple[int, Any]:
+    """Run `steps` on the simulated bench with the load controller falling silent at 3 s and interlocks set to
+    abort: the run stops in its first step, resumable. Returns execute()'s (exit code, summary)."""
+    from benchlab.runner.session import RunRequest, execute
+    from protocols.limits import BenchLimits
+    from sim_bench.bench import SimulatedBench
+    from sim_bench.faults import Fault
+
+    sim = SimulatedBench(faults=[Fault(3.0, "controller_silent", target="load")], options={"dropouts": False},
+                         limits=BenchLimits(on_interlock="abort"))
+    return execute(RunRequest("custom", out, steps=tuple(steps), bench=sim, install_signals=False))
 
 
 def write_then_kill(path: "str | os.PathLike[str]", layout: Any, calls: Sequence[tuple[Any, ...]],

@@ -21,10 +21,10 @@ import benchlab.runner.session as session
 from benchlab.cli import main
 from benchlab.runfile import read_progress
 from benchlab.runner.session import RunRequest, execute
+from crashed import abort_on_silent_load  # tests/crashed.py
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
 from sim_bench.bench import SimulatedBench
-from sim_bench.faults import Fault
 
 STEPS = (Step("open", 20.0, 1500.0, 0.0, 0.0, 0), Step("launch", 10.0, 1500.0, 45.0, 500.0, 1),
          Step("drive", 20.0, 1500.0, 45.0, 500.0, 1), Step("open", 20.0, 1500.0, 0.0, 500.0, 1))
@@ -34,9 +34,7 @@ STEPS = (Step("open", 20.0, 1500.0, 0.0, 0.0, 0), Step("launch", 10.0, 1500.0, 4
 def aborted_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A run aborted in cycle 0 by a silent load controller: resumable, cycle 1 still to do."""
     out = tmp_path_factory.mktemp("aborted") / "run.h5"
-    sim = SimulatedBench(faults=[Fault(3.0, "controller_silent", target="load")], options={"dropouts": False},
-                         limits=BenchLimits(on_interlock="abort"))
-    code, summary = execute(RunRequest("custom", out, steps=STEPS, bench=sim, install_signals=False))
+    code, summary = abort_on_silent_load(out, STEPS)
     assert code == 1 and summary.status == "aborted"
     return out
 

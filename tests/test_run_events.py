@@ -20,10 +20,9 @@ from benchlab.errors import InputError
 from benchlab.runfile import load_events, load_schedule
 from benchlab.runner.session import RunRequest, execute
 from benchlab.watch.live import LiveRun
-from protocols.limits import BenchLimits
+from crashed import abort_on_silent_load  # tests/crashed.py
 from protocols.schedule import Step
 from sim_bench.bench import SimulatedBench
-from sim_bench.faults import Fault
 
 STEPS = (Step("open", 10.0, 1500.0, 0.0, 0.0, 0), Step("launch", 5.0, 1500.0, 45.0, 500.0, 1),
          Step("drive", 10.0, 1500.0, 45.0, 500.0, 1), Step("open", 10.0, 1500.0, 0.0, 500.0, 1))
@@ -34,9 +33,7 @@ OLD_COLUMNS = ("time", "cycle", "kind", "detail")  # /events before `step`
 def aborted(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A run aborted in step 0 (cycle 0) by a silent load controller; cycle 1 (steps 1-3) still to do."""
     out = tmp_path_factory.mktemp("events") / "run.h5"
-    sim = SimulatedBench(faults=[Fault(3.0, "controller_silent", target="load")], options={"dropouts": False},
-                         limits=BenchLimits(on_interlock="abort"))
-    code, _ = execute(RunRequest("custom", out, steps=STEPS, bench=sim, install_signals=False))
+    code, _ = abort_on_silent_load(out, STEPS)
     assert code == 1
     return out
 
