@@ -34,7 +34,10 @@ def test_probe_can_against_running_emulator(capsys) -> None:
     emu = CanBenchEmulator(bus)
     try:
         with RealtimeLoop(emu.poll, period_s=0.002):
-            assert main(["probe", "can", "--url", "virtual:probe-test", "--count", "8", "--json"]) == 0
+            # a time-out far above the frames' 10 ms: the probe ends at the 8th frame, and a loaded machine (two
+            # test processes on two cores) may starve the emulator's thread for a while (failed once with 2 s)
+            argv = ["probe", "can", "--url", "virtual:probe-test", "--count", "8", "--json", "--timeout", "30"]
+            assert main(argv) == 0
     finally:
         bus.shutdown()
     doc = json.loads(capsys.readouterr().out)
