@@ -376,6 +376,12 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
         held = _held_out(spec, result.params, datasets)
         return (result.params, result.cost, result.residuals, held.predictions, held.params), bound
 
+    def record(cand: Candidate, spec: ModelSpec, values: tuple) -> None:
+        params, cost, residuals, predictions, fold_params = values
+        held = HeldOut(datasets, predictions, fold_params)
+        tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
+                           100.0 * (1.0 - held.rmse / current_held.rmse)))
+
     tried, good, offered = [], 0, list(scored[:MAX_VALIDATED])
     while offered and good < CROSS_VALIDATED:
         batch, offered = offered[:CROSS_VALIDATED - good], offered[CROSS_VALIDATED - good:]
@@ -384,12 +390,8 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
                 failed.append((cand.key, bound))
                 continue
             good += 1
-            if not values:
-                continue
-            params, cost, residuals, predictions, fold_params = values
-            held = HeldOut(datasets, predictions, fold_params)
-            tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
-                               100.0 * (1.0 - held.rmse / current_held.rmse)))
+            if values:
+                record(cand, spec, values)
     passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
     if not passing:
         return None
@@ -404,10 +406,7 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
             if values is None:
                 failed.append((cand.key, bound))
             elif values:
-                params, cost, residuals, predictions, fold_params = values
-                held = HeldOut(datasets, predictions, fold_params)
-                tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
-                                   100.0 * (1.0 - held.rmse / current_held.rmse)))
+                record(cand, spec, values)
         passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
     best = _simplest_equal(best, passing, current)
     alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, best.held))
@@ -418,7 +417,12 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
 
 def _complexity(tried: Tried, current: FitResult) -> tuple[int, int]:
     """How much an extension asks of the data: the parameters it adds, then the signals it reads."""
-    return sum(p.name not in current.params for p in tried.spec.free), len(tried.candidate.reads)
+    return len(_added(tried.spec, current)), len(tried.candidate.reads)
+
+
+def _added(spec: ModelSpec, current: FitResult) -> tuple[str, ...]:
+    """The free parameters of an extension's spec that the current model does not have."""
+    return tuple(p.name for p in spec.free if p.name not in current.params)
 
 
 def _simplest_equal(best: Tried, passing: Sequence[Tried], current: FitResult) -> Tried:
@@ -439,7 +443,7 @@ def _explains(cand: Candidate) -> tuple:
 def _finding(cand: Candidate, spec: ModelSpec, params: dict[str, float], cost: float, residuals: np.ndarray,
              current: FitResult, current_held: HeldOut, held: HeldOut, alternatives: list["Alternative"]) -> Finding:
     """The finding of an extension fitted to `params` (in-sample cost and residuals) on top of `current`."""
-    added = tuple(p.name for p in spec.free if p.name not in current.params)
+    added = _added(spec, current)
     return Finding(cand, spec, params, added, current_held, held, _block_test(current_held, held),
                    _bic_delta(current.cost, cost, residuals, len(added)), alternatives)
 
