@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from drivers import can_signals as sig
-from drivers.can_codec import CodecTable, MessageCodec, compile_codecs
+from drivers.can_codec import CodecTable, MessageCodec, compile_codecs, decode_row
 from drivers.can_frames import (ERROR, EXTENDED, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
                                 send_all)
 from drivers.can_log import log_frames
@@ -43,9 +43,11 @@ TimestampSource = Literal["interface", "run", "receive"]
 LOG_SYNC_S = 1.0  # the log file is flushed to the OS this often
 MAX_CATCH_UP_S = 1.0  # a cyclic frame more than this late is skipped, not sent in a burst
 _STANDARD_IDS = 1 << 11
-# why a frame is not decoded (_classify): its id is not one we receive, its length is wrong, it is an error or
-# remote frame, it is our own frame echoed by the interface, or its id needs the slow lookup (extended ids)
-UNKNOWN_ID, BAD_LENGTH, ERROR_FRAME, OWN_FRAME, LOOK_UP = -1, -2, -3, -4, -5
+# why a frame is not decoded (_classify_decode): its id is not one we receive, its length is wrong, it is an error or
+# remote frame, it is our own frame echoed by the interface, or its message's codec refused the payload
+UNKNOWN_ID, BAD_LENGTH, ERROR_FRAME, OWN_FRAME, DECODE_ERROR = -1, -2, -3, -4, -5
+# the columns of _RxTable.meta, one row per received message
+LENGTH, COMPILED, ALIVE_COL, ALIVE_MODULO, FAULT_COL, STATE_COL, OWNER = range(7)
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,6 +136,12 @@ class _Tx:
     def next_due(self) -> float:
         return self.origin + self.cycles * self.cycle_s
 
+    def due_until(self, t: float) -> np.ndarray:
+        """Times of the cycles due from `next_due` up to `t` (inclusive), each computed as `next_due` computes it."""
+        first = self.cycles + np.arange(max(int((t - self.next_due) // self.cycle_s) + 2, 1))
+        times = self.origin + first * self.cycle_s
+        return times[times <= t]
+
 
 class _RxTable:
     """The received messages as arrays for the compiled paths: id → slot, codec table, watched columns, state."""
@@ -142,33 +150,33 @@ class _RxTable:
         self.rx = rx
         self.codecs = CodecTable([r.codec for r in rx])
         self.standard = np.full(_STANDARD_IDS, UNKNOWN_ID, dtype=np.int64)  # 11-bit id → slot
-        self.extended: dict[int, int] = {}
-        for slot, (ident, extended) in enumerate(ids):
-            if extended:
-                self.extended[ident] = slot
-            else:
+        extended = sorted((ident, slot) for slot, (ident, is_extended) in enumerate(ids) if is_extended)
+        self.extended_ids = np.array([ident for ident, _ in extended], dtype=np.int64)  # sorted, for a binary search
+        self.extended_slots = np.array([slot for _, slot in extended], dtype=np.int64)
+        for slot, (ident, is_extended) in enumerate(ids):
+            if not is_extended:
                 self.standard[ident] = slot
-        self.length = np.array([r.codec.length for r in rx], dtype=np.int64)
-        self.alive_col, self.fault_col, self.state_col = (self._columns(rx, attr)
-                                                          for attr in ("alive_key", "fault_key", "state_key"))
-        self.alive_modulo = np.array([max(r.alive_modulo, 1) for r in rx], dtype=np.int64)
+        self.controllers = sorted({r.controller for r in rx})
+        self.meta = np.array([[r.codec.length, compiled, self._column(r, r.alive_key), max(r.alive_modulo, 1),
+                               self._column(r, r.fault_key), self._column(r, r.state_key),
+                               self.controllers.index(r.controller)]
+                              for r, compiled in zip(rx, self.codecs.compiled.tolist())], dtype=np.int64)
+        self.alive_col, self.fault_col, self.state_col = self.meta[:, ALIVE_COL], self.meta[:, FAULT_COL], \
+            self.meta[:, STATE_COL]
+        self.fallback = not self.codecs.compiled.all()  # some message is decoded row by row in Python
         self.key_columns = [[j for j, key in enumerate(r.codec.columns) if key is not None] for r in rx]
         self.keys = [tuple(r.codec.columns[j] for j in at) for r, at in zip(rx, self.key_columns)]
+        # each message's keyed columns as a slice where they come first and in order (a view, no copy)
+        self.key_slices = [slice(0, len(at)) if at == list(range(len(at))) else at for at in self.key_columns]
         self.alive = np.full(len(rx), -1, dtype=np.int64)  # last alive counter per slot (-1: none yet)
-        self.controllers = sorted({r.controller for r in rx})
-        self.owner = np.array([self.controllers.index(r.controller) for r in rx], dtype=np.int64)
         self.faulted = np.zeros(len(self.controllers), dtype=bool)  # per controller
+        self.last = np.full((len(rx), self.codecs.width), np.nan)  # each message's newest values
+        self.seen = np.zeros(len(rx), dtype=bool)  # whether `last` holds a frame's values yet
 
     @staticmethod
-    def _columns(rx: list[_Rx], attr: str) -> np.ndarray:
-        """Per slot, the value-matrix column of the signal named by `attr` (-1: the message has none)."""
-        keys = [getattr(r, attr) for r in rx]
-        return np.array([-1 if k is None else r.codec.columns.index(k) for r, k in zip(rx, keys)], dtype=np.int64)
-
-    def look_up(self, ident: int, flags: int, length: int) -> int:
-        """Slot of one frame `_classify` left to Python (an extended id), or UNKNOWN_ID / BAD_LENGTH."""
-        slot = self.extended.get(ident, UNKNOWN_ID) if flags & EXTENDED else UNKNOWN_ID
-        return slot if slot < 0 or length == self.length[slot] else BAD_LENGTH
+    def _column(rx: _Rx, key: str | None) -> int:
+        """The value-matrix column of the signal `key` of a message (-1: the message has none)."""
+        return -1 if key is None else rx.codec.columns.index(key)
 
 
 class _TxTable:
@@ -201,7 +209,6 @@ class CanBench:
         except (OSError, ValueError, cantools.database.Error) as exc:
             raise CanConfigError(f"{dbc}: not a DBC cantools can load ({type(exc).__name__})") from exc
         self.stats = CanStats()
-        self.latest: dict[str, float] = {}
         self.estop_active = False
         self._events: list[ControllerEvent] = []
         self._silent: dict[str, str] = {}
@@ -267,7 +274,7 @@ class CanBench:
         if self.listen_only:
             return
         now = self.clock()
-        due: list[tuple[_Tx, float]] = []
+        due: list[tuple[_Tx, np.ndarray]] = []
         for tx in self._tx.values():
             if not tx.cycle_s or (tx is self._tx_of.get("estop.request") and not self.estop_active):
                 continue
@@ -275,9 +282,10 @@ class CanBench:
                 skipped = int((now - tx.next_due) // tx.cycle_s)
                 tx.cycles += skipped
                 self.stats.late_skipped += skipped
-            while tx.next_due <= now + 1e-9:
-                due.append((tx, min(tx.next_due, now)))
-                tx.cycles += 1
+            if tx.next_due <= now + 1e-9:
+                stamps = tx.due_until(now + 1e-9)
+                due.append((tx, np.minimum(stamps, now)))
+                tx.cycles += len(stamps)
         self._send(due)
 
     def receive(self) -> list[CanSample]:
@@ -337,49 +345,52 @@ class CanBench:
 
         Our own frames echoed by the interface (not `is_rx`) are logged, not decoded.
         """
-        stats, table, flags = self.stats, self._rx_table, frames["flags"]
+        stats, table = self.stats, self._rx_table
         slot = np.empty(len(frames), dtype=np.int64)
-        _classify(flags, frames["arbitration_id"], frames["length"], table.standard, table.length, slot)
-        counts = np.bincount(slot - LOOK_UP, minlength=1 - LOOK_UP).tolist()  # index 0: LOOK_UP ... 4: UNKNOWN_ID
-        if counts[0]:
-            for i in np.flatnonzero(slot == LOOK_UP).tolist():
-                slot[i] = table.look_up(int(frames["arbitration_id"][i]), int(flags[i]), int(frames["length"][i]))
-            counts = np.bincount(slot - LOOK_UP, minlength=1 - LOOK_UP).tolist()
-        stats.unknown_id += counts[UNKNOWN_ID - LOOK_UP]
-        stats.bad_dlc += counts[BAD_LENGTH - LOOK_UP]
-        stats.error_frames += counts[ERROR_FRAME - LOOK_UP]
-        rows = np.flatnonzero(slot >= 0)
-        slot = slot.take(rows)
-        values, valid = table.codecs.decode(slot, frames["data"].take(rows, axis=0))
-        if not valid.all():
-            stats.decode_errors += len(rows) - int(np.count_nonzero(valid))
-            rows, slot, values = rows[valid], slot[valid], values[valid]
-        if not len(rows):
+        values = np.empty((len(frames), table.codecs.width))
+        _classify_decode(frames, table.standard, table.extended_ids, table.extended_slots, table.meta,
+                         table.codecs.bits, table.codecs.linear, slot, values)
+        if table.fallback:
+            self._decode_in_python(frames, slot, values)
+        order, starts, alive_wrong, alive_before, fault_change, counts = _watch(
+            slot, values, table.meta, table.alive, float(self.fault_state), table.faulted)
+        stats.unknown_id += int(counts[-UNKNOWN_ID])
+        stats.bad_dlc += int(counts[-BAD_LENGTH])
+        stats.error_frames += int(counts[-ERROR_FRAME])
+        stats.decode_errors += int(counts[-DECODE_ERROR])
+        if not len(order):
             return []
-        stats.frames_ok += len(rows)
-        order, starts, alive_wrong, alive_before, fault_change = _watch(
-            slot, values, table.alive_col, table.alive_modulo, table.alive, table.fault_col, table.state_col,
-            float(self.fault_state), table.owner, table.faulted)
-        rows, values = rows.take(order), values.take(order, axis=0)  # per message, each in the order received
-        t = t.take(rows)
+        stats.frames_ok += len(order)
+        values, t = values.take(order, axis=0), t.take(order)  # per message, each in the order received
         events = []  # (arrival position, check, event): in the order the frames arrived, as frame by frame
         if alive_wrong.any() or fault_change.any():
-            events = self._frame_events(rows, slot.take(order), values, t, alive_wrong, alive_before, fault_change)
+            events = self._frame_events(order, slot.take(order), values, t, alive_wrong, alive_before, fault_change)
         bounds = starts.tolist()
         present = [m for m in range(len(table.rx)) if bounds[m + 1] > bounds[m]]
         firsts, ends = [bounds[m] for m in present], [bounds[m + 1] for m in present]
+        table.last[present], table.seen[present] = values.take([e - 1 for e in ends], axis=0), True
         blocks = []
-        for m, a, b, newest, last in zip(present, firsts, ends, np.maximum.reduceat(t, firsts).tolist(),
-                                         values.take([e - 1 for e in ends], axis=0).tolist()):
-            rx, keys, at = table.rx[m], table.keys[m], table.key_columns[m]
+        for m, a, b, newest in zip(present, firsts, ends, np.maximum.reduceat(t, firsts).tolist()):
+            rx = table.rx[m]
             rx.last_seen = max(rx.last_seen, newest)
-            self.latest.update(zip(keys, [last[j] for j in at]))
-            block = CanBlock(rx.controller, rx.codec.message.name, rows[a:b], t[a:b], values[a:b, at], keys)
+            block = CanBlock(rx.controller, rx.codec.message.name, order[a:b], t[a:b],
+                             values[a:b, table.key_slices[m]], table.keys[m])
             if rx.controller == "estop":
                 events += self._estop_events(block)
             blocks.append(block)
         self._events += [event for *_, event in sorted(events, key=lambda e: e[:2])]
         return blocks
+
+    def _decode_in_python(self, frames: np.ndarray, slot: np.ndarray, values: np.ndarray) -> None:
+        """The frames of messages the compiled pass leaves to cantools (multiplexed, float, > 8 bytes)."""
+        table = self._rx_table
+        known = np.flatnonzero(slot >= 0)
+        rows = known[table.meta[slot.take(known), COMPILED] == 0]
+        if not len(rows):
+            return
+        decoded, valid = table.codecs.decode(slot.take(rows), frames["data"].take(rows, axis=0))
+        values[rows] = decoded
+        slot[rows[~valid]] = DECODE_ERROR
 
     def _compile(self, signals: Mapping[str, tuple[str, str]], silent_cycles: float,
                  now: float) -> tuple[dict[tuple[int, bool], _Rx], dict[str, _Tx]]:
@@ -410,28 +421,31 @@ class CanBench:
             tx = self._tx_of[key]
             tx.values[key] = value
             touched[id(tx)] = tx
-        now = self.clock()
+        now = np.array([self.clock()])
         self._send([(tx, now) for tx in touched.values()])
 
-    def _send(self, due: list[tuple[_Tx, float]]) -> None:
-        """One frame per (message, run time) of `due`, in that order, each with the message's values and its alive
-        counter one on: encoded in one pass, sent as one array (drivers/can_frames.py: one python-can message per
+    def _send(self, due: list[tuple[_Tx, np.ndarray]]) -> None:
+        """Per message of `due` one frame at each of its run times, with the message's values and its alive counter
+        one on per frame: encoded in one pass, sent as one array (drivers/can_frames.py: one python-can message per
         frame on a bus without bulk sending), the frames that went out logged."""
         if not due:
             return
         table = self._tx_table
-        rows, slots = [], []
-        for tx, _ in due:
+        counts = [len(times) for _, times in due]
+        which = np.repeat([table.slot[id(tx)] for tx, _ in due], counts)
+        rows = np.repeat([[tx.values.get(key, 0.0) for key in table.columns[table.slot[id(tx)]]] for tx, _ in due],
+                         counts, axis=0)
+        a = 0
+        for (tx, _), count in zip(due, counts):
             if tx.alive_key is not None:
-                tx.values[tx.alive_key] = (int(tx.values[tx.alive_key]) + 1) % tx.alive_modulo
-            slot = table.slot[id(tx)]
-            rows.append([tx.values.get(key, 0.0) for key in table.columns[slot]])
-            slots.append(slot)
-        which = np.array(slots)
-        stamps = np.array([t for _, t in due])
+                alive = (int(tx.values[tx.alive_key]) + 1 + np.arange(count)) % tx.alive_modulo
+                rows[a:a + count, table.columns[table.slot[id(tx)]].index(tx.alive_key)] = alive
+                tx.values[tx.alive_key] = int(alive[-1])
+            a += count
+        stamps = np.concatenate([times for _, times in due])
         if self.timestamps == "interface" and not math.isnan(self.clock_map.offset):
             stamps = stamps - self.clock_map.offset  # in the bus's time base, as logged (ClockMap.to_device)
-        frames = make_frames(stamps, table.frame_id.take(which), table.codecs.encode(which, np.array(rows)),
+        frames = make_frames(stamps, table.frame_id.take(which), table.codecs.encode(which, rows),
                              table.length.take(which), extended=table.extended.take(which), rx=False)
         sent = send_all(self.bus, frames)
         count = int(np.count_nonzero(sent))
@@ -514,6 +528,15 @@ class CanBench:
         return dict(self._silent)
 
     @property
+    def latest(self) -> dict[str, float]:
+        """Each received signal's newest value (logical key → physical value), for the signals seen so far."""
+        table, latest = self._rx_table, {}
+        for keys, at, row, seen in zip(table.keys, table.key_columns, table.last.tolist(), table.seen.tolist()):
+            if seen:
+                latest.update(zip(keys, [row[j] for j in at]))
+        return latest
+
+    @property
     def faulted(self) -> set[str]:
         """Controllers currently reporting a fault."""
         return {c for c, f in zip(self._rx_table.controllers, self._rx_table.faulted.tolist()) if f}
@@ -534,59 +557,75 @@ def _samples(blocks: list[CanBlock]) -> list[CanSample]:
 
 
 @njit(cache=True, nogil=True)
-def _classify(flags: np.ndarray, ident: np.ndarray, length: np.ndarray, standard: np.ndarray, slot_length: np.ndarray,
-              slot: np.ndarray) -> None:  # pragma: no cover - compiled
-    """Per frame its message's slot, or why it is not decoded (UNKNOWN_ID, BAD_LENGTH, ... LOOK_UP)."""
-    for i in range(flags.shape[0]):
-        f = flags[i]
+def _classify_decode(frames: np.ndarray, standard: np.ndarray, extended_ids: np.ndarray, extended_slots: np.ndarray,
+                     meta: np.ndarray, bits: np.ndarray, linear: np.ndarray, slot: np.ndarray,
+                     values: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Per FRAME record its message's slot, or why it is not decoded (UNKNOWN_ID, BAD_LENGTH, ERROR_FRAME,
+    OWN_FRAME); the values of the frames of compiled messages (can_codec.decode_row), NaN elsewhere."""
+    values[:] = np.nan
+    for i in range(frames.shape[0]):
+        frame = frames[i]
+        f, ident = frame.flags, frame.arbitration_id
         if not f & RX:
-            slot[i] = OWN_FRAME
+            m = OWN_FRAME
         elif f & (ERROR | REMOTE):
-            slot[i] = ERROR_FRAME
-        elif f & EXTENDED or ident[i] >= _STANDARD_IDS:
-            slot[i] = LOOK_UP
+            m = ERROR_FRAME
+        elif f & EXTENDED:
+            k = np.searchsorted(extended_ids, ident)
+            m = extended_slots[k] if k < extended_ids.shape[0] and extended_ids[k] == ident else UNKNOWN_ID
         else:
-            m = standard[ident[i]]
-            slot[i] = m if m < 0 or length[i] == slot_length[m] else BAD_LENGTH
+            m = standard[ident] if ident < _STANDARD_IDS else UNKNOWN_ID
+        if m >= 0 and frame.length != meta[m, LENGTH]:
+            m = BAD_LENGTH
+        slot[i] = m
+        if m >= 0 and meta[m, COMPILED]:
+            decode_row(frame.data, m, bits, linear, values[i])
 
 
 @njit(cache=True, nogil=True)
-def _watch(slot: np.ndarray, values: np.ndarray, alive_col: np.ndarray, alive_modulo: np.ndarray, alive: np.ndarray,
-           fault_col: np.ndarray, state_col: np.ndarray, fault_state: float, owner: np.ndarray,
+def _watch(slot: np.ndarray, values: np.ndarray, meta: np.ndarray, alive: np.ndarray, fault_state: float,
            faulted: np.ndarray) -> tuple:  # pragma: no cover - compiled
-    """Decoded frames grouped by message (stable), watched frame by frame in that order.
+    """Decoded frames (slot ≥ 0) grouped by message (stable), watched frame by frame in that order.
 
-    Returns the order, each slot's start in it (slots + 1 bounds), and per position: alive counter not the
-    previous + 1 (and the previous), fault state changed (+1 faulted, -1 cleared). Updates `alive` (per slot)
-    and `faulted` (per controller, `owner` of each slot).
+    Returns the order (positions of the decoded frames), each slot's start in it (slots + 1 bounds), and per
+    position: alive counter not the previous + 1 (and the previous), fault state changed (+1 faulted, -1
+    cleared); and how many frames each reason left undecoded (index -reason). Updates `alive` (per slot) and
+    `faulted` (per controller, meta OWNER of each slot).
     """
-    n, slots = slot.shape[0], alive_col.shape[0]
+    n, slots = slot.shape[0], meta.shape[0]
     starts = np.zeros(slots + 1, dtype=np.int64)
+    undecoded = np.zeros(1 - DECODE_ERROR, dtype=np.int64)
     for i in range(n):
-        starts[slot[i] + 1] += 1
+        if slot[i] >= 0:
+            starts[slot[i] + 1] += 1
+        else:
+            undecoded[-slot[i]] += 1
     for m in range(slots):
         starts[m + 1] += starts[m]
-    order = np.empty(n, dtype=np.int64)
+    order = np.empty(starts[slots], dtype=np.int64)
     fill = starts[:-1].copy()
     for i in range(n):
-        order[fill[slot[i]]] = i
-        fill[slot[i]] += 1
-    alive_wrong = np.zeros(n, dtype=np.bool_)
-    alive_before = np.full(n, -1, dtype=np.int64)
-    fault_change = np.zeros(n, dtype=np.int8)
-    for k in range(n):
+        if slot[i] >= 0:
+            order[fill[slot[i]]] = i
+            fill[slot[i]] += 1
+    k_all = order.shape[0]
+    alive_wrong = np.zeros(k_all, dtype=np.bool_)
+    alive_before = np.full(k_all, -1, dtype=np.int64)
+    fault_change = np.zeros(k_all, dtype=np.int8)
+    for k in range(k_all):
         i = order[k]
         m = slot[i]
-        if alive_col[m] >= 0:
-            counter = np.int64(values[i, alive_col[m]])
-            if alive[m] >= 0 and counter != (alive[m] + 1) % alive_modulo[m]:
+        alive_col, fault_col, state_col = meta[m, ALIVE_COL], meta[m, FAULT_COL], meta[m, STATE_COL]
+        if alive_col >= 0:
+            counter = np.int64(values[i, alive_col])
+            if alive[m] >= 0 and counter != (alive[m] + 1) % meta[m, ALIVE_MODULO]:
                 alive_wrong[k] = True
                 alive_before[k] = alive[m]
             alive[m] = counter
-        if fault_col[m] >= 0 or state_col[m] >= 0:
-            code = np.int64(values[i, fault_col[m]]) if fault_col[m] >= 0 else 0
-            now_faulted = code != 0 or (state_col[m] >= 0 and values[i, state_col[m]] == fault_state)
-            if now_faulted != faulted[owner[m]]:
+        if fault_col >= 0 or state_col >= 0:
+            code = np.int64(values[i, fault_col]) if fault_col >= 0 else 0
+            now_faulted = code != 0 or (state_col >= 0 and values[i, state_col] == fault_state)
+            if now_faulted != faulted[meta[m, OWNER]]:
                 fault_change[k] = 1 if now_faulted else -1
-                faulted[owner[m]] = now_faulted
-    return order, starts, alive_wrong, alive_before, fault_change
+                faulted[meta[m, OWNER]] = now_faulted
+    return order, starts, alive_wrong, alive_before, fault_change, undecoded

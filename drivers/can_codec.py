@@ -113,9 +113,9 @@ class CodecTable:
         self.width = max([len(c.columns) for c in codecs] + [1])
         # per message and column: [big-endian word?, shift in the padded 8-byte word, mask, sign bit] and
         # [scale, offset, lowest raw, highest raw]; columns without a field keep mask 0 (value 0)
-        self._bits = np.zeros((len(codecs), 4, self.width), dtype=np.uint64)
-        self._linear = np.zeros((len(codecs), 4, self.width))
-        self._linear[:, 0] = 1.0
+        self.bits = np.zeros((len(codecs), 4, self.width), dtype=np.uint64)
+        self.linear = np.zeros((len(codecs), 4, self.width))
+        self.linear[:, 0] = 1.0
         self._row_by_row = [m for m, c in enumerate(codecs) if c._fallback or c.length > 8]
         self.compiled = np.array([m not in self._row_by_row for m in range(len(codecs))])
         self.payload_bytes = max([8] + [c.length for c in codecs])
@@ -123,14 +123,14 @@ class CodecTable:
             if m in self._row_by_row:
                 continue
             for j, ((_, is_big, shift, mask, sign, scale, offset), (lo, hi)) in enumerate(zip(c._fields, c._limits)):
-                self._bits[m, :, j] = is_big, shift + (8 * (8 - c.length) if is_big else 0), mask, sign
-                self._linear[m, :, j] = 1.0 if scale is None else scale, offset, lo, hi
+                self.bits[m, :, j] = is_big, shift + (8 * (8 - c.length) if is_big else 0), mask, sign
+                self.linear[m, :, j] = 1.0 if scale is None else scale, offset, lo, hi
 
     def decode(self, which: np.ndarray, payloads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Values (n, width) of each row's message, and which rows decoded (the others are NaN)."""
         values = np.empty((len(which), self.width))
         valid = np.ones(len(which), dtype=bool)
-        _decode_rows(which, payloads, self._bits, self._linear, self.compiled, values)
+        _decode_rows(which, payloads, self.bits, self.linear, self.compiled, values)
         for m in self._row_by_row:
             codec = self.codecs[m]
             for i in np.flatnonzero(which == m).tolist():
@@ -146,7 +146,7 @@ class CodecTable:
     def encode(self, which: np.ndarray, values: np.ndarray) -> np.ndarray:
         """Payloads (n, payload_bytes) of each row's message from its values; out-of-range values saturate."""
         payloads = np.zeros((len(which), self.payload_bytes), dtype=np.uint8)
-        _encode_rows(which, values, self._bits, self._linear, self.compiled, payloads)
+        _encode_rows(which, values, self.bits, self.linear, self.compiled, payloads)
         for m in self._row_by_row:
             codec = self.codecs[m]
             for i in np.flatnonzero(which == m).tolist():
@@ -170,14 +170,21 @@ def _words(payload: np.ndarray) -> tuple:  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _decode_rows(which: np.ndarray, payloads: np.ndarray, bits: np.ndarray, linear: np.ndarray,
                  compiled: np.ndarray, values: np.ndarray) -> None:  # pragma: no cover - compiled
-    """CodecTable.decode of the rows whose message is compiled: each field out of its 8-byte word, sign, scale."""
+    """CodecTable.decode of the rows whose message is compiled."""
     for i in np.flatnonzero(compiled[which]):
-        m = which[i]
-        little, big = _words(payloads[i])
-        for j in range(values.shape[1]):
-            raw = ((big if bits[m, 0, j] else little) >> bits[m, 1, j]) & bits[m, 2, j]
-            signed = np.int64(raw - ((raw & bits[m, 3, j]) << np.uint64(1)))  # two's complement: minus 2 × sign bit
-            values[i, j] = signed * linear[m, 0, j] + linear[m, 1, j]
+        decode_row(payloads[i], which[i], bits, linear, values[i])
+
+
+@njit(cache=True, nogil=True)
+def decode_row(payload: np.ndarray, m: int, bits: np.ndarray, linear: np.ndarray,
+               out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """One frame of compiled message `m` (a CodecTable's `bits`, `linear`): each field out of its 8-byte word, sign,
+    scale, into `out` (the frame's row of values); for other compiled kernels that decode frames on the way."""
+    little, big = _words(payload)
+    for j in range(out.shape[0]):
+        raw = ((big if bits[m, 0, j] else little) >> bits[m, 1, j]) & bits[m, 2, j]
+        signed = np.int64(raw - ((raw & bits[m, 3, j]) << np.uint64(1)))  # two's complement: minus 2 × sign bit
+        out[j] = signed * linear[m, 0, j] + linear[m, 1, j]
 
 
 @njit(cache=True, nogil=True)
