@@ -26,6 +26,7 @@ assert _CAN_OBJECT.itemsize == _HEADER_SIZE + blf.CAN_MSG_STRUCT.size  # python-
 _TEMPLATE = np.zeros((), _CAN_OBJECT)  # what every CAN_MESSAGE object's headers hold
 _TEMPLATE[()] = (b"LOBJ", _HEADER_SIZE, 1, _CAN_OBJECT.itemsize, blf.CAN_MESSAGE, blf.TIME_ONE_NANS,
                  0, 0, 0, 0, 0, 0, 0, np.zeros(8, np.uint8))
+_TEMPLATE_BYTES = _TEMPLATE.tobytes()  # repeated as bytes: numpy's structured assignment costs 40x more
 CAN_MSG_EXT, REMOTE_FLAG, DIR = blf.CAN_MSG_EXT, blf.REMOTE_FLAG, blf.DIR  # python-can's BLF constants, for the kernel
 
 
@@ -35,10 +36,10 @@ def log_frames(listener: can.Listener, frames: np.ndarray) -> None:
         for msg in messages_from_frames(frames):
             listener.on_message_received(msg)
         return
-    special = (frames["flags"] & (ERROR | FD)) != 0
-    if not special.any():
+    if not _any_flag(frames, ERROR | FD):
         _add_can_objects(listener, frames)
         return
+    special = (frames["flags"] & (ERROR | FD)) != 0
     starts = np.r_[0, np.flatnonzero(np.diff(special.astype(np.int8))) + 1]
     for a, b in zip(starts, np.r_[starts[1:], len(frames)]):
         if special[a]:
@@ -56,11 +57,8 @@ def _add_can_objects(writer: can.BLFWriter, frames: np.ndarray) -> None:
     if writer.start_timestamp is None:
         writer.start_timestamp = int(float(stamps[0]) * 1000) / 1000
     writer.stop_timestamp = float(stamps[-1])
-    objects = np.empty(len(frames), _CAN_OBJECT)
-    objects[...] = _TEMPLATE
-    _fill_can_objects(stamps, frames["arbitration_id"], frames["flags"], frames["dlc"], frames["channel"],
-                      frames["data"], writer.start_timestamp, writer.channel, objects["timestamp"],
-                      objects["arbitration_id"], objects["flags"], objects["dlc"], objects["channel"], objects["data"])
+    objects = np.frombuffer(bytearray(_TEMPLATE_BYTES * len(frames)), _CAN_OBJECT)
+    _fill_can_objects(frames, writer.start_timestamp, writer.channel, objects)
     writer._buffer.append(objects.tobytes())  # noqa: SLF001 - python-can's container buffer, as _add_object fills it
     writer._buffer_size += objects.nbytes  # noqa: SLF001
     writer.object_count += len(frames)
@@ -72,16 +70,25 @@ def _add_can_objects(writer: can.BLFWriter, frames: np.ndarray) -> None:
 
 
 @njit(cache=True, nogil=True)
-def _fill_can_objects(stamps: np.ndarray, ident: np.ndarray, flags: np.ndarray, dlc: np.ndarray, channel: np.ndarray,
-                      data: np.ndarray, start: float, default_channel: int, out_time: np.ndarray, out_id: np.ndarray,
-                      out_flags: np.ndarray, out_dlc: np.ndarray, out_channel: np.ndarray,
-                      out_data: np.ndarray) -> None:  # pragma: no cover - compiled
-    """The per-frame fields of CAN_MESSAGE objects, as BLFWriter.on_message_received computes them."""
-    for i in range(stamps.shape[0]):
-        out_time[i] = max(np.int64((stamps[i] - start) * 1e9), 0)
-        out_id[i] = ident[i] | (np.uint32(CAN_MSG_EXT) if flags[i] & EXTENDED else np.uint32(0))
-        out_flags[i] = (REMOTE_FLAG if flags[i] & REMOTE else 0) | (0 if flags[i] & RX else DIR)
-        out_dlc[i] = dlc[i]
-        out_channel[i] = default_channel if channel[i] < 0 else channel[i] + 1
+def _any_flag(frames: np.ndarray, mask: int) -> bool:  # pragma: no cover - compiled
+    """Whether any FRAME record has a flag of `mask`."""
+    for i in range(frames.shape[0]):
+        if frames[i].flags & mask:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _fill_can_objects(frames: np.ndarray, start: float, default_channel: int,
+                      objects: np.ndarray) -> None:  # pragma: no cover - compiled
+    """The per-frame fields of CAN_MESSAGE objects from FRAME records, as BLFWriter.on_message_received computes them."""
+    for i in range(frames.shape[0]):
+        frame, out = frames[i], objects[i]
+        flags = frame.flags
+        out.timestamp = max(np.int64((frame.timestamp - start) * 1e9), 0)
+        out.arbitration_id = frame.arbitration_id | (np.uint32(CAN_MSG_EXT) if flags & EXTENDED else np.uint32(0))
+        out.flags = (REMOTE_FLAG if flags & REMOTE else 0) | (0 if flags & RX else DIR)
+        out.dlc = frame.dlc
+        out.channel = default_channel if frame.channel < 0 else frame.channel + 1
         for b in range(8):
-            out_data[i, b] = data[i, b]
+            out.data[b] = frame.data[b]
