@@ -10,24 +10,32 @@ NODE_RESET flag) is reported too.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol
 
+import numpy as np
 import serial
+from numba import njit
 
 from drivers import cvd, node_frame
-from drivers.errors import ConnectionLost, DriverConfigError, FrameError
+from drivers.errors import ConnectionLost, DriverConfigError
 from drivers.node_frame import NodeFrame
 from drivers.timebase import ClockMap
 
 SensorStatus = Literal["ok", "open", "short", "range", "fault"]
+SENSOR_STATUSES: tuple[SensorStatus, ...] = ("ok", "open", "short", "range", "fault")  # NodeBlock.status indexes this
+_OK, _OPEN, _SHORT, _RANGE, _FAULT = range(len(SENSOR_STATUSES))
 _MAX_CHUNK = 4 * node_frame.ENCODED_LEN
 ERROR_WINDOW_S = 1.0
 CorruptCounter = Literal["crc_errors", "malformed", "resyncs"]
-_OPEN_BITS = (node_frame.CH1_OPEN, node_frame.CH2_OPEN)
-_SHORT_BITS = (node_frame.CH1_SHORT, node_frame.CH2_SHORT)
+_NO_ROWS = np.zeros((0, len(node_frame.FIELDS)), dtype=np.int64)
+_F = {name: j for j, name in enumerate(node_frame.FIELDS)}
+_CORRUPT: dict[int, CorruptCounter] = {node_frame.BAD_CRC: "crc_errors", node_frame.BAD_LENGTH: "malformed",
+                                       node_frame.BAD_COBS: "malformed", node_frame.BAD_PAYLOAD: "malformed",
+                                       node_frame.BAD_VERSION: "malformed"}
 
 
 class ByteStream(Protocol):
@@ -56,6 +64,39 @@ class NodeSample:
     rssi_dbm: int
     lqi: int
     flags: int
+
+
+@dataclass(frozen=True, slots=True)
+class NodeBlock:
+    """The samples of one read as columns, one row per accepted frame in the order received (NodeSample's fields;
+    per channel NaN where NodeSample has None, the status as an index into SENSOR_STATUSES)."""
+
+    seq: np.ndarray
+    node_time_ms: np.ndarray
+    t_host: float  # run-clock time the gateway received the frames
+    t: np.ndarray  # run-clock time the node measured each (its own clock mapped onto the run clock)
+    resistance_ohm: np.ndarray  # (n, 2)
+    temperature_c: np.ndarray  # (n, 2)
+    status: np.ndarray  # (n, 2)
+    supply_mv: np.ndarray
+    rssi_dbm: np.ndarray
+    lqi: np.ndarray
+    flags: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.seq)
+
+    def samples(self) -> list[NodeSample]:
+        """The block as one NodeSample per frame."""
+        def value(v: float) -> float | None:
+            return None if math.isnan(v) else v
+
+        return [NodeSample(seq, t_ms, self.t_host, t, (value(r1), value(r2)), (value(d1), value(d2)),
+                           (SENSOR_STATUSES[s1], SENSOR_STATUSES[s2]), supply, rssi, lqi, flags)
+                for seq, t_ms, t, (r1, r2), (d1, d2), (s1, s2), supply, rssi, lqi, flags in zip(
+                    self.seq.tolist(), self.node_time_ms.tolist(), self.t.tolist(), self.resistance_ohm.tolist(),
+                    self.temperature_c.tolist(), self.status.tolist(), self.supply_mv.tolist(),
+                    self.rssi_dbm.tolist(), self.lqi.tolist(), self.flags.tolist())]
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,6 +174,10 @@ class ClutchNodeGateway:
 
     def poll(self) -> list[NodeSample]:
         """Decode whatever bytes are waiting (never blocks) and check for radio silence."""
+        return self.poll_block().samples()
+
+    def poll_block(self) -> NodeBlock:
+        """`poll`, the samples as one block of columns."""
         if self.port is None:
             raise DriverConfigError("poll() needs a port; use feed() on a gateway without one")
         try:
@@ -140,9 +185,9 @@ class ClutchNodeGateway:
             data = self.port.read(waiting) if waiting else b""
         except (serial.SerialException, OSError) as exc:
             raise ConnectionLost(f"gateway port: {exc}") from exc
-        samples = self.feed(data) if data else []
+        block = self.feed_block(data) if data else self._block(_NO_ROWS, self.clock())
         self.check_silence()
-        return samples
+        return block
 
     def read(self, count: int, timeout_s: float) -> list[NodeSample]:
         """Block (wall-clock) until at least `count` samples arrived or `timeout_s` passed; real-time use only."""
@@ -157,20 +202,25 @@ class ClutchNodeGateway:
 
     def feed(self, data: bytes) -> list[NodeSample]:
         """Parse a piece of the byte stream (any split is fine) and return the samples it completed."""
+        return self.feed_block(data).samples()
+
+    def feed_block(self, data: bytes) -> NodeBlock:
+        """`feed`, the samples as one block of columns: every delimited chunk decoded in one compiled pass."""
         now = self.clock()
-        chunks = (self._buf + data).split(node_frame.DELIMITER)
-        self._buf = chunks.pop()
+        rows, status, self._buf = node_frame.decode_stream(self._buf + data)
         if len(self._buf) > _MAX_CHUNK:
             self._buf, self._synced = b"", False
             self._count_corrupt("resyncs", now)
-        frames: list[tuple[NodeFrame, float, float, ClockMap]] = []
-        for chunk in chunks:
-            frame = self._decode(chunk, now)
-            if frame is not None and self._accept(frame, now):
-                frames.append((frame, now, self._node_s, self.clock_map))
-                self.clock_map.observe(self._node_s, now)
+        if len(status):
+            synced, self._synced = self._synced, True
+            if status.any():  # not all frames: empty chunks are skipped, corrupt ones counted
+                for k, code in enumerate(status.tolist()):
+                    if code > node_frame.EMPTY:
+                        self._count_corrupt(_CORRUPT[code] if synced or k else "resyncs", now)
+                rows = rows[status == node_frame.OK]
+        block = self._block(rows, now)
         self._report_errors(now)
-        return self._samples(frames)
+        return block
 
     def pop_events(self) -> list[LinkEvent]:
         """Link events since the last call, in the order they were noticed."""
@@ -204,21 +254,6 @@ class ClutchNodeGateway:
             self.port.close()
         except (serial.SerialException, OSError) as exc:
             raise ConnectionLost(f"close failed: {exc}") from exc
-
-    def _decode(self, chunk: bytes, now: float) -> NodeFrame | None:
-        synced, self._synced = self._synced, True
-        if not chunk:
-            return None
-        try:
-            return node_frame.decode(chunk)
-        except FrameError as exc:
-            if not synced:
-                self._count_corrupt("resyncs", now)
-            elif isinstance(exc, node_frame.CrcMismatch):
-                self._count_corrupt("crc_errors", now)
-            else:
-                self._count_corrupt("malformed", now)
-            return None
 
     def _count_corrupt(self, counter: CorruptCounter, now: float) -> None:
         """Count a corrupt chunk in the gateway's counters and in the running counting window."""
@@ -283,26 +318,104 @@ class ClutchNodeGateway:
         self._last, self._last_host = frame, now
         return True
 
-    def _samples(self, frames: list[tuple[NodeFrame, float, float, ClockMap]]) -> list[NodeSample]:
-        samples = []
-        for f, t_host, node_s, clock_map in frames:
-            ohm = (f.r_mohm[0] / 1000.0, f.r_mohm[1] / 1000.0)
-            deg = (cvd.temperature(ohm[0], self.coefficients[0]), cvd.temperature(ohm[1], self.coefficients[1]))
-            s1, s2 = self._status(f, 0, ohm[0], deg[0]), self._status(f, 1, ohm[1], deg[1])
-            samples.append(NodeSample(
-                f.seq, f.node_time_ms, t_host, min(clock_map.to_run(node_s), t_host),
-                (ohm[0] if s1 in ("ok", "range") else None, ohm[1] if s2 in ("ok", "range") else None),
-                (deg[0] if s1 == "ok" else None, deg[1] if s2 == "ok" else None),
-                (s1, s2), f.supply_mv, f.rssi_dbm, f.lqi, f.flags))
-        return samples
+    def _block(self, rows: np.ndarray, now: float) -> NodeBlock:
+        """The accepted frames among `rows` (node_frame.FIELDS order, as received) as samples.
 
-    def _status(self, frame: NodeFrame, ch: int, ohm: float, deg: float) -> SensorStatus:
-        if frame.flags & _OPEN_BITS[ch]:
-            return "open"
-        if frame.flags & _SHORT_BITS[ch]:
-            return "short"
-        if frame.flags & node_frame.ADC_FAULT or frame.r_mohm[ch] == node_frame.NO_VALUE:
-            return "fault"
-        if ohm < self.short_ohm:
-            return "short"
-        return "ok" if cvd.T_MIN_C <= deg <= cvd.T_MAX_C else "range"
+        A run of plainly consecutive frames (seq + 1, node clock forward by at most the drop-out limit, no reset flag,
+        no drop-out running) is taken in one step; any other frame goes through `_accept`.
+        """
+        n = len(rows)
+        last = self._last
+        plain, span, all_plain = _plainly_consecutive(rows, last.seq if last else 0, last.node_time_ms if last else 0,
+                                                      self.period_s, self.dropout_s)
+        if all_plain and n and last is not None and not self._in_dropout:  # the usual read: one run of plain frames
+            node_s = self._take_plain(rows, span, now)
+            return self._columns(rows, np.minimum(self.clock_map.to_run(node_s), now), now)
+        plain_list = plain.tolist()
+        node_s, keep = np.empty(n), np.zeros(n, dtype=bool)
+        runs: list[tuple[int, int, ClockMap]] = []  # accepted rows [i, j) and the node clock's map they belong to
+        i = 0
+        while i < n:
+            if plain_list[i] and self._last is not None and not self._in_dropout:
+                j = i + 1
+                while j < n and plain_list[j]:
+                    j += 1
+                node_s[i:j] = self._take_plain(rows[i:j], span[i:j], now)
+            else:
+                j = i + 1
+                if not self._accept(node_frame.frame_of(rows[i].tolist()), now):
+                    i = j
+                    continue
+                node_s[i] = self._node_s
+                self.clock_map.observe(self._node_s, now)
+            keep[i:j] = True
+            runs.append((i, j, self.clock_map))
+            i = j
+        t = np.empty(n)
+        for i, j, clock_map in runs:
+            t[i:j] = np.minimum(clock_map.to_run(node_s[i:j]), now)
+        return self._columns(rows[keep], t[keep], now)
+
+    def _take_plain(self, rows: np.ndarray, span: np.ndarray, now: float) -> np.ndarray:
+        """`_accept` of plainly consecutive frames in one step (nothing lost, no event): their node clock times."""
+        node_s = np.cumsum(np.concatenate(([self._node_s], span)))[1:]  # one by one, as _accept adds them
+        self._node_s = float(node_s[-1])
+        self.clock_map.observe_together(node_s, now)
+        self.stats.frames_ok += len(rows)
+        self._last, self._last_host = node_frame.frame_of(rows[-1].tolist()), now
+        return node_s
+
+    def _columns(self, rows: np.ndarray, t: np.ndarray, now: float) -> NodeBlock:
+        """Samples of accepted frames: resistance, CVD temperature and sensor status per channel."""
+        ohm = rows[:, _F["r1_mohm"]:_F["r2_mohm"] + 1] / 1000.0
+        c1, c2 = self.coefficients
+        deg = cvd.temperature(ohm, c1) if c1 == c2 else np.column_stack(
+            [cvd.temperature(ohm[:, 0], c1), cvd.temperature(ohm[:, 1], c2)])
+        status = _sensor_status(rows, ohm, deg, self.short_ohm)
+        if status.any():  # values only where the status allows them
+            ohm = np.where((status == _OK) | (status == _RANGE), ohm, np.nan)
+            deg = np.where(status == _OK, deg, np.nan)
+        return NodeBlock(rows[:, _F["seq"]], rows[:, _F["node_time_ms"]], now, t, ohm, deg, status,
+                         rows[:, _F["supply_mv"]], rows[:, _F["rssi_dbm"]], rows[:, _F["lqi"]], rows[:, _F["flags"]])
+
+
+@njit(cache=True, nogil=True)
+def _plainly_consecutive(rows: np.ndarray, last_seq: int, last_ms: int, period_s: float,
+                         dropout_s: float) -> tuple[np.ndarray, np.ndarray, bool]:  # pragma: no cover - compiled
+    """Per frame (rows in node_frame.FIELDS order; the first after a frame `last_seq`, `last_ms`): whether it follows
+    the frame before plainly (seq + 1, no full wrap, no reset flag, node clock forward by at most `dropout_s`), and
+    the node clock's step to it in s; and whether all do."""
+    n = rows.shape[0]
+    plain, span = np.empty(n, dtype=np.bool_), np.empty(n)
+    prev_seq, prev_ms = last_seq, last_ms
+    for i in range(n):
+        seq, t_ms = rows[i, 2], rows[i, 3]
+        node_dt = (t_ms - prev_ms) & 0xFFFFFFFF
+        span[i] = node_dt / 1000
+        plain[i] = (((seq - prev_seq) & 0xFFFF) == 1 and rows[i, 1] & node_frame.NODE_RESET == 0
+                    and node_dt < 1 << 31 and span[i] <= dropout_s
+                    and np.round((node_dt / (1000 * period_s) - 1) / 65536) <= 0)
+        prev_seq, prev_ms = seq, t_ms
+    return plain, span, bool(np.all(plain))
+
+
+@njit(cache=True, nogil=True)
+def _sensor_status(rows: np.ndarray, ohm: np.ndarray, deg: np.ndarray,
+                   short_ohm: float) -> np.ndarray:  # pragma: no cover - compiled
+    """SENSOR_STATUSES index per frame and channel: the node's open/short/fault flags first, then NO_VALUE (fault),
+    a resistance below `short_ohm` (short), a temperature outside the CVD range (range)."""
+    status = np.empty((rows.shape[0], 2), dtype=np.int64)
+    for i in range(rows.shape[0]):
+        flags = rows[i, 1]
+        for ch in range(2):
+            if flags & (node_frame.CH1_OPEN if ch == 0 else node_frame.CH2_OPEN):
+                status[i, ch] = _OPEN
+            elif flags & (node_frame.CH1_SHORT if ch == 0 else node_frame.CH2_SHORT):
+                status[i, ch] = _SHORT
+            elif flags & node_frame.ADC_FAULT or rows[i, 4 + ch] == node_frame.NO_VALUE:
+                status[i, ch] = _FAULT
+            elif ohm[i, ch] < short_ohm:
+                status[i, ch] = _SHORT
+            else:
+                status[i, ch] = _OK if cvd.T_MIN_C <= deg[i, ch] <= cvd.T_MAX_C else _RANGE
+    return status

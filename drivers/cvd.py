@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 
 T_MIN_C = -200.0
@@ -39,32 +40,31 @@ def resistance(temperature_c: ArrayLike, coef: CvdCoefficients = PT1000) -> np.n
 def temperature(resistance_ohm: ArrayLike, coef: CvdCoefficients = PT1000) -> np.ndarray | float:
     """Temperature in °C for `resistance_ohm`: exact quadratic root at/above R0, Newton on the full equation below."""
     if isinstance(resistance_ohm, (int, float)):
-        return _temperature_scalar(float(resistance_ohm), coef)
+        return _temperature_of(float(resistance_ohm), coef.r0, coef.a, coef.b, coef.c)
     r = np.asarray(resistance_ohm, dtype=float)
-    with np.errstate(invalid="ignore"):
-        t = (-coef.a + np.sqrt(coef.a**2 - 4.0 * coef.b * (1.0 - r / coef.r0))) / (2.0 * coef.b)
-    below = r < coef.r0
-    if np.any(below):
-        tb = np.where(below, np.nan_to_num(t, nan=(r / coef.r0 - 1.0) / coef.a), 0.0)
-        rb = np.where(below, r, coef.r0)
-        for _ in range(_NEWTON_STEPS):
-            f = coef.r0 * (1.0 + coef.a * tb + coef.b * tb**2 + coef.c * (tb - 100.0) * tb**3) - rb
-            df = coef.r0 * (coef.a + 2.0 * coef.b * tb + coef.c * (4.0 * tb**3 - 300.0 * tb**2))
-            tb = tb - f / df
-        t = np.where(below, tb, t)
-    return _like(t, resistance_ohm)
+    return _like(_temperatures(r.ravel(), coef.r0, coef.a, coef.b, coef.c).reshape(r.shape), resistance_ohm)
 
 
-def _temperature_scalar(r: float, coef: CvdCoefficients) -> float:
-    """`temperature` for one float without numpy overhead (drivers convert one reading at a time)."""
-    disc = coef.a**2 - 4.0 * coef.b * (1.0 - r / coef.r0)
-    if r >= coef.r0 or math.isnan(r):
-        return (-coef.a + math.sqrt(disc)) / (2.0 * coef.b) if disc >= 0 else math.nan
-    t = (-coef.a + math.sqrt(disc)) / (2.0 * coef.b) if disc >= 0 else (r / coef.r0 - 1.0) / coef.a
+@njit(cache=True, nogil=True)
+def _temperature_of(r: float, r0: float, a: float, b: float, c: float) -> float:  # pragma: no cover - compiled
+    """`temperature` of one resistance with the coefficients spelled out (the one implementation of the inverse)."""
+    disc = a * a - 4.0 * b * (1.0 - r / r0)
+    if r >= r0 or math.isnan(r):
+        return (-a + math.sqrt(disc)) / (2.0 * b) if disc >= 0 else math.nan
+    t = (-a + math.sqrt(disc)) / (2.0 * b) if disc >= 0 else (r / r0 - 1.0) / a
     for _ in range(_NEWTON_STEPS):
-        f = coef.r0 * (1.0 + coef.a * t + coef.b * t * t + coef.c * (t - 100.0) * t**3) - r
-        t -= f / (coef.r0 * (coef.a + 2.0 * coef.b * t + coef.c * (4.0 * t**3 - 300.0 * t * t)))
+        f = r0 * (1.0 + a * t + b * t * t + c * (t - 100.0) * t * t * t) - r
+        t -= f / (r0 * (a + 2.0 * b * t + c * (4.0 * t * t * t - 300.0 * t * t)))
     return t
+
+
+@njit(cache=True, nogil=True)
+def _temperatures(r: np.ndarray, r0: float, a: float, b: float, c: float) -> np.ndarray:  # pragma: no cover - compiled
+    """`_temperature_of` for each of `r`."""
+    out = np.empty(r.shape[0])
+    for i in range(r.shape[0]):
+        out[i] = _temperature_of(r[i], r0, a, b, c)
+    return out
 
 
 def in_range(temperature_c: ArrayLike) -> np.ndarray | bool:

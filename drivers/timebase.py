@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 
 class ClockMap:
     """Device time → run time, from pairs (device stamp, run-clock receive time)."""
@@ -31,8 +33,13 @@ class ClockMap:
         self._last_receive = received_t
         return device_t + self.offset
 
-    def to_run(self, device_t: float) -> float:
-        """Run time of a device stamp with the current offset (NaN before the first frame)."""
+    def observe_together(self, device_t: np.ndarray, received_t: float) -> None:
+        """`observe` of frames received together at `received_t`, in order (the offset is the same as one by one)."""
+        self.observe(float(device_t[0]), received_t)
+        self.offset = min(self.offset, float(np.min(received_t - device_t)))
+
+    def to_run(self, device_t: "float | np.ndarray") -> "float | np.ndarray":
+        """Run time of a device stamp (or stamps) with the current offset (NaN before the first frame)."""
         return device_t + self.offset
 
     def to_device(self, run_t: float) -> float:

@@ -39,7 +39,7 @@ from sim_bench.emulators import registry
 from sim_bench.emulators.can_controllers import CanBenchEmulator
 from sim_bench.emulators.clutch_node import ClutchNodeEmulator
 from sim_bench.emulators.drivetrain import DrivetrainActuals
-from sim_bench.emulators.providers import NodeInputs
+from sim_bench.emulators.providers import NodeInputs, NodeInputSeries
 from sim_bench.emulators.scpi_instrument import ScpiInstrumentEmulator
 from sim_bench.emulators.sim_can_bus import SimCanBus
 from sim_bench.plant import Effect, ThermalPlant, custom_source
@@ -269,11 +269,12 @@ class SimPhysics:
     # -- NodeInputProvider (flywheel node) -----------------------------------------------------------
     def node_inputs(self, t: float) -> NodeInputs:
         """What the flywheel node measures at `t`."""
-        return self.node_inputs_at([t])[0]
+        r1, r2 = self.node_inputs_at(np.array([t])).resistances_ohm[0].tolist()
+        return NodeInputs((r1, r2))
 
-    def node_inputs_at(self, times: "list[float]") -> list[NodeInputs]:
+    def node_inputs_at(self, times: np.ndarray) -> NodeInputSeries:
         """What the node measures at each of `times` (increasing), in one look-up: the emulator asks once per read."""
-        return [NodeInputs((r1, r2), 5000, -60, 200) for r1, r2 in self._rows_at(times, "_R_node").tolist()]
+        return NodeInputSeries(self._rows_at(times, "_R_node"))
 
     # -- truth, for tests and analysis ----------------------------------------------------------------
     def _record_truth(self, k0: int, states: np.ndarray) -> None:

@@ -5,6 +5,7 @@ import math
 import random
 from contextlib import nullcontext
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -40,10 +41,38 @@ def test_documented_example() -> None:
 @given(st.lists(st.builds(NodeFrame, st.integers(0, 0xFFFF), st.integers(0, 0xFFFFFFFF),
                           st.tuples(st.integers(0, 0xFFFFFFFF), st.integers(0, 0xFFFFFFFF)), st.integers(0, 0xFFFF),
                           st.integers(-128, 127), st.integers(0, 255), st.integers(0, 255)), max_size=5))
-def test_encode_many_is_encode_frame_by_frame(frames: list[NodeFrame]) -> None:
-    """The compiled bulk encoder (the node emulator's) writes the same bytes as `encode`, zeros and extremes included."""
-    assert node_frame.encode_many(frames) == b"".join(node_frame.encode(f) for f in frames)
-    assert node_frame.encode_many([EXAMPLE]) == EXAMPLE_WIRE
+def test_bulk_encode_and_decode_are_frame_by_frame(frames: list[NodeFrame]) -> None:
+    """The compiled bulk encoder (the node emulator's) writes the same bytes as `encode`, zeros and extremes included,
+    and the bulk decoder (the gateway's) reads back the same fields as `decode`."""
+    rows = np.array([rows_of(f) for f in frames], dtype=np.int64).reshape(-1, len(node_frame.FIELDS))
+    wire = node_frame.encode_rows(rows)
+    assert wire == b"".join(node_frame.encode(f) for f in frames)
+    assert node_frame.encode_rows(np.array([rows_of(EXAMPLE)])) == EXAMPLE_WIRE
+    decoded, status, rest = node_frame.decode_stream(wire + b"\x03\x01")
+    assert np.array_equal(decoded, rows) and list(status) == [node_frame.OK] * len(frames) and rest == b"\x03\x01"
+    assert [node_frame.frame_of(r) for r in decoded.tolist()] == [node_frame.decode(c) for c in wire.split(b"\0")[:-1]]
+
+
+def rows_of(f: NodeFrame) -> tuple[int, ...]:
+    return (f.version, f.flags, f.seq, f.node_time_ms, f.r_mohm[0], f.r_mohm[1], f.supply_mv, f.rssi_dbm, f.lqi)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.binary(min_size=0, max_size=30).map(lambda b: b.replace(b"\0", b"\x01")), max_size=6),
+       st.sampled_from([b"", node_frame.encode(EXAMPLE)[:-1]]))
+def test_bulk_decode_status_is_decode_outcome(chunks: list[bytes], valid: bytes) -> None:
+    """Each chunk's status from the bulk decoder is what `decode` makes of it: a frame, a CRC error or malformed."""
+    chunks = chunks + [valid, bytes([valid[0] ^ 1]) + valid[1:] if valid else b""]
+    _, status, _ = node_frame.decode_stream(b"".join(c + b"\0" for c in chunks))
+    for chunk, code in zip(chunks, status.tolist()):
+        try:
+            node_frame.decode(chunk)
+            outcome = node_frame.OK
+        except node_frame.CrcMismatch:
+            outcome = node_frame.BAD_CRC
+        except node_frame.MalformedFrame:
+            outcome = "malformed"
+        assert outcome == (code if code in (node_frame.OK, node_frame.BAD_CRC) else "malformed"), (chunk, code)
 
 
 @settings(max_examples=300, deadline=None)

@@ -27,10 +27,12 @@ from benchlab.drivetrain import DrivetrainFacts, friction_power
 from benchlab.runfile.schema import ALIGNED_UNITS
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
+from drivers.clutch_node import SENSOR_STATUSES
 from drivers.errors import CanLogError, ConnectionLost, DriverError
 from protocols.limits import BenchLimits
 
 STATUS_CODES = {"ok": 0.0, "open": 1.0, "short": 2.0, "range": 3.0, "fault": 4.0}
+_NODE_STATUS_CODES = np.array([STATUS_CODES[s] for s in SENSOR_STATUSES])  # NodeBlock.status → stored code
 
 
 @dataclass(frozen=True)
@@ -387,22 +389,24 @@ class DriverBench:
 
     def _poll_node(self, now: float) -> None:
         try:
-            samples = self.gateway.poll()
+            block = self.gateway.poll_block()
         except DriverError as exc:
             self._error(now, "node_error", str(exc), self.gateway.reconnect)
             return
-        for s in samples:  # each at the time the node measured it (the driver maps the node's clock)
-            t = s.t
-            temps = tuple(math.nan if v is None else v for v in s.temperature_c)
-            ohms = tuple(math.nan if v is None else v for v in s.resistance_ohm)
-            row = (float(s.seq), s.node_time_ms / 1000.0, *temps, *ohms,
-                   STATUS_CODES.get(s.sensor_status[0], 4.0), STATUS_CODES.get(s.sensor_status[1], 4.0),
-                   s.supply_mv / 1000.0, float(s.rssi_dbm), float(s.lqi), float(s.flags))
-            self.readings.append(("node", t, row))
-            valid = [v for v in temps if np.isfinite(v)]
-            if valid:
-                self.status.T_flywheel = sum(valid) / len(valid)
-                self.status.mark_seen("T_flywheel", t)
+        if len(block):  # each sample at the time the node measured it (the driver maps the node's clock)
+            rows = np.empty((len(block), 12))
+            rows[:, 0], rows[:, 1] = block.seq, block.node_time_ms / 1000.0
+            rows[:, 2:4], rows[:, 4:6] = block.temperature_c, block.resistance_ohm
+            rows[:, 6:8] = _NODE_STATUS_CODES[block.status]
+            rows[:, 8], rows[:, 9], rows[:, 10], rows[:, 11] = (block.supply_mv / 1000.0, block.rssi_dbm, block.lqi,
+                                                                block.flags)
+            self.readings.append(("node", block.t, rows))
+            valid = np.isfinite(block.temperature_c)
+            seen = np.flatnonzero(valid.any(axis=1))
+            if len(seen):
+                temps = block.temperature_c[seen[-1]][valid[seen[-1]]].tolist()
+                self.status.T_flywheel = sum(temps) / len(temps)
+                self.status.mark_seen("T_flywheel", float(block.t[seen].max()))
         for ev in self.gateway.pop_events():
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:

@@ -15,7 +15,7 @@ from sim_bench.emulators.clock import ManualClock
 from sim_bench.emulators.clutch_node import ClutchNodeEmulator
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 from sim_bench.emulators.providers import (ConstantNodeInputs, ConstantResistances, NodeInputProvider, NodeInputs,
-                                           ResistanceProvider, TemperatureResistances)
+                                           NodeInputSeries, ResistanceProvider, TemperatureResistances)
 from sim_bench.emulators.realtime import RealtimeLoop
 from sim_bench.emulators.scpi_instrument import ScpiInstrumentEmulator
 from sim_bench.emulators.scripted_serial import ScriptedSerial
@@ -29,6 +29,7 @@ registry.set_default("node", ClutchNodeEmulator)
 __all__ = [
     "CanBenchEmulator", "ClutchNodeEmulator", "ConstantNodeInputs", "ConstantResistances", "DrivetrainActuals",
     "DrivetrainProvider", "FirstOrderDrivetrain", "ManualClock", "NodeInputProvider", "NodeInputs",
-    "RealtimeLoop", "ResistanceProvider", "ScpiInstrumentEmulator", "ScriptedSerial", "SimCanBus", "TemperatureResistances",
+    "NodeInputSeries", "RealtimeLoop", "ResistanceProvider", "ScpiInstrumentEmulator", "ScriptedSerial", "SimCanBus",
+    "TemperatureResistances",
     "registry",
 ]

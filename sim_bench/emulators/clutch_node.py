@@ -13,9 +13,12 @@ import time
 from collections.abc import Callable
 from typing import Literal
 
+import numpy as np
+from numba import njit
+
 from drivers import cobs, node_frame
 from drivers.node_frame import NodeFrame
-from sim_bench.emulators.providers import ConstantNodeInputs, NodeInputProvider, NodeInputs
+from sim_bench.emulators.providers import ConstantNodeInputs, NodeInputProvider
 
 Damage = Literal["flip", "truncate", "garbage"]
 _OPEN = (node_frame.CH1_OPEN, node_frame.CH2_OPEN)
@@ -54,10 +57,7 @@ class ClutchNodeEmulator:
                 due.append(self._next_t)
             self._next_t += self.period_s
         if due:
-            frames: list[NodeFrame] = []  # undamaged frames not yet on the line, encoded together
-            for t, inputs in zip(due, self.provider.node_inputs_at(due)):
-                self._emit(t, inputs, frames)
-            self._out += node_frame.encode_many(frames)
+            self._emit(np.array(due))
         data, self._out = bytes(self._out), bytearray()
         return data
 
@@ -88,36 +88,26 @@ class ClutchNodeEmulator:
     def _boot(self, t: float) -> None:
         self._t_boot, self._seq, self._reset_flag = t, 0, node_frame.NODE_RESET
 
-    def _emit(self, t: float, inputs: NodeInputs, pending: list[NodeFrame]) -> None:
-        """The frame measured at `t` onto the line, after the undamaged ones `pending` (kept there if undamaged)."""
-        frame = self._frame(t, inputs)
-        self._seq = (self._seq + 1) & 0xFFFF
+    def _emit(self, times: np.ndarray) -> None:
+        """The frames measured at `times` onto the line: those in a radio silence are lost, the next ones damaged on
+        request, the rest encoded together."""
+        inputs = self.provider.node_inputs_at(times)
+        n = len(times)
+        fields = _frame_fields(times, np.asarray(inputs.resistances_ohm, dtype=float),
+                               *(np.asarray(v, dtype=np.int64).reshape(-1)
+                                 for v in (inputs.supply_mv, inputs.rssi_dbm, inputs.lqi)),
+                               self._t_boot, self._seq, self._reset_flag, self.short_ohm, self.low_supply_mv)
+        self._seq = (self._seq + n) & 0xFFFF
         self._reset_flag = 0
-        if t < self._silent_until:
-            self.frames_suppressed += 1
-            return
-        self.frames_sent += 1
-        if not self._damage:
-            pending.append(frame)
-            return
-        self._out += node_frame.encode_many(pending) + self._wire(frame, self._damage.pop(0))
-        pending.clear()
-
-    def _frame(self, t: float, inputs: NodeInputs) -> NodeFrame:
-        flags = self._reset_flag | (node_frame.LOW_SUPPLY if inputs.supply_mv < self.low_supply_mv else 0)
-        raw = []
-        for ch, ohm in enumerate(inputs.resistances_ohm):
-            if not math.isfinite(ohm):
-                flags |= _OPEN[ch]
-                raw.append(node_frame.NO_VALUE)
-            elif ohm < self.short_ohm:
-                flags |= _SHORT[ch]
-                raw.append(node_frame.NO_VALUE)
-            else:
-                raw.append(min(round(ohm * 1000), node_frame.NO_VALUE - 1))
-        node_ms = int(round((t - self._t_boot) * 1000)) & 0xFFFFFFFF
-        return NodeFrame(self._seq, node_ms, (raw[0], raw[1]), max(0, min(inputs.supply_mv, 0xFFFF)),
-                         max(-128, min(inputs.rssi_dbm, 127)), max(0, min(inputs.lqi, 255)), flags)
+        if times[0] < self._silent_until:
+            sent = times >= self._silent_until
+            self.frames_suppressed += n - int(np.count_nonzero(sent))
+            fields = fields[sent]
+        self.frames_sent += len(fields)
+        damaged = min(len(self._damage), len(fields))
+        for row in fields[:damaged].tolist():
+            self._out += self._wire(node_frame.frame_of(row), self._damage.pop(0))
+        self._out += node_frame.encode_rows(fields[damaged:])
 
     @staticmethod
     def _wire(frame: NodeFrame, damage: Damage) -> bytes:
@@ -132,3 +122,36 @@ class ClutchNodeEmulator:
         if damage == "garbage":
             return b"\x5a\xa5\xff\x13" + wire[4:]
         return wire
+
+
+@njit(cache=True, nogil=True)
+def _frame_fields(times: np.ndarray, ohm: np.ndarray, supply_mv: np.ndarray, rssi_dbm: np.ndarray, lqi: np.ndarray,
+                  t_boot: float, seq: int, reset_flag: int, short_ohm: float,
+                  low_supply_mv: int) -> np.ndarray:  # pragma: no cover - compiled
+    """Rows (node_frame.FIELDS order) of the frames measured at `times`, the first with sequence number `seq` and
+    `reset_flag` (supply, RSSI and LQI one per frame or one for all): open (inf/NaN) and short (below `short_ohm`) sensors flagged with NO_VALUE, a low supply flagged,
+    the node clock in ms since `t_boot`, every field clamped to its width."""
+    out = np.empty((times.shape[0], 9), dtype=np.int64)
+    for i in range(times.shape[0]):
+        flags = reset_flag if i == 0 else 0
+        supply = supply_mv[i] if supply_mv.shape[0] > 1 else supply_mv[0]
+        rssi = rssi_dbm[i] if rssi_dbm.shape[0] > 1 else rssi_dbm[0]
+        lqi_i = lqi[i] if lqi.shape[0] > 1 else lqi[0]
+        if supply < low_supply_mv:
+            flags |= node_frame.LOW_SUPPLY
+        for ch in range(2):
+            r = ohm[i, ch]
+            if not np.isfinite(r):
+                flags |= _OPEN[ch]
+                out[i, 4 + ch] = node_frame.NO_VALUE
+            elif r < short_ohm:
+                flags |= _SHORT[ch]
+                out[i, 4 + ch] = node_frame.NO_VALUE
+            else:
+                out[i, 4 + ch] = np.int64(min(np.rint(r * 1000.0), node_frame.NO_VALUE - 1))
+        out[i, 0], out[i, 1], out[i, 2] = node_frame.VERSION, flags, (seq + i) & 0xFFFF
+        out[i, 3] = np.int64(np.rint((times[i] - t_boot) * 1000.0)) & 0xFFFFFFFF
+        out[i, 6] = max(0, min(supply, 0xFFFF))
+        out[i, 7] = max(-128, min(rssi, 127))
+        out[i, 8] = max(0, min(lqi_i, 255))
+    return out

@@ -10,6 +10,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
+import numpy as np
+
 from drivers import cvd
 
 
@@ -29,10 +31,21 @@ class NodeInputs:
     lqi: int = 200
 
 
+@dataclass(frozen=True, slots=True)
+class NodeInputSeries:
+    """What the flywheel node measures at each of n instants, as columns: resistances (n, 2) Ω (inf/NaN = open);
+    supply, RSSI and LQI one per instant or one for all."""
+
+    resistances_ohm: np.ndarray
+    supply_mv: "np.ndarray | int" = 5000
+    rssi_dbm: "np.ndarray | int" = -60
+    lqi: "np.ndarray | int" = 200
+
+
 class NodeInputProvider(Protocol):
     """The flywheel node's inputs at each of the simulated times `times` (seconds, increasing), in one call."""
 
-    def node_inputs_at(self, times: list[float]) -> list[NodeInputs]: ...
+    def node_inputs_at(self, times: np.ndarray) -> NodeInputSeries: ...
 
 
 @dataclass(slots=True)
@@ -63,5 +76,7 @@ class ConstantNodeInputs:
 
     inputs: NodeInputs = NodeInputs((1097.347, 1097.347))
 
-    def node_inputs_at(self, times: list[float]) -> list[NodeInputs]:
-        return [self.inputs] * len(times)
+    def node_inputs_at(self, times: np.ndarray) -> NodeInputSeries:
+        i = self.inputs
+        return NodeInputSeries(np.broadcast_to(np.array(i.resistances_ohm, dtype=float), (len(times), 2)),
+                               i.supply_mv, i.rssi_dbm, i.lqi)
