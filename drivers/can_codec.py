@@ -126,6 +126,11 @@ class CodecTable:
                 self._bits[m, :, j] = is_big, shift + (8 * (8 - c.length) if is_big else 0), mask, sign
                 self._linear[m, :, j] = 1.0 if scale is None else scale, offset, lo, hi
 
+    @property
+    def layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(bits, linear, compiled): the arrays `encode_rows` takes, for kernels that encode as part of their work."""
+        return self._bits, self._linear, self.compiled
+
     def decode(self, which: np.ndarray, payloads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Values (n, width) of each row's message, and which rows decoded (the others are NaN)."""
         values = np.empty((len(which), self.width))
@@ -146,7 +151,7 @@ class CodecTable:
     def encode(self, which: np.ndarray, values: np.ndarray) -> np.ndarray:
         """Payloads (n, payload_bytes) of each row's message from its values; out-of-range values saturate."""
         payloads = np.zeros((len(which), self.payload_bytes), dtype=np.uint8)
-        _encode_rows(which, values, self._bits, self._linear, self.compiled, payloads)
+        encode_rows(which, values, self._bits, self._linear, self.compiled, payloads)
         for m in self._row_by_row:
             codec = self.codecs[m]
             for i in np.flatnonzero(which == m).tolist():
@@ -181,9 +186,10 @@ def _decode_rows(which: np.ndarray, payloads: np.ndarray, bits: np.ndarray, line
 
 
 @njit(cache=True, nogil=True)
-def _encode_rows(which: np.ndarray, values: np.ndarray, bits: np.ndarray, linear: np.ndarray,
+def encode_rows(which: np.ndarray, values: np.ndarray, bits: np.ndarray, linear: np.ndarray,
                  compiled: np.ndarray, payloads: np.ndarray) -> None:  # pragma: no cover - compiled
-    """CodecTable.encode of the rows whose message is compiled: scale, round half to even, saturate, place."""
+    """CodecTable.encode of the rows whose message is compiled: scale, round half to even, saturate, place (other
+    kernels call it with a table's `layout`)."""
     for i in range(which.shape[0]):
         m = which[i]
         if not compiled[m]:

@@ -25,8 +25,8 @@ import numpy as np
 from numba import njit
 
 from drivers import can_signals as sig
-from drivers.can_codec import CodecTable, compile_codecs
-from drivers.can_frames import EXTENDED, drain, make_frames, pick, send_all
+from drivers.can_codec import CodecTable, compile_codecs, encode_rows
+from drivers.can_frames import EXTENDED, FRAME, drain, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
 
@@ -43,17 +43,11 @@ _STATUS_OF = {"state": 0, "hb_state": 0, "fault_code": 1}  # signal (after the c
 
 @dataclass(slots=True)
 class _Controller:
-    """Emulated state of one controller (what it sends per message lives in the emulator's per-message arrays)."""
+    """One controller: its set-points; the rest of its state is row `index` of the emulator's per-controller arrays."""
 
     name: str
-    index: int  # row in the emulator's per-controller arrays
+    index: int
     setpoints: dict[str, float] = field(default_factory=dict)
-    last_cmd: float | None = None
-    injected_fault: int = 0
-
-    @property
-    def enabled(self) -> bool:
-        return bool(self.setpoints.get(f"{self.name}.enable"))
 
 
 @dataclass(slots=True)
@@ -83,22 +77,24 @@ class CanBenchEmulator:
         self.stats = EmulatorStats()
         self.estop = False
         self.controllers = {name: _Controller(name, i) for i, name in enumerate(sig.CONTROLLERS)}
-        # the command frames: frame id → slot in the command table; per slot its owner, length and id kind
+        # per controller: time of the last command taken (NaN: none yet), enabled, injected fault code, and the
+        # command values last taken (NaN: none yet; only the set-point columns count)
+        n = len(self.controllers)
+        self._last_cmd, self._enabled, self._fault = np.full(n, np.nan), np.zeros(n, dtype=bool), np.zeros(n, np.int64)
+        # the command frames: frame id, length, id kind per slot in the command table, and who takes the slot
         received = ("drive.cmd_alive", "clutch.cmd_alive", "load.cmd_alive", "estop.request", "pc.hb_alive")
         rx = [self._codec_of[key] for key in received]
-        self._rx_slot = {codec.message.frame_id: i for i, codec in enumerate(rx)}
+        self._rx_table = CodecTable(rx)
+        self._rx_id = np.array([codec.message.frame_id for codec in rx], dtype=np.int64)
+        self._rx_length = np.array([codec.length for codec in rx], dtype=np.int64)
+        self._rx_extended = np.array([codec.message.is_extended_frame for codec in rx])
         self._rx_owner = [key.split(".")[0] for key in received]
-        # per slot: the controller that takes it (its index), _ESTOP (the emergency stop) or _IGNORED (the PC's heartbeat)
         self._rx_controller = np.array([self.controllers[o].index if o in self.controllers else
                                         _ESTOP if o == "estop" else _IGNORED for o in self._rx_owner])
-        self._rx_length = np.array([codec.length for codec in rx])
-        self._rx_extended = np.array([codec.message.is_extended_frame for codec in rx])
-        self._rx_table = CodecTable(rx)
         # per command slot and column: whether the value is a set-point (not the alive counter, not a padding column)
         self._setpoint = np.array([[c is not None and not c.endswith("alive") for c in codec.columns]
                                    + [False] * (self._rx_table.width - len(codec.columns)) for codec in rx])
-        # per controller the command values last taken (NaN: none yet; only the set-point columns count)
-        self._taken = np.full((len(self.controllers), self._rx_table.width), np.nan)
+        self._taken = np.full((n, self._rx_table.width), np.nan)
         self.origin = clock()
         self._t = self.origin  # frames due before this instant have been sent
         # every message the controllers send (status and heartbeat, keyed by its alive counter) as one codec table,
@@ -107,7 +103,7 @@ class CanBenchEmulator:
         sent = [f"{name}.{alive}" for name in sig.CONTROLLERS for alive in ("alive", "hb_alive")]
         codecs = [self._codec_of[key] for key in sent]
         self._table = CodecTable(codecs)
-        self._owner = [self.controllers[key.split(".")[0]] for key in sent]
+        self._owner = np.array([self.controllers[key.split(".")[0]].index for key in sent])
         self._frame_id = np.array([codec.message.frame_id for codec in codecs])
         self._cycle = np.array([codec.message.cycle_time / 1000 for codec in codecs])
         self._sent_cycles = np.ones(len(sent), dtype=np.int64)
@@ -133,12 +129,12 @@ class CanBenchEmulator:
     # -- fault hooks ---------------------------------------------------------------------------------
     def silence(self, controller: str, on: bool = True) -> None:
         """The controller stops (or resumes) sending anything."""
-        self._silent[self._messages_of(controller)] = on
+        self._silent[self._owner == self.controllers[controller].index] = on
 
     def set_fault(self, controller: str, code: int) -> None:
         """From now on the controller reports fault `code` (state Fault) and holds its safe set-point until cleared."""
         self._emit_until(self.clock(), inclusive=False)
-        self.controllers[controller].injected_fault = code
+        self._fault[self.controllers[controller].index] = code
         self._apply(self.clock())
 
     def clear_fault(self, controller: str) -> None:
@@ -147,7 +143,7 @@ class CanBenchEmulator:
 
     def freeze_alive(self, controller: str, on: bool = True) -> None:
         """The controller's alive counters stop counting (a hung task still sending old frames)."""
-        self._frozen[self._messages_of(controller)] = on
+        self._frozen[self._owner == self.controllers[controller].index] = on
 
     def send_raw(self, arbitration_id: int, data: bytes, is_extended_id: bool = False) -> None:
         """Put an arbitrary frame on the bus (wrong DLC, unknown id, ...)."""
@@ -158,21 +154,15 @@ class CanBenchEmulator:
         """Apply the waiting commands at their times and send every frame due up to now, in time order.
 
         A command that changes nothing (same set-points, controller running) only refreshes the command
-        time-out; the frames are then sent in whole segments between the commands that change something.
+        time-out (in one compiled pass); the frames are then sent in whole segments between the commands that
+        change something.
         """
         now = self.clock()
         which, stamps, values, valid = self._commands()
-        ctrls = list(self.controllers.values())
         i = 0
         while i < len(which):
-            # the commands that only refresh the time-out, in one compiled pass up to the next one that may not
-            last_cmd = np.array([math.nan if c.last_cmd is None else c.last_cmd for c in ctrls])
             i = _refresh_commands(which, stamps, values, valid, i, now, self._t + COMMAND_LATENCY_S, self._rx_controller,
-                                  self._setpoint, self._taken, last_cmd, np.array([c.enabled for c in ctrls]),
-                                  self.command_timeout_s)
-            for ctrl, t in zip(ctrls, last_cmd.tolist()):
-                if not math.isnan(t):
-                    ctrl.last_cmd = t
+                                  self._setpoint, self._taken, self._last_cmd, self._enabled, self.command_timeout_s)
             if i < len(which):
                 self._command(int(which[i]), float(stamps[i]), values[i], now)
                 i += 1
@@ -180,69 +170,50 @@ class CanBenchEmulator:
 
     def state(self, controller: str, t: float | None = None) -> tuple[int, int]:
         """(state, fault code) the controller reports at `t` (default: now)."""
-        return self._state(self.controllers[controller], self.clock() if t is None else t)
+        return self._state(self.controllers[controller].index, self.clock() if t is None else t)
 
     # -- internals -----------------------------------------------------------------------------------
-    def _command(self, slot: int, stamp: float, row: np.ndarray, now: float) -> None:
-        """Take one command frame that may change something (see `_refresh_commands` for the ones that cannot)."""
-        # a command acts after the last frame already reported (a frame measured when it was sent is gone)
-        t = min(max(stamp or now, self._t + COMMAND_LATENCY_S), now)
-        owner = self._rx_owner[slot]
-        ctrl = self.controllers.get(owner)
-        values = {c: v for c, v in zip(self._rx_table.codecs[slot].columns, row.tolist()) if c is not None}
-        if self._changes(owner, values, t):
-            self._emit_until(t, inclusive=False)
-            self._take(owner, values, t)
-            self._apply(t)
-        elif ctrl is not None:
-            ctrl.last_cmd = t
-        if ctrl is not None:
-            self._taken[ctrl.index] = row
+    def _state(self, c: int, t: float) -> tuple[int, int]:
+        return _status(t, self._fault[c], self._last_cmd[c], self._enabled[c], self.estop, self.command_timeout_s)
 
-    def _messages_of(self, controller: str) -> list[int]:
-        """The sent messages (indices into the per-message arrays) of a controller."""
-        return [p for p, ctrl in enumerate(self._owner) if ctrl.name == controller]
-
-    def _state(self, ctrl: _Controller, t: float) -> tuple[int, int]:
-        code = ctrl.injected_fault or (sig.FAULT_COMMAND_TIMEOUT if self._timed_out(ctrl, t) else 0)
-        if self.estop:
-            return sig.STATE_ESTOP, code
-        if code:
-            return sig.STATE_FAULT, code
-        return (sig.STATE_RUNNING if ctrl.enabled else sig.STATE_READY), 0
-
-    def _deadline(self, ctrl: _Controller) -> float | None:
-        """When an enabled controller times out without a further command (None: it cannot)."""
-        if ctrl.last_cmd is None or not ctrl.enabled:
-            return None
-        return ctrl.last_cmd + self.command_timeout_s
-
-    def _timed_out(self, ctrl: _Controller, t: float) -> bool:
-        deadline = self._deadline(ctrl)
-        return deadline is not None and t > deadline + 1e-9
+    def _timed_out(self, c: int, t: float) -> bool:
+        return _is_timed_out(t, self._last_cmd[c], self._enabled[c], self.command_timeout_s)
 
     def _commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The waiting command frames in time order (stable), decoded in one pass: command slot, time stamp, values
         by codec column, whether they decoded; frames with an unknown id, a wrong length or id kind are left out.
         Every frame is counted as a command or as malformed."""
         frames = drain(self.bus)
-        frames = pick(frames, np.argsort(frames["timestamp"], kind="stable"))
-        slots = np.array([self._rx_slot.get(ident, -1) for ident in frames["arbitration_id"].tolist()], dtype=np.int64)
-        known = np.flatnonzero((slots >= 0) & (frames["length"] == self._rx_length.take(slots))
-                               & (((frames["flags"] & EXTENDED) != 0) == self._rx_extended.take(slots)))
-        which = slots.take(known)
-        values, valid = self._rx_table.decode(which, frames["data"].take(known, axis=0))
+        which, stamps, payloads = _known_frames(frames, self._rx_id, self._rx_length, self._rx_extended,
+                                                self._rx_table.payload_bytes)
+        values, valid = self._rx_table.decode(which, payloads)
         ok = int(np.count_nonzero(valid))
         self.stats.commands_ok += ok
         self.stats.malformed += len(frames) - ok
-        return which, frames["timestamp"].take(known), values, valid
+        return which, stamps, values, valid
+
+    def _command(self, slot: int, stamp: float, row: np.ndarray, now: float) -> None:
+        """Take one command frame that may change something (see `_refresh_commands` for the ones that cannot)."""
+        # a command acts after the last frame already reported (a frame measured when it was sent is gone)
+        t = min(max(stamp or now, self._t + COMMAND_LATENCY_S), now)
+        owner = self._rx_owner[slot]
+        values = {c: v for c, v in zip(self._rx_table.codecs[slot].columns, row.tolist()) if c is not None}
+        ctrl = self.controllers.get(owner)
+        if self._changes(owner, values, t):
+            self._emit_until(t, inclusive=False)
+            self._take(owner, values, t)
+            self._apply(t)
+        elif ctrl is not None:
+            self._last_cmd[ctrl.index] = t
+        if ctrl is not None:
+            self._taken[ctrl.index] = row
 
     def _changes(self, owner: str, values: Mapping[str, float], t: float) -> bool:
         """Whether a command changes what the controllers do (set-points, time-out ending, emergency stop)."""
         if owner == "estop":
             return bool(values["estop.request"]) != self.estop
         ctrl = self.controllers[owner]
-        if ctrl.last_cmd is None or self._timed_out(ctrl, t):
+        if math.isnan(self._last_cmd[ctrl.index]) or self._timed_out(ctrl.index, t):
             return True
         return any(ctrl.setpoints.get(k) != v for k, v in values.items() if not k.endswith("alive"))
 
@@ -252,12 +223,13 @@ class CanBenchEmulator:
             return
         ctrl = self.controllers[owner]
         ctrl.setpoints.update(values)
-        ctrl.last_cmd = t
+        self._last_cmd[ctrl.index] = t
+        self._enabled[ctrl.index] = bool(ctrl.setpoints.get(f"{owner}.enable"))
 
     def _apply(self, t: float) -> None:
         """Set-points the controllers hold from `t` on (safe ones where not running)."""
         self.provider.advance(t)
-        sp = {name: (c.setpoints if self._state(c, t)[0] == sig.STATE_RUNNING else {})
+        sp = {name: (c.setpoints if self._state(c.index, t)[0] == sig.STATE_RUNNING else {})
               for name, c in self.controllers.items()}
         self.provider.set_drive_speed(sp["drive"].get("drive.speed_setpoint", 0.0))
         self.provider.set_clutch(sp["clutch"].get("clutch.torque_setpoint", 0.0),
@@ -267,12 +239,8 @@ class CanBenchEmulator:
     def _emit_until(self, t_end: float, inclusive: bool) -> None:
         """Send the frames due in [self._t, t_end) (or up to t_end inclusive), cut where a controller times out."""
         while True:
-            cut = None
-            for ctrl in self.controllers.values():
-                d = self._deadline(ctrl)
-                if d is not None and self._t < d < t_end and (cut is None or d < cut):
-                    cut = d
-            if cut is None:
+            cut = _first_deadline(self._last_cmd, self._enabled, self.command_timeout_s, self._t, t_end)
+            if math.isnan(cut):
                 self._emit_segment(t_end, inclusive)
                 return
             self._emit_segment(cut, True)
@@ -280,42 +248,126 @@ class CanBenchEmulator:
 
     def _emit_segment(self, t_end: float, inclusive: bool) -> None:
         """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now."""
-        item, local, stamps, times, row, first, count = _due_frames(
+        item, local, stamps, times, row, status, count = _due_frames(
             self._sent_cycles, self._silent, t_end, 1e-9 if inclusive else -1e-9, self.origin, self._cycle,
-            self._frame_id)
+            self._frame_id, self._owner, self._fault, self._last_cmd, self._enabled, self.estop, self.command_timeout_s)
         self._t = max(self._t, t_end)
         if not len(item):
             return
-        status = np.zeros((2, len(count)))  # state and fault code per message, at its first frame due
-        for p, (n, t) in enumerate(zip(count.tolist(), first.tolist())):
-            if n:
-                status[:, p] = self._state(self._owner[p], t)
         actuals = self.provider.actuals_at(times)
-        values = _frame_values(item, local, row, np.array([getattr(actuals, name) for name in _ACTUALS]),
-                               self._source, self._status_source, status, self._alive_col, self._alive,
-                               self._frozen, self._modulo, count)
-        frames = pick(self._template, item)
-        frames["timestamp"] = stamps
-        frames["data"][:, :self._table.payload_bytes] = self._table.encode(item, values)
+        frames, values = _frames(item, local, row, stamps, np.array([getattr(actuals, name) for name in _ACTUALS]),
+                                 self._source, self._status_source, status, self._alive_col, self._alive,
+                                 self._frozen, self._modulo, count, self._template, np.empty(len(item), FRAME),
+                                 *self._table.layout)
+        if not self._table.compiled.all():  # messages the compiled loop cannot encode
+            frames["data"][:, :self._table.payload_bytes] = self._table.encode(item, values)
         self.stats.sent += int(np.count_nonzero(send_all(self.bus, frames)))
 
 
 @njit(cache=True, nogil=True)
+def _is_timed_out(t: float, last_cmd: float, enabled: bool, timeout: float) -> bool:  # pragma: no cover - compiled
+    """Whether an enabled controller whose last command came at `last_cmd` (NaN: none) has timed out at `t`."""
+    return enabled and not math.isnan(last_cmd) and t > last_cmd + timeout + 1e-9
+
+
+@njit(cache=True, nogil=True)
+def _status(t: float, fault: int, last_cmd: float, enabled: bool, estop: bool,
+            timeout: float) -> tuple:  # pragma: no cover - compiled
+    """(state, fault code) a controller reports at `t`: emergency stop, else an injected fault or the command
+    time-out, else running while enabled, else ready."""
+    code = fault if fault else (sig.FAULT_COMMAND_TIMEOUT if _is_timed_out(t, last_cmd, enabled, timeout) else 0)
+    if estop:
+        return sig.STATE_ESTOP, code
+    if code:
+        return sig.STATE_FAULT, code
+    return (sig.STATE_RUNNING if enabled else sig.STATE_READY), 0
+
+
+@njit(cache=True, nogil=True)
+def _first_deadline(last_cmd: np.ndarray, enabled: np.ndarray, timeout: float, after: float,
+                    before: float) -> float:  # pragma: no cover - compiled
+    """The earliest instant strictly between `after` and `before` at which an enabled controller times out without
+    a further command (NaN: none)."""
+    cut = math.nan
+    for c in range(last_cmd.shape[0]):
+        if enabled[c] and not math.isnan(last_cmd[c]):
+            d = last_cmd[c] + timeout
+            if after < d < before and (math.isnan(cut) or d < cut):
+                cut = d
+    return cut
+
+
+@njit(cache=True, nogil=True)
+def _known_frames(frames: np.ndarray, rx_id: np.ndarray, rx_length: np.ndarray, rx_extended: np.ndarray,
+                  width: int) -> tuple:  # pragma: no cover - compiled
+    """The FRAME records of known command messages (id, length and id kind of a slot) in time order (stable):
+    each one's slot, time stamp and first `width` data bytes."""
+    n = frames.shape[0]
+    order = np.arange(n)
+    for i in range(1, n):  # insertion sort: stable, and the frames come (nearly) in order
+        j = i
+        while j > 0 and frames[order[j - 1]].timestamp > frames[order[j]].timestamp:
+            order[j - 1], order[j] = order[j], order[j - 1]
+            j -= 1
+    which, stamps = np.empty(n, dtype=np.int64), np.empty(n)
+    payloads = np.zeros((n, width), dtype=np.uint8)
+    k = 0
+    for i in order:
+        f = frames[i]
+        for s in range(rx_id.shape[0]):
+            if (f.arbitration_id == rx_id[s] and f.length == rx_length[s]
+                    and ((f.flags & EXTENDED) != 0) == rx_extended[s]):
+                which[k], stamps[k] = s, f.timestamp
+                for b in range(min(width, f.data.shape[0])):
+                    payloads[k, b] = f.data[b]
+                k += 1
+                break
+    return which[:k], stamps[:k], payloads[:k]
+
+
+@njit(cache=True, nogil=True)
+def _refresh_commands(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, valid: np.ndarray, start: int,
+                      now: float, earliest: float, controller: np.ndarray, setpoint: np.ndarray, taken: np.ndarray,
+                      last_cmd: np.ndarray, enabled: np.ndarray, timeout: float) -> int:  # pragma: no cover
+    """From command `start` on, take the commands that only refresh a controller's time-out (the set-points it last
+    took again, not timed out: last_cmd = the command's time) and skip the ones nobody acts on (not decoded, the
+    PC's heartbeat); stop at the first other one and return its index (len(which): none left)."""
+    for i in range(start, which.shape[0]):
+        c = controller[which[i]]
+        if not valid[i] or c == _IGNORED:
+            continue
+        if c < 0:
+            return i
+        t = min(max(stamps[i] if stamps[i] != 0.0 else now, earliest), now)
+        if _is_timed_out(t, last_cmd[c], enabled[c], timeout):
+            return i
+        for j in range(values.shape[1]):
+            if setpoint[which[i], j] and not values[i, j] == taken[c, j]:
+                return i
+        last_cmd[c] = t
+    return which.shape[0]
+
+
+@njit(cache=True, nogil=True)
 def _due_frames(sent_cycles: np.ndarray, silent: np.ndarray, t_end: float, eps: float, origin: float,
-                cycle: np.ndarray, frame_id: np.ndarray) -> tuple:  # pragma: no cover - compiled
+                cycle: np.ndarray, frame_id: np.ndarray, owner: np.ndarray, fault: np.ndarray, last_cmd: np.ndarray,
+                enabled: np.ndarray, estop: bool, timeout: float) -> tuple:  # pragma: no cover - compiled
     """The frames of messages p falling due at origin + k·cycle[p] from k = sent_cycles[p] up to t_end + eps,
     merged in time order (ties by frame id); sent_cycles moves on past them (silenced messages' frames too, but
     they are not returned). Returns each frame's message p, its number l among p's frames, its time; the distinct
-    times and each frame's among them; per message the time of its first frame and the number of its frames."""
+    times and each frame's among them; per message the (state, fault code) of its controller (`owner`) at its
+    first frame and the number of its frames."""
     m = sent_cycles.shape[0]
-    first, count = np.empty(m), np.zeros(m, dtype=np.int64)
+    status, count = np.zeros((2, m)), np.zeros(m, dtype=np.int64)
     for p in range(m):
         k1 = int(np.floor((t_end + eps - origin) / cycle[p])) + 1
         k0 = sent_cycles[p]
-        first[p] = origin + k0 * cycle[p]
         if k1 > k0:
             if not silent[p]:
                 count[p] = k1 - k0
+                c = owner[p]
+                status[0, p], status[1, p] = _status(origin + k0 * cycle[p], fault[c], last_cmd[c], enabled[c], estop,
+                                                     timeout)
             sent_cycles[p] = k1
     n = count.sum()
     item, local = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
@@ -335,19 +387,24 @@ def _due_frames(sent_cycles: np.ndarray, silent: np.ndarray, t_end: float, eps: 
             times[distinct] = best_t
             distinct += 1
         row[k] = distinct - 1
-    return item, local, stamps, times[:distinct].copy(), row, first, count
+    return item, local, stamps, times[:distinct].copy(), row, status, count
 
 
 @njit(cache=True, nogil=True)
-def _frame_values(item: np.ndarray, local: np.ndarray, row: np.ndarray, measured: np.ndarray, source: np.ndarray,
-                  status_source: np.ndarray, status: np.ndarray, alive_col: np.ndarray, alive: np.ndarray,
-                  frozen: np.ndarray, modulo: np.ndarray, count: np.ndarray) -> np.ndarray:  # pragma: no cover
-    """Each frame's signal values: a measured actual (source ≥ 0, at the frame's time `row`), its message's state or
-    fault code (status_source ≥ 0) or 0, and the alive counter counting on from `alive` (held while frozen);
+def _frames(item: np.ndarray, local: np.ndarray, row: np.ndarray, stamps: np.ndarray, measured: np.ndarray,
+            source: np.ndarray, status_source: np.ndarray, status: np.ndarray, alive_col: np.ndarray,
+            alive: np.ndarray, frozen: np.ndarray, modulo: np.ndarray, count: np.ndarray, template: np.ndarray,
+            frames: np.ndarray, bits: np.ndarray, linear: np.ndarray, compiled: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """Each frame into `frames` (its message's `template` at its time stamp) and its signal values: a measured actual (source ≥ 0,
+    at the frame's time `row`), its message's state or fault code (status_source ≥ 0) or 0, and the alive counter
+    counting on from `alive` (held while frozen), encoded by the codec table layout (bits, linear, compiled);
     `alive` then moves on past each message's `count` frames."""
-    values = np.empty((item.shape[0], source.shape[1]))
-    for k in range(item.shape[0]):
+    n = item.shape[0]
+    values = np.empty((n, source.shape[1]))
+    for k in range(n):
         p = item[k]
+        frames[k] = template[p]
+        frames[k].timestamp = stamps[k]
         for j in range(source.shape[1]):
             if source[p, j] >= 0:
                 values[k, j] = measured[source[p, j], row[k]]
@@ -356,30 +413,12 @@ def _frame_values(item: np.ndarray, local: np.ndarray, row: np.ndarray, measured
             else:
                 values[k, j] = 0.0
         values[k, alive_col[p]] = alive[p] if frozen[p] else (alive[p] + 1 + local[k]) % modulo[p]
+    payloads = np.zeros((n, 8), dtype=np.uint8)
+    encode_rows(item, values, bits, linear, compiled, payloads)
+    for k in range(n):
+        for b in range(8):
+            frames[k].data[b] = payloads[k, b]
     for p in range(alive.shape[0]):
         if count[p] and not frozen[p]:
             alive[p] = (alive[p] + count[p]) % modulo[p]
-    return values
-
-
-@njit(cache=True, nogil=True)
-def _refresh_commands(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, valid: np.ndarray, start: int,
-                      now: float, earliest: float, controller: np.ndarray, setpoint: np.ndarray, taken: np.ndarray,
-                      last_cmd: np.ndarray, enabled: np.ndarray, timeout: float) -> int:  # pragma: no cover
-    """From command `start` on, take the commands that only refresh a controller's time-out (the set-points it last
-    took again, not timed out: last_cmd = the command's time) and skip the ones nobody acts on (not decoded, the
-    PC's heartbeat); stop at the first other one and return its index (len(which): none left)."""
-    for i in range(start, which.shape[0]):
-        c = controller[which[i]]
-        if not valid[i] or c == _IGNORED:
-            continue
-        if c < 0:
-            return i
-        t = min(max(stamps[i] if stamps[i] != 0.0 else now, earliest), now)
-        if not math.isnan(last_cmd[c]) and enabled[c] and t > last_cmd[c] + timeout + 1e-9:
-            return i
-        for j in range(values.shape[1]):
-            if setpoint[which[i], j] and not values[i, j] == taken[c, j]:
-                return i
-        last_cmd[c] = t
-    return which.shape[0]
+    return frames, values
