@@ -146,7 +146,7 @@ class CodecTable:
     def encode(self, which: np.ndarray, values: np.ndarray) -> np.ndarray:
         """Payloads (n, payload_bytes) of each row's message from its values; out-of-range values saturate."""
         payloads = np.zeros((len(which), self.payload_bytes), dtype=np.uint8)
-        _encode_rows(which, values, self.bits, self.linear, self.compiled, payloads)
+        encode_rows(which, values, self.bits, self.linear, self.compiled, payloads)
         for m in self._row_by_row:
             codec = self.codecs[m]
             for i in np.flatnonzero(which == m).tolist():
@@ -188,9 +188,10 @@ def decode_row(payload: np.ndarray, m: int, bits: np.ndarray, linear: np.ndarray
 
 
 @njit(cache=True, nogil=True)
-def _encode_rows(which: np.ndarray, values: np.ndarray, bits: np.ndarray, linear: np.ndarray,
-                 compiled: np.ndarray, payloads: np.ndarray) -> None:  # pragma: no cover - compiled
-    """CodecTable.encode of the rows whose message is compiled: scale, round half to even, saturate, place."""
+def encode_rows(which: np.ndarray, values: np.ndarray, bits: np.ndarray, linear: np.ndarray,
+                compiled: np.ndarray, payloads: np.ndarray) -> None:  # pragma: no cover - compiled
+    """CodecTable.encode of the rows whose message is compiled: scale, round half to even, saturate, place (other
+    kernels call it with a table's `bits`, `linear` and `compiled`)."""
     for i in range(which.shape[0]):
         m = which[i]
         if not compiled[m]:

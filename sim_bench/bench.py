@@ -244,11 +244,12 @@ class SimPhysics:
 
     def _rows_at(self, times: "np.ndarray | list[float]", name: str) -> np.ndarray:
         """Rows of the per-grid-point matrix `name` at each of `times` (increasing), computed where needed."""
-        k = np.floor(np.asarray(times) / self.dt + 1e-6).astype(np.int64)
-        self._ensure(int(k[-1]))
+        times = np.asarray(times, dtype=float)
+        self._ensure(self._index(times[-1]))
         k0, _, temps = self._chunks[-1]
-        if k[0] >= k0:  # all in the newest chunk (the usual case)
-            return temps[name].take(k - k0, axis=0)
+        if self._index(times[0]) >= k0:  # all in the newest chunk (the usual case)
+            return _grid_rows(times, self.dt, k0, temps[name])
+        k = np.floor(times / self.dt + 1e-6).astype(np.int64)
         k = np.maximum(k, self._chunks[0][0])  # older than kept: the oldest sample we have
         rows = np.empty((len(k), temps[name].shape[1]))
         for k0, _, temps in self._chunks:
@@ -306,6 +307,15 @@ class SimPhysics:
 
 
 _ACTUAL_SOURCES = ("engine_speed", "clutch_speed", "clutch_torque", "friction_power", "clutch_state", "load_torque")
+
+
+@njit(cache=True, nogil=True)
+def _grid_rows(times: np.ndarray, dt: float, k0: int, matrix: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Rows of `matrix` (grid points from k0 on) at the grid point of each of `times` (SimPhysics._index's rule)."""
+    rows = np.empty((times.shape[0], matrix.shape[1]))
+    for i in range(times.shape[0]):
+        rows[i] = matrix[int(math.floor(times[i] / dt + 1e-6)) - k0]
+    return rows
 
 
 @njit(cache=True, nogil=True)

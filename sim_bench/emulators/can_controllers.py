@@ -25,8 +25,8 @@ import numpy as np
 from numba import njit
 
 from drivers import can_signals as sig
-from drivers.can_codec import CodecTable, compile_codecs
-from drivers.can_frames import EXTENDED, drain, make_frames, pick, send_all
+from drivers.can_codec import CodecTable, compile_codecs, encode_rows
+from drivers.can_frames import EXTENDED, FRAME, drain, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
 
@@ -37,18 +37,17 @@ _ACTUAL_OF = {"drive.speed": "drive_speed_rpm", "drive.torque": "drive_torque_nm
 _ACTUALS = list(DrivetrainActuals.__dataclass_fields__)
 
 
+_ESTOP, _IGNORED = -1, -2  # command owners that are not a controller: the emergency stop; the PC's heartbeat
+_STATUS_OF = {"state": 0, "hb_state": 0, "fault_code": 1}  # signal (after the controller's name) → row of the status pair
+
+
 @dataclass(slots=True)
 class _Controller:
-    """Emulated state of one controller."""
+    """One controller: its set-points; the rest of its state is row `index` of the emulator's per-controller arrays."""
 
     name: str
+    index: int
     setpoints: dict[str, float] = field(default_factory=dict)
-    last_cmd: float | None = None
-    injected_fault: int = 0
-    silent: bool = False
-    alive_frozen: bool = False
-    alive: dict[str, int] = field(default_factory=dict)
-    sent_cycles: dict[str, int] = field(default_factory=dict)  # frames due so far per message (sent or silenced)
 
 
 @dataclass(slots=True)
@@ -73,49 +72,69 @@ class CanBenchEmulator:
         self._codec_of = {key: codec for codec in self.codecs.values() for key in codec.names.values()}
         self.command_timeout_s = (command_timeout_s if command_timeout_s is not None
                                   else 3 * self._codec_of["drive.cmd_alive"].message.cycle_time / 1000)
-        self._modulo = {key: 1 << self.db.get_message_by_name(m).get_signal_by_name(s).length
-                        for key, (m, s) in signals.items() if key.endswith("alive")}
+        modulo = {key: 1 << self.db.get_message_by_name(m).get_signal_by_name(s).length
+                  for key, (m, s) in signals.items() if key.endswith("alive")}
         self.stats = EmulatorStats()
         self.estop = False
-        self.controllers = {name: _Controller(name) for name in sig.CONTROLLERS}
+        self.controllers = {name: _Controller(name, i) for i, name in enumerate(sig.CONTROLLERS)}
+        # per controller: time of the last command taken (NaN: none yet), enabled, injected fault code, and the
+        # command values last taken (NaN: none yet; only the set-point columns count)
+        n = len(self.controllers)
+        self._last_cmd, self._enabled, self._fault = np.full(n, np.nan), np.zeros(n, dtype=bool), np.zeros(n, np.int64)
+        # the command frames: frame id, length, id kind per slot in the command table, and who takes the slot
         received = ("drive.cmd_alive", "clutch.cmd_alive", "load.cmd_alive", "estop.request", "pc.hb_alive")
-        self._rx = {self._codec_of[key].message.frame_id: (i, key.split(".")[0], self._codec_of[key])
-                    for i, key in enumerate(received)}  # frame id → (slot in the command table, owner, codec)
-        self._rx_table = CodecTable([self._codec_of[key] for key in received])
-        # per command slot the (column, key) of the values that are set-points (not the alive counter)
-        self._setpoint_columns = [[(j, c) for j, c in enumerate(self._codec_of[key].columns)
-                                   if c is not None and not c.endswith("alive")] for key in received]
-        self._taken: dict[str, list[float] | None] = {name: None for name in self.controllers}  # set-points last taken
+        rx = [self._codec_of[key] for key in received]
+        self._rx_table = CodecTable(rx)
+        self._rx_id = np.array([codec.message.frame_id for codec in rx], dtype=np.int64)
+        self._rx_length = np.array([codec.length for codec in rx], dtype=np.int64)
+        self._rx_extended = np.array([codec.message.is_extended_frame for codec in rx])
+        self._rx_owner = [key.split(".")[0] for key in received]
+        self._rx_controller = np.array([self.controllers[o].index if o in self.controllers else
+                                        _ESTOP if o == "estop" else _IGNORED for o in self._rx_owner])
+        # per command slot and column: whether the value is a set-point (not the alive counter, not a padding column)
+        self._setpoint = np.array([[c is not None and not c.endswith("alive") for c in codec.columns]
+                                   + [False] * (self._rx_table.width - len(codec.columns)) for codec in rx])
+        self._taken = np.full((n, self._rx_table.width), np.nan)
         self.origin = clock()
         self._t = self.origin  # frames due before this instant have been sent
-        for ctrl in self.controllers.values():
-            for key in (f"{ctrl.name}.alive", f"{ctrl.name}.hb_alive"):
-                ctrl.sent_cycles[key] = 1  # the first frame one cycle after start-up (a time stamp of 0.0 means "unset")
-                ctrl.alive[key] = 0
-        # every message the controllers send (status and heartbeat, keyed by its alive counter) as one codec table
+        # every message the controllers send (status and heartbeat, keyed by its alive counter) as one codec table,
+        # and per message: its controller, cycle, frames due so far (sent or silenced; the first one cycle after
+        # start-up: a time stamp of 0.0 means "unset"), alive counter, whether silenced or frozen
         sent = [f"{name}.{alive}" for name in sig.CONTROLLERS for alive in ("alive", "hb_alive")]
-        self._slot = {key: i for i, key in enumerate(sent)}
-        self._table = CodecTable([self._codec_of[key] for key in sent])
-        self._frame_id = np.array([self._codec_of[key].message.frame_id for key in sent])
-        self._extended = np.array([self._codec_of[key].message.is_extended_frame for key in sent])
-        self._length = np.array([self._codec_of[key].length for key in sent])
-        self._cycle = {key: self._codec_of[key].message.cycle_time / 1000 for key in sent}
-        # where each column of each sent message comes from: an actual value (index into _ACTUALS), else -1
-        columns = [self._codec_of[key].columns for key in sent]
+        codecs = [self._codec_of[key] for key in sent]
+        self._table = CodecTable(codecs)
+        self._owner = np.array([self.controllers[key.split(".")[0]].index for key in sent])
+        self._frame_id = np.array([codec.message.frame_id for codec in codecs])
+        self._cycle = np.array([codec.message.cycle_time / 1000 for codec in codecs])
+        self._sent_cycles = np.ones(len(sent), dtype=np.int64)
+        self._alive = np.zeros(len(sent), dtype=np.int64)
+        self._modulo = np.array([modulo[key] for key in sent])
+        self._silent = np.zeros(len(sent), dtype=bool)
+        self._frozen = np.zeros(len(sent), dtype=bool)
+        # each message's frame with everything but time stamp and data (make_frames' flags, length, channel)
+        self._template = make_frames(np.zeros(len(sent)), self._frame_id,
+                                     np.zeros((len(sent), self._table.payload_bytes), dtype=np.uint8),
+                                     np.array([codec.length for codec in codecs]),
+                                     extended=np.array([codec.message.is_extended_frame for codec in codecs]))
+        # where each column of each sent message comes from: an actual value (index into _ACTUALS), else -1; the
+        # controller's state or fault code (row of the status pair), else -1; which column is the alive counter
+        columns = [list(codec.columns) + [None] * (self._table.width - len(codec.columns)) for codec in codecs]
         self._source = np.array([[_ACTUALS.index(_ACTUAL_OF[c]) if c in _ACTUAL_OF else -1 for c in cols]
-                                 + [-1] * (self._table.width - len(cols)) for cols in columns])
+                                 for cols in columns])
+        self._status_source = np.array([[_STATUS_OF.get(c.split(".", 1)[1], -1)
+                                         if c is not None and c.split(".")[0] == key.split(".")[0] else -1
+                                         for c in cols] for cols, key in zip(columns, sent)])
         self._alive_col = np.array([cols.index(key) for cols, key in zip(columns, sent)])
-        self._column = [{c: j for j, c in enumerate(cols) if c is not None} for cols in columns]
 
     # -- fault hooks ---------------------------------------------------------------------------------
     def silence(self, controller: str, on: bool = True) -> None:
         """The controller stops (or resumes) sending anything."""
-        self.controllers[controller].silent = on
+        self._silent[self._owner == self.controllers[controller].index] = on
 
     def set_fault(self, controller: str, code: int) -> None:
         """From now on the controller reports fault `code` (state Fault) and holds its safe set-point until cleared."""
         self._emit_until(self.clock(), inclusive=False)
-        self.controllers[controller].injected_fault = code
+        self._fault[self.controllers[controller].index] = code
         self._apply(self.clock())
 
     def clear_fault(self, controller: str) -> None:
@@ -124,7 +143,7 @@ class CanBenchEmulator:
 
     def freeze_alive(self, controller: str, on: bool = True) -> None:
         """The controller's alive counters stop counting (a hung task still sending old frames)."""
-        self.controllers[controller].alive_frozen = on
+        self._frozen[self._owner == self.controllers[controller].index] = on
 
     def send_raw(self, arbitration_id: int, data: bytes, is_extended_id: bool = False) -> None:
         """Put an arbitrary frame on the bus (wrong DLC, unknown id, ...)."""
@@ -135,83 +154,66 @@ class CanBenchEmulator:
         """Apply the waiting commands at their times and send every frame due up to now, in time order.
 
         A command that changes nothing (same set-points, controller running) only refreshes the command
-        time-out; the frames are then sent in whole segments between the commands that change something.
+        time-out (in one compiled pass); the frames are then sent in whole segments between the commands that
+        change something.
         """
         now = self.clock()
-        for owner, stamp, slot, row in self._commands():
-            # a command acts after the last frame already reported (a frame measured when it was sent is gone)
-            t = min(max(stamp or now, self._t + COMMAND_LATENCY_S), now)
-            ctrl = self.controllers.get(owner)
-            setpoints = [row[j] for j, _ in self._setpoint_columns[slot]]
-            if ctrl is not None and setpoints == self._taken[owner] and not self._timed_out(ctrl, t):
-                ctrl.last_cmd = t  # the same set-points again: only the command time-out starts anew
-                continue
-            values = {c: row[j] for j, c in enumerate(self._rx_table.codecs[slot].columns) if c is not None}
-            if self._changes(owner, values, t):
-                self._emit_until(t, inclusive=False)
-                self._take(owner, values, t)
-                self._apply(t)
-            elif ctrl is not None:
-                ctrl.last_cmd = t
-            if ctrl is not None:
-                self._taken[owner] = setpoints
+        which, stamps, values, valid = self._commands()
+        i = 0
+        while i < len(which):
+            i = _refresh_commands(which, stamps, values, valid, i, now, self._t + COMMAND_LATENCY_S, self._rx_controller,
+                                  self._setpoint, self._taken, self._last_cmd, self._enabled, self.command_timeout_s)
+            if i < len(which):
+                self._command(int(which[i]), float(stamps[i]), values[i], now)
+                i += 1
         self._emit_until(now, inclusive=True)
 
     def state(self, controller: str, t: float | None = None) -> tuple[int, int]:
         """(state, fault code) the controller reports at `t` (default: now)."""
-        t = self.clock() if t is None else t
-        ctrl = self.controllers[controller]
-        code = ctrl.injected_fault or (sig.FAULT_COMMAND_TIMEOUT if self._timed_out(ctrl, t) else 0)
-        if self.estop:
-            return sig.STATE_ESTOP, code
-        if code:
-            return sig.STATE_FAULT, code
-        return (sig.STATE_RUNNING if ctrl.setpoints.get(f"{controller}.enable") else sig.STATE_READY), 0
+        return self._state(self.controllers[controller].index, self.clock() if t is None else t)
 
     # -- internals -----------------------------------------------------------------------------------
-    def _deadline(self, ctrl: _Controller) -> float | None:
-        """When an enabled controller times out without a further command (None: it cannot)."""
-        if ctrl.last_cmd is None or not ctrl.setpoints.get(f"{ctrl.name}.enable"):
-            return None
-        return ctrl.last_cmd + self.command_timeout_s
+    def _state(self, c: int, t: float) -> tuple[int, int]:
+        return _status(t, self._fault[c], self._last_cmd[c], self._enabled[c], self.estop, self.command_timeout_s)
 
-    def _timed_out(self, ctrl: _Controller, t: float) -> bool:
-        deadline = self._deadline(ctrl)
-        return deadline is not None and t > deadline + 1e-9
+    def _timed_out(self, c: int, t: float) -> bool:
+        return _is_timed_out(t, self._last_cmd[c], self._enabled[c], self.command_timeout_s)
 
-    def _commands(self) -> list[tuple[str, float, int, list[float]]]:
-        """The waiting command frames in time order (stable), decoded in one pass: (owner, time stamp, command slot,
-        values by codec column); frames with an unknown id, a wrong length or id kind are counted as malformed."""
+    def _commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The waiting command frames in time order (stable), decoded in one pass: command slot, time stamp, values
+        by codec column, whether they decoded; frames with an unknown id, a wrong length or id kind are left out.
+        Every frame is counted as a command or as malformed."""
         frames = drain(self.bus)
-        if not len(frames):
-            return []
-        frames = pick(frames, np.argsort(frames["timestamp"], kind="stable"))
-        known = []
-        for i, (ident, flags, length) in enumerate(zip(frames["arbitration_id"].tolist(), frames["flags"].tolist(),
-                                                       frames["length"].tolist())):
-            slot, owner, codec = self._rx.get(ident, (-1, None, None))
-            if codec is None or length != codec.length or bool(flags & EXTENDED) != codec.message.is_extended_frame:
-                self.stats.malformed += 1
-                continue
-            known.append((i, slot, owner))
-        if not known:
-            return []
-        rows = np.array([i for i, _, _ in known])
-        which = np.array([slot for _, slot, _ in known])
-        values, valid = self._rx_table.decode(which, frames["data"].take(rows, axis=0))
-        self.stats.commands_ok += int(np.count_nonzero(valid))
-        self.stats.malformed += len(known) - int(np.count_nonzero(valid))
-        return [(owner, stamp, slot, row) for (_, slot, owner), stamp, row, ok
-                in zip(known, frames["timestamp"].take(rows).tolist(), values.tolist(), valid.tolist()) if ok]
+        which, stamps, payloads = _known_frames(frames, self._rx_id, self._rx_length, self._rx_extended,
+                                                self._rx_table.payload_bytes)
+        values, valid = self._rx_table.decode(which, payloads)
+        ok = int(np.count_nonzero(valid))
+        self.stats.commands_ok += ok
+        self.stats.malformed += len(frames) - ok
+        return which, stamps, values, valid
+
+    def _command(self, slot: int, stamp: float, row: np.ndarray, now: float) -> None:
+        """Take one command frame that may change something (see `_refresh_commands` for the ones that cannot)."""
+        # a command acts after the last frame already reported (a frame measured when it was sent is gone)
+        t = min(max(stamp or now, self._t + COMMAND_LATENCY_S), now)
+        owner = self._rx_owner[slot]
+        values = {c: v for c, v in zip(self._rx_table.codecs[slot].columns, row.tolist()) if c is not None}
+        ctrl = self.controllers.get(owner)
+        if self._changes(owner, values, t):
+            self._emit_until(t, inclusive=False)
+            self._take(owner, values, t)
+            self._apply(t)
+        elif ctrl is not None:
+            self._last_cmd[ctrl.index] = t
+        if ctrl is not None:
+            self._taken[ctrl.index] = row
 
     def _changes(self, owner: str, values: Mapping[str, float], t: float) -> bool:
         """Whether a command changes what the controllers do (set-points, time-out ending, emergency stop)."""
-        if owner == "pc":
-            return False
         if owner == "estop":
             return bool(values["estop.request"]) != self.estop
         ctrl = self.controllers[owner]
-        if ctrl.last_cmd is None or self._timed_out(ctrl, t):
+        if math.isnan(self._last_cmd[ctrl.index]) or self._timed_out(ctrl.index, t):
             return True
         return any(ctrl.setpoints.get(k) != v for k, v in values.items() if not k.endswith("alive"))
 
@@ -221,12 +223,13 @@ class CanBenchEmulator:
             return
         ctrl = self.controllers[owner]
         ctrl.setpoints.update(values)
-        ctrl.last_cmd = t
+        self._last_cmd[ctrl.index] = t
+        self._enabled[ctrl.index] = bool(ctrl.setpoints.get(f"{owner}.enable"))
 
     def _apply(self, t: float) -> None:
         """Set-points the controllers hold from `t` on (safe ones where not running)."""
         self.provider.advance(t)
-        sp = {name: (c.setpoints if self.state(name, t)[0] == sig.STATE_RUNNING else {})
+        sp = {name: (c.setpoints if self._state(c.index, t)[0] == sig.STATE_RUNNING else {})
               for name, c in self.controllers.items()}
         self.provider.set_drive_speed(sp["drive"].get("drive.speed_setpoint", 0.0))
         self.provider.set_clutch(sp["clutch"].get("clutch.torque_setpoint", 0.0),
@@ -236,9 +239,8 @@ class CanBenchEmulator:
     def _emit_until(self, t_end: float, inclusive: bool) -> None:
         """Send the frames due in [self._t, t_end) (or up to t_end inclusive), cut where a controller times out."""
         while True:
-            deadlines = (self._deadline(c) for c in self.controllers.values())
-            cut = min((d for d in deadlines if d is not None and self._t < d < t_end), default=None)
-            if cut is None:
+            cut = _first_deadline(self._last_cmd, self._enabled, self.command_timeout_s, self._t, t_end)
+            if math.isnan(cut):
                 self._emit_segment(t_end, inclusive)
                 return
             self._emit_segment(cut, True)
@@ -246,62 +248,137 @@ class CanBenchEmulator:
 
     def _emit_segment(self, t_end: float, inclusive: bool) -> None:
         """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now."""
-        eps = 1e-9 if inclusive else -1e-9
-        plan: list[tuple[_Controller, str, int, int]] = []  # controller, message (its alive key), cycles k0 ≤ k < k1
-        for ctrl in self.controllers.values():
-            for key in (f"{ctrl.name}.alive", f"{ctrl.name}.hb_alive"):
-                k0 = ctrl.sent_cycles[key]
-                k1 = math.floor((t_end + eps - self.origin) / self._cycle[key]) + 1
-                if k1 > k0:
-                    if not ctrl.silent:
-                        plan.append((ctrl, key, k0, k1))
-                    ctrl.sent_cycles[key] = k1
+        item, local, stamps, times, row, status, count = _due_frames(
+            self._sent_cycles, self._silent, t_end, 1e-9 if inclusive else -1e-9, self.origin, self._cycle,
+            self._frame_id, self._owner, self._fault, self._last_cmd, self._enabled, self.estop, self.command_timeout_s)
         self._t = max(self._t, t_end)
-        if not plan:
+        if not len(item):
             return
-        slots = np.array([self._slot[key] for _, key, _, _ in plan])
-        item, local, stamps, times, row = _due_frames(
-            np.array([k0 for _, _, k0, _ in plan]), np.array([k1 - k0 for _, _, k0, k1 in plan]),
-            np.array([self._cycle[key] for _, key, _, _ in plan]), self._frame_id.take(slots), self.origin)
         actuals = self.provider.actuals_at(times)
-        constant = np.zeros((len(plan), self._table.width))  # state, fault code, heartbeat state per message
-        start, frozen, modulo = [], [], []
-        for p, (ctrl, key, k0, k1) in enumerate(plan):
-            state, code = self.state(ctrl.name, self.origin + k0 * self._cycle[key])
-            column = self._column[self._slot[key]]
-            for name, value in ((f"{ctrl.name}.state", state), (f"{ctrl.name}.fault_code", code),
-                                (f"{ctrl.name}.hb_state", state)):
-                if name in column:
-                    constant[p, column[name]] = value
-            start.append(ctrl.alive[key])
-            frozen.append(ctrl.alive_frozen)
-            modulo.append(self._modulo[key])
-            if not ctrl.alive_frozen:
-                ctrl.alive[key] = (ctrl.alive[key] + k1 - k0) % self._modulo[key]
-        values = _frame_values(item, local, row, np.array([getattr(actuals, name) for name in _ACTUALS]),
-                               self._source.take(slots, axis=0), constant, self._alive_col.take(slots),
-                               np.array(start), np.array(frozen), np.array(modulo))
-        slot = slots.take(item)
-        frames = make_frames(stamps, self._frame_id.take(slot), self._table.encode(slot, values),
-                             self._length.take(slot), extended=self._extended.take(slot))
+        frames, values = _frames(item, local, row, stamps, np.array([getattr(actuals, name) for name in _ACTUALS]),
+                                 self._source, self._status_source, status, self._alive_col, self._alive,
+                                 self._frozen, self._modulo, count, self._template, np.empty(len(item), FRAME),
+                                 self._table.bits, self._table.linear, self._table.compiled)
+        if not self._table.compiled.all():  # messages the compiled loop cannot encode
+            frames["data"][:, :self._table.payload_bytes] = self._table.encode(item, values)
         self.stats.sent += int(np.count_nonzero(send_all(self.bus, frames)))
 
 
 @njit(cache=True, nogil=True)
-def _due_frames(first: np.ndarray, count: np.ndarray, cycle: np.ndarray, frame_id: np.ndarray,
-                origin: float) -> tuple:  # pragma: no cover - compiled
-    """The frames of messages p = 0.. due at origin + (first[p] + l)·cycle[p], l < count[p], merged in time order
-    (ties by frame id): each frame's message p and number l, its time; the distinct times, each frame's among them."""
+def _is_timed_out(t: float, last_cmd: float, enabled: bool, timeout: float) -> bool:  # pragma: no cover - compiled
+    """Whether an enabled controller whose last command came at `last_cmd` (NaN: none) has timed out at `t`."""
+    return enabled and not math.isnan(last_cmd) and t > last_cmd + timeout + 1e-9
+
+
+@njit(cache=True, nogil=True)
+def _status(t: float, fault: int, last_cmd: float, enabled: bool, estop: bool,
+            timeout: float) -> tuple:  # pragma: no cover - compiled
+    """(state, fault code) a controller reports at `t`: emergency stop, else an injected fault or the command
+    time-out, else running while enabled, else ready."""
+    code = fault if fault else (sig.FAULT_COMMAND_TIMEOUT if _is_timed_out(t, last_cmd, enabled, timeout) else 0)
+    if estop:
+        return sig.STATE_ESTOP, code
+    if code:
+        return sig.STATE_FAULT, code
+    return (sig.STATE_RUNNING if enabled else sig.STATE_READY), 0
+
+
+@njit(cache=True, nogil=True)
+def _first_deadline(last_cmd: np.ndarray, enabled: np.ndarray, timeout: float, after: float,
+                    before: float) -> float:  # pragma: no cover - compiled
+    """The earliest instant strictly between `after` and `before` at which an enabled controller times out without
+    a further command (NaN: none)."""
+    cut = math.nan
+    for c in range(last_cmd.shape[0]):
+        if enabled[c] and not math.isnan(last_cmd[c]):
+            d = last_cmd[c] + timeout
+            if after < d < before and (math.isnan(cut) or d < cut):
+                cut = d
+    return cut
+
+
+@njit(cache=True, nogil=True)
+def _known_frames(frames: np.ndarray, rx_id: np.ndarray, rx_length: np.ndarray, rx_extended: np.ndarray,
+                  width: int) -> tuple:  # pragma: no cover - compiled
+    """The FRAME records of known command messages (id, length and id kind of a slot) in time order (stable):
+    each one's slot, time stamp and first `width` data bytes."""
+    n = frames.shape[0]
+    order = np.arange(n)
+    for i in range(1, n):  # insertion sort: stable, and the frames come (nearly) in order
+        j = i
+        while j > 0 and frames[order[j - 1]].timestamp > frames[order[j]].timestamp:
+            order[j - 1], order[j] = order[j], order[j - 1]
+            j -= 1
+    which, stamps = np.empty(n, dtype=np.int64), np.empty(n)
+    payloads = np.zeros((n, width), dtype=np.uint8)
+    k = 0
+    for i in order:
+        f = frames[i]
+        for s in range(rx_id.shape[0]):
+            if (f.arbitration_id == rx_id[s] and f.length == rx_length[s]
+                    and ((f.flags & EXTENDED) != 0) == rx_extended[s]):
+                which[k], stamps[k] = s, f.timestamp
+                for b in range(min(width, f.data.shape[0])):
+                    payloads[k, b] = f.data[b]
+                k += 1
+                break
+    return which[:k], stamps[:k], payloads[:k]
+
+
+@njit(cache=True, nogil=True)
+def _refresh_commands(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, valid: np.ndarray, start: int,
+                      now: float, earliest: float, controller: np.ndarray, setpoint: np.ndarray, taken: np.ndarray,
+                      last_cmd: np.ndarray, enabled: np.ndarray, timeout: float) -> int:  # pragma: no cover
+    """From command `start` on, take the commands that only refresh a controller's time-out (the set-points it last
+    took again, not timed out: last_cmd = the command's time) and skip the ones nobody acts on (not decoded, the
+    PC's heartbeat); stop at the first other one and return its index (len(which): none left)."""
+    for i in range(start, which.shape[0]):
+        c = controller[which[i]]
+        if not valid[i] or c == _IGNORED:
+            continue
+        if c < 0:
+            return i
+        t = min(max(stamps[i] if stamps[i] != 0.0 else now, earliest), now)
+        if _is_timed_out(t, last_cmd[c], enabled[c], timeout):
+            return i
+        for j in range(values.shape[1]):
+            if setpoint[which[i], j] and not values[i, j] == taken[c, j]:
+                return i
+        last_cmd[c] = t
+    return which.shape[0]
+
+
+@njit(cache=True, nogil=True)
+def _due_frames(sent_cycles: np.ndarray, silent: np.ndarray, t_end: float, eps: float, origin: float,
+                cycle: np.ndarray, frame_id: np.ndarray, owner: np.ndarray, fault: np.ndarray, last_cmd: np.ndarray,
+                enabled: np.ndarray, estop: bool, timeout: float) -> tuple:  # pragma: no cover - compiled
+    """The frames of messages p falling due at origin + k·cycle[p] from k = sent_cycles[p] up to t_end + eps,
+    merged in time order (ties by frame id); sent_cycles moves on past them (silenced messages' frames too, but
+    they are not returned). Returns each frame's message p, its number l among p's frames, its time; the distinct
+    times and each frame's among them; per message the (state, fault code) of its controller (`owner`) at its
+    first frame and the number of its frames."""
+    m = sent_cycles.shape[0]
+    status, count = np.zeros((2, m)), np.zeros(m, dtype=np.int64)
+    for p in range(m):
+        k1 = int(np.floor((t_end + eps - origin) / cycle[p])) + 1
+        k0 = sent_cycles[p]
+        if k1 > k0:
+            if not silent[p]:
+                count[p] = k1 - k0
+                c = owner[p]
+                status[0, p], status[1, p] = _status(origin + k0 * cycle[p], fault[c], last_cmd[c], enabled[c], estop,
+                                                     timeout)
+            sent_cycles[p] = k1
     n = count.sum()
     item, local = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
     stamps, times, row = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
-    taken = np.zeros(count.shape[0], dtype=np.int64)
+    taken = np.zeros(m, dtype=np.int64)
     distinct = 0
     for k in range(n):
         best, best_t = -1, 0.0
-        for p in range(count.shape[0]):
+        for p in range(m):
             if taken[p] < count[p]:
-                t = origin + (first[p] + taken[p]) * cycle[p]
+                t = origin + (sent_cycles[p] - count[p] + taken[p]) * cycle[p]
                 if best < 0 or t < best_t or (t == best_t and frame_id[p] < frame_id[best]):
                     best, best_t = p, t
         item[k], local[k], stamps[k] = best, taken[best], best_t
@@ -310,19 +387,38 @@ def _due_frames(first: np.ndarray, count: np.ndarray, cycle: np.ndarray, frame_i
             times[distinct] = best_t
             distinct += 1
         row[k] = distinct - 1
-    return item, local, stamps, times[:distinct].copy(), row
+    return item, local, stamps, times[:distinct].copy(), row, status, count
 
 
 @njit(cache=True, nogil=True)
-def _frame_values(item: np.ndarray, local: np.ndarray, row: np.ndarray, measured: np.ndarray, source: np.ndarray,
-                  constant: np.ndarray, alive_col: np.ndarray, start: np.ndarray, frozen: np.ndarray,
-                  modulo: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """Each frame's signal values: a measured actual (source ≥ 0, at the frame's time `row`) or its message's
-    constant, and the alive counter counting on from `start` (held while frozen)."""
-    values = np.empty((item.shape[0], source.shape[1]))
-    for k in range(item.shape[0]):
+def _frames(item: np.ndarray, local: np.ndarray, row: np.ndarray, stamps: np.ndarray, measured: np.ndarray,
+            source: np.ndarray, status_source: np.ndarray, status: np.ndarray, alive_col: np.ndarray,
+            alive: np.ndarray, frozen: np.ndarray, modulo: np.ndarray, count: np.ndarray, template: np.ndarray,
+            frames: np.ndarray, bits: np.ndarray, linear: np.ndarray, compiled: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """Each frame into `frames` (its message's `template` at its time stamp) and its signal values: a measured actual (source ≥ 0,
+    at the frame's time `row`), its message's state or fault code (status_source ≥ 0) or 0, and the alive counter
+    counting on from `alive` (held while frozen), encoded by the codec table layout (bits, linear, compiled);
+    `alive` then moves on past each message's `count` frames."""
+    n = item.shape[0]
+    values = np.empty((n, source.shape[1]))
+    for k in range(n):
         p = item[k]
+        frames[k] = template[p]
+        frames[k].timestamp = stamps[k]
         for j in range(source.shape[1]):
-            values[k, j] = measured[source[p, j], row[k]] if source[p, j] >= 0 else constant[p, j]
-        values[k, alive_col[p]] = start[p] if frozen[p] else (start[p] + 1 + local[k]) % modulo[p]
-    return values
+            if source[p, j] >= 0:
+                values[k, j] = measured[source[p, j], row[k]]
+            elif status_source[p, j] >= 0:
+                values[k, j] = status[status_source[p, j], p]
+            else:
+                values[k, j] = 0.0
+        values[k, alive_col[p]] = alive[p] if frozen[p] else (alive[p] + 1 + local[k]) % modulo[p]
+    payloads = np.zeros((n, 8), dtype=np.uint8)
+    encode_rows(item, values, bits, linear, compiled, payloads)
+    for k in range(n):
+        for b in range(8):
+            frames[k].data[b] = payloads[k, b]
+    for p in range(alive.shape[0]):
+        if count[p] and not frozen[p]:
+            alive[p] = (alive[p] + count[p]) % modulo[p]
+    return frames, values
