@@ -19,7 +19,7 @@ import pytest
 
 from benchlab.runfile import load_run
 from benchlab.drivetrain import friction_power
-from benchlab.runner.devices import BenchStatus, _held_status
+from benchlab.runner.devices import BenchStatus
 from benchlab.runner.session import RunRequest, execute
 from drivers.can_bench import CanBlock
 from drivers.can_signals import CLAMP_OPEN, CLAMP_SLIPPING
@@ -214,7 +214,7 @@ def _frame_by_frame(st: BenchStatus, t: float, values: dict, gear: float) -> Non
 
 def test_friction_energy_of_a_polls_frames_in_bulk_equals_frame_by_frame():
     """Status frames of the three controllers, interleaved, some late (older than a frame already taken), over
-    many polls: BenchStatus.take_frames on the merged blocks gives the energy and values of taking each frame in
+    many polls: BenchStatus.take_status on the blocks gives the energy and values of taking each frame in
     the order received."""
     rng = np.random.default_rng(5)
     signals = {"drive": ("drive.speed",), "clutch": ("clutch.torque", "clutch.clamp_state"), "load": ("load.speed",)}
@@ -244,7 +244,7 @@ def test_friction_energy_of_a_polls_frames_in_bulk_equals_frame_by_frame():
                 frames += [(i, times[i], dict(zip(keys, row))) for i, row in zip(index, matrix.tolist())]
             for _, t, values in sorted(frames, key=lambda f: f[0]):
                 _frame_by_frame(reference, t, values, 15.0)
-            bulk.take_frames(*_held_status(blocks, bulk, 15.0))
+            bulk.take_status(blocks, 15.0)
             for name in ("engine_speed", "clutch_speed", "clutch_torque", "clamp_state", "friction_power", "t_frame"):
                 a, b = getattr(bulk, name), getattr(reference, name)
                 assert a == b or (math.isnan(a) and math.isnan(b)), name

@@ -14,10 +14,10 @@ from __future__ import annotations
 import functools
 import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -30,6 +30,9 @@ from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_S
 from drivers.clutch_node import SENSOR_STATUSES
 from drivers.errors import CanLogError, ConnectionLost, DriverError
 from protocols.limits import BenchLimits
+
+if TYPE_CHECKING:
+    from drivers.can_bench import CanBlock
 
 STATUS_CODES = {"ok": 0.0, "open": 1.0, "short": 2.0, "range": 3.0, "fault": 4.0}
 _NODE_STATUS_CODES = np.array([STATUS_CODES[s] for s in SENSOR_STATUSES])  # NodeBlock.status → stored code
@@ -111,17 +114,22 @@ class BenchStatus:
         if t > self.seen.get(channel, -math.inf):
             self.seen[channel] = t
 
-    def take_frames(self, t: np.ndarray, engine_rpm: np.ndarray, clutch_rpm: np.ndarray, torque_nm: np.ndarray,
-                    clamp_state: np.ndarray) -> None:
-        """Status frames in the order received, at run times `t`, with the values held after each: the energy up to
-        each frame at the power held before it (a frame older than the newest adds none), then the newest values."""
-        power = friction_power(torque_nm, engine_rpm, clutch_rpm, actuator_slipping(clamp_state))
-        power[np.isnan(power)] = 0.0  # unknown (NaN) counts as no power
-        energy, self.t_frame = _energy_at_frames(t, power, self.t_frame, self.friction_power)
+    def take_status(self, blocks: "Sequence[CanBlock]", gear_ratio: float) -> None:
+        """The status blocks of one CAN receive (at most one per controller), their frames taken in the order received:
+        the energy up to each frame at the power held before it (a frame older than the newest adds none), the values
+        held after each, the newest values, and when each status channel was last valid (`mark_seen`)."""
+        held = np.array([self.engine_speed, self.clutch_speed, self.clutch_torque, float(self.clamp_state),
+                         self.friction_power, self.t_frame, 0.0] + [math.nan] * len(_STATUS_HELD))
+        parts = [_NO_STATUS_BLOCK] * len(_STATUS_BLOCK_ORDER)
+        for b in blocks:
+            parts[_STATUS_BLOCK_ORDER[b.controller]] = (b.index, b.t, b.matrix, _held_columns(b.keys))
+        _take_status_frames(*parts[0], *parts[1], *parts[2], held, gear_ratio, CLAMP_SLIPPING)
+        engine, clutch, torque, clamp, self.friction_power, self.t_frame, energy, *seen = held.tolist()
+        self.engine_speed, self.clutch_speed, self.clutch_torque, self.clamp_state = engine, clutch, torque, int(clamp)
         self.friction_energy_j += energy
-        self.engine_speed, self.clutch_speed = float(engine_rpm[-1]), float(clutch_rpm[-1])
-        self.clutch_torque, self.clamp_state = float(torque_nm[-1]), int(clamp_state[-1])
-        self.friction_power = float(power[-1])
+        for channel, t in zip(_SEEN_CHANNELS, seen):
+            if t == t:  # not NaN: the channel had a valid value in this receive
+                self.mark_seen(channel, t)
 
 
 def actuator_slipping(clamp_state: np.ndarray) -> np.ndarray:
@@ -142,63 +150,55 @@ _CAN_STREAMS = {
                  ("state", "load.state", "1"), ("fault_code", "load.fault_code", "1")),
 }
 _CAN_KEYS = {stream: tuple(key for _, key, _ in cols) for stream, cols in _CAN_STREAMS.items()}
-_SEEN_FROM = {"drive": ("drive.speed", "engine_speed"), "load": ("load.speed", "clutch_speed"),
-              "clutch": ("clutch.torque", "clutch_torque")}  # status message's controller -> (signal, channel)
 _STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_load"}
 
 
 _STATUS_HELD = ("drive.speed", "load.speed", "clutch.torque", "clutch.clamp_state")  # what BenchStatus holds
+_SEEN_CHANNELS = ("engine_speed", "clutch_speed", "clutch_torque")  # the stale-reading channel of each held value
+_STATUS_BLOCK_ORDER = {"drive": 0, "clutch": 1, "load": 2}  # the kernel's argument group of each status message
+_NO_STATUS_BLOCK = (np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros((0, 1)), np.full(len(_STATUS_HELD), -1))
+_friction_power = njit(cache=True, nogil=True)(friction_power)  # the one formula, compiled for the kernel below
 
 
-def _held_status(blocks: list[Any], st: BenchStatus, gear_ratio: float) -> tuple[np.ndarray, ...]:
-    """The status frames of one CAN receive (drivers.can_bench.CanBlock) merged in the order received: their times,
-    and engine speed, clutch speed, clutch torque and clamp state as held after each frame (`st`'s before any)."""
-    sizes = [len(b.t) for b in blocks]
-    given = np.empty((sum(sizes), len(_STATUS_HELD)))
-    carries = np.zeros((len(blocks), len(_STATUS_HELD)), dtype=bool)  # which block brings which value
-    a = 0
-    for k, (b, size) in enumerate(zip(blocks, sizes)):
-        for j, key in enumerate(_STATUS_HELD):
-            if key in b.keys:
-                column = b.matrix[:, b.keys.index(key)]
-                given[a:a + size, j] = column * gear_ratio if key == "load.speed" else column
-                carries[k, j] = True
-        a += size
-    order = np.argsort(np.concatenate([b.index for b in blocks]), kind="stable")
-    start = np.array([st.engine_speed, st.clutch_speed, st.clutch_torque, float(st.clamp_state)])
-    held = _hold_forward(order, np.repeat(np.arange(len(blocks)), sizes), carries, given, start)
-    return (np.concatenate([b.t for b in blocks]).take(order), *held.T)
+@functools.lru_cache(maxsize=32)
+def _held_columns(keys: tuple[str, ...]) -> np.ndarray:
+    """Per held status value (_STATUS_HELD) its column in a block with these keys, -1 where the block has none."""
+    return np.array([keys.index(k) if k in keys else -1 for k in _STATUS_HELD], dtype=np.int64)
 
 
 @njit(cache=True, nogil=True)
-def _hold_forward(order: np.ndarray, block: np.ndarray, carries: np.ndarray, given: np.ndarray,
-                  start: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """Values held after each frame, frames taken in `order`: frame i brings given[i, j] where its block carries j."""
-    held = np.empty((order.shape[0], start.shape[0]))
-    current = start.copy()
-    for k in range(order.shape[0]):
-        i = order[k]
-        for j in range(start.shape[0]):
-            if carries[block[i], j]:
-                current[j] = given[i, j]
-            held[k, j] = current[j]
-    return held
-
-
-@njit(cache=True, nogil=True)
-def _energy_at_frames(t: np.ndarray, power: np.ndarray, t_frame: float,
-                      power_before: float) -> tuple[float, float]:  # pragma: no cover - compiled
-    """Σ power held × time to each frame from the newest frame before it (frames in the order received, a frame
-    older than the newest adds nothing); returns (energy, newest frame time). `t_frame` NaN: no frame before."""
-    energy = 0.0
-    for i in range(t.shape[0]):
-        if t[i] > t_frame:
-            energy += power_before * (t[i] - t_frame)
-            t_frame = t[i]
-        elif np.isnan(t_frame):
-            t_frame = t[i]
-        power_before = power[i]
-    return energy, t_frame
+def _take_status_frames(index0: np.ndarray, t0: np.ndarray, values0: np.ndarray, columns0: np.ndarray,
+                        index1: np.ndarray, t1: np.ndarray, values1: np.ndarray, columns1: np.ndarray,
+                        index2: np.ndarray, t2: np.ndarray, values2: np.ndarray, columns2: np.ndarray,
+                        held: np.ndarray, gear_ratio: float, slipping_state: int) -> None:  # pragma: no cover
+    """Three status blocks' frames merged by arrival position and taken one by one. `held` (in/out): the four held
+    values (_STATUS_HELD; clutch speed = load speed × gear ratio), friction power, newest frame time (NaN: none),
+    then out: the energy added, and per held value its newest valid frame time (NaN: none)."""
+    n = index0.shape[0] + index1.shape[0] + index2.shape[0]
+    at = np.zeros(3, dtype=np.int64)
+    for _ in range(n):
+        b, best = -1, 0
+        for k, index in enumerate((index0, index1, index2)):
+            if at[k] < index.shape[0] and (b < 0 or index[at[k]] < best):
+                b, best = k, index[at[k]]
+        t, values, columns = (t0, values0, columns0) if b == 0 else (t1, values1, columns1) if b == 1 \
+            else (t2, values2, columns2)
+        i = at[b]
+        at[b] += 1
+        for j in range(4):
+            if columns[j] >= 0:
+                value = values[i, columns[j]]
+                held[j] = value * gear_ratio if j == 1 else value
+                if np.isfinite(value) and not held[7 + j] >= t[i]:
+                    held[7 + j] = t[i]
+        if t[i] > held[5]:
+            held[6] += held[4] * (t[i] - held[5])
+            held[5] = t[i]
+        elif np.isnan(held[5]):
+            held[5] = t[i]
+        slipping = np.nan if np.isnan(held[3]) else (1.0 if held[3] == slipping_state else 0.0)
+        power = _friction_power(held[2], held[0], held[1], slipping)
+        held[4] = 0.0 if np.isnan(power) else power  # unknown (NaN) counts as no power
 
 
 def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -460,12 +460,7 @@ class DriverBench:
             stream = _STATUS_MESSAGE[b.controller]
             self.readings.append((stream, b.t, b.columns(_CAN_KEYS[stream])))
         if status:
-            st.take_frames(*_held_status(status, st, self.config.drivetrain.gear_ratio))
-        for b in status:  # the stale-reading interlocks: the newest valid value of each status channel
-            key, channel = _SEEN_FROM[b.controller]
-            valid = np.isfinite(b.matrix[:, b.keys.index(key)])
-            if valid.any():
-                st.mark_seen(channel, float(b.t[valid].max()))
+            st.take_status(status, self.config.drivetrain.gear_ratio)
         for ev in self.can.pop_events():
             self.events.append((ev.t, f"controller_{ev.kind}", f"{ev.controller}: {ev.detail}"))
         st.controllers_bad = {**{c: "silent" for c in self.can.silent}, **{c: "fault" for c in self.can.faulted}}
