@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from drivers import can_signals as sig
-from drivers.can_codec import CodecTable, MessageCodec, compile_codecs, decode_row
+from drivers.can_codec import CodecTable, MessageCodec, compile_codecs, decode_row, encode_rows
 from drivers.can_frames import (ERROR, EXTENDED, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
                                 send_all)
 from drivers.can_log import log_frames
@@ -120,27 +120,14 @@ class _Rx:
     last_seen: float
 
 
-@dataclass(slots=True)
+@dataclass(frozen=True, slots=True)
 class _Tx:
-    """A message the PC sends: its current values (logical keys), alive key and cyclic schedule."""
+    """A message the PC sends: its codec, alive key and cycle time (0: sent only when a set-point changes)."""
 
     codec: MessageCodec
-    values: dict[str, float]
     alive_key: str | None
     alive_modulo: int
     cycle_s: float
-    origin: float
-    cycles: int = 0  # cyclic frames due so far: the next falls due at origin + cycles * cycle_s
-
-    @property
-    def next_due(self) -> float:
-        return self.origin + self.cycles * self.cycle_s
-
-    def due_until(self, t: float) -> np.ndarray:
-        """Times of the cycles due from `next_due` up to `t` (inclusive), each computed as `next_due` computes it."""
-        first = self.cycles + np.arange(max(int((t - self.next_due) // self.cycle_s) + 2, 1))
-        times = self.origin + first * self.cycle_s
-        return times[times <= t]
 
 
 class _RxTable:
@@ -180,15 +167,29 @@ class _RxTable:
 
 
 class _TxTable:
-    """The messages the PC sends as arrays for the bulk send: codec table, ids, lengths, each one's value columns."""
+    """The messages the PC sends as arrays for the compiled send: codec table, ids, lengths, each one's current values
+    (by codec column, alive counters included) and cyclic schedule (the next frame of slot m falls due at
+    origin[m] + cycles[m] × cycle[m]; `cyclic` says which slots repeat now)."""
 
-    def __init__(self, tx: list[_Tx]) -> None:
-        self.slot = {id(t): i for i, t in enumerate(tx)}
+    def __init__(self, tx: list[_Tx], now: float) -> None:
         self.codecs = CodecTable([t.codec for t in tx])
-        self.columns = [tuple(t.codec.columns) + (None,) * (self.codecs.width - len(t.codec.columns)) for t in tx]
+        columns = [tuple(t.codec.columns) for t in tx]
+        self.column_of = {key: (m, j) for m, cols in enumerate(columns) for j, key in enumerate(cols) if key is not None}
         self.frame_id = np.array([t.codec.message.frame_id for t in tx], dtype=np.int64)
         self.length = np.array([t.codec.length for t in tx], dtype=np.int64)
         self.extended = np.array([t.codec.message.is_extended_frame for t in tx], dtype=bool)
+        self.values = np.zeros((len(tx), self.codecs.width))
+        self.alive_col = np.array([-1 if t.alive_key is None else cols.index(t.alive_key)
+                                   for t, cols in zip(tx, columns)], dtype=np.int64)
+        self.alive_modulo = np.array([max(t.alive_modulo, 1) for t in tx], dtype=np.int64)
+        self.cycle = np.array([t.cycle_s for t in tx])
+        self.origin = np.full(len(tx), now)
+        self.cycles = np.zeros(len(tx), dtype=np.int64)
+        self.cyclic = self.cycle > 0
+        # each message's frame with everything but time stamp and data (make_frames' flags, length, channel)
+        self.template = make_frames(np.zeros(len(tx)), self.frame_id,
+                                    np.zeros((len(tx), self.codecs.payload_bytes), dtype=np.uint8), self.length,
+                                    extended=self.extended, rx=False)
 
 
 class CanBench:
@@ -215,10 +216,13 @@ class CanBench:
         self._to_log: list[np.ndarray] = []  # FRAME arrays sent and received, in order
         self._log_synced = -math.inf
         now = clock()
-        self._rx, self._tx = self._compile(signals, silent_cycles, now)
+        self._rx, sent = self._compile(signals, silent_cycles, now)
         self._rx_table = _RxTable(list(self._rx.values()), list(self._rx))
-        self._tx_of = {key: tx for tx in self._tx.values() for key in tx.codec.names.values()}
-        self._tx_table = _TxTable(list(self._tx.values()))
+        self._tx_table = _TxTable(sent, now)
+        self._estop_slot = self._tx_table.column_of["estop.request"][0] if "estop.request" in self._tx_table.column_of \
+            else -1
+        if self._estop_slot >= 0:
+            self._tx_table.cyclic[self._estop_slot] = False  # repeated only while an emergency stop is active
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any], **kwargs: Any) -> "CanBench":
@@ -254,14 +258,16 @@ class CanBench:
     def emergency_stop(self, source: int = sig.ESTOP_SOURCE_PC) -> None:
         """Send the emergency stop now and repeat it every cycle until `release_emergency_stop()`."""
         self.estop_active = True
-        tx = self._tx_of["estop.request"]
-        tx.origin, tx.cycles = self.clock() + tx.cycle_s, 0
+        table, m = self._tx_table, self._estop_slot
+        table.origin[m], table.cycles[m] = self.clock() + table.cycle[m], 0
+        table.cyclic[m] = table.cycle[m] > 0
         self._set({"estop.request": 1, "estop.source": source})
 
     def release_emergency_stop(self) -> None:
         """Send one emergency-stop release and stop repeating it."""
         self._set({"estop.request": 0})
         self.estop_active = False
+        self._tx_table.cyclic[self._estop_slot] = False
 
     # -- the bus -----------------------------------------------------------------------------------
     def poll(self) -> list[CanSample]:
@@ -270,23 +276,15 @@ class CanBench:
         return self.receive()
 
     def send_due(self) -> None:
-        """Send every cyclic frame that fell due up to now, each stamped with its due time (not listen-only)."""
+        """Send every cyclic frame that fell due up to now, each stamped with its due time (not listen-only); a frame
+        more than MAX_CATCH_UP_S late is skipped."""
         if self.listen_only:
             return
-        now = self.clock()
-        due: list[tuple[_Tx, np.ndarray]] = []
-        for tx in self._tx.values():
-            if not tx.cycle_s or (tx is self._tx_of.get("estop.request") and not self.estop_active):
-                continue
-            if now - tx.next_due > MAX_CATCH_UP_S:
-                skipped = int((now - tx.next_due) // tx.cycle_s)
-                tx.cycles += skipped
-                self.stats.late_skipped += skipped
-            if tx.next_due <= now + 1e-9:
-                stamps = tx.due_until(now + 1e-9)
-                due.append((tx, np.minimum(stamps, now)))
-                tx.cycles += len(stamps)
-        self._send(due)
+        table = self._tx_table
+        which, stamps, skipped = _due_cyclic(self.clock(), table.origin, table.cycles, table.cycle, table.cyclic,
+                                             MAX_CATCH_UP_S)
+        self.stats.late_skipped += skipped
+        self._send(which, stamps)
 
     def receive(self) -> list[CanSample]:
         """Every waiting frame at its own time, decoded and watched, one CanSample per frame in arrival order."""
@@ -393,9 +391,9 @@ class CanBench:
         slot[rows[~valid]] = DECODE_ERROR
 
     def _compile(self, signals: Mapping[str, tuple[str, str]], silent_cycles: float,
-                 now: float) -> tuple[dict[tuple[int, bool], _Rx], dict[str, _Tx]]:
+                 now: float) -> tuple[dict[tuple[int, bool], _Rx], list[_Tx]]:
         rx: dict[tuple[int, bool], _Rx] = {}
-        tx: dict[str, _Tx] = {}
+        tx: list[_Tx] = []
         for name, codec in compile_codecs(self.db, signals).items():
             message, keys = codec.message, {key: signal for signal, key in codec.names.items()}
             alive = next((k for k in keys if k.endswith("alive")), None)
@@ -404,7 +402,7 @@ class CanBench:
             controller = next(iter(keys)).split(".")[0]
             sent_by_pc = all(k in sig.TX_KEYS for k in keys)
             if sent_by_pc:
-                tx[name] = _Tx(codec, dict.fromkeys(keys, 0.0), alive, modulo, cycle_s, now)
+                tx.append(_Tx(codec, alive, modulo, cycle_s))
             if controller == "estop" or not sent_by_pc:
                 timeout = cycle_s * silent_cycles if cycle_s and controller != "estop" else None
                 fault, state = f"{controller}.fault_code", f"{controller}.state"
@@ -416,37 +414,26 @@ class CanBench:
     def _set(self, updates: Mapping[str, float]) -> None:
         if self.listen_only:
             raise CanConfigError("CanBench was opened listen-only; it sends nothing")
-        touched = {}
+        table, touched = self._tx_table, {}
         for key, value in updates.items():
-            tx = self._tx_of[key]
-            tx.values[key] = value
-            touched[id(tx)] = tx
-        now = np.array([self.clock()])
-        self._send([(tx, now) for tx in touched.values()])
+            m, j = table.column_of[key]
+            table.values[m, j] = value
+            touched[m] = None
+        self._send(np.array(list(touched), dtype=np.int64), np.full(len(touched), self.clock()))
 
-    def _send(self, due: list[tuple[_Tx, np.ndarray]]) -> None:
-        """Per message of `due` one frame at each of its run times, with the message's values and its alive counter
-        one on per frame: encoded in one pass, sent as one array (drivers/can_frames.py: one python-can message per
-        frame on a bus without bulk sending), the frames that went out logged."""
-        if not due:
+    def _send(self, which: np.ndarray, stamps: np.ndarray) -> None:
+        """One frame of message slot which[i] at run time stamps[i] each, with the message's values and its alive
+        counter one on per frame: encoded in one pass, sent as one array (drivers/can_frames.py: one python-can message
+        per frame on a bus without bulk sending), the frames that went out logged."""
+        if not len(which):
             return
-        table = self._tx_table
-        counts = [len(times) for _, times in due]
-        which = np.repeat([table.slot[id(tx)] for tx, _ in due], counts)
-        rows = np.repeat([[tx.values.get(key, 0.0) for key in table.columns[table.slot[id(tx)]]] for tx, _ in due],
-                         counts, axis=0)
-        a = 0
-        for (tx, _), count in zip(due, counts):
-            if tx.alive_key is not None:
-                alive = (int(tx.values[tx.alive_key]) + 1 + np.arange(count)) % tx.alive_modulo
-                rows[a:a + count, table.columns[table.slot[id(tx)]].index(tx.alive_key)] = alive
-                tx.values[tx.alive_key] = int(alive[-1])
-            a += count
-        stamps = np.concatenate([times for _, times in due])
+        table, codecs = self._tx_table, self._tx_table.codecs
+        frames, rows = _next_frames(which, stamps, table.values, table.alive_col, table.alive_modulo, table.template,
+                                    codecs.bits, codecs.linear, codecs.compiled)
+        if not codecs.compiled.all():  # messages the compiled loop cannot encode
+            frames["data"][:, :codecs.payload_bytes] = codecs.encode(which, rows)
         if self.timestamps == "interface" and not math.isnan(self.clock_map.offset):
-            stamps = stamps - self.clock_map.offset  # in the bus's time base, as logged (ClockMap.to_device)
-        frames = make_frames(stamps, table.frame_id.take(which), table.codecs.encode(which, rows),
-                             table.length.take(which), extended=table.extended.take(which), rx=False)
+            frames["timestamp"] -= self.clock_map.offset  # in the bus's time base, as logged (ClockMap.to_device)
         sent = send_all(self.bus, frames)
         count = int(np.count_nonzero(sent))
         self.stats.sent += count
@@ -629,3 +616,54 @@ def _watch(slot: np.ndarray, values: np.ndarray, meta: np.ndarray, alive: np.nda
                 fault_change[k] = 1 if now_faulted else -1
                 faulted[meta[m, OWNER]] = now_faulted
     return order, starts, alive_wrong, alive_before, fault_change, undecoded
+
+
+@njit(cache=True, nogil=True)
+def _due_cyclic(now: float, origin: np.ndarray, cycles: np.ndarray, cycle: np.ndarray, cyclic: np.ndarray,
+                max_catch_up: float) -> tuple:  # pragma: no cover - compiled
+    """The cyclic frames due up to `now` (+1 ns): per slot in slot order, each at its due time (at most `now`);
+    frames more than `max_catch_up` late are skipped. Advances `cycles`; returns (slots, times, skipped)."""
+    skipped, count = 0, 0
+    for m in range(origin.shape[0]):
+        if not cyclic[m]:
+            continue
+        late = now - (origin[m] + cycles[m] * cycle[m])
+        if late > max_catch_up:
+            cycles[m] += np.int64(late // cycle[m])
+            skipped += np.int64(late // cycle[m])
+        k = 0
+        while origin[m] + (cycles[m] + k) * cycle[m] <= now + 1e-9:
+            k += 1
+        count += k
+    which, times = np.empty(count, dtype=np.int64), np.empty(count)
+    at = 0
+    for m in range(origin.shape[0]):
+        if not cyclic[m]:
+            continue
+        while origin[m] + cycles[m] * cycle[m] <= now + 1e-9:
+            which[at], times[at] = m, min(origin[m] + cycles[m] * cycle[m], now)
+            cycles[m] += 1
+            at += 1
+    return which, times, skipped
+
+
+@njit(cache=True, nogil=True)
+def _next_frames(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, alive_col: np.ndarray,
+                 alive_modulo: np.ndarray, template: np.ndarray, bits: np.ndarray, linear: np.ndarray,
+                 compiled: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """One frame of each slot in `which` at `stamps`, in order: its message's template with the values (alive counter
+    one on first) encoded by can_codec.encode_rows; returns (frames, values per frame)."""
+    rows = np.empty((which.shape[0], values.shape[1]))
+    for k in range(which.shape[0]):
+        m = which[k]
+        if alive_col[m] >= 0:
+            values[m, alive_col[m]] = (np.int64(values[m, alive_col[m]]) + 1) % alive_modulo[m]
+        rows[k] = values[m]
+    payloads = np.zeros((which.shape[0], template[0].data.shape[0]), dtype=np.uint8)
+    encode_rows(which, rows, bits, linear, compiled, payloads)
+    frames = np.empty(which.shape[0], template.dtype)
+    for k in range(which.shape[0]):
+        frames[k] = template[which[k]]
+        frames[k].timestamp = stamps[k]
+        frames[k].data[:] = payloads[k]
+    return frames, rows
