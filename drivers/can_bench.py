@@ -106,7 +106,7 @@ class CanStats:
     late_skipped: int = 0
 
 
-@dataclass(slots=True)
+@dataclass(frozen=True, slots=True)
 class _Rx:
     """How to decode and watch one received message."""
 
@@ -117,7 +117,6 @@ class _Rx:
     alive_modulo: int
     fault_key: str | None
     state_key: str | None
-    last_seen: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,7 +132,7 @@ class _Tx:
 class _RxTable:
     """The received messages as arrays for the compiled paths: id → slot, codec table, watched columns, state."""
 
-    def __init__(self, rx: list[_Rx], ids: list[tuple[int, bool]]) -> None:
+    def __init__(self, rx: list[_Rx], ids: list[tuple[int, bool]], now: float) -> None:
         self.rx = rx
         self.codecs = CodecTable([r.codec for r in rx])
         self.standard = np.full(_STANDARD_IDS, UNKNOWN_ID, dtype=np.int64)  # 11-bit id → slot
@@ -157,8 +156,8 @@ class _RxTable:
         self.key_slices = [slice(0, len(at)) if at == list(range(len(at))) else at for at in self.key_columns]
         self.alive = np.full(len(rx), -1, dtype=np.int64)  # last alive counter per slot (-1: none yet)
         self.faulted = np.zeros(len(self.controllers), dtype=bool)  # per controller
-        self.last = np.full((len(rx), self.codecs.width), np.nan)  # each message's newest values
-        self.seen = np.zeros(len(rx), dtype=bool)  # whether `last` holds a frame's values yet
+        self.last = np.full((len(rx), self.codecs.width), np.nan)  # each message's newest values (NaN: none yet)
+        self.last_seen = np.full(len(rx), now)  # each message's newest frame time (at first: when the bench opened)
 
     @staticmethod
     def _column(rx: _Rx, key: str | None) -> int:
@@ -216,8 +215,8 @@ class CanBench:
         self._to_log: list[np.ndarray] = []  # FRAME arrays sent and received, in order
         self._log_synced = -math.inf
         now = clock()
-        self._rx, sent = self._compile(signals, silent_cycles, now)
-        self._rx_table = _RxTable(list(self._rx.values()), list(self._rx))
+        received, sent = self._compile(signals, silent_cycles)
+        self._rx_table = _RxTable(list(received.values()), list(received), now)
         self._tx_table = _TxTable(sent, now)
         self._estop_slot = self._tx_table.column_of["estop.request"][0] if "estop.request" in self._tx_table.column_of \
             else -1
@@ -350,27 +349,26 @@ class CanBench:
                          table.codecs.bits, table.codecs.linear, slot, values)
         if table.fallback:
             self._decode_in_python(frames, slot, values)
-        order, starts, alive_wrong, alive_before, fault_change, counts = _watch(
-            slot, values, table.meta, table.alive, float(self.fault_state), table.faulted)
-        stats.unknown_id += int(counts[-UNKNOWN_ID])
-        stats.bad_dlc += int(counts[-BAD_LENGTH])
-        stats.error_frames += int(counts[-ERROR_FRAME])
-        stats.decode_errors += int(counts[-DECODE_ERROR])
+        order, starts, values, t, alive_wrong, alive_before, fault_change, counts = _watch(
+            slot, values, t, table.meta, table.alive, float(self.fault_state), table.faulted, table.last,
+            table.last_seen)
+        flagged, unknown_id, bad_dlc, error_frames, _, decode_errors = counts.tolist()
+        stats.unknown_id += unknown_id
+        stats.bad_dlc += bad_dlc
+        stats.error_frames += error_frames
+        stats.decode_errors += decode_errors
         if not len(order):
             return []
         stats.frames_ok += len(order)
-        values, t = values.take(order, axis=0), t.take(order)  # per message, each in the order received
         events = []  # (arrival position, check, event): in the order the frames arrived, as frame by frame
-        if alive_wrong.any() or fault_change.any():
+        if flagged:
             events = self._frame_events(order, slot.take(order), values, t, alive_wrong, alive_before, fault_change)
         bounds = starts.tolist()
-        present = [m for m in range(len(table.rx)) if bounds[m + 1] > bounds[m]]
-        firsts, ends = [bounds[m] for m in present], [bounds[m + 1] for m in present]
-        table.last[present], table.seen[present] = values.take([e - 1 for e in ends], axis=0), True
         blocks = []
-        for m, a, b, newest in zip(present, firsts, ends, np.maximum.reduceat(t, firsts).tolist()):
-            rx = table.rx[m]
-            rx.last_seen = max(rx.last_seen, newest)
+        for m, rx in enumerate(table.rx):
+            a, b = bounds[m], bounds[m + 1]
+            if b == a:
+                continue
             block = CanBlock(rx.controller, rx.codec.message.name, order[a:b], t[a:b],
                              values[a:b, table.key_slices[m]], table.keys[m])
             if rx.controller == "estop":
@@ -390,8 +388,8 @@ class CanBench:
         values[rows] = decoded
         slot[rows[~valid]] = DECODE_ERROR
 
-    def _compile(self, signals: Mapping[str, tuple[str, str]], silent_cycles: float,
-                 now: float) -> tuple[dict[tuple[int, bool], _Rx], list[_Tx]]:
+    def _compile(self, signals: Mapping[str, tuple[str, str]],
+                 silent_cycles: float) -> tuple[dict[tuple[int, bool], _Rx], list[_Tx]]:
         rx: dict[tuple[int, bool], _Rx] = {}
         tx: list[_Tx] = []
         for name, codec in compile_codecs(self.db, signals).items():
@@ -408,7 +406,7 @@ class CanBench:
                 fault, state = f"{controller}.fault_code", f"{controller}.state"
                 rx[(message.frame_id, message.is_extended_frame)] = _Rx(
                     codec, controller, timeout, alive, modulo, fault if fault in keys else None,
-                    state if state in keys else None, now)
+                    state if state in keys else None)
         return rx, tx
 
     def _set(self, updates: Mapping[str, float]) -> None:
@@ -491,10 +489,10 @@ class CanBench:
 
     def _watch(self, now: float) -> None:
         overdue: dict[str, str] = {}
-        for rx in self._rx.values():
-            if rx.timeout_s is not None and now - rx.last_seen > rx.timeout_s:
+        for rx, last_seen in zip(self._rx_table.rx, self._rx_table.last_seen.tolist()):
+            if rx.timeout_s is not None and now - last_seen > rx.timeout_s:
                 overdue.setdefault(rx.controller, rx.codec.message.name)
-        for controller in {rx.controller for rx in self._rx.values()}:
+        for controller in self._rx_table.controllers:
             was, now_silent = controller in self._silent, controller in overdue
             if now_silent and not was:
                 self._silent[controller] = overdue[controller]
@@ -504,7 +502,7 @@ class CanBench:
                 self._event(now, controller, "back")
 
     def _timeout_of(self, message: str) -> float | None:
-        return next(rx.timeout_s for rx in self._rx.values() if rx.codec.message.name == message)
+        return next(rx.timeout_s for rx in self._rx_table.rx if rx.codec.message.name == message)
 
     def _event(self, t: float, controller: str, kind: EventKind, detail: str = "") -> None:
         self._events.append(ControllerEvent(t, controller, kind, detail))
@@ -518,8 +516,8 @@ class CanBench:
     def latest(self) -> dict[str, float]:
         """Each received signal's newest value (logical key → physical value), for the signals seen so far."""
         table, latest = self._rx_table, {}
-        for keys, at, row, seen in zip(table.keys, table.key_columns, table.last.tolist(), table.seen.tolist()):
-            if seen:
+        for keys, at, row in zip(table.keys, table.key_columns, table.last.tolist()):
+            if at and not math.isnan(row[at[0]]):  # decoded values are numbers; NaN: no frame yet
                 latest.update(zip(keys, [row[j] for j in at]))
         return latest
 
@@ -570,23 +568,25 @@ def _classify_decode(frames: np.ndarray, standard: np.ndarray, extended_ids: np.
 
 
 @njit(cache=True, nogil=True)
-def _watch(slot: np.ndarray, values: np.ndarray, meta: np.ndarray, alive: np.ndarray, fault_state: float,
-           faulted: np.ndarray) -> tuple:  # pragma: no cover - compiled
+def _watch(slot: np.ndarray, values: np.ndarray, t: np.ndarray, meta: np.ndarray, alive: np.ndarray,
+           fault_state: float, faulted: np.ndarray, last: np.ndarray,
+           last_seen: np.ndarray) -> tuple:  # pragma: no cover - compiled
     """Decoded frames (slot ≥ 0) grouped by message (stable), watched frame by frame in that order.
 
-    Returns the order (positions of the decoded frames), each slot's start in it (slots + 1 bounds), and per
-    position: alive counter not the previous + 1 (and the previous), fault state changed (+1 faulted, -1
-    cleared); and how many frames each reason left undecoded (index -reason). Updates `alive` (per slot) and
-    `faulted` (per controller, meta OWNER of each slot).
+    Returns the order (positions of the decoded frames), each slot's start in it (slots + 1 bounds), their values
+    and times in that order, and per position: alive counter not the previous + 1 (and the previous), fault state
+    changed (+1 faulted, -1 cleared); and counts: index 0 the frames flagged so, index -reason the frames a reason
+    left undecoded. Updates per slot `alive`, `last` (newest values, NaN: none yet) and `last_seen` (newest
+    time), and `faulted` per controller (meta OWNER of each slot).
     """
     n, slots = slot.shape[0], meta.shape[0]
     starts = np.zeros(slots + 1, dtype=np.int64)
-    undecoded = np.zeros(1 - DECODE_ERROR, dtype=np.int64)
+    counts = np.zeros(1 - DECODE_ERROR, dtype=np.int64)
     for i in range(n):
         if slot[i] >= 0:
             starts[slot[i] + 1] += 1
         else:
-            undecoded[-slot[i]] += 1
+            counts[-slot[i]] += 1
     for m in range(slots):
         starts[m + 1] += starts[m]
     order = np.empty(starts[slots], dtype=np.int64)
@@ -596,12 +596,16 @@ def _watch(slot: np.ndarray, values: np.ndarray, meta: np.ndarray, alive: np.nda
             order[fill[slot[i]]] = i
             fill[slot[i]] += 1
     k_all = order.shape[0]
+    grouped, times = np.empty((k_all, values.shape[1])), np.empty(k_all)
     alive_wrong = np.zeros(k_all, dtype=np.bool_)
     alive_before = np.full(k_all, -1, dtype=np.int64)
     fault_change = np.zeros(k_all, dtype=np.int8)
     for k in range(k_all):
         i = order[k]
         m = slot[i]
+        grouped[k], times[k] = values[i], t[i]
+        last[m] = values[i]
+        last_seen[m] = max(last_seen[m], t[i])
         alive_col, fault_col, state_col = meta[m, ALIVE_COL], meta[m, FAULT_COL], meta[m, STATE_COL]
         if alive_col >= 0:
             counter = np.int64(values[i, alive_col])
@@ -615,7 +619,9 @@ def _watch(slot: np.ndarray, values: np.ndarray, meta: np.ndarray, alive: np.nda
             if now_faulted != faulted[meta[m, OWNER]]:
                 fault_change[k] = 1 if now_faulted else -1
                 faulted[meta[m, OWNER]] = now_faulted
-    return order, starts, alive_wrong, alive_before, fault_change, undecoded
+        if alive_wrong[k] or fault_change[k]:
+            counts[0] += 1
+    return order, starts, grouped, times, alive_wrong, alive_before, fault_change, counts
 
 
 @njit(cache=True, nogil=True)
