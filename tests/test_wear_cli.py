@@ -101,6 +101,10 @@ BAD_CLUTCH = {
     "negative wear rate": (lambda t: _edit(t, r"mm3_per_J = \[3\.0e-5", "mm3_per_J = [-3.0e-5"),
                            "maps.wear_rate.mm3_per_J"),
     "limit above height": (lambda t: _edit(t, r"min_height_mm = 2\.5", "min_height_mm = 4.0"), "lining.min_height_mm"),
+    "misspelt state key": (lambda t: _edit(t, r"wear_plate_mm = 0\.0", "wear_plat_mm = 0.4"), "state.wear_plat_mm"),
+    "misspelt map key": (lambda t: _edit(t, r"mm3_per_J = ", "mm3_per_j = "), "maps.wear_rate.mm3_per_j"),
+    "unknown map": (lambda t: t + "\n[maps.frictoin]\ntemperature_C = [20.0]\nmu = [0.3]\n", "maps.frictoin"),
+    "unknown section": (lambda t: t + "\n[lineing]\nheight_mm = 3.0\n", "lineing"),
 }
 
 

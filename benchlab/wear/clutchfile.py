@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from benchlab.errors import InputError, read_document
-from benchlab.values import finite_number
+from benchlab.values import check_keys, finite_number
 from benchlab.wear.maps import Map1D, make_map
 from benchlab.wear.state import WearState
 
@@ -131,8 +131,27 @@ def _state(doc: dict[str, Any], source: str) -> WearState:
     return WearState(**values)
 
 
+def _check_known_keys(doc: dict[str, Any], source: str) -> None:
+    """Every table holds only the keys this format defines: a misspelt key (`wear_plat_mm`) is refused, not left at
+    its default (the wear already accumulated would read as zero)."""
+    sections = {section for section, _ in SCALARS}
+    check_keys(source, "", doc, (*sections, "state", "maps"))
+    for section in sections:
+        if isinstance(doc.get(section), dict):
+            check_keys(source, section, doc[section], [key for s, key in SCALARS if s == section])
+    if isinstance(doc.get("state"), dict):
+        check_keys(source, "state", doc["state"], STATE_KEYS)
+    maps = doc.get("maps")
+    if isinstance(maps, dict):
+        check_keys(source, "maps", maps, MAPS)
+        for name, table in maps.items():
+            if isinstance(table, dict):
+                check_keys(source, f"maps.{name}", table, MAPS[name][:2])
+
+
 def clutch_from_doc(doc: dict[str, Any], source: str) -> ClutchSpec:
     """Build and check a ClutchSpec from a parsed TOML document."""
+    _check_known_keys(doc, source)
     values = {key: _scalar(doc, source, section, key) for section, key in SCALARS}
     if values["min_height_mm"] >= values["height_mm"]:
         raise InputError(source, "lining.min_height_mm", f"less than lining.height_mm ({values['height_mm']})")
