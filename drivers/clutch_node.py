@@ -218,12 +218,24 @@ class ClutchNodeGateway:
         return self.feed_block(data).samples()
 
     def feed_block(self, data: bytes) -> NodeBlock:
-        """`feed`, the samples as one block of columns: every delimited chunk decoded in one compiled pass."""
+        """`feed`, the samples as one block of columns: every delimited chunk decoded in one compiled pass (the usual
+        read, frames only and each plainly after the one before, decoded and taken in one compiled call)."""
         now = self.clock()
-        rows, status, self._buf = node_frame.decode_stream(self._buf + data)
-        if len(self._buf) > _MAX_CHUNK:
-            self._buf, self._synced = b"", False
-            self._count_corrupt("resyncs", now)
+        buf = self._buf + data
+        if self._last_seq is not None and not self._in_dropout:
+            rows, table, t, node_s, newest, t_measured, rest = _read_plain(
+                buf, self._last_seq, self._last_ms, self._node_s, self.clock_map.state, now, self._settings)
+            if rest >= 0:  # taken as `_accept` takes them one by one (nothing lost, no event)
+                self._keep_rest(buf[rest:], now)
+                n = len(rows)
+                if n:
+                    self._synced, self._node_s = True, node_s
+                    self.stats.frames_ok += n
+                    self._last_seq, self._last_ms, self._last_host = int(rows[-1, 2]), int(rows[-1, 3]), now
+                self._report_errors(now)
+                return NodeBlock(rows, now, t, table, newest, t_measured)
+        rows, status, rest_bytes = node_frame.decode_stream(buf)
+        self._keep_rest(rest_bytes, now)
         if len(status):
             synced, self._synced = self._synced, True
             if status.any():  # not all frames: empty chunks are skipped, corrupt ones counted
@@ -234,6 +246,14 @@ class ClutchNodeGateway:
         block = self._block(rows, now)
         self._report_errors(now)
         return block
+
+    def _keep_rest(self, rest: bytes, now: float) -> None:
+        """Keep the unterminated rest of the stream for the next read; one longer than a frame can be is dropped (a
+        resync)."""
+        self._buf = rest
+        if len(rest) > _MAX_CHUNK:
+            self._buf, self._synced = b"", False
+            self._count_corrupt("resyncs", now)
 
     def pop_events(self) -> list[LinkEvent]:
         """Link events since the last call, in the order they were noticed."""
@@ -336,20 +356,11 @@ class ClutchNodeGateway:
         """The accepted frames among `rows` (node_frame.FIELDS order, as received) as samples.
 
         A run of plainly consecutive frames (seq + 1, node clock forward by at most the drop-out limit, no reset flag,
-        no drop-out running) is taken in one step; any other frame goes through `_accept`. The usual read, one such
-        run, is one compiled call (`_plain_block`).
+        no drop-out running) is taken in one step; any other frame goes through `_accept`.
         """
         n = len(rows)
         if not n:
             return NodeBlock(_NO_ROWS, now, _NO_T, _NO_TABLE, -1, math.nan)
-        if self._last_seq is not None and not self._in_dropout:
-            table, t, node_s, newest, t_measured = _plain_block(rows, self._last_seq, self._last_ms, self._node_s,
-                                                                self.clock_map.state, now, self._settings)
-            if len(t) == n:  # all plain: taken as `_accept` takes them one by one (nothing lost, no event)
-                self._node_s = node_s
-                self.stats.frames_ok += n
-                self._last_seq, self._last_ms, self._last_host = int(rows[-1, 2]), int(rows[-1, 3]), now
-                return NodeBlock(rows, now, t, table, newest, t_measured)
         plain, span, _ = _plainly_consecutive(rows, self._last_seq or 0, self._last_ms, self.period_s, self.dropout_s)
         plain_list = plain.tolist()
         node_s, keep = np.empty(n), np.zeros(n, dtype=bool)
@@ -385,6 +396,26 @@ class ClutchNodeGateway:
         self.stats.frames_ok += len(rows)
         self._last_seq, self._last_ms, self._last_host = int(rows[-1, 2]), int(rows[-1, 3]), now
         return node_s
+
+
+@njit(cache=True, nogil=True)
+def _read_plain(src: bytes, last_seq: int, last_ms: int, node_s: float, clock: np.ndarray, now: float,
+                settings: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, int, float,
+                                               int]:  # pragma: no cover - compiled
+    """The usual read in one call: every delimited chunk of `src` decoded and, if all are frames, `_plain_block` of
+    them, with where the unterminated rest begins; rest -1 (and nothing changed) if any chunk is not a frame or any
+    frame does not follow plainly."""
+    rows, status, rest = node_frame.decode_chunks(np.frombuffer(src, dtype=np.uint8))
+    plain = True
+    for k in range(status.shape[0]):
+        plain = plain and status[k] == node_frame.OK
+    if plain and rows.shape[0]:
+        table, t, node_s, newest, t_measured = _plain_block(rows, last_seq, last_ms, node_s, clock, now, settings)
+        if t.shape[0] == rows.shape[0]:
+            return rows, table, t, node_s, newest, t_measured, rest
+    elif plain:
+        return rows, np.empty((0, len(TABLE_COLUMNS))), np.empty(0), node_s, -1, np.nan, rest
+    return rows, np.empty((0, len(TABLE_COLUMNS))), np.empty(0), node_s, -1, np.nan, -1
 
 
 @njit(cache=True, nogil=True)

@@ -150,8 +150,8 @@ def _decode_into(src: np.ndarray, start: int, stop: int, payload: np.ndarray,
 
 
 @njit(cache=True, nogil=True)
-def _decode_stream(src: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:  # pragma: no cover - compiled
-    """Every 0x00-terminated chunk of `src` decoded: rows (FIELDS order), a status per chunk, and where the
+def decode_chunks(src: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:  # pragma: no cover - compiled
+    """`decode_stream` for compiled callers: every 0x00-terminated chunk of `src` decoded: rows (FIELDS order), a status per chunk, and where the
     unterminated rest begins."""
     count = 0
     for i in range(src.shape[0]):
@@ -171,7 +171,7 @@ def _decode_stream(src: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:  # pr
 def decode_stream(data: bytes) -> tuple[np.ndarray, np.ndarray, bytes]:
     """Every delimited chunk of a piece of byte stream: rows (FIELDS order), a status per chunk (OK, EMPTY or the
     reason it is not a frame: BAD_LENGTH, BAD_COBS, BAD_PAYLOAD, BAD_CRC, BAD_VERSION), and the undelimited rest."""
-    rows, status, rest = _decode_stream(np.frombuffer(data, dtype=np.uint8))
+    rows, status, rest = decode_chunks(np.frombuffer(data, dtype=np.uint8))
     return rows, status, data[rest:]
 
 
