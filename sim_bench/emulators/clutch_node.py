@@ -118,8 +118,8 @@ class ClutchNodeEmulator:
 
     def _link_rows(self, inputs: NodeInputSeries, n: int) -> np.ndarray:
         """Supply, RSSI and LQI as rows (n, 3) for the kernel, or one row (1, 3) if each is one value for all."""
-        key = (inputs.supply_mv, inputs.rssi_dbm, inputs.lqi)
-        if all(type(v) is int for v in key):
+        key = supply, rssi, lqi = inputs.supply_mv, inputs.rssi_dbm, inputs.lqi
+        if type(supply) is int and type(rssi) is int and type(lqi) is int:
             if key != self._link_key:
                 self._link_key, self._link = key, np.array([key], dtype=np.int64)
             return self._link
