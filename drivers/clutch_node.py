@@ -22,8 +22,7 @@ from numba import njit
 
 from drivers import cvd, node_frame
 from drivers.errors import ConnectionLost, DriverConfigError
-from drivers.node_frame import NodeFrame
-from drivers.timebase import ClockMap
+from drivers.timebase import ClockMap, observe_into
 
 SensorStatus = Literal["ok", "open", "short", "range", "fault"]
 SENSOR_STATUSES: tuple[SensorStatus, ...] = ("ok", "open", "short", "range", "fault")  # NodeBlock.status indexes this
@@ -31,8 +30,13 @@ _OK, _OPEN, _SHORT, _RANGE, _FAULT = range(len(SENSOR_STATUSES))
 _MAX_CHUNK = 4 * node_frame.ENCODED_LEN
 ERROR_WINDOW_S = 1.0
 CorruptCounter = Literal["crc_errors", "malformed", "resyncs"]
+TABLE_COLUMNS = ("seq", "node_time_s", "temperature_1_c", "temperature_2_c", "resistance_1_ohm", "resistance_2_ohm",
+                 "status_1", "status_2", "supply_v", "rssi_dbm", "lqi", "flags")  # NodeBlock.table's; status: index
+_T1, _R1, _S1 = (TABLE_COLUMNS.index(name) for name in ("temperature_1_c", "resistance_1_ohm", "status_1"))
 _NO_ROWS = np.zeros((0, len(node_frame.FIELDS)), dtype=np.int64)
+_NO_TABLE, _NO_T = np.zeros((0, len(TABLE_COLUMNS))), np.zeros(0)
 _F = {name: j for j, name in enumerate(node_frame.FIELDS)}
+_PERIOD, _DROPOUT, _SHORT_OHM, _COEF = range(4)  # the gateway's settings array; CVD coefficients (4 per channel) last
 _CORRUPT: dict[int, CorruptCounter] = {node_frame.BAD_CRC: "crc_errors", node_frame.BAD_LENGTH: "malformed",
                                        node_frame.BAD_COBS: "malformed", node_frame.BAD_PAYLOAD: "malformed",
                                        node_frame.BAD_VERSION: "malformed"}
@@ -68,23 +72,29 @@ class NodeSample:
 
 @dataclass(frozen=True, slots=True)
 class NodeBlock:
-    """The samples of one read as columns, one row per accepted frame in the order received (NodeSample's fields;
-    per channel NaN where NodeSample has None, the status as an index into SENSOR_STATUSES)."""
+    """The samples of one read, one row per accepted frame in the order received: the frames' fields (`rows`), their
+    measurement times and the samples as one float table (TABLE_COLUMNS: NodeSample's values, per channel NaN where
+    NodeSample has None, the status as an index into SENSOR_STATUSES); NodeSample's fields as columns too."""
 
-    seq: np.ndarray
-    node_time_ms: np.ndarray
+    rows: np.ndarray  # (n, 9) the frames' fields, node_frame.FIELDS order
     t_host: float  # run-clock time the gateway received the frames
     t: np.ndarray  # run-clock time the node measured each (its own clock mapped onto the run clock)
-    resistance_ohm: np.ndarray  # (n, 2)
-    temperature_c: np.ndarray  # (n, 2)
-    status: np.ndarray  # (n, 2)
-    supply_mv: np.ndarray
-    rssi_dbm: np.ndarray
-    lqi: np.ndarray
-    flags: np.ndarray
+    table: np.ndarray  # (n, 12) TABLE_COLUMNS; the block's own (fresh every read)
+    newest_measured: int  # row of the newest sample with a temperature, -1 if none has one
+    t_measured: float  # the latest `t` of the samples with a temperature (NaN if none)
 
     def __len__(self) -> int:
-        return len(self.seq)
+        return len(self.rows)
+
+    seq = property(lambda self: self.rows[:, _F["seq"]])
+    node_time_ms = property(lambda self: self.rows[:, _F["node_time_ms"]])
+    resistance_ohm = property(lambda self: self.table[:, _R1:_R1 + 2], doc="(n, 2) Ω")
+    temperature_c = property(lambda self: self.table[:, _T1:_T1 + 2], doc="(n, 2) °C")
+    status = property(lambda self: self.table[:, _S1:_S1 + 2].astype(np.int64), doc="(n, 2) SENSOR_STATUSES index")
+    supply_mv = property(lambda self: self.rows[:, _F["supply_mv"]])
+    rssi_dbm = property(lambda self: self.rows[:, _F["rssi_dbm"]])
+    lqi = property(lambda self: self.rows[:, _F["lqi"]])
+    flags = property(lambda self: self.rows[:, _F["flags"]])
 
     def samples(self) -> list[NodeSample]:
         """The block as one NodeSample per frame."""
@@ -149,14 +159,17 @@ class ClutchNodeGateway:
     def __init__(self, port: ByteStream | None, *, period_s: float = 0.05, dropout_periods: float = 5,
                  coefficients: Sequence[cvd.CvdCoefficients] = (cvd.PT1000, cvd.PT1000),
                  clock: Callable[[], float] = time.monotonic, short_ohm: float = 150.0) -> None:
-        self.port, self.period_s, self.clock, self.short_ohm = port, period_s, clock, short_ohm
+        self.port, self.period_s, self.clock, self.short_ohm = port, period_s, clock, short_ohm  # fixed once made
         self.dropout_s = dropout_periods * period_s
         self.coefficients = tuple(coefficients)
+        self._settings = np.array([period_s, self.dropout_s, short_ohm]
+                                  + [v for c in self.coefficients for v in (c.r0, c.a, c.b, c.c)])
         self.stats = GatewayStats()
         self._events: list[LinkEvent] = []
         self._buf = b""
         self._synced = False
-        self._last: NodeFrame | None = None
+        self._last_seq: int | None = None  # the newest accepted frame's seq and node clock (ms), None before one
+        self._last_ms = 0
         self._last_host = clock()
         self.clock_map = ClockMap()  # the node's clock → run clock (anew after a node reboot)
         self._node_s = 0.0  # the node's clock in s, unwrapped, at the newest accepted frame
@@ -205,12 +218,24 @@ class ClutchNodeGateway:
         return self.feed_block(data).samples()
 
     def feed_block(self, data: bytes) -> NodeBlock:
-        """`feed`, the samples as one block of columns: every delimited chunk decoded in one compiled pass."""
+        """`feed`, the samples as one block of columns: every delimited chunk decoded in one compiled pass (the usual
+        read, frames only and each plainly after the one before, decoded and taken in one compiled call)."""
         now = self.clock()
-        rows, status, self._buf = node_frame.decode_stream(self._buf + data)
-        if len(self._buf) > _MAX_CHUNK:
-            self._buf, self._synced = b"", False
-            self._count_corrupt("resyncs", now)
+        buf = self._buf + data
+        if self._last_seq is not None and not self._in_dropout:
+            rows, table, t, node_s, newest, t_measured, rest = _read_plain(
+                buf, self._last_seq, self._last_ms, self._node_s, self.clock_map.state, now, self._settings)
+            if rest >= 0:  # taken as `_accept` takes them one by one (nothing lost, no event)
+                self._keep_rest(buf[rest:], now)
+                n = len(rows)
+                if n:
+                    self._synced, self._node_s = True, node_s
+                    self.stats.frames_ok += n
+                    self._last_seq, self._last_ms, self._last_host = int(rows[-1, 2]), int(rows[-1, 3]), now
+                self._report_errors(now)
+                return NodeBlock(rows, now, t, table, newest, t_measured)
+        rows, status, rest_bytes = node_frame.decode_stream(buf)
+        self._keep_rest(rest_bytes, now)
         if len(status):
             synced, self._synced = self._synced, True
             if status.any():  # not all frames: empty chunks are skipped, corrupt ones counted
@@ -221,6 +246,14 @@ class ClutchNodeGateway:
         block = self._block(rows, now)
         self._report_errors(now)
         return block
+
+    def _keep_rest(self, rest: bytes, now: float) -> None:
+        """Keep the unterminated rest of the stream for the next read; one longer than a frame can be is dropped (a
+        resync)."""
+        self._buf = rest
+        if len(rest) > _MAX_CHUNK:
+            self._buf, self._synced = b"", False
+            self._count_corrupt("resyncs", now)
 
     def pop_events(self) -> list[LinkEvent]:
         """Link events since the last call, in the order they were noticed."""
@@ -268,7 +301,7 @@ class ClutchNodeGateway:
         if window is None or (not final and now - window.t0 < ERROR_WINDOW_S):
             return
         self._events.append(LinkEvent(
-            "frame_errors", now, self._last.seq if self._last else None, now - window.t0,
+            "frame_errors", now, self._last_seq, now - window.t0,
             window.crc_errors + window.malformed, window.crc_errors, window.malformed, window.resyncs))
         self._errors = None
 
@@ -276,25 +309,26 @@ class ClutchNodeGateway:
         """The one place a drop-out begins, so that every `dropout_end` has exactly one `dropout_start`."""
         self._in_dropout = True
         self.stats.dropouts += 1
-        self._events.append(LinkEvent("dropout_start", t, self._last.seq if self._last else None))
+        self._events.append(LinkEvent("dropout_start", t, self._last_seq))
 
-    def _accept(self, frame: NodeFrame, now: float) -> bool:
+    def _accept(self, row: list[int], now: float) -> bool:
         """Sequence bookkeeping; False for a duplicate. Emits reset and drop-out events.
 
         A gap longer than the drop-out limit that fell between two polls was never seen as silence by
         `check_silence` (the host polls slower than the limit, e.g. 1 s ticks against 0.25 s): its
         `dropout_start` is emitted here, dated when the silence passed the limit, before its end.
         """
-        last, stats = self._last, self.stats
+        last, stats = self._last_seq, self.stats
+        seq, t_ms, flags = row[_F["seq"]], row[_F["node_time_ms"]], row[_F["flags"]]
         host_span = now - self._last_host
         lost, span, reset = 0, host_span, False
         if last is not None:
-            seq_gap = (frame.seq - last.seq) & 0xFFFF
-            node_dt = (frame.node_time_ms - last.node_time_ms) & 0xFFFFFFFF
+            seq_gap = (seq - last) & 0xFFFF
+            node_dt = (t_ms - self._last_ms) & 0xFFFFFFFF
             if seq_gap == 0 and node_dt == 0:
                 stats.duplicates += 1
                 return False
-            reset = bool(frame.flags & node_frame.NODE_RESET) or node_dt >= 1 << 31
+            reset = bool(flags & node_frame.NODE_RESET) or node_dt >= 1 << 31
             if not reset:
                 self._node_s += node_dt / 1000
             if reset:
@@ -308,14 +342,14 @@ class ClutchNodeGateway:
         if last is not None and span > self.dropout_s and not self._in_dropout:
             self._start_dropout(min(now, max(self._last_host, now - span) + self.dropout_s))
         if reset or last is None:  # a new node clock: counted from this frame, mapped afresh
-            self._node_s, self.clock_map = frame.node_time_ms / 1000, ClockMap()
+            self._node_s, self.clock_map = t_ms / 1000, ClockMap()
         if reset:
-            self._events.append(LinkEvent("node_reset", now, last.seq if last else None, host_span, lost))
+            self._events.append(LinkEvent("node_reset", now, last, host_span, lost))
         if self._in_dropout:
-            self._events.append(LinkEvent("dropout_end", now, last.seq if last else None, span, lost))
+            self._events.append(LinkEvent("dropout_end", now, last, span, lost))
             self._in_dropout = False
         stats.frames_ok += 1
-        self._last, self._last_host = frame, now
+        self._last_seq, self._last_ms, self._last_host = seq, t_ms, now
         return True
 
     def _block(self, rows: np.ndarray, now: float) -> NodeBlock:
@@ -325,25 +359,22 @@ class ClutchNodeGateway:
         no drop-out running) is taken in one step; any other frame goes through `_accept`.
         """
         n = len(rows)
-        last = self._last
-        plain, span, all_plain = _plainly_consecutive(rows, last.seq if last else 0, last.node_time_ms if last else 0,
-                                                      self.period_s, self.dropout_s)
-        if all_plain and n and last is not None and not self._in_dropout:  # the usual read: one run of plain frames
-            node_s = self._take_plain(rows, span, now)
-            return self._columns(rows, np.minimum(self.clock_map.to_run(node_s), now), now)
+        if not n:
+            return NodeBlock(_NO_ROWS, now, _NO_T, _NO_TABLE, -1, math.nan)
+        plain, span, _ = _plainly_consecutive(rows, self._last_seq or 0, self._last_ms, self.period_s, self.dropout_s)
         plain_list = plain.tolist()
         node_s, keep = np.empty(n), np.zeros(n, dtype=bool)
         runs: list[tuple[int, int, ClockMap]] = []  # accepted rows [i, j) and the node clock's map they belong to
         i = 0
         while i < n:
-            if plain_list[i] and self._last is not None and not self._in_dropout:
+            if plain_list[i] and self._last_seq is not None and not self._in_dropout:
                 j = i + 1
                 while j < n and plain_list[j]:
                     j += 1
                 node_s[i:j] = self._take_plain(rows[i:j], span[i:j], now)
             else:
                 j = i + 1
-                if not self._accept(node_frame.frame_of(rows[i].tolist()), now):
+                if not self._accept(rows[i].tolist(), now):
                     i = j
                     continue
                 node_s[i] = self._node_s
@@ -354,7 +385,8 @@ class ClutchNodeGateway:
         t = np.empty(n)
         for i, j, clock_map in runs:
             t[i:j] = np.minimum(clock_map.to_run(node_s[i:j]), now)
-        return self._columns(rows[keep], t[keep], now)
+        rows, t = rows[keep], t[keep]
+        return NodeBlock(rows, now, t, *_table(rows, t, self._settings))
 
     def _take_plain(self, rows: np.ndarray, span: np.ndarray, now: float) -> np.ndarray:
         """`_accept` of plainly consecutive frames in one step (nothing lost, no event): their node clock times."""
@@ -362,21 +394,75 @@ class ClutchNodeGateway:
         self._node_s = float(node_s[-1])
         self.clock_map.observe_together(node_s, now)
         self.stats.frames_ok += len(rows)
-        self._last, self._last_host = node_frame.frame_of(rows[-1].tolist()), now
+        self._last_seq, self._last_ms, self._last_host = int(rows[-1, 2]), int(rows[-1, 3]), now
         return node_s
 
-    def _columns(self, rows: np.ndarray, t: np.ndarray, now: float) -> NodeBlock:
-        """Samples of accepted frames: resistance, CVD temperature and sensor status per channel."""
-        ohm = rows[:, _F["r1_mohm"]:_F["r2_mohm"] + 1] / 1000.0
-        c1, c2 = self.coefficients
-        deg = cvd.temperature(ohm, c1) if c1 == c2 else np.column_stack(
-            [cvd.temperature(ohm[:, 0], c1), cvd.temperature(ohm[:, 1], c2)])
-        status = _sensor_status(rows, ohm, deg, self.short_ohm)
-        if status.any():  # values only where the status allows them
-            ohm = np.where((status == _OK) | (status == _RANGE), ohm, np.nan)
-            deg = np.where(status == _OK, deg, np.nan)
-        return NodeBlock(rows[:, _F["seq"]], rows[:, _F["node_time_ms"]], now, t, ohm, deg, status,
-                         rows[:, _F["supply_mv"]], rows[:, _F["rssi_dbm"]], rows[:, _F["lqi"]], rows[:, _F["flags"]])
+
+@njit(cache=True, nogil=True)
+def _read_plain(src: bytes, last_seq: int, last_ms: int, node_s: float, clock: np.ndarray, now: float,
+                settings: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, int, float,
+                                               int]:  # pragma: no cover - compiled
+    """The usual read in one call: every delimited chunk of `src` decoded and, if all are frames, `_plain_block` of
+    them, with where the unterminated rest begins; rest -1 (and nothing changed) if any chunk is not a frame or any
+    frame does not follow plainly."""
+    rows, status, rest = node_frame.decode_chunks(np.frombuffer(src, dtype=np.uint8))
+    plain = True
+    for k in range(status.shape[0]):
+        plain = plain and status[k] == node_frame.OK
+    if plain and rows.shape[0]:
+        table, t, node_s, newest, t_measured = _plain_block(rows, last_seq, last_ms, node_s, clock, now, settings)
+        if t.shape[0] == rows.shape[0]:
+            return rows, table, t, node_s, newest, t_measured, rest
+    elif plain:
+        return rows, np.empty((0, len(TABLE_COLUMNS))), np.empty(0), node_s, -1, np.nan, rest
+    return rows, np.empty((0, len(TABLE_COLUMNS))), np.empty(0), node_s, -1, np.nan, -1
+
+
+@njit(cache=True, nogil=True)
+def _plain_block(rows: np.ndarray, last_seq: int, last_ms: int, node_s: float, clock: np.ndarray, now: float,
+                 settings: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int, float]:  # pragma: no cover - compiled
+    """The usual read in one pass: if every frame of `rows` follows the one before plainly (the first after frame
+    `last_seq`, `last_ms`), their node clock times counted on from `node_s` one by one, the clock map `clock`
+    updated with them (ClockMap.observe_together), their run times and `_table`; else nothing changed and no rows."""
+    plain, span, all_plain = _plainly_consecutive(rows, last_seq, last_ms, settings[_PERIOD], settings[_DROPOUT])
+    if not all_plain:
+        return np.empty((0, len(TABLE_COLUMNS))), np.empty(0), node_s, -1, np.nan
+    n = rows.shape[0]
+    times = np.empty(n)
+    for i in range(n):
+        node_s += span[i]
+        times[i] = node_s
+    offset = observe_into(clock, times[0], node_s, now)
+    for i in range(n):
+        times[i] = min(times[i] + offset, now)
+    table, newest, t_measured = _table(rows, times, settings)
+    return table, times, node_s, newest, t_measured
+
+
+@njit(cache=True, nogil=True)
+def _table(rows: np.ndarray, t: np.ndarray, settings: np.ndarray) -> tuple[np.ndarray, int, float]:  # pragma: no cover
+    """NodeBlock's table of accepted frames measured at `t` (resistance, CVD temperature and sensor status per
+    channel, values only where the status allows them), the newest row with a temperature and the latest `t` of
+    those."""
+    n = rows.shape[0]
+    table = np.empty((n, len(TABLE_COLUMNS)))
+    newest, t_measured = -1, np.nan
+    for i in range(n):
+        flags = rows[i, 1]
+        for ch in range(2):
+            c = _COEF + 4 * ch
+            ohm = rows[i, 4 + ch] / 1000.0
+            deg = cvd.temperature_of(ohm, settings[c], settings[c + 1], settings[c + 2], settings[c + 3])
+            status = _sensor_status(flags, rows[i, 4 + ch], ohm, deg, ch, settings[_SHORT_OHM])
+            table[i, _T1 + ch] = deg if status == _OK else np.nan
+            table[i, _R1 + ch] = ohm if status == _OK or status == _RANGE else np.nan
+            table[i, _S1 + ch] = status
+            if status == _OK:
+                t_measured = t[i] if newest < 0 else max(t_measured, t[i])
+                newest = i
+        table[i, 0], table[i, 1] = rows[i, 2], rows[i, 3] / 1000.0
+        table[i, 8], table[i, 9], table[i, 10], table[i, 11] = rows[i, 6] / 1000.0, rows[i, 7], rows[i, 8], flags
+    return table, newest, t_measured
 
 
 @njit(cache=True, nogil=True)
@@ -400,22 +486,16 @@ def _plainly_consecutive(rows: np.ndarray, last_seq: int, last_ms: int, period_s
 
 
 @njit(cache=True, nogil=True)
-def _sensor_status(rows: np.ndarray, ohm: np.ndarray, deg: np.ndarray,
-                   short_ohm: float) -> np.ndarray:  # pragma: no cover - compiled
-    """SENSOR_STATUSES index per frame and channel: the node's open/short/fault flags first, then NO_VALUE (fault),
+def _sensor_status(flags: int, r_mohm: int, ohm: float, deg: float, ch: int,
+                   short_ohm: float) -> int:  # pragma: no cover - compiled
+    """SENSOR_STATUSES index of channel `ch` of a frame: the node's open/short/fault flags first, then NO_VALUE (fault),
     a resistance below `short_ohm` (short), a temperature outside the CVD range (range)."""
-    status = np.empty((rows.shape[0], 2), dtype=np.int64)
-    for i in range(rows.shape[0]):
-        flags = rows[i, 1]
-        for ch in range(2):
-            if flags & (node_frame.CH1_OPEN if ch == 0 else node_frame.CH2_OPEN):
-                status[i, ch] = _OPEN
-            elif flags & (node_frame.CH1_SHORT if ch == 0 else node_frame.CH2_SHORT):
-                status[i, ch] = _SHORT
-            elif flags & node_frame.ADC_FAULT or rows[i, 4 + ch] == node_frame.NO_VALUE:
-                status[i, ch] = _FAULT
-            elif ohm[i, ch] < short_ohm:
-                status[i, ch] = _SHORT
-            else:
-                status[i, ch] = _OK if cvd.T_MIN_C <= deg[i, ch] <= cvd.T_MAX_C else _RANGE
-    return status
+    if flags & (node_frame.CH1_OPEN if ch == 0 else node_frame.CH2_OPEN):
+        return _OPEN
+    if flags & (node_frame.CH1_SHORT if ch == 0 else node_frame.CH2_SHORT):
+        return _SHORT
+    if flags & node_frame.ADC_FAULT or r_mohm == node_frame.NO_VALUE:
+        return _FAULT
+    if ohm < short_ohm:
+        return _SHORT
+    return _OK if cvd.T_MIN_C <= deg <= cvd.T_MAX_C else _RANGE

@@ -40,13 +40,13 @@ def resistance(temperature_c: ArrayLike, coef: CvdCoefficients = PT1000) -> np.n
 def temperature(resistance_ohm: ArrayLike, coef: CvdCoefficients = PT1000) -> np.ndarray | float:
     """Temperature in °C for `resistance_ohm`: exact quadratic root at/above R0, Newton on the full equation below."""
     if isinstance(resistance_ohm, (int, float)):
-        return _temperature_of(float(resistance_ohm), coef.r0, coef.a, coef.b, coef.c)
+        return temperature_of(float(resistance_ohm), coef.r0, coef.a, coef.b, coef.c)
     r = np.asarray(resistance_ohm, dtype=float)
     return _like(_temperatures(r.ravel(), coef.r0, coef.a, coef.b, coef.c).reshape(r.shape), resistance_ohm)
 
 
 @njit(cache=True, nogil=True)
-def _temperature_of(r: float, r0: float, a: float, b: float, c: float) -> float:  # pragma: no cover - compiled
+def temperature_of(r: float, r0: float, a: float, b: float, c: float) -> float:  # pragma: no cover - compiled
     """`temperature` of one resistance with the coefficients spelled out (the one implementation of the inverse)."""
     disc = a * a - 4.0 * b * (1.0 - r / r0)
     if r >= r0 or math.isnan(r):
@@ -60,10 +60,10 @@ def _temperature_of(r: float, r0: float, a: float, b: float, c: float) -> float:
 
 @njit(cache=True, nogil=True)
 def _temperatures(r: np.ndarray, r0: float, a: float, b: float, c: float) -> np.ndarray:  # pragma: no cover - compiled
-    """`_temperature_of` for each of `r`."""
+    """`temperature_of` for each of `r`."""
     out = np.empty(r.shape[0])
     for i in range(r.shape[0]):
-        out[i] = _temperature_of(r[i], r0, a, b, c)
+        out[i] = temperature_of(r[i], r0, a, b, c)
     return out
 
 

@@ -70,7 +70,7 @@ def encode(frame: NodeFrame) -> bytes:
 
 def encode_rows(fields: np.ndarray) -> bytes:
     """`encode` of frames given as integer rows in FIELDS order, one after the other, in one compiled pass."""
-    return _encode_rows(fields.astype(np.int64, copy=False)).tobytes() if len(fields) else b""
+    return wire_of_rows(fields.astype(np.int64, copy=False)).tobytes() if len(fields) else b""
 
 
 def frame_of(row: Sequence[int]) -> NodeFrame:
@@ -97,8 +97,8 @@ def _crc16(data: np.ndarray, start: int, stop: int) -> int:  # pragma: no cover 
 
 
 @njit(cache=True, nogil=True)
-def _encode_rows(fields: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """Wire bytes (n, ENCODED_LEN + 1) of frames given as rows in FIELDS order: the _BODY layout (little-endian),
+def wire_of_rows(fields: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """`encode_rows` for compiled callers: wire bytes (n, ENCODED_LEN + 1) of frames given as rows in FIELDS order: the _BODY layout (little-endian),
     CRC-16/CCITT-FALSE big-endian, COBS, the 0x00 delimiter."""
     out = np.zeros((fields.shape[0], PAYLOAD_LEN + 2), dtype=np.uint8)
     payload = np.empty(PAYLOAD_LEN, dtype=np.uint8)
@@ -150,8 +150,8 @@ def _decode_into(src: np.ndarray, start: int, stop: int, payload: np.ndarray,
 
 
 @njit(cache=True, nogil=True)
-def _decode_stream(src: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:  # pragma: no cover - compiled
-    """Every 0x00-terminated chunk of `src` decoded: rows (FIELDS order), a status per chunk, and where the
+def decode_chunks(src: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:  # pragma: no cover - compiled
+    """`decode_stream` for compiled callers: every 0x00-terminated chunk of `src` decoded: rows (FIELDS order), a status per chunk, and where the
     unterminated rest begins."""
     count = 0
     for i in range(src.shape[0]):
@@ -171,7 +171,7 @@ def _decode_stream(src: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:  # pr
 def decode_stream(data: bytes) -> tuple[np.ndarray, np.ndarray, bytes]:
     """Every delimited chunk of a piece of byte stream: rows (FIELDS order), a status per chunk (OK, EMPTY or the
     reason it is not a frame: BAD_LENGTH, BAD_COBS, BAD_PAYLOAD, BAD_CRC, BAD_VERSION), and the undelimited rest."""
-    rows, status, rest = _decode_stream(np.frombuffer(data, dtype=np.uint8))
+    rows, status, rest = decode_chunks(np.frombuffer(data, dtype=np.uint8))
     return rows, status, data[rest:]
 
 

@@ -12,31 +12,38 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
+
+_OFFSET, _LAST_RECEIVE, _DRIFT = range(3)  # ClockMap.state
 
 
 class ClockMap:
-    """Device time → run time, from pairs (device stamp, run-clock receive time)."""
+    """Device time → run time, from pairs (device stamp, run-clock receive time).
+
+    Its state is one small array (`state`: offset, last receive time, drift) so compiled code can update it with
+    `observe_into`, the one implementation of the rule.
+    """
 
     def __init__(self, drift_ppm: float = 100.0) -> None:
-        self.drift = drift_ppm * 1e-6
-        self.offset = math.nan  # run time − device time
-        self._last_receive = math.nan
+        self.state = np.array([np.nan, np.nan, drift_ppm * 1e-6])
+
+    @property
+    def drift(self) -> float:
+        """How fast the offset may rise: s per s of run time."""
+        return float(self.state[_DRIFT])
+
+    @property
+    def offset(self) -> float:
+        """Run time − device time (NaN before the first frame)."""
+        return float(self.state[_OFFSET])
 
     def observe(self, device_t: float, received_t: float) -> float:
         """Update the offset with one frame and return the frame's run time (never later than its receipt)."""
-        offset = received_t - device_t
-        if math.isnan(self.offset):
-            self.offset = offset
-        else:
-            grown = self.offset + self.drift * max(0.0, received_t - self._last_receive)
-            self.offset = min(grown, offset)
-        self._last_receive = received_t
-        return device_t + self.offset
+        return device_t + observe_into(self.state, device_t, device_t, received_t)
 
     def observe_together(self, device_t: np.ndarray, received_t: float) -> None:
         """`observe` of frames received together at `received_t`, in order (the offset is the same as one by one)."""
-        self.observe(float(device_t[0]), received_t)
-        self.offset = min(self.offset, float(np.min(received_t - device_t)))
+        observe_into(self.state, float(device_t[0]), float(np.max(device_t)), received_t)
 
     def to_run(self, device_t: "float | np.ndarray") -> "float | np.ndarray":
         """Run time of a device stamp (or stamps) with the current offset (NaN before the first frame)."""
@@ -44,4 +51,19 @@ class ClockMap:
 
     def to_device(self, run_t: float) -> float:
         """Device time of a run time (to stamp frames the host sends, in the device's time base)."""
-        return run_t - self.offset if not math.isnan(self.offset) else run_t
+        offset = self.offset
+        return run_t - offset if not math.isnan(offset) else run_t
+
+
+@njit(cache=True, nogil=True)
+def observe_into(state: np.ndarray, first_t: float, latest_t: float,
+                 received_t: float) -> float:  # pragma: no cover - compiled
+    """Update a ClockMap's `state` with frames received together at `received_t`, the first stamped `first_t`, the
+    latest `latest_t` (one frame: both the same): the offset may grow by the drift since the last receipt, and
+    falls to any smaller receive − stamp difference. Returns the new offset."""
+    offset = received_t - first_t
+    if not np.isnan(state[_OFFSET]):
+        offset = min(state[_OFFSET] + state[_DRIFT] * max(0.0, received_t - state[_LAST_RECEIVE]), offset)
+    offset = min(offset, received_t - latest_t)
+    state[_OFFSET], state[_LAST_RECEIVE] = offset, received_t
+    return offset

@@ -394,19 +394,13 @@ class DriverBench:
             self._error(now, "node_error", str(exc), self.gateway.reconnect)
             return
         if len(block):  # each sample at the time the node measured it (the driver maps the node's clock)
-            rows = np.empty((len(block), 12))
-            rows[:, 0], rows[:, 1] = block.seq, block.node_time_ms / 1000.0
-            rows[:, 2:4], rows[:, 4:6] = block.temperature_c, block.resistance_ohm
+            rows = block.table  # the node stream's columns (its own array), the status as the stored code
             rows[:, 6:8] = _NODE_STATUS_CODES[block.status]
-            rows[:, 8], rows[:, 9], rows[:, 10], rows[:, 11] = (block.supply_mv / 1000.0, block.rssi_dbm, block.lqi,
-                                                                block.flags)
             self.readings.append(("node", block.t, rows))
-            valid = np.isfinite(block.temperature_c)
-            seen = np.flatnonzero(valid.any(axis=1))
-            if len(seen):
-                temps = block.temperature_c[seen[-1]][valid[seen[-1]]].tolist()
+            if block.newest_measured >= 0:
+                temps = [v for v in rows[block.newest_measured, 2:4].tolist() if not math.isnan(v)]
                 self.status.T_flywheel = sum(temps) / len(temps)
-                self.status.mark_seen("T_flywheel", float(block.t[seen].max()))
+                self.status.mark_seen("T_flywheel", block.t_measured)
         for ev in self.gateway.pop_events():
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:

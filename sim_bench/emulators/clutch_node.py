@@ -18,7 +18,7 @@ from numba import njit
 
 from drivers import cobs, node_frame
 from drivers.node_frame import NodeFrame
-from sim_bench.emulators.providers import ConstantNodeInputs, NodeInputProvider
+from sim_bench.emulators.providers import ConstantNodeInputs, NodeInputProvider, NodeInputSeries
 
 Damage = Literal["flip", "truncate", "garbage"]
 _OPEN = (node_frame.CH1_OPEN, node_frame.CH2_OPEN)
@@ -42,7 +42,9 @@ class ClutchNodeEmulator:
         self._silent_until = -math.inf
         self._off_until = -math.inf
         self._damage: list[Damage] = []
-        self._out = bytearray()
+        self._out = bytearray()  # bytes on the line not yet read: injected noise, damaged frames
+        self._link_key: tuple[int, int, int] | None = None  # constant supply, RSSI, LQI and their row for the kernel
+        self._link = np.zeros((1, 3), dtype=np.int64)
 
     # -- serial endpoint -----------------------------------------------------------------------------
     def write(self, data: bytes) -> None:
@@ -51,14 +53,17 @@ class ClutchNodeEmulator:
     def read_available(self) -> bytes:
         """Bytes of every frame due up to the clock's current time."""
         now = self.clock()
+        if self._next_t > now and not self._out:
+            return b""
         due = []
         while self._next_t <= now:
             if self._next_t >= self._off_until:  # powered: the node measures and sends
                 due.append(self._next_t)
             self._next_t += self.period_s
-        if due:
-            self._emit(np.array(due))
-        data, self._out = bytes(self._out), bytearray()
+        frames = self._emit(np.array(due)) if due else b""
+        if not self._out:
+            return frames
+        data, self._out = bytes(self._out) + frames, bytearray()
         return data
 
     # -- fault hooks ---------------------------------------------------------------------------------
@@ -88,17 +93,19 @@ class ClutchNodeEmulator:
     def _boot(self, t: float) -> None:
         self._t_boot, self._seq, self._reset_flag = t, 0, node_frame.NODE_RESET
 
-    def _emit(self, times: np.ndarray) -> None:
-        """The frames measured at `times` onto the line: those in a radio silence are lost, the next ones damaged on
-        request, the rest encoded together."""
+    def _emit(self, times: np.ndarray) -> bytes:
+        """The frames measured at `times`: those in a radio silence are lost, the next ones damaged on request (onto
+        the line at once), the rest encoded together and returned."""
         inputs = self.provider.node_inputs_at(times)
         n = len(times)
-        fields = _frame_fields(times, np.asarray(inputs.resistances_ohm, dtype=float),
-                               *(np.asarray(v, dtype=np.int64).reshape(-1)
-                                 for v in (inputs.supply_mv, inputs.rssi_dbm, inputs.lqi)),
-                               self._t_boot, self._seq, self._reset_flag, self.short_ohm, self.low_supply_mv)
+        ohm, link = np.asarray(inputs.resistances_ohm, dtype=float), self._link_rows(inputs, n)
+        args = (times, ohm, link, self._t_boot, self._seq, self._reset_flag, self.short_ohm, self.low_supply_mv)
         self._seq = (self._seq + n) & 0xFFFF
         self._reset_flag = 0
+        if times[0] >= self._silent_until and not self._damage:  # the usual read: every frame sent intact
+            self.frames_sent += n
+            return _frame_wire(*args).tobytes()
+        fields = _frame_fields(*args)
         if times[0] < self._silent_until:
             sent = times >= self._silent_until
             self.frames_suppressed += n - int(np.count_nonzero(sent))
@@ -107,7 +114,16 @@ class ClutchNodeEmulator:
         damaged = min(len(self._damage), len(fields))
         for row in fields[:damaged].tolist():
             self._out += self._wire(node_frame.frame_of(row), self._damage.pop(0))
-        self._out += node_frame.encode_rows(fields[damaged:])
+        return node_frame.encode_rows(fields[damaged:])
+
+    def _link_rows(self, inputs: NodeInputSeries, n: int) -> np.ndarray:
+        """Supply, RSSI and LQI as rows (n, 3) for the kernel, or one row (1, 3) if each is one value for all."""
+        key = supply, rssi, lqi = inputs.supply_mv, inputs.rssi_dbm, inputs.lqi
+        if type(supply) is int and type(rssi) is int and type(lqi) is int:
+            if key != self._link_key:
+                self._link_key, self._link = key, np.array([key], dtype=np.int64)
+            return self._link
+        return np.column_stack([np.broadcast_to(np.asarray(v, dtype=np.int64).reshape(-1), n) for v in key])
 
     @staticmethod
     def _wire(frame: NodeFrame, damage: Damage) -> bytes:
@@ -125,18 +141,17 @@ class ClutchNodeEmulator:
 
 
 @njit(cache=True, nogil=True)
-def _frame_fields(times: np.ndarray, ohm: np.ndarray, supply_mv: np.ndarray, rssi_dbm: np.ndarray, lqi: np.ndarray,
-                  t_boot: float, seq: int, reset_flag: int, short_ohm: float,
+def _frame_fields(times: np.ndarray, ohm: np.ndarray, link: np.ndarray, t_boot: float, seq: int, reset_flag: int,
+                  short_ohm: float,
                   low_supply_mv: int) -> np.ndarray:  # pragma: no cover - compiled
     """Rows (node_frame.FIELDS order) of the frames measured at `times`, the first with sequence number `seq` and
-    `reset_flag` (supply, RSSI and LQI one per frame or one for all): open (inf/NaN) and short (below `short_ohm`) sensors flagged with NO_VALUE, a low supply flagged,
+    `reset_flag` (`link`: supply, RSSI and LQI, one row per frame or one for all): open (inf/NaN) and short (below `short_ohm`) sensors flagged with NO_VALUE, a low supply flagged,
     the node clock in ms since `t_boot`, every field clamped to its width."""
     out = np.empty((times.shape[0], 9), dtype=np.int64)
     for i in range(times.shape[0]):
         flags = reset_flag if i == 0 else 0
-        supply = supply_mv[i] if supply_mv.shape[0] > 1 else supply_mv[0]
-        rssi = rssi_dbm[i] if rssi_dbm.shape[0] > 1 else rssi_dbm[0]
-        lqi_i = lqi[i] if lqi.shape[0] > 1 else lqi[0]
+        k = i if link.shape[0] > 1 else 0
+        supply, rssi, lqi_i = link[k, 0], link[k, 1], link[k, 2]
         if supply < low_supply_mv:
             flags |= node_frame.LOW_SUPPLY
         for ch in range(2):
@@ -155,3 +170,10 @@ def _frame_fields(times: np.ndarray, ohm: np.ndarray, supply_mv: np.ndarray, rss
         out[i, 7] = max(-128, min(rssi, 127))
         out[i, 8] = max(0, min(lqi_i, 255))
     return out
+
+
+@njit(cache=True, nogil=True)
+def _frame_wire(times: np.ndarray, ohm: np.ndarray, link: np.ndarray, t_boot: float, seq: int, reset_flag: int,
+                short_ohm: float, low_supply_mv: int) -> np.ndarray:  # pragma: no cover - compiled
+    """The wire bytes of `_frame_fields`'s frames (node_frame.encode_rows) in the same compiled call."""
+    return node_frame.wire_of_rows(_frame_fields(times, ohm, link, t_boot, seq, reset_flag, short_ohm, low_supply_mv))
