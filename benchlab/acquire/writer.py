@@ -27,6 +27,7 @@ from typing import Any
 
 import h5py
 import numpy as np
+from isal import isal_zlib
 from numba import njit
 
 from benchlab.runfile.read import read_progress
@@ -81,16 +82,19 @@ class _Readings:
 
     def __init__(self, columns: int) -> None:
         self.columns = columns
+        self.rows: list[tuple[float, ...]] = []  # single readings (time, values...) not yet made a block
         self._blocks: list[np.ndarray] = []
-        self._rows: list[tuple[float, ...]] = []
-        self._count = 0
+        self._block_rows = 0
 
     def add(self, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading (`t` a number, `row` its values) or a block (`t` N times, `row` an (N, columns) array)."""
         if not isinstance(t, np.ndarray):
-            self._rows.append((t, *row))
-            self._count += 1
+            self.rows.append((t, *row))
             return
+        self.add_block(t, row)
+
+    def add_block(self, t: np.ndarray, row: "np.ndarray") -> None:
+        """A block of readings: `t` N times, `row` an (N, columns) array."""
         block = np.empty((len(t), 1 + self.columns))
         block[:, 0] = t
         block[:, 1:] = row
@@ -100,23 +104,27 @@ class _Readings:
         """Readings already as (N, 1 + columns) rows, time first (kept as they are: not to be changed after)."""
         self._close_rows()
         self._blocks.append(block)
-        self._count += len(block)
+        self._block_rows += len(block)
 
-    def take(self) -> np.ndarray:
-        """Everything added since the last take, in order, and forget it."""
+    def take(self, first: np.ndarray | None = None) -> np.ndarray:
+        """Everything added since the last take, in order (after the rows `first`, if given), and forget it."""
         self._close_rows()
-        blocks, self._blocks, self._count = self._blocks, [], 0
+        blocks, self._blocks, self._block_rows = self._blocks, [], 0
+        if first is not None:
+            blocks.insert(0, first)
         if len(blocks) == 1:
             return blocks[0]
         return np.concatenate(blocks) if blocks else np.empty((0, 1 + self.columns))
 
     def __len__(self) -> int:
-        return self._count
+        return self._block_rows + len(self.rows)
 
     def _close_rows(self) -> None:
-        if self._rows:
-            self._blocks.append(np.asarray(self._rows, dtype=float).reshape(len(self._rows), 1 + self.columns))
-            self._rows = []
+        if self.rows:
+            block = np.array(self.rows, dtype=float).reshape(len(self.rows), 1 + self.columns)
+            self.rows = []
+            self._blocks.append(block)
+            self._block_rows += len(block)
 
 
 def _str_array(values: Sequence[str], length: int) -> np.ndarray:
@@ -140,55 +148,71 @@ class AlignedBuilder:
         self.layout = layout
         self.dt = layout.dt
         self.rows = 0  # grid rows finalised
-        self._pending = {s.name: _Readings(len(s.columns)) for s in layout.streams}
-        self._carry: dict[str, np.ndarray | None] = {s.name: None for s in layout.streams}  # last row before the grid
-        self._column = {s.name: {c: j for j, c in enumerate(s.names)} for s in layout.streams}
+        sourced = [src.channel for src in layout.sources]
+        #: the grid's channels in one matrix: the stored ones in file order, then sourced ones that are not stored
+        self.channels = list(layout.aligned_units) + [c for c in sourced if c not in layout.aligned_units]
+        self._derived = [c for c in layout.aligned_units if c not in sourced]
+        index = {c: j for j, c in enumerate(self.channels)}
+        self._held: list[tuple[StreamSpec, np.ndarray, np.ndarray, np.ndarray]] = []  # stream, its columns, scales, targets
+        for spec in layout.streams:
+            mine = [src for src in layout.sources if src.stream == spec.name]
+            if mine:
+                self._held.append((spec, np.array([1 + spec.names.index(src.column) for src in mine]),
+                                   np.array([src.scale for src in mine], dtype=float),
+                                   np.array([index[src.channel] for src in mine])))
+        self._pending = {spec.name: _Readings(len(spec.columns)) for spec, *_ in self._held}  # sourced streams only
+        self._carry: dict[str, np.ndarray | None] = {name: None for name in self._pending}  # last row before the grid
 
     def add(self, stream: str, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading of `stream`, or a block of them (`t` an array, `row` an (N, columns) array)."""
-        self._pending[stream].add(t, row)
+        if stream in self._pending:  # a stream no /aligned channel comes from is not held
+            self._pending[stream].add(t, row)
 
     def add_rows(self, stream: str, rows: np.ndarray) -> None:
         """Readings of `stream` as (N, 1 + columns) rows, time first."""
-        self._pending[stream].add_rows(rows)
+        if stream in self._pending:
+            self._pending[stream].add_rows(rows)
 
     def finalise(self, until_row: int) -> dict[str, np.ndarray]:
         """Channels for grid rows [rows, until_row) (time included); later readings stay pending."""
+        return self.finalise_matrix(until_row)[1]
+
+    def finalise_matrix(self, until_row: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """`finalise`, with the rows also as one matrix whose columns are `channels`."""
         k0, k1 = self.rows, max(self.rows, until_row)
-        tk = np.arange(k0, k1) * self.dt
-        held: dict[str, np.ndarray] = {}  # stream → (rows, columns) values held on the grid
-        for spec in self.layout.streams:
-            pending, carry = self._pending[spec.name], self._carry[spec.name]
-            held[spec.name] = values = np.empty((k1 - k0, len(spec.columns)))
-            if k1 == k0:  # no grid rows to fill: the readings stay pending
-                continue
-            readings = pending.take()
-            if carry is not None:
-                readings = np.concatenate([carry[None, :], readings])
-            n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, values)
-            if n_before < 0:  # readings out of time order: sorted (stable), then held
-                readings = readings[np.argsort(readings[:, 0], kind="stable")]
-                n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, values)
-            if n_before:
-                self._carry[spec.name] = readings[n_before - 1].copy()
-            if n_before < len(readings):
-                pending.add_rows(readings[n_before:])
-        out: dict[str, np.ndarray] = {"time": tk}
-        for src in self.layout.sources:
-            column = held[src.stream][:, self._column[src.stream][src.column]]
-            out[src.channel] = column if src.scale == 1.0 else column * src.scale
+        grid = np.empty((k1 - k0, len(self.channels)))
+        out: dict[str, np.ndarray] = {"time": np.arange(k0, k1) * self.dt}
+        if k1 > k0:  # else no grid rows to fill: the readings stay pending
+            for spec, columns, scales, targets in self._held:
+                pending, carry = self._pending[spec.name], self._carry[spec.name]
+                readings = pending.take(first=carry)
+                n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, columns, scales, targets, grid)
+                if n_before < 0:  # readings out of time order: sorted (stable), then held
+                    readings = readings[np.argsort(readings[:, 0], kind="stable")]
+                    n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, columns, scales, targets, grid)
+                self._carry[spec.name] = readings[n_before - 1:n_before].copy() if n_before else carry
+                if n_before < len(readings):
+                    pending.add_rows(readings[n_before:])
+        for j, channel in enumerate(self.channels):
+            if channel not in self._derived:
+                out[channel] = grid[:, j]
         if self.layout.derive is not None:
-            out.update(self.layout.derive(out))
+            derived = self.layout.derive(out)
+            out.update(derived)
+            for j, channel in enumerate(self.channels):
+                if channel in self._derived:
+                    grid[:, j] = derived[channel]
         self.rows = k1
-        return out
+        return grid, out
 
 
 @njit(cache=True, nogil=True)
-def _hold_on_grid(readings: np.ndarray, k0: int, k1: int, dt: float, hold_s: float,
-                  values: np.ndarray) -> int:  # pragma: no cover - compiled
+def _hold_on_grid(readings: np.ndarray, k0: int, k1: int, dt: float, hold_s: float, columns: np.ndarray,
+                  scales: np.ndarray, targets: np.ndarray, grid: np.ndarray) -> int:  # pragma: no cover - compiled
     """Grid rows k0..k1-1 (time k·dt) from time-ordered readings (time, values...): each row holds the newest
-    reading at or before it, NaN when there is none or it is `hold_s` old or older. Returns how many readings
-    lie at or before the last row (-1, nothing written, if the readings are not in time order)."""
+    reading at or before it, NaN when there is none or it is `hold_s` old or older; reading column columns[i]
+    times scales[i] goes to grid column targets[i]. Returns how many readings lie at or before the last row
+    (-1, nothing written, if the readings are not in time order)."""
     n = readings.shape[0]
     for j in range(1, n):
         if readings[j, 0] < readings[j - 1, 0]:
@@ -198,10 +222,9 @@ def _hold_on_grid(readings: np.ndarray, k0: int, k1: int, dt: float, hold_s: flo
         t = k * dt
         while j < n and readings[j, 0] <= t + _EPS:
             j += 1
-        if j > 0 and t - readings[j - 1, 0] < hold_s + _EPS:
-            values[k - k0, :] = readings[j - 1, 1:]
-        else:
-            values[k - k0, :] = np.nan
+        held = j > 0 and t - readings[j - 1, 0] < hold_s + _EPS
+        for i in range(columns.shape[0]):
+            grid[k - k0, targets[i]] = readings[j - 1, columns[i]] * scales[i] if held else np.nan
     return j
 
 
@@ -264,17 +287,17 @@ class RunWriter:
         assert self._fd is not None
         until_row = int(np.floor(now / self.layout.dt + _EPS)) + 1
         self._ensure_capacity(until_row)
-        raw = {spec.name: self._raw[spec.name].take() for spec in self.layout.streams}
-        for name, data in raw.items():
+        raw = [(spec.name, self._raw[spec.name].take()) for spec in self.layout.streams]
+        for name, data in raw:
             if len(data):
                 self.builder.add_rows(name, data)
         k0 = self.builder.rows
         if until_row > k0:
-            rows = self.builder.finalise(until_row)
-            _store(self._aligned_views, k0, [rows[name] for name in self.layout.aligned_units])
-        for name, data in raw.items():
+            grid, _ = self.builder.finalise_matrix(until_row)
+            _scatter(self._words, self._aligned_words, k0, grid)
+        for name, data in raw:
             if len(data):
-                _store(self._stream_views[name], self._raw_rows[name], data.T)
+                _scatter(self._words, self._stream_words[name], self._raw_rows[name], data)
                 self._raw_rows[name] += len(data)
         if self._events:
             a, ev = self._event_rows, self._events
@@ -370,9 +393,17 @@ class RunWriter:
         whole = np.asarray(self._mm)  # a plain ndarray view of the mapping: slicing it skips memmap's bookkeeping
         self._views = {name: whole[off:off + cap * dt.itemsize].view(dt)
                        for name, (off, dt, cap) in self._where.items()}
-        self._aligned_views = [self._views[f"aligned/{name}"] for name in self.layout.aligned_units]
-        self._stream_views = {s.name: [self._views[f"raw/{s.name}/{c}"] for c in ("time", *s.names)]
+        self._words = whole[:len(whole) // 8 * 8].view("<f8")  # the file as 8-byte words: datasets start on one
+        self._aligned_words = np.array([self._word(f"aligned/{name}") for name in self.layout.aligned_units])
+        self._stream_words = {s.name: np.array([self._word(f"raw/{s.name}/{c}") for c in ("time", *s.names)])
                               for s in self.layout.streams}
+
+    def _word(self, name: str) -> int:
+        """Index in the file's 8-byte words of float64 dataset `name`'s first value (the file aligns datasets)."""
+        offset, dtype, _ = self._where[name]
+        if dtype != np.dtype("<f8") or offset % 8:
+            raise RuntimeError(f"{name}: not an 8-byte aligned float64 dataset")
+        return offset // 8
 
     def _close_fd(self) -> None:
         if self._fd is not None:
@@ -406,13 +437,16 @@ class RunWriter:
 
     def _ensure_capacity(self, until_row: int) -> None:
         """Grow the file (rebuilt at twice what is needed) if what the next flush writes would not fit."""
+        if (until_row <= self._capacity("aligned/time")
+                and self._event_rows + len(self._events) <= self._capacity("events/time")
+                and all(self._raw_rows[name] + len(self._raw[name]) <= self._capacity(f"raw/{name}/time")
+                        for name in self._raw)):
+            return
         need = {"aligned": until_row, "events": self._event_rows + len(self._events)}
         have = {"aligned": self._capacity("aligned/time"), "events": self._capacity("events/time")}
-        for name, views in self._stream_views.items():
+        for name in self._raw:
             need[f"raw/{name}"] = self._raw_rows[name] + len(self._raw[name])
-            have[f"raw/{name}"] = len(views[0])
-        if all(need[k] <= have[k] for k in need):
-            return
+            have[f"raw/{name}"] = self._capacity(f"raw/{name}/time")
         capacity = {k: max(have[k], 2 * need[k]) for k in have}
         self._close_fd()
         self._rebuild(capacity, compact=False, status="running", attrs=None)
@@ -433,7 +467,8 @@ class RunWriter:
     def _write_file(self, tmp: Path, capacity: Mapping[str, int] | None, meta: Mapping[str, Any],
                     data: Mapping[str, np.ndarray], compact: bool) -> None:
         """Write the whole file at `tmp`: attributes, /aligned, /raw, /events, /schedule, /acquire."""
-        with h5py.File(tmp, "w", locking=False) as f:
+        aligned = {} if compact else {"alignment_threshold": 1, "alignment_interval": 8}  # see _word
+        with h5py.File(tmp, "w", locking=False, **aligned) as f:
             f.attrs.update({k: v for k, v in meta["attrs"].items() if v is not None})
             self._write_group(f, "aligned", {"time": "s", **self.layout.aligned_units},
                               capacity, data, compact, "aligned")
@@ -450,7 +485,7 @@ class RunWriter:
                 src = data.get(f"events/{name}")
                 if src is not None:
                     arr[:len(src)] = src[:n_ev]
-                ds = ev.create_dataset(name, data=arr, track_times=False, **_compression(compact, arr))
+                ds = _dataset(ev, name, arr, compact)
                 ds.attrs["units"] = units
             self._write_schedule(f, meta["schedule"], meta["schedule_units"])
             acq = f.create_group("acquire")
@@ -465,7 +500,7 @@ class RunWriter:
                 group = f.create_group(name)
                 for col, (values, units) in columns.items():
                     arr = np.asarray(values, dtype=float)
-                    ds = group.create_dataset(col, data=arr, track_times=False, **_compression(compact, arr))
+                    ds = _dataset(group, col, arr, compact)
                     ds.attrs["units"] = units
             f.flush()
 
@@ -474,13 +509,14 @@ class RunWriter:
         group = parent.create_group(name)
         n = len(data.get(f"{prefix}/time", ())) if compact else capacity[prefix]
         for col, units in columns.items():
-            arr = np.full(n, np.nan)
-            if col == "time" and prefix == "aligned":
-                arr = np.arange(n) * self.layout.dt
             src = data.get(f"{prefix}/{col}")
-            if src is not None:
-                arr[:len(src)] = src[:n]
-            ds = group.create_dataset(col, data=arr, track_times=False, **_compression(compact, arr))
+            if compact and src is not None and len(src) == n:  # already exactly what is stored: no copy
+                arr = src
+            else:
+                arr = np.arange(n) * self.layout.dt if col == "time" and prefix == "aligned" else np.full(n, np.nan)
+                if src is not None:
+                    arr[:len(src)] = src[:n]
+            ds = _dataset(group, col, arr, compact)
             ds.attrs["units"] = units
 
     def _write_schedule(self, f: h5py.File, schedule: Sequence[Mapping[str, Any]], units: Mapping[str, str]) -> None:
@@ -534,10 +570,14 @@ class RunWriter:
         self._build(dest, capacity, meta, data)
 
 
-def _store(views: Sequence[np.ndarray], start: int, columns: Sequence[np.ndarray]) -> None:
-    """Columns into their datasets' mapped bytes from row `start` (the capacity is made sure of before)."""
-    for view, column in zip(views, columns):
-        view[start:start + len(column)] = column
+@njit(cache=True, nogil=True)
+def _scatter(words: np.ndarray, starts: np.ndarray, row: int, block: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Column c of `block` (c < len(starts)) into the float64 dataset whose values begin at word starts[c] of the
+    mapped file, from its row `row` on (the capacity is made sure of before)."""
+    for c in range(starts.shape[0]):
+        base = starts[c] + row
+        for i in range(block.shape[0]):
+            words[base + i] = block[i, c]
 
 
 def _tmp(path: Path) -> Path:
@@ -545,11 +585,27 @@ def _tmp(path: Path) -> Path:
     return path.with_name(path.name + ".tmp")
 
 
-def _compression(compact: bool, arr: np.ndarray) -> dict[str, Any]:
-    if not compact or arr.size < 1024:
-        return {}
-    chunk = int(min(arr.size, 65536))
-    return {"chunks": (chunk,), "compression": "gzip", "compression_opts": 1, "shuffle": True}
+COMPRESS_FROM = 1024  # values: smaller datasets of the compact file stay contiguous
+CHUNK = 65536  # values per compressed chunk
+
+
+def _dataset(parent: h5py.Group, name: str, arr: np.ndarray, compact: bool) -> h5py.Dataset:
+    """`arr` as dataset `name`: contiguous, or in the compact file (if large enough) chunked, shuffled and gzipped.
+
+    The chunks are shuffled and deflated here (ISA-L, several times faster than HDF5's zlib filter at level 1)
+    and written as they are: HDF5's own shuffle and gzip filters read them, as any HDF5 reader does.
+    """
+    if not compact or arr.size < COMPRESS_FROM:
+        return parent.create_dataset(name, data=arr, track_times=False)
+    chunk = min(arr.size, CHUNK)
+    ds = parent.create_dataset(name, shape=arr.shape, dtype=arr.dtype, chunks=(chunk,), compression="gzip",
+                               compression_opts=1, shuffle=True, track_times=False)
+    for start in range(0, arr.size, chunk):
+        part = np.zeros(chunk, dtype=arr.dtype)  # a chunk is whole even where the dataset ends inside it
+        part[:min(chunk, arr.size - start)] = arr[start:start + chunk]
+        shuffled = part.view(np.uint8).reshape(chunk, arr.dtype.itemsize).T.copy()  # HDF5's shuffle filter
+        ds.id.write_direct_chunk((start,), isal_zlib.compress(shuffled, 1))
+    return ds
 
 
 def describe_layout(layout: Layout) -> dict[str, Any]:
