@@ -82,49 +82,61 @@ class _Readings:
 
     def __init__(self, columns: int) -> None:
         self.columns = columns
-        self.rows: list[tuple[float, ...]] = []  # single readings (time, values...) not yet made a block
-        self._blocks: list[np.ndarray] = []
-        self._block_rows = 0
+        self.flat: list[float] = []  # single readings since the last part, one after the other: time, values...
+        self._parts: list[Any] = []  # in order: (N, 1 + columns) arrays and (times, values) blocks
+        self._count = 0  # readings in _parts
 
     def add(self, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading (`t` a number, `row` its values) or a block (`t` N times, `row` an (N, columns) array)."""
-        if not isinstance(t, np.ndarray):
-            self.rows.append((t, *row))
-            return
-        self.add_block(t, row)
+        if isinstance(t, np.ndarray):
+            self.add_block(t, row)
+        elif len(row) == self.columns:
+            self.flat.append(t)
+            self.flat.extend(row)
+        else:
+            raise ValueError(f"{len(row)} values for a stream of {self.columns} columns")
 
-    def add_block(self, t: np.ndarray, row: "np.ndarray") -> None:
-        """A block of readings: `t` N times, `row` an (N, columns) array."""
-        block = np.empty((len(t), 1 + self.columns))
-        block[:, 0] = t
-        block[:, 1:] = row
-        self.add_rows(block)
+    def add_block(self, t: np.ndarray, row: np.ndarray) -> None:
+        """A block of readings: `t` N times, `row` an (N, columns) array (copied when taken)."""
+        self._close_rows()
+        self._parts.append((t, row))
+        self._count += len(t)
 
     def add_rows(self, block: np.ndarray) -> None:
         """Readings already as (N, 1 + columns) rows, time first (kept as they are: not to be changed after)."""
         self._close_rows()
-        self._blocks.append(block)
-        self._block_rows += len(block)
+        self._parts.append(block)
+        self._count += len(block)
 
-    def take(self, first: np.ndarray | None = None) -> np.ndarray:
-        """Everything added since the last take, in order (after the rows `first`, if given), and forget it."""
+    def take(self) -> np.ndarray:
+        """Everything added since the last take, in order, and forget it."""
         self._close_rows()
-        blocks, self._blocks, self._block_rows = self._blocks, [], 0
-        if first is not None:
-            blocks.insert(0, first)
-        if len(blocks) == 1:
-            return blocks[0]
-        return np.concatenate(blocks) if blocks else np.empty((0, 1 + self.columns))
+        parts, self._parts = self._parts, []
+        count, self._count = self._count, 0
+        if len(parts) == 1 and isinstance(parts[0], np.ndarray):
+            return parts[0]
+        out = np.empty((count, 1 + self.columns))
+        a = 0
+        for part in parts:
+            if isinstance(part, tuple):
+                t, row = part
+                out[a:a + len(t), 0] = t
+                out[a:a + len(t), 1:] = row
+                a += len(t)
+            else:
+                out[a:a + len(part)] = part
+                a += len(part)
+        return out
 
     def __len__(self) -> int:
-        return self._block_rows + len(self.rows)
+        return self._count + len(self.flat) // (1 + self.columns)
 
     def _close_rows(self) -> None:
-        if self.rows:
-            block = np.array(self.rows, dtype=float).reshape(len(self.rows), 1 + self.columns)
-            self.rows = []
-            self._blocks.append(block)
-            self._block_rows += len(block)
+        if self.flat:
+            block = np.array(self.flat, dtype=float).reshape(-1, 1 + self.columns)
+            self.flat = []
+            self._parts.append(block)
+            self._count += len(block)
 
 
 def _str_array(values: Sequence[str], length: int) -> np.ndarray:
@@ -151,7 +163,8 @@ class AlignedBuilder:
         sourced = [src.channel for src in layout.sources]
         #: the grid's channels in one matrix: the stored ones in file order, then sourced ones that are not stored
         self.channels = list(layout.aligned_units) + [c for c in sourced if c not in layout.aligned_units]
-        self._derived = [c for c in layout.aligned_units if c not in sourced]
+        self._derived = [(j, c) for j, c in enumerate(self.channels) if c not in sourced]
+        self._sourced = [(j, c) for j, c in enumerate(self.channels) if c in sourced]
         index = {c: j for j, c in enumerate(self.channels)}
         self._held: list[tuple[StreamSpec, np.ndarray, np.ndarray, np.ndarray]] = []  # stream, its columns, scales, targets
         for spec in layout.streams:
@@ -161,7 +174,8 @@ class AlignedBuilder:
                                    np.array([src.scale for src in mine], dtype=float),
                                    np.array([index[src.channel] for src in mine])))
         self._pending = {spec.name: _Readings(len(spec.columns)) for spec, *_ in self._held}  # sourced streams only
-        self._carry: dict[str, np.ndarray | None] = {name: None for name in self._pending}  # last row before the grid
+        self._carry = {spec.name: np.array([-np.inf] + [np.nan] * len(spec.columns))  # the last reading before the
+                       for spec, *_ in self._held}  # grid's next row (time -inf: none yet)
 
     def add(self, stream: str, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading of `stream`, or a block of them (`t` an array, `row` an (N, columns) array)."""
@@ -185,46 +199,51 @@ class AlignedBuilder:
         if k1 > k0:  # else no grid rows to fill: the readings stay pending
             for spec, columns, scales, targets in self._held:
                 pending, carry = self._pending[spec.name], self._carry[spec.name]
-                readings = pending.take(first=carry)
-                n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, columns, scales, targets, grid)
-                if n_before < 0:  # readings out of time order: sorted (stable), then held
+                readings = pending.take()
+                used = _hold_on_grid(carry, readings, k0, k1, self.dt, spec.hold_s, columns, scales, targets, grid)
+                if used < 0:  # readings out of time order: sorted (stable) after the carried one, then held
+                    readings = np.concatenate([carry[None, :], readings])
                     readings = readings[np.argsort(readings[:, 0], kind="stable")]
-                    n_before = _hold_on_grid(readings, k0, k1, self.dt, spec.hold_s, columns, scales, targets, grid)
-                self._carry[spec.name] = readings[n_before - 1:n_before].copy() if n_before else carry
-                if n_before < len(readings):
-                    pending.add_rows(readings[n_before:])
-        for j, channel in enumerate(self.channels):
-            if channel not in self._derived:
-                out[channel] = grid[:, j]
+                    carry, readings = readings[0], readings[1:]
+                    used = _hold_on_grid(carry, readings, k0, k1, self.dt, spec.hold_s, columns, scales, targets,
+                                         grid)
+                self._carry[spec.name] = readings[used - 1].copy() if used else carry
+                if used < len(readings):
+                    pending.add_rows(readings[used:])
+        for j, channel in self._sourced:
+            out[channel] = grid[:, j]
         if self.layout.derive is not None:
             derived = self.layout.derive(out)
             out.update(derived)
-            for j, channel in enumerate(self.channels):
-                if channel in self._derived:
-                    grid[:, j] = derived[channel]
+            for j, channel in self._derived:
+                grid[:, j] = derived[channel]
         self.rows = k1
         return grid, out
 
 
 @njit(cache=True, nogil=True)
-def _hold_on_grid(readings: np.ndarray, k0: int, k1: int, dt: float, hold_s: float, columns: np.ndarray,
-                  scales: np.ndarray, targets: np.ndarray, grid: np.ndarray) -> int:  # pragma: no cover - compiled
-    """Grid rows k0..k1-1 (time k·dt) from time-ordered readings (time, values...): each row holds the newest
-    reading at or before it, NaN when there is none or it is `hold_s` old or older; reading column columns[i]
-    times scales[i] goes to grid column targets[i]. Returns how many readings lie at or before the last row
-    (-1, nothing written, if the readings are not in time order)."""
+def _hold_on_grid(carry: np.ndarray, readings: np.ndarray, k0: int, k1: int, dt: float, hold_s: float,
+                  columns: np.ndarray, scales: np.ndarray, targets: np.ndarray,
+                  grid: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Grid rows k0..k1-1 (time k·dt) from time-ordered readings (time, values...) that follow `carry`, the newest
+    reading before row k0 (time -inf: none): each row holds the newest reading at or before it, NaN when it is
+    `hold_s` old or older; reading column columns[i] times scales[i] goes to grid column targets[i]. Returns how
+    many of `readings` lie at or before the last row (-1, nothing written, if they are not in time order)."""
     n = readings.shape[0]
-    for j in range(1, n):
-        if readings[j, 0] < readings[j - 1, 0]:
+    last = carry[0]
+    for j in range(n):
+        if readings[j, 0] < last:
             return -1
+        last = readings[j, 0]
     j = 0
     for k in range(k0, k1):
         t = k * dt
         while j < n and readings[j, 0] <= t + _EPS:
             j += 1
-        held = j > 0 and t - readings[j - 1, 0] < hold_s + _EPS
+        row = carry if j == 0 else readings[j - 1]
+        held = t - row[0] < hold_s + _EPS
         for i in range(columns.shape[0]):
-            grid[k - k0, targets[i]] = readings[j - 1, columns[i]] * scales[i] if held else np.nan
+            grid[k - k0, targets[i]] = row[columns[i]] * scales[i] if held else np.nan
     return j
 
 
@@ -266,7 +285,12 @@ class RunWriter:
     def add(self, stream: str, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading of `stream` at run time `t` (s): values in the stream's column order (NaN = no number);
         or a block of readings: `t` an array of N times, `row` an (N, columns) array."""
-        self._raw[stream].add(t, row)
+        readings = self._raw[stream]
+        if isinstance(t, np.ndarray) or len(row) != readings.columns:
+            readings.add(t, row)  # a block, or a row of the wrong length (refused there)
+        else:  # _Readings.add without a second call: the runner adds a reading at a time
+            readings.flat.append(t)
+            readings.flat.extend(row)
 
     def event(self, t: float, kind: str, cycle: int = -1, detail: str = "", *, step: int = -1) -> None:
         """An entry of the events table (cycle start, engagement, interlock, fault, drop-out, ...); `step` is the
@@ -287,18 +311,16 @@ class RunWriter:
         assert self._fd is not None
         until_row = int(np.floor(now / self.layout.dt + _EPS)) + 1
         self._ensure_capacity(until_row)
-        raw = [(spec.name, self._raw[spec.name].take()) for spec in self.layout.streams]
+        raw = [(name, readings.take()) for name, readings in self._raw.items() if len(readings)]
         for name, data in raw:
-            if len(data):
-                self.builder.add_rows(name, data)
+            self.builder.add_rows(name, data)
         k0 = self.builder.rows
         if until_row > k0:
             grid, _ = self.builder.finalise_matrix(until_row)
             _scatter(self._words, self._aligned_words, k0, grid)
         for name, data in raw:
-            if len(data):
-                _scatter(self._words, self._stream_words[name], self._raw_rows[name], data)
-                self._raw_rows[name] += len(data)
+            _scatter(self._words, self._stream_words[name], self._raw_rows[name], data)
+            self._raw_rows[name] += len(data)
         if self._events:
             a, ev = self._event_rows, self._events
             for j, (name, (dtype, _, _)) in enumerate(EVENT_FIELDS.items()):
@@ -395,6 +417,7 @@ class RunWriter:
                        for name, (off, dt, cap) in self._where.items()}
         self._words = whole[:len(whole) // 8 * 8].view("<f8")  # the file as 8-byte words: datasets start on one
         self._aligned_words = np.array([self._word(f"aligned/{name}") for name in self.layout.aligned_units])
+        self._raw_capacity = [self._capacity(f"raw/{s.name}/time") for s in self.layout.streams]
         self._stream_words = {s.name: np.array([self._word(f"raw/{s.name}/{c}") for c in ("time", *s.names)])
                               for s in self.layout.streams}
 
@@ -439,8 +462,8 @@ class RunWriter:
         """Grow the file (rebuilt at twice what is needed) if what the next flush writes would not fit."""
         if (until_row <= self._capacity("aligned/time")
                 and self._event_rows + len(self._events) <= self._capacity("events/time")
-                and all(self._raw_rows[name] + len(self._raw[name]) <= self._capacity(f"raw/{name}/time")
-                        for name in self._raw)):
+                and all(self._raw_rows[name] + len(readings) <= capacity
+                        for (name, readings), capacity in zip(self._raw.items(), self._raw_capacity))):
             return
         need = {"aligned": until_row, "events": self._event_rows + len(self._events)}
         have = {"aligned": self._capacity("aligned/time"), "events": self._capacity("events/time")}
