@@ -83,8 +83,9 @@ class _Readings:
     def __init__(self, columns: int) -> None:
         self.columns = columns
         self.flat: list[float] = []  # single readings since the last part, one after the other: time, values...
-        self._parts: list[Any] = []  # in order: (N, 1 + columns) arrays and (times, values) blocks
+        self.parts: list[Any] = []  # in order: (N, 1 + columns) arrays and (times, values) blocks
         self._count = 0  # readings in _parts
+        self._none = np.empty((0, 1 + columns))
 
     def add(self, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading (`t` a number, `row` its values) or a block (`t` N times, `row` an (N, columns) array)."""
@@ -99,22 +100,24 @@ class _Readings:
     def add_block(self, t: np.ndarray, row: np.ndarray) -> None:
         """A block of readings: `t` N times, `row` an (N, columns) array (copied when taken)."""
         self._close_rows()
-        self._parts.append((t, row))
+        self.parts.append((t, row))
         self._count += len(t)
 
     def add_rows(self, block: np.ndarray) -> None:
         """Readings already as (N, 1 + columns) rows, time first (kept as they are: not to be changed after)."""
         self._close_rows()
-        self._parts.append(block)
+        self.parts.append(np.ascontiguousarray(block, dtype=float))
         self._count += len(block)
 
     def take(self) -> np.ndarray:
         """Everything added since the last take, in order, and forget it."""
         self._close_rows()
-        parts, self._parts = self._parts, []
+        parts, self.parts = self.parts, []
         count, self._count = self._count, 0
         if len(parts) == 1 and isinstance(parts[0], np.ndarray):
             return parts[0]
+        if not parts:
+            return self._none
         out = np.empty((count, 1 + self.columns))
         a = 0
         for part in parts:
@@ -135,7 +138,7 @@ class _Readings:
         if self.flat:
             block = np.array(self.flat, dtype=float).reshape(-1, 1 + self.columns)
             self.flat = []
-            self._parts.append(block)
+            self.parts.append(block)
             self._count += len(block)
 
 
@@ -166,16 +169,15 @@ class AlignedBuilder:
         self._derived = [(j, c) for j, c in enumerate(self.channels) if c not in sourced]
         self._sourced = [(j, c) for j, c in enumerate(self.channels) if c in sourced]
         index = {c: j for j, c in enumerate(self.channels)}
-        self._held: list[tuple[StreamSpec, np.ndarray, np.ndarray, np.ndarray]] = []  # stream, its columns, scales, targets
-        for spec in layout.streams:
-            mine = [src for src in layout.sources if src.stream == spec.name]
-            if mine:
-                self._held.append((spec, np.array([1 + spec.names.index(src.column) for src in mine]),
-                                   np.array([src.scale for src in mine], dtype=float),
-                                   np.array([index[src.channel] for src in mine])))
-        self._pending = {spec.name: _Readings(len(spec.columns)) for spec, *_ in self._held}  # sourced streams only
-        self._carry = {spec.name: np.array([-np.inf] + [np.nan] * len(spec.columns))  # the last reading before the
-                       for spec, *_ in self._held}  # grid's next row (time -inf: none yet)
+        self._held = [spec for spec in layout.streams if any(src.stream == spec.name for src in layout.sources)]
+        self._holds = np.array([spec.hold_s for spec in self._held], dtype=float)
+        #: per held stream, a row per channel it gives: its column in the readings, its grid column, its scale
+        self._plans = tuple(np.array([(1 + spec.names.index(src.column), index[src.channel], src.scale)
+                                      for src in layout.sources if src.stream == spec.name], dtype=float)
+                            for spec in self._held)
+        self._pending = {spec.name: _Readings(len(spec.columns)) for spec in self._held}  # held streams only
+        #: the last reading of each held stream before the grid's next row (time -inf: none yet), updated in place
+        self._carries = tuple(np.array([-np.inf] + [np.nan] * len(spec.columns)) for spec in self._held)
 
     def add(self, stream: str, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
         """One reading of `stream`, or a block of them (`t` an array, `row` an (N, columns) array)."""
@@ -197,19 +199,23 @@ class AlignedBuilder:
         grid = np.empty((k1 - k0, len(self.channels)))
         out: dict[str, np.ndarray] = {"time": np.arange(k0, k1) * self.dt}
         if k1 > k0:  # else no grid rows to fill: the readings stay pending
-            for spec, columns, scales, targets in self._held:
-                pending, carry = self._pending[spec.name], self._carry[spec.name]
-                readings = pending.take()
-                used = _hold_on_grid(carry, readings, k0, k1, self.dt, spec.hold_s, columns, scales, targets, grid)
-                if used < 0:  # readings out of time order: sorted (stable) after the carried one, then held
-                    readings = np.concatenate([carry[None, :], readings])
-                    readings = readings[np.argsort(readings[:, 0], kind="stable")]
-                    carry, readings = readings[0], readings[1:]
-                    used = _hold_on_grid(carry, readings, k0, k1, self.dt, spec.hold_s, columns, scales, targets,
-                                         grid)
-                self._carry[spec.name] = readings[used - 1].copy() if used else carry
-                if used < len(readings):
-                    pending.add_rows(readings[used:])
+            pending = [self._pending[spec.name] for spec in self._held]
+            readings = tuple(p.take() for p in pending)
+            rest = _hold_streams(self._carries, readings, k0, self.dt, self._holds, self._plans, grid)
+            for i in np.flatnonzero(rest):  # readings after the last row stay pending; disordered ones are sorted
+                data = readings[i]
+                if rest[i] < 0:  # readings out of time order: sorted (stable) after the carried one, then held
+                    data = np.concatenate([self._carries[i][None, :], data])
+                    data = data[np.argsort(data[:, 0], kind="stable")]
+                    self._carries[i][:] = data[0]
+                    data = data[1:]
+                    used = _hold_on_grid(self._carries[i], data, k0, self.dt, self._holds[i], self._plans[i], grid)
+                    if used:
+                        self._carries[i][:] = data[used - 1]
+                else:
+                    used = len(data) - rest[i]
+                if used < len(data):
+                    pending[i].add_rows(data[used:])
         for j, channel in self._sourced:
             out[channel] = grid[:, j]
         if self.layout.derive is not None:
@@ -222,13 +228,27 @@ class AlignedBuilder:
 
 
 @njit(cache=True, nogil=True)
-def _hold_on_grid(carry: np.ndarray, readings: np.ndarray, k0: int, k1: int, dt: float, hold_s: float,
-                  columns: np.ndarray, scales: np.ndarray, targets: np.ndarray,
+def _hold_streams(carries: tuple, readings: tuple, k0: int, dt: float, holds: np.ndarray, plans: tuple,
+                  grid: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """_hold_on_grid for each held stream, its carried reading then moved on to its newest used one. Returns per
+    stream how many readings lie after the grid's last row (-1: not in time order, nothing done for it)."""
+    rest = np.empty(len(readings), np.int64)
+    for s in range(len(readings)):
+        used = _hold_on_grid(carries[s], readings[s], k0, dt, holds[s], plans[s], grid)
+        if used > 0:
+            carries[s][:] = readings[s][used - 1]
+        rest[s] = -1 if used < 0 else readings[s].shape[0] - used
+    return rest
+
+
+@njit(cache=True, nogil=True)
+def _hold_on_grid(carry: np.ndarray, readings: np.ndarray, k0: int, dt: float, hold_s: float, plan: np.ndarray,
                   grid: np.ndarray) -> int:  # pragma: no cover - compiled
-    """Grid rows k0..k1-1 (time k·dt) from time-ordered readings (time, values...) that follow `carry`, the newest
-    reading before row k0 (time -inf: none): each row holds the newest reading at or before it, NaN when it is
-    `hold_s` old or older; reading column columns[i] times scales[i] goes to grid column targets[i]. Returns how
-    many of `readings` lie at or before the last row (-1, nothing written, if they are not in time order)."""
+    """Grid rows k0, k0+1, ... (time k·dt, as many as `grid` has) from time-ordered readings (time, values...) that
+    follow `carry`, the newest reading before row k0 (time -inf: none): each row holds the newest reading at or
+    before it, NaN when it is `hold_s` old or older; per `plan` row (column, grid column, scale) the reading's
+    column times scale goes to the grid column. Returns how many of `readings` lie at or before the last row
+    (-1, nothing written, if they are not in time order)."""
     n = readings.shape[0]
     last = carry[0]
     for j in range(n):
@@ -236,14 +256,14 @@ def _hold_on_grid(carry: np.ndarray, readings: np.ndarray, k0: int, k1: int, dt:
             return -1
         last = readings[j, 0]
     j = 0
-    for k in range(k0, k1):
+    for k in range(k0, k0 + grid.shape[0]):
         t = k * dt
         while j < n and readings[j, 0] <= t + _EPS:
             j += 1
         row = carry if j == 0 else readings[j - 1]
         held = t - row[0] < hold_s + _EPS
-        for i in range(columns.shape[0]):
-            grid[k - k0, targets[i]] = row[columns[i]] * scales[i] if held else np.nan
+        for i in range(plan.shape[0]):
+            grid[k - k0, int(plan[i, 1])] = row[int(plan[i, 0])] * plan[i, 2] if held else np.nan
     return j
 
 
@@ -311,16 +331,18 @@ class RunWriter:
         assert self._fd is not None
         until_row = int(np.floor(now / self.layout.dt + _EPS)) + 1
         self._ensure_capacity(until_row)
-        raw = [(name, readings.take()) for name, readings in self._raw.items() if len(readings)]
+        raw = [(name, readings.take()) for name, readings in self._raw.items() if readings.flat or readings.parts]
         for name, data in raw:
             self.builder.add_rows(name, data)
         k0 = self.builder.rows
         if until_row > k0:
             grid, _ = self.builder.finalise_matrix(until_row)
             _scatter(self._words, self._aligned_words, k0, grid)
-        for name, data in raw:
-            _scatter(self._words, self._stream_words[name], self._raw_rows[name], data)
-            self._raw_rows[name] += len(data)
+        if raw:
+            _scatter_streams(self._words, tuple(self._stream_words[name] for name, _ in raw),
+                             np.array([self._raw_rows[name] for name, _ in raw]), tuple(data for _, data in raw))
+            for name, data in raw:
+                self._raw_rows[name] += len(data)
         if self._events:
             a, ev = self._event_rows, self._events
             for j, (name, (dtype, _, _)) in enumerate(EVENT_FIELDS.items()):
@@ -430,9 +452,10 @@ class RunWriter:
 
     def _close_fd(self) -> None:
         if self._fd is not None:
-            self._views = {}
+            self._views, self._words = {}, None
             if self._mm is not None:
-                self._mm.flush()
+                if self.durable:  # else the page cache holds the bytes for any reader, a killed process or not
+                    self._mm.flush()
                 self._mm._mmap.close()  # noqa: SLF001 - unmap now, not at garbage collection
                 self._mm = None
             os.close(self._fd)
@@ -603,6 +626,13 @@ def _scatter(words: np.ndarray, starts: np.ndarray, row: int, block: np.ndarray)
             words[base + i] = block[i, c]
 
 
+@njit(cache=True, nogil=True)
+def _scatter_streams(words: np.ndarray, starts: tuple, rows: np.ndarray, blocks: tuple) -> None:  # pragma: no cover - compiled
+    """_scatter for several streams in one call: blocks[s] from row rows[s] into the datasets at starts[s]."""
+    for s in range(len(blocks)):
+        _scatter(words, starts[s], rows[s], blocks[s])
+
+
 def _tmp(path: Path) -> Path:
     """Where a new version of `path` is built before it replaces it."""
     return path.with_name(path.name + ".tmp")
@@ -624,8 +654,9 @@ def _dataset(parent: h5py.Group, name: str, arr: np.ndarray, compact: bool) -> h
     ds = parent.create_dataset(name, shape=arr.shape, dtype=arr.dtype, chunks=(chunk,), compression="gzip",
                                compression_opts=1, shuffle=True, track_times=False)
     for start in range(0, arr.size, chunk):
-        part = np.zeros(chunk, dtype=arr.dtype)  # a chunk is whole even where the dataset ends inside it
-        part[:min(chunk, arr.size - start)] = arr[start:start + chunk]
+        part = np.ascontiguousarray(arr[start:start + chunk])
+        if len(part) < chunk:  # a chunk is whole even where the dataset ends inside it
+            part = np.concatenate([part, np.zeros(chunk - len(part), dtype=arr.dtype)])
         shuffled = part.view(np.uint8).reshape(chunk, arr.dtype.itemsize).T.copy()  # HDF5's shuffle filter
         ds.id.write_direct_chunk((start,), isal_zlib.compress(shuffled, 1))
     return ds

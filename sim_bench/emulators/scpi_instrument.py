@@ -67,6 +67,8 @@ class ScpiInstrumentEmulator:
 
     def read_available(self) -> bytes:
         """Reply bytes waiting for the host."""
+        if not self._out:
+            return b""
         data, self._out = bytes(self._out), bytearray()
         return data
 
@@ -162,7 +164,7 @@ class ScpiInstrumentEmulator:
         if self.last_scan is None:
             self._push_error(-230, "Data stale")
             return None
-        return ",".join(f"{v:+.8E}" for v in self.last_scan)
+        return ",".join(["%+.8E"] * len(self.last_scan)) % tuple(self.last_scan)
 
     def _read(self, args: str) -> str | None:
         self._init(args)
