@@ -331,18 +331,17 @@ class RunWriter:
         assert self._fd is not None
         until_row = int(np.floor(now / self.layout.dt + _EPS)) + 1
         self._ensure_capacity(until_row)
-        raw = [(name, readings.take()) for name, readings in self._raw.items() if readings.flat or readings.parts]
-        for name, data in raw:
-            self.builder.add_rows(name, data)
+        raw = tuple(readings.take() for readings in self._raw.values())  # every stream: one compiled signature
+        for name, data in zip(self._raw, raw):
+            if len(data):
+                self.builder.add_rows(name, data)
         k0 = self.builder.rows
         if until_row > k0:
             grid, _ = self.builder.finalise_matrix(until_row)
             _scatter(self._words, self._aligned_words, k0, grid)
-        if raw:
-            _scatter_streams(self._words, tuple(self._stream_words[name] for name, _ in raw),
-                             np.array([self._raw_rows[name] for name, _ in raw]), tuple(data for _, data in raw))
-            for name, data in raw:
-                self._raw_rows[name] += len(data)
+        _scatter_streams(self._words, self._stream_words, np.array(list(self._raw_rows.values())), raw)
+        for name, data in zip(self._raw, raw):
+            self._raw_rows[name] += len(data)
         if self._events:
             a, ev = self._event_rows, self._events
             for j, (name, (dtype, _, _)) in enumerate(EVENT_FIELDS.items()):
@@ -440,8 +439,8 @@ class RunWriter:
         self._words = whole[:len(whole) // 8 * 8].view("<f8")  # the file as 8-byte words: datasets start on one
         self._aligned_words = np.array([self._word(f"aligned/{name}") for name in self.layout.aligned_units])
         self._raw_capacity = [self._capacity(f"raw/{s.name}/time") for s in self.layout.streams]
-        self._stream_words = {s.name: np.array([self._word(f"raw/{s.name}/{c}") for c in ("time", *s.names)])
-                              for s in self.layout.streams}
+        self._stream_words = tuple(np.array([self._word(f"raw/{s.name}/{c}") for c in ("time", *s.names)])
+                                   for s in self.layout.streams)
 
     def _word(self, name: str) -> int:
         """Index in the file's 8-byte words of float64 dataset `name`'s first value (the file aligns datasets)."""
