@@ -84,7 +84,7 @@ class _Readings:
         self.columns = columns
         self.flat: list[float] = []  # single readings since the last part, one after the other: time, values...
         self.parts: list[Any] = []  # in order: (N, 1 + columns) arrays and (times, values) blocks
-        self._count = 0  # readings in _parts
+        self._count = 0  # readings in parts
         self._none = np.empty((0, 1 + columns))
 
     def add(self, t: "float | np.ndarray", row: "Sequence[float] | np.ndarray") -> None:
