@@ -134,6 +134,9 @@ class _Readings:
     def __len__(self) -> int:
         return self._count + len(self.flat) // (1 + self.columns)
 
+    def __bool__(self) -> bool:
+        return bool(self.parts or self.flat)
+
     def _close_rows(self) -> None:
         if self.flat:
             block = np.array(self.flat, dtype=float).reshape(-1, 1 + self.columns)
@@ -176,6 +179,7 @@ class AlignedBuilder:
                                       for src in layout.sources if src.stream == spec.name], dtype=float)
                             for spec in self._held)
         self._pending = {spec.name: _Readings(len(spec.columns)) for spec in self._held}  # held streams only
+        self._held_at = [layout.streams.index(spec) for spec in self._held]
         #: the last reading of each held stream before the grid's next row (time -inf: none yet), updated in place
         self._carries = tuple(np.array([-np.inf] + [np.nan] * len(spec.columns)) for spec in self._held)
 
@@ -193,14 +197,20 @@ class AlignedBuilder:
         """Channels for grid rows [rows, until_row) (time included); later readings stay pending."""
         return self.finalise_matrix(until_row)[1]
 
-    def finalise_matrix(self, until_row: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """`finalise`, with the rows also as one matrix whose columns are `channels`."""
+    def finalise_matrix(self, until_row: int, fresh: Sequence[np.ndarray] | None = None
+                        ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """`finalise`, with the rows also as one matrix whose columns are `channels`. `fresh`: the newest readings
+        of every stream of the layout, in its order, as (N, 1 + columns) float rows (as if added just before)."""
         k0, k1 = self.rows, max(self.rows, until_row)
         grid = np.empty((k1 - k0, len(self.channels)))
         out: dict[str, np.ndarray] = {"time": np.arange(k0, k1) * self.dt}
+        pending = [self._pending[spec.name] for spec in self._held]
+        if fresh is not None:
+            for p, i in zip(pending, self._held_at):
+                if p or k1 == k0:  # behind readings still pending (rare), or no grid row to take them
+                    p.add_rows(fresh[i])
         if k1 > k0:  # else no grid rows to fill: the readings stay pending
-            pending = [self._pending[spec.name] for spec in self._held]
-            readings = tuple(p.take() for p in pending)
+            readings = tuple(p.take() if fresh is None or p else fresh[i] for p, i in zip(pending, self._held_at))
             rest = _hold_streams(self._carries, readings, k0, self.dt, self._holds, self._plans, grid)
             for i in np.flatnonzero(rest):  # readings after the last row stay pending; disordered ones are sorted
                 data = readings[i]
@@ -332,13 +342,9 @@ class RunWriter:
         until_row = int(np.floor(now / self.layout.dt + _EPS)) + 1
         self._ensure_capacity(until_row)
         raw = tuple(readings.take() for readings in self._raw.values())  # every stream: one compiled signature
-        for name, data in zip(self._raw, raw):
-            if len(data):
-                self.builder.add_rows(name, data)
         k0 = self.builder.rows
-        if until_row > k0:
-            grid, _ = self.builder.finalise_matrix(until_row)
-            _scatter(self._words, self._aligned_words, k0, grid)
+        grid, _ = self.builder.finalise_matrix(until_row, raw)
+        _scatter(self._words, self._aligned_words, k0, grid)
         _scatter_streams(self._words, self._stream_words, np.array(list(self._raw_rows.values())), raw)
         for name, data in zip(self._raw, raw):
             self._raw_rows[name] += len(data)
