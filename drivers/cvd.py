@@ -69,6 +69,8 @@ def _temperatures(r: np.ndarray, r0: float, a: float, b: float, c: float) -> np.
 
 def in_range(temperature_c: ArrayLike) -> np.ndarray | bool:
     """True where the temperature lies in the IEC 60751 validity range −200…850 °C."""
+    if isinstance(temperature_c, float):  # one reading (the drivers): no numpy round trip
+        return T_MIN_C <= temperature_c <= T_MAX_C
     t = np.asarray(temperature_c, dtype=float)
     return _like((t >= T_MIN_C) & (t <= T_MAX_C), temperature_c)
 

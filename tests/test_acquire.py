@@ -114,6 +114,35 @@ def test_run_file_layout_units_status_and_events(tmp_path):
         assert not os.path.exists(str(path) + ".tmp")
 
 
+def test_compact_file_holds_the_running_files_values_gzipped_and_shuffled(tmp_path):
+    """Closing writes its own compressed chunks (two of them here, the second only partly used): HDF5's gzip and
+    shuffle filters read back exactly the values the running file held, NaN included."""
+    path = tmp_path / "run.h5"
+    w = RunWriter(path, _layout(), protocol="table1", planned_s=700.0)
+    t = 0.0
+    while t < 700.0:
+        t = round(t + 0.05, 10)
+        w.add("s", t, _row(t) if int(t) % 7 else [np.nan] * len(CHANNELS))
+        w.advance(t)
+    w.flush(t)
+    with h5py.File(path, "r") as f:
+        rows = int(read_progress(f)["aligned_rows"])
+        running = {name: f["aligned"][name][:rows] for name in f["aligned"]}
+    w.close("complete")
+    with h5py.File(path, "r") as f:
+        for name, values in running.items():
+            ds = f["aligned"][name]
+            assert ds.compression == "gzip" and ds.shuffle and ds.chunks == (65536,), name
+            np.testing.assert_array_equal(ds[:], values, err_msg=name)
+    assert rows > 65536 and np.isnan(running["clutch_torque"]).any()
+
+
+def test_a_reading_with_the_wrong_number_of_values_is_refused(tmp_path):
+    w = RunWriter(tmp_path / "run.h5", _layout(), protocol="table1", planned_s=2.0)
+    with pytest.raises(ValueError, match="values for a stream of"):
+        w.add("s", 0.1, _row(0.1)[:-1])
+
+
 WRITER = textwrap.dedent("""
     import sys
     sys.path.insert(0, {root!r})

@@ -208,13 +208,27 @@ def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     point belong to the same instant.
     """
     clamp = out["_clamp_state"]
-    state = np.where(np.isnan(clamp), np.nan, (clamp == CLAMP_SLIPPING) | (clamp == CLAMP_CLAMPED)).astype(float)
     power = friction_power(out["clutch_torque"], out["engine_speed"], out["clutch_speed"], actuator_slipping(clamp))
-    f1, f2 = out["T_flywheel_1"], out["T_flywheel_2"]
-    both = np.column_stack([f1, f2])
-    count = np.sum(np.isfinite(both), axis=1)
-    mean = np.where(count > 0, np.nansum(both, axis=1) / np.maximum(count, 1), np.nan)
+    state, mean = _state_and_mean(clamp, out["T_flywheel_1"], out["T_flywheel_2"])
     return {"clutch_state": state, "friction_power": power, "T_flywheel": mean}
+
+
+@njit(cache=True, nogil=True)
+def _state_and_mean(clamp: np.ndarray, f1: np.ndarray, f2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Clutch state (1 slipping or clamped, 0 open, NaN unknown) and the mean of the finite flywheel temperatures
+    (NaN where neither is) on each grid row."""
+    state, mean = np.empty(clamp.shape[0]), np.empty(clamp.shape[0])
+    for k in range(clamp.shape[0]):
+        c = clamp[k]
+        state[k] = np.nan if np.isnan(c) else 1.0 if c == CLAMP_SLIPPING or c == CLAMP_CLAMPED else 0.0
+        total, count = 0.0, 0
+        for v in (f1[k], f2[k]):
+            if not np.isnan(v):
+                total += v
+            if np.isfinite(v):
+                count += 1
+        mean[k] = total / count if count else np.nan
+    return state, mean
 
 
 #: The /aligned channels the bench writes, in file order, with the contract's units (time is the grid's own;

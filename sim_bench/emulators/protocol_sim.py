@@ -52,11 +52,12 @@ class Serial(SerialBase):
         return len(self._rx)
 
     def read(self, size: int = 1) -> bytes:
-        deadline = None if self.timeout is None else time.monotonic() + self.timeout
         self._pull()
-        while len(self._rx) < size and (deadline is None or time.monotonic() < deadline):
-            time.sleep(_WAIT_S)
-            self._pull()
+        if len(self._rx) < size:  # wait in wall-clock time for the rest
+            deadline = None if self.timeout is None else time.monotonic() + self.timeout
+            while len(self._rx) < size and (deadline is None or time.monotonic() < deadline):
+                time.sleep(_WAIT_S)
+                self._pull()
         data = bytes(self._rx[:size])
         del self._rx[:size]
         return data

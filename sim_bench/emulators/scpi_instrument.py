@@ -53,6 +53,7 @@ class ScpiInstrumentEmulator:
             ("[SENSe:]TEMPerature:TRANsducer:FRTD:RESistance[:REFerence]", self._frtd_ref),
             ("ROUTe:SCAN", self._scan_list), ("READ?", self._read), ("INITiate[:IMMediate]", self._init),
             ("FETCh?", self._fetch))]
+        self._handler_of: dict[str, Callable[[str], str | None] | None] = {}  # header -> its handler, once matched
         self._rst("")
 
     # -- serial endpoint -----------------------------------------------------------------------------
@@ -66,6 +67,8 @@ class ScpiInstrumentEmulator:
 
     def read_available(self) -> bytes:
         """Reply bytes waiting for the host."""
+        if not self._out:
+            return b""
         data, self._out = bytes(self._out), bytearray()
         return data
 
@@ -85,15 +88,23 @@ class ScpiInstrumentEmulator:
             return None
         self.commands.append(line)
         header, _, args = line.partition(" ")
-        for pattern, handler in self._handlers:
-            if pattern.fullmatch(header.upper()):
-                try:
-                    return handler(args.strip())
-                except ValueError:
-                    self._push_error(-224, "Illegal parameter value")
-                    return None
-        self._push_error(-113, "Undefined header")
-        return None
+        try:
+            handler = self._handler_of[header]
+        except KeyError:
+            handler = self._handler_of[header] = self._match(header)
+        if handler is None:
+            self._push_error(-113, "Undefined header")
+            return None
+        try:
+            return handler(args.strip())
+        except ValueError:
+            self._push_error(-224, "Illegal parameter value")
+            return None
+
+    def _match(self, header: str) -> Callable[[str], str | None] | None:
+        """The handler of a command header (short or long form, any case), None if the instrument has none."""
+        upper = header.upper()
+        return next((handler for pattern, handler in self._handlers if pattern.fullmatch(upper)), None)
 
     def _idn(self, args: str) -> str:
         return self.idn
@@ -153,7 +164,7 @@ class ScpiInstrumentEmulator:
         if self.last_scan is None:
             self._push_error(-230, "Data stale")
             return None
-        return ",".join(f"{v:+.8E}" for v in self.last_scan)
+        return ",".join(["%+.8E"] * len(self.last_scan)) % tuple(self.last_scan)
 
     def _read(self, args: str) -> str | None:
         self._init(args)
