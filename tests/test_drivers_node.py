@@ -405,4 +405,6 @@ def test_frame_and_cobs_errors_are_driver_errors() -> None:
 def test_real_time_read_from_default_emulator() -> None:
     import sim_bench.emulators  # noqa: F401
     g = ClutchNodeGateway.open("sim://node", period_s=0.05)
-    assert len(g.read(2, timeout_s=30.0)) == 2  # ends at the 2nd frame; the wait covers a first compile (numba)
+    # read() returns what arrived once it holds at least 2 (more if a loaded machine polled late); the long
+    # time-out covers a first compile (numba) on a fresh clone
+    assert len(g.read(2, timeout_s=30.0)) >= 2
