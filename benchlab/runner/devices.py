@@ -123,7 +123,7 @@ class BenchStatus:
         parts = [_NO_STATUS_BLOCK] * len(_STATUS_BLOCK_ORDER)
         for b in blocks:
             parts[_STATUS_BLOCK_ORDER[b.controller]] = (b.index, b.t, b.matrix, _held_columns(b.keys))
-        _take_status_frames(*parts[0], *parts[1], *parts[2], held, gear_ratio, CLAMP_SLIPPING)
+        _take_status_frames(*parts[0], *parts[1], *parts[2], held, gear_ratio)
         engine, clutch, torque, clamp, self.friction_power, self.t_frame, energy, *seen = held.tolist()
         self.engine_speed, self.clutch_speed, self.clutch_torque, self.clamp_state = engine, clutch, torque, int(clamp)
         self.friction_energy_j += energy
@@ -132,9 +132,10 @@ class BenchStatus:
                 self.mark_seen(channel, t)
 
 
-def actuator_slipping(clamp_state: np.ndarray) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def actuator_slipping(clamp_state: float) -> float:  # pragma: no cover - compiled
     """1 where the clutch actuator reports slipping, 0 where clamped or open, NaN where its state is unknown."""
-    return np.where(np.isnan(clamp_state), np.nan, clamp_state == CLAMP_SLIPPING)
+    return np.nan if np.isnan(clamp_state) else (1.0 if clamp_state == CLAMP_SLIPPING else 0.0)
 
 
 Reading = tuple[str, "float | np.ndarray", "tuple[float, ...] | np.ndarray"]  # one row, or a block: times, rows
@@ -157,7 +158,7 @@ _STATUS_HELD = ("drive.speed", "load.speed", "clutch.torque", "clutch.clamp_stat
 _SEEN_CHANNELS = ("engine_speed", "clutch_speed", "clutch_torque")  # the stale-reading channel of each held value
 _STATUS_BLOCK_ORDER = {"drive": 0, "clutch": 1, "load": 2}  # the kernel's argument group of each status message
 _NO_STATUS_BLOCK = (np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros((0, 1)), np.full(len(_STATUS_HELD), -1))
-_friction_power = njit(cache=True, nogil=True)(friction_power)  # the one formula, compiled for the kernel below
+_friction_power = njit(cache=True, nogil=True)(friction_power)  # the one formula, compiled for the kernels below
 
 
 @functools.lru_cache(maxsize=32)
@@ -170,7 +171,7 @@ def _held_columns(keys: tuple[str, ...]) -> np.ndarray:
 def _take_status_frames(index0: np.ndarray, t0: np.ndarray, values0: np.ndarray, columns0: np.ndarray,
                         index1: np.ndarray, t1: np.ndarray, values1: np.ndarray, columns1: np.ndarray,
                         index2: np.ndarray, t2: np.ndarray, values2: np.ndarray, columns2: np.ndarray,
-                        held: np.ndarray, gear_ratio: float, slipping_state: int) -> None:  # pragma: no cover
+                        held: np.ndarray, gear_ratio: float) -> None:  # pragma: no cover - compiled
     """Three status blocks' frames merged by arrival position and taken one by one. `held` (in/out): the four held
     values (_STATUS_HELD; clutch speed = load speed × gear ratio), friction power, newest frame time (NaN: none),
     then out: the energy added, and per held value its newest valid frame time (NaN: none)."""
@@ -196,8 +197,7 @@ def _take_status_frames(index0: np.ndarray, t0: np.ndarray, values0: np.ndarray,
             held[5] = t[i]
         elif np.isnan(held[5]):
             held[5] = t[i]
-        slipping = np.nan if np.isnan(held[3]) else (1.0 if held[3] == slipping_state else 0.0)
-        power = _friction_power(held[2], held[0], held[1], slipping)
+        power = _friction_power(held[2], held[0], held[1], actuator_slipping(held[3]))
         held[4] = 0.0 if np.isnan(power) else power  # unknown (NaN) counts as no power
 
 
@@ -207,20 +207,22 @@ def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     Every CAN status frame sits on the grid point of the instant it was measured, so torque and slip at a grid
     point belong to the same instant.
     """
-    clamp = out["_clamp_state"]
-    power = friction_power(out["clutch_torque"], out["engine_speed"], out["clutch_speed"], actuator_slipping(clamp))
-    state, mean = _state_and_mean(clamp, out["T_flywheel_1"], out["T_flywheel_2"])
+    state, power, mean = _derived(out["_clamp_state"], out["clutch_torque"], out["engine_speed"],
+                                  out["clutch_speed"], out["T_flywheel_1"], out["T_flywheel_2"])
     return {"clutch_state": state, "friction_power": power, "T_flywheel": mean}
 
 
 @njit(cache=True, nogil=True)
-def _state_and_mean(clamp: np.ndarray, f1: np.ndarray, f2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """Clutch state (1 slipping or clamped, 0 open, NaN unknown) and the mean of the finite flywheel temperatures
-    (NaN where neither is) on each grid row."""
-    state, mean = np.empty(clamp.shape[0]), np.empty(clamp.shape[0])
-    for k in range(clamp.shape[0]):
+def _derived(clamp: np.ndarray, torque: np.ndarray, engine: np.ndarray, clutch: np.ndarray, f1: np.ndarray,
+             f2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Per grid row: clutch state (1 slipping or clamped, 0 open, NaN unknown), friction power (the one formula),
+    and the mean of the finite flywheel temperatures (NaN where neither is)."""
+    n = clamp.shape[0]
+    state, power, mean = np.empty(n), np.empty(n), np.empty(n)
+    for k in range(n):
         c = clamp[k]
         state[k] = np.nan if np.isnan(c) else 1.0 if c == CLAMP_SLIPPING or c == CLAMP_CLAMPED else 0.0
+        power[k] = _friction_power(torque[k], engine[k], clutch[k], actuator_slipping(c))
         total, count = 0.0, 0
         for v in (f1[k], f2[k]):
             if not np.isnan(v):
@@ -228,7 +230,7 @@ def _state_and_mean(clamp: np.ndarray, f1: np.ndarray, f2: np.ndarray) -> tuple[
             if np.isfinite(v):
                 count += 1
         mean[k] = total / count if count else np.nan
-    return state, mean
+    return state, power, mean
 
 
 #: The /aligned channels the bench writes, in file order, with the contract's units (time is the grid's own;
