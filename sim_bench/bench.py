@@ -136,13 +136,16 @@ class SimPhysics:
         temps = self.plant.sensor_temperatures(states)
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
         self._record_truth(k0, temps["_states"])
-        # what the sensors read on this grid: noise per sample, resistances in one vectorised call each
+        # what the sensors read on this grid: the node's two sensors, then the DMM's channels, one row each: noise
+        # per sample (drawn row after row, one call), resistances in one vectorised call
         sc, rng = self.cfg.sensors, self.rng_sensor
-        temps["_R_node"] = np.column_stack([cvd.resistance(temps["T_flywheel"] + rng.normal(0.0, sc.node_noise_k, n))
-                                            for _ in range(2)])  # the node's two sensors
-        for ch, name in self.cfg.dmm_channels.items():
-            true = cols["T_ambient"] if name == "T_ambient" else temps[name]
-            temps[f"_R_dmm{ch}"] = cvd.resistance(true + rng.normal(0.0, sc.wired_noise_k, n))
+        true = [temps["T_flywheel"]] * 2 + [cols["T_ambient"] if name == "T_ambient" else temps[name]
+                                            for name in self.cfg.dmm_channels.values()]
+        noise_scale = np.array([sc.node_noise_k] * 2 + [sc.wired_noise_k] * (len(true) - 2))[:, None]
+        resistances = cvd.resistance(np.stack(true) + rng.normal(0.0, noise_scale, (len(true), n)))
+        temps["_R_node"] = np.ascontiguousarray(resistances[:2].T)
+        for i, ch in enumerate(self.cfg.dmm_channels, start=2):
+            temps[f"_R_dmm{ch}"] = resistances[i]
         noise_speed = rng.normal(0.0, sc.speed_noise_rpm, (n, 2))
         noise_torque = rng.normal(0.0, sc.torque_noise_nm, n)
         # what the controllers' actual values are made of, one row per grid point (actuals_at takes rows)
