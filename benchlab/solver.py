@@ -11,6 +11,7 @@ each distinct one is discretised once.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -42,12 +43,21 @@ def _conductances(network: ThermalNetwork, params: Params, channels: Channels, n
             out.append(by_law[id(link.resistance)])
             continue
         r = np.asarray(link.resistance(params, channels), dtype=np.float64)
-        if np.any(~np.isfinite(r)) or np.any(r <= 0):
+        if not (_all_positive_finite(r.ravel()) if r.ndim else math.isfinite(float(r)) and float(r) > 0):
             raise ValueError(f"resistance of link {link.label or (link.a, link.b)} is not positive and finite")
         g = float(1.0 / r) if r.ndim == 0 else 1.0 / r
         by_law[id(link.resistance)] = g
         out.append(g)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _all_positive_finite(values: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """Whether every value is finite and > 0, in one pass (a law's resistances are checked on every call)."""
+    for v in values:
+        if not (math.isfinite(v) and v > 0):
+            return False
+    return True
 
 
 def _system_matrices(network: ThermalNetwork, params: Params, conductances: list[np.ndarray],

@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from drivers import can_signals as sig
-from drivers.can_codec import CodecTable, compile_codecs, encode_rows
+from drivers.can_codec import CodecTable, compile_codecs, decode_row, encode_rows
 from drivers.can_frames import EXTENDED, drain, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
@@ -44,6 +44,7 @@ _CYCLES, _ALIVE, _SILENT, _FROZEN = range(4)  # columns of the per-message count
 _ALIVE_COL, _MODULO, _ID, _OWNER = range(4)  # the per-message layout's last columns, after source and status source
 _SCALARS = 4
 _ITEM, _LOCAL, _ROW = range(3)  # rows of _due_frames' per-frame index
+_RX_ID, _RX_LENGTH, _RX_EXTENDED, _RX_CONTROLLER = range(4)  # columns of the command slots' matrix
 
 
 @dataclass(slots=True)
@@ -86,16 +87,16 @@ class CanBenchEmulator:
         # command values last taken (NaN: none yet; only the set-point columns count)
         n = len(self.controllers)
         self._last_cmd, self._enabled, self._fault = np.full(n, np.nan), np.zeros(n, dtype=bool), np.zeros(n, np.int64)
-        # the command frames: frame id, length, id kind per slot in the command table, and who takes the slot
+        # the command frames: per slot in the command table its frame id, length, id kind and who takes it (columns
+        # _RX_ID, _RX_LENGTH, _RX_EXTENDED, _RX_CONTROLLER)
         received = ("drive.cmd_alive", "clutch.cmd_alive", "load.cmd_alive", "estop.request", "pc.hb_alive")
         rx = [self._codec_of[key] for key in received]
         self._rx_table = CodecTable(rx)
-        self._rx_id = np.array([codec.message.frame_id for codec in rx], dtype=np.int64)
-        self._rx_length = np.array([codec.length for codec in rx], dtype=np.int64)
-        self._rx_extended = np.array([codec.message.is_extended_frame for codec in rx])
+        self._rx_all_compiled = bool(self._rx_table.compiled.all())
         self._rx_owner = [key.split(".")[0] for key in received]
-        self._rx_controller = np.array([self.controllers[o].index if o in self.controllers else
-                                        _ESTOP if o == "estop" else _IGNORED for o in self._rx_owner])
+        self._rx = np.array([[codec.message.frame_id, codec.length, codec.message.is_extended_frame,
+                              self.controllers[o].index if o in self.controllers else _ESTOP if o == "estop"
+                              else _IGNORED] for codec, o in zip(rx, self._rx_owner)], dtype=np.int64)
         # per command slot and column: whether the value is a set-point (not the alive counter, not a padding column)
         self._setpoint = np.array([[c is not None and not c.endswith("alive") for c in codec.columns]
                                    + [False] * (self._rx_table.width - len(codec.columns)) for codec in rx])
@@ -166,14 +167,21 @@ class CanBenchEmulator:
         change something.
         """
         now = self.clock()
-        which, stamps, values, valid = self._commands()
-        i = 0
+        frames = drain(self.bus)
+        table = self._rx_table
+        which, stamps, payloads, values, valid, i = _take_commands(
+            frames, self._rx, table.payload_bytes, table.bits, table.linear, table.compiled, self._rx_all_compiled,
+            now, self._t + COMMAND_LATENCY_S, self._setpoint, self._taken, self._last_cmd, self._enabled,
+            self.command_timeout_s)
+        if not self._rx_all_compiled:  # messages the compiled pass cannot decode: all rows again, then refresh
+            values, valid = table.decode(which, payloads)
+            i = self._refresh(which, stamps, values, valid, 0, now)
+        ok = int(np.count_nonzero(valid))
+        self.stats.commands_ok += ok
+        self.stats.malformed += len(frames) - ok
         while i < len(which):
-            i = _refresh_commands(which, stamps, values, valid, i, now, self._t + COMMAND_LATENCY_S, self._rx_controller,
-                                  self._setpoint, self._taken, self._last_cmd, self._enabled, self.command_timeout_s)
-            if i < len(which):
-                self._command(int(which[i]), float(stamps[i]), values[i], now)
-                i += 1
+            self._command(int(which[i]), float(stamps[i]), values[i], now)
+            i = self._refresh(which, stamps, values, valid, i + 1, now)
         self._emit_until(now, inclusive=True)
 
     def state(self, controller: str, t: float | None = None) -> tuple[int, int]:
@@ -187,18 +195,11 @@ class CanBenchEmulator:
     def _timed_out(self, c: int, t: float) -> bool:
         return _is_timed_out(t, self._last_cmd[c], self._enabled[c], self.command_timeout_s)
 
-    def _commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The waiting command frames in time order (stable), decoded in one pass: command slot, time stamp, values
-        by codec column, whether they decoded; frames with an unknown id, a wrong length or id kind are left out.
-        Every frame is counted as a command or as malformed."""
-        frames = drain(self.bus)
-        which, stamps, payloads = _known_frames(frames, self._rx_id, self._rx_length, self._rx_extended,
-                                                self._rx_table.payload_bytes)
-        values, valid = self._rx_table.decode(which, payloads)
-        ok = int(np.count_nonzero(valid))
-        self.stats.commands_ok += ok
-        self.stats.malformed += len(frames) - ok
-        return which, stamps, values, valid
+    def _refresh(self, which: np.ndarray, stamps: np.ndarray, values: np.ndarray, valid: np.ndarray, start: int,
+                 now: float) -> int:
+        """`_refresh_commands` from command `start` on: the index of the next command that may change something."""
+        return _refresh_commands(which, stamps, values, valid, start, now, self._t + COMMAND_LATENCY_S, self._rx,
+                                 self._setpoint, self._taken, self._last_cmd, self._enabled, self.command_timeout_s)
 
     def _command(self, slot: int, stamp: float, row: np.ndarray, now: float) -> None:
         """Take one command frame that may change something (see `_refresh_commands` for the ones that cannot)."""
@@ -304,9 +305,8 @@ def _first_deadline(last_cmd: np.ndarray, enabled: np.ndarray, timeout: float, a
 
 
 @njit(cache=True, nogil=True)
-def _known_frames(frames: np.ndarray, rx_id: np.ndarray, rx_length: np.ndarray, rx_extended: np.ndarray,
-                  width: int) -> tuple:  # pragma: no cover - compiled
-    """The FRAME records of known command messages (id, length and id kind of a slot) in time order (stable):
+def _known_frames(frames: np.ndarray, rx: np.ndarray, width: int) -> tuple:  # pragma: no cover - compiled
+    """The FRAME records of known command messages (id, length and id kind of a slot of `rx`) in time order (stable):
     each one's slot, time stamp and first `width` data bytes."""
     n = frames.shape[0]
     order = np.arange(n)
@@ -320,9 +320,9 @@ def _known_frames(frames: np.ndarray, rx_id: np.ndarray, rx_length: np.ndarray, 
     k = 0
     for i in order:
         f = frames[i]
-        for s in range(rx_id.shape[0]):
-            if (f.arbitration_id == rx_id[s] and f.length == rx_length[s]
-                    and ((f.flags & EXTENDED) != 0) == rx_extended[s]):
+        for s in range(rx.shape[0]):
+            if (f.arbitration_id == rx[s, _RX_ID] and f.length == rx[s, _RX_LENGTH]
+                    and ((f.flags & EXTENDED) != 0) == (rx[s, _RX_EXTENDED] != 0)):
                 which[k], stamps[k] = s, f.timestamp
                 for b in range(min(width, f.data.shape[0])):
                     payloads[k, b] = f.data[b]
@@ -332,14 +332,35 @@ def _known_frames(frames: np.ndarray, rx_id: np.ndarray, rx_length: np.ndarray, 
 
 
 @njit(cache=True, nogil=True)
+def _take_commands(frames: np.ndarray, rx: np.ndarray, width: int, bits: np.ndarray, linear: np.ndarray,
+                   compiled: np.ndarray, refresh: bool, now: float, earliest: float, setpoint: np.ndarray,
+                   taken: np.ndarray, last_cmd: np.ndarray, enabled: np.ndarray,
+                   timeout: float) -> tuple:  # pragma: no cover - compiled
+    """The known command frames (`_known_frames`: slot, time stamp, payload) decoded where the codec table compiles
+    their message (values, whether decoded; the others are left for CodecTable.decode), and, if `refresh`, the
+    commands that only refresh a time-out taken (`_refresh_commands` from 0): returns those and the index of the
+    first command left."""
+    which, stamps, payloads = _known_frames(frames, rx, width)
+    values = np.full((which.shape[0], bits.shape[2]), np.nan)
+    valid = np.zeros(which.shape[0], dtype=np.bool_)
+    for i in range(which.shape[0]):
+        if compiled[which[i]]:
+            decode_row(payloads[i], which[i], bits, linear, values[i])
+            valid[i] = True
+    first = (_refresh_commands(which, stamps, values, valid, 0, now, earliest, rx, setpoint, taken, last_cmd, enabled,
+                               timeout) if refresh else 0)
+    return which, stamps, payloads, values, valid, first
+
+
+@njit(cache=True, nogil=True)
 def _refresh_commands(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, valid: np.ndarray, start: int,
-                      now: float, earliest: float, controller: np.ndarray, setpoint: np.ndarray, taken: np.ndarray,
+                      now: float, earliest: float, rx: np.ndarray, setpoint: np.ndarray, taken: np.ndarray,
                       last_cmd: np.ndarray, enabled: np.ndarray, timeout: float) -> int:  # pragma: no cover
     """From command `start` on, take the commands that only refresh a controller's time-out (the set-points it last
     took again, not timed out: last_cmd = the command's time) and skip the ones nobody acts on (not decoded, the
     PC's heartbeat); stop at the first other one and return its index (len(which): none left)."""
     for i in range(start, which.shape[0]):
-        c = controller[which[i]]
+        c = rx[which[i], _RX_CONTROLLER]
         if not valid[i] or c == _IGNORED:
             continue
         if c < 0:
