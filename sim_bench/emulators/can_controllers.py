@@ -247,28 +247,25 @@ class CanBenchEmulator:
 
     def _emit_until(self, t_end: float, inclusive: bool) -> None:
         """Send the frames due in [self._t, t_end) (or up to t_end inclusive), cut where a controller times out."""
-        while True:
-            cut = _first_deadline(self._last_cmd, self._enabled, self.command_timeout_s, self._t, t_end)
-            if math.isnan(cut):
-                self._emit_segment(t_end, inclusive)
-                return
-            self._emit_segment(cut, True)
+        while not math.isnan(cut := self._emit_segment(t_end, inclusive)):
             self._apply(cut + 1e-9)
 
-    def _emit_segment(self, t_end: float, inclusive: bool) -> None:
-        """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now."""
-        index, stamps, times, status = _due_frames(
-            self._counters, t_end, 1e-9 if inclusive else -1e-9, self.origin, self._cycle, self._layout,
+    def _emit_segment(self, t_end: float, inclusive: bool) -> float:
+        """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now, up to and
+        including the first instant a controller times out if that comes first: returns that instant (NaN: none)."""
+        index, stamps, times, status, cut = _due_frames(
+            self._counters, self._t, t_end, 1e-9 if inclusive else -1e-9, self.origin, self._cycle, self._layout,
             self._fault, self._last_cmd, self._enabled, self.estop, self.command_timeout_s)
-        self._t = max(self._t, t_end)
+        self._t = max(self._t, t_end if math.isnan(cut) else cut)
         if not len(stamps):
-            return
+            return cut
         frames, values = _frames(index, stamps, self.provider.actuals_matrix(times), self._layout, status,
                                  self._counters, self._template, self._table.bits, self._table.linear,
                                  self._table.compiled)
         if not self._all_compiled:  # messages the compiled loop cannot encode
             frames["data"][:, :self._table.payload_bytes] = self._table.encode(index[_ITEM], values)
         self.stats.sent += int(np.count_nonzero(send_all(self.bus, frames)))
+        return cut
 
 
 @njit(cache=True, nogil=True)
@@ -309,12 +306,10 @@ def _known_frames(frames: np.ndarray, rx: np.ndarray, width: int) -> tuple:  # p
     """The FRAME records of known command messages (id, length and id kind of a slot of `rx`) in time order (stable):
     each one's slot, time stamp and first `width` data bytes."""
     n = frames.shape[0]
-    order = np.arange(n)
-    for i in range(1, n):  # insertion sort: stable, and the frames come (nearly) in order
-        j = i
-        while j > 0 and frames[order[j - 1]].timestamp > frames[order[j]].timestamp:
-            order[j - 1], order[j] = order[j], order[j - 1]
-            j -= 1
+    stamps_in = np.empty(n)
+    for i in range(n):
+        stamps_in[i] = frames[i].timestamp
+    order = np.argsort(stamps_in, kind="mergesort")  # stable: frames of one instant stay in arrival order
     which, stamps = np.empty(n, dtype=np.int64), np.empty(n)
     payloads = np.zeros((n, width), dtype=np.uint8)
     k = 0
@@ -376,15 +371,19 @@ def _refresh_commands(which: np.ndarray, stamps: np.ndarray, values: np.ndarray,
 
 
 @njit(cache=True, nogil=True)
-def _due_frames(counters: np.ndarray, t_end: float, eps: float, origin: float, cycle: np.ndarray, layout: np.ndarray,
-                fault: np.ndarray, last_cmd: np.ndarray, enabled: np.ndarray, estop: bool,
+def _due_frames(counters: np.ndarray, t_start: float, t_end: float, eps: float, origin: float, cycle: np.ndarray,
+                layout: np.ndarray, fault: np.ndarray, last_cmd: np.ndarray, enabled: np.ndarray, estop: bool,
                 timeout: float) -> tuple:  # pragma: no cover - compiled
-    """The frames of messages p falling due at origin + k·cycle[p] from k = counters[p, _CYCLES] up to t_end + eps,
-    merged in time order (ties by frame id); the cycle counter moves on past them (silenced messages' frames too,
+    """The frames of messages p falling due at origin + k·cycle[p] from k = counters[p, _CYCLES] up to t_end + eps, or
+    up to and including the first instant strictly between t_start and t_end at which a controller times out
+    (`_first_deadline`, returned last; NaN: none), merged in time order (ties by frame id); the cycle counter moves on past them (silenced messages' frames too,
     but they are not returned). Returns per frame (rows _ITEM, _LOCAL, _ROW) its message p, its number among p's
     frames and its time's index among the distinct times; the frames' times; the distinct times; per message
     (rows _STATE, _CODE) the (state, fault code) of its controller at its first frame and (row _COUNT) the number
     of its frames."""
+    cut = _first_deadline(last_cmd, enabled, timeout, t_start, t_end)
+    if not math.isnan(cut):
+        t_end, eps = cut, 1e-9
     m, w = counters.shape[0], (layout.shape[1] - _SCALARS) // 2
     status = np.zeros((3, m))
     count = np.zeros(m, dtype=np.int64)
@@ -417,7 +416,7 @@ def _due_frames(counters: np.ndarray, t_end: float, eps: float, origin: float, c
         index[_ROW, k] = distinct - 1
     for p in range(m):
         status[_COUNT, p] = count[p]
-    return index, stamps, times[:distinct].copy(), status
+    return index, stamps, times[:distinct].copy(), status, cut
 
 
 @njit(cache=True, nogil=True)
