@@ -137,12 +137,13 @@ class SimPhysics:
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
         self._record_truth(k0, temps["_states"])
         # what the sensors read on this grid: the node's two sensors, then the DMM's channels, one row each: noise
-        # per sample (drawn row after row, one call), resistances in one vectorised call
+        # per sample (drawn row after row, one call per noise level), resistances in one vectorised call
         sc, rng = self.cfg.sensors, self.rng_sensor
-        true = [temps["T_flywheel"]] * 2 + [cols["T_ambient"] if name == "T_ambient" else temps[name]
-                                            for name in self.cfg.dmm_channels.values()]
-        noise_scale = np.array([sc.node_noise_k] * 2 + [sc.wired_noise_k] * (len(true) - 2))[:, None]
-        resistances = cvd.resistance(np.stack(true) + rng.normal(0.0, noise_scale, (len(true), n)))
+        noisy = np.stack([temps["T_flywheel"]] * 2 + [cols["T_ambient"] if name == "T_ambient" else temps[name]
+                                                      for name in self.cfg.dmm_channels.values()])
+        noisy[:2] += rng.normal(0.0, sc.node_noise_k, (2, n))
+        noisy[2:] += rng.normal(0.0, sc.wired_noise_k, (len(noisy) - 2, n))
+        resistances = cvd.resistance(noisy)
         temps["_R_node"] = np.ascontiguousarray(resistances[:2].T)
         for i, ch in enumerate(self.cfg.dmm_channels, start=2):
             temps[f"_R_dmm{ch}"] = resistances[i]
