@@ -39,7 +39,7 @@ _ACTUALS = list(DrivetrainActuals.__dataclass_fields__)
 
 _ESTOP, _IGNORED = -1, -2  # command owners that are not a controller: the emergency stop; the PC's heartbeat
 _STATE, _CODE, _COUNT = range(3)  # rows of _due_frames' per-message status
-_STATUS_OF = {"state": _STATE, "hb_state": _STATE, "fault_code": _CODE}  # signal (after the controller's name) → status row
+_STATUS_OF = {"state": _STATE, "hb_state": _STATE, "fault_code": _CODE}  # signal after the controller's name → row
 _CYCLES, _ALIVE, _SILENT, _FROZEN = range(4)  # columns of the per-message counters
 _ALIVE_COL, _MODULO, _ID, _OWNER = range(4)  # the per-message layout's last columns, after source and status source
 _SCALARS = 4
@@ -374,13 +374,13 @@ def _refresh_commands(which: np.ndarray, stamps: np.ndarray, values: np.ndarray,
 def _due_frames(counters: np.ndarray, t_start: float, t_end: float, eps: float, origin: float, cycle: np.ndarray,
                 layout: np.ndarray, fault: np.ndarray, last_cmd: np.ndarray, enabled: np.ndarray, estop: bool,
                 timeout: float) -> tuple:  # pragma: no cover - compiled
-    """The frames of messages p falling due at origin + k·cycle[p] from k = counters[p, _CYCLES] up to t_end + eps, or
-    up to and including the first instant strictly between t_start and t_end at which a controller times out
-    (`_first_deadline`, returned last; NaN: none), merged in time order (ties by frame id); the cycle counter moves on past them (silenced messages' frames too,
-    but they are not returned). Returns per frame (rows _ITEM, _LOCAL, _ROW) its message p, its number among p's
-    frames and its time's index among the distinct times; the frames' times; the distinct times; per message
-    (rows _STATE, _CODE) the (state, fault code) of its controller at its first frame and (row _COUNT) the number
-    of its frames."""
+    """The frames of messages p falling due at origin + k·cycle[p] from k = counters[p, _CYCLES] up to t_end + eps,
+    or up to and including the first instant strictly between t_start and t_end at which a controller times out
+    (`_first_deadline`) if there is one, merged in time order (ties by frame id); the cycle counter moves on past
+    them (silenced messages' frames too, but they are not returned). Returns per frame (rows _ITEM, _LOCAL, _ROW)
+    its message p, its number among p's frames and its time's index among the distinct times; the frames' times;
+    the distinct times; per message (rows _STATE, _CODE) the (state, fault code) of its controller at its first
+    frame and (row _COUNT) the number of its frames; the time-out instant (NaN: none)."""
     cut = _first_deadline(last_cmd, enabled, timeout, t_start, t_end)
     if not math.isnan(cut):
         t_end, eps = cut, 1e-9
@@ -442,7 +442,8 @@ def _frames(index: np.ndarray, stamps: np.ndarray, measured: np.ndarray, layout:
             else:
                 values[k, j] = 0.0
         alive, modulo = counters[p, _ALIVE], layout[p, 2 * w + _MODULO]
-        values[k, layout[p, 2 * w + _ALIVE_COL]] = alive if counters[p, _FROZEN] else (alive + 1 + index[_LOCAL, k]) % modulo
+        counted = alive if counters[p, _FROZEN] else (alive + 1 + index[_LOCAL, k]) % modulo
+        values[k, layout[p, 2 * w + _ALIVE_COL]] = counted
     payloads = np.zeros((n, 8), dtype=np.uint8)
     encode_rows(index[_ITEM], values, bits, linear, compiled, payloads)
     for k in range(n):
