@@ -169,14 +169,13 @@ class CanBenchEmulator:
         now = self.clock()
         frames = drain(self.bus)
         table = self._rx_table
-        which, stamps, payloads, values, valid, i = _take_commands(
+        which, stamps, payloads, values, valid, ok, i = _take_commands(
             frames, self._rx, table.payload_bytes, table.bits, table.linear, table.compiled, self._rx_all_compiled,
             now, self._t + COMMAND_LATENCY_S, self._setpoint, self._taken, self._last_cmd, self._enabled,
             self.command_timeout_s)
         if not self._rx_all_compiled:  # messages the compiled pass cannot decode: all rows again, then refresh
             values, valid = table.decode(which, payloads)
-            i = self._refresh(which, stamps, values, valid, 0, now)
-        ok = int(np.count_nonzero(valid))
+            ok, i = int(np.count_nonzero(valid)), self._refresh(which, stamps, values, valid, 0, now)
         self.stats.commands_ok += ok
         self.stats.malformed += len(frames) - ok
         while i < len(which):
@@ -332,19 +331,21 @@ def _take_commands(frames: np.ndarray, rx: np.ndarray, width: int, bits: np.ndar
                    taken: np.ndarray, last_cmd: np.ndarray, enabled: np.ndarray,
                    timeout: float) -> tuple:  # pragma: no cover - compiled
     """The known command frames (`_known_frames`: slot, time stamp, payload) decoded where the codec table compiles
-    their message (values, whether decoded; the others are left for CodecTable.decode), and, if `refresh`, the
-    commands that only refresh a time-out taken (`_refresh_commands` from 0): returns those and the index of the
-    first command left."""
+    their message (values, whether decoded, how many; the others are left for CodecTable.decode), and, if
+    `refresh`, the commands that only refresh a time-out taken (`_refresh_commands` from 0): returns those and the
+    index of the first command left."""
     which, stamps, payloads = _known_frames(frames, rx, width)
     values = np.full((which.shape[0], bits.shape[2]), np.nan)
     valid = np.zeros(which.shape[0], dtype=np.bool_)
+    ok = 0
     for i in range(which.shape[0]):
         if compiled[which[i]]:
             decode_row(payloads[i], which[i], bits, linear, values[i])
             valid[i] = True
+            ok += 1
     first = (_refresh_commands(which, stamps, values, valid, 0, now, earliest, rx, setpoint, taken, last_cmd, enabled,
                                timeout) if refresh else 0)
-    return which, stamps, payloads, values, valid, first
+    return which, stamps, payloads, values, valid, ok, first
 
 
 @njit(cache=True, nogil=True)
