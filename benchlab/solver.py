@@ -11,11 +11,11 @@ each distinct one is discretised once.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 from numba import njit
 
 from benchlab.network import Channels, Params, ThermalNetwork, as_samples
@@ -42,12 +42,21 @@ def _conductances(network: ThermalNetwork, params: Params, channels: Channels, n
             out.append(by_law[id(link.resistance)])
             continue
         r = np.asarray(link.resistance(params, channels), dtype=np.float64)
-        if np.any(~np.isfinite(r)) or np.any(r <= 0):
+        if not (_all_positive_finite(r.ravel()) if r.ndim else math.isfinite(float(r)) and float(r) > 0):
             raise ValueError(f"resistance of link {link.label or (link.a, link.b)} is not positive and finite")
         g = float(1.0 / r) if r.ndim == 0 else 1.0 / r
         by_law[id(link.resistance)] = g
         out.append(g)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _all_positive_finite(values: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """Whether every value is finite and > 0, in one pass (a law's resistances are checked on every call)."""
+    for v in values:
+        if not (math.isfinite(v) and v > 0):
+            return False
+    return True
 
 
 def _system_matrices(network: ThermalNetwork, params: Params, conductances: list[np.ndarray],
@@ -56,36 +65,67 @@ def _system_matrices(network: ThermalNetwork, params: Params, conductances: list
 
     `coefficients`: per (source, node) term of `_coefficient_terms`, the heat flow per kelvin of that node
     (an affine source, e.g. copper loss rising with winding temperature), which goes into A.
+    The entries are written as a list of steps (`_ADD_A`, ...: matrix, row, column, law row or -1, factor) applied in
+    one compiled pass, in the order and with the operations of writing them one by one.
     """
     states = {name: i for i, name in enumerate(network.state_names)}
     bcol = {b.name: len(network.sources) + j for j, b in enumerate(network.boundaries)}
     n, m = len(states), len(network.sources) + len(network.boundaries)
-    inv_c = np.zeros(n)
+    inv_c = [0.0] * n
     for node in network.nodes:
         inv_c[states[node.name]] = 1.0 / params[node.capacity]
-    A = np.zeros((n_ops, n, n))
-    B = np.zeros((n_ops, n, m))
-    for link, g in zip(network.links, conductances):
-        ends = [(link.a, link.b), (link.b, link.a)]
-        for here, there in ends:
+    steps: list[int] = []  # (kind, row, column, law row) after one another
+    factors: list[float] = []
+    for row, link in enumerate(network.links):
+        for here, there in ((link.a, link.b), (link.b, link.a)):
             if here not in states:
                 continue
             i = states[here]
-            A[:, i, i] -= g * inv_c[i]
-            if there in states:
-                A[:, i, states[there]] += g * inv_c[i]
-            else:
-                B[:, i, bcol[there]] += g * inv_c[i]
+            steps += (_SUB_A, i, i, row)
+            steps += (_ADD_A, i, states[there], row) if there in states else (_ADD_B, i, bcol[there], row)
+            factors += [inv_c[i], inv_c[i]]
     for k, src in enumerate(network.sources):
         i = states[src.node]
-        B[:, i, k] = inv_c[i]
-    for (src, node, _), k in zip(_coefficient_terms(network), coefficients):
-        A[:, states[src.node], states[node]] += k * inv_c[states[src.node]]
+        steps += (_SET_B, i, k, -1)
+        factors.append(inv_c[i])
+    for row, (src, node, _) in enumerate(_coefficient_terms(network), start=len(network.links)):
+        i = states[src.node]
+        steps += (_ADD_A, i, states[node], row)
+        factors.append(inv_c[i])
     for lag in network.lags:
         s, i, tau = states[lag.name], states[lag.node], params[lag.time_constant]
-        A[:, s, s] = -1.0 / tau
-        A[:, s, i] = 1.0 / tau
+        steps += (_SET_A, s, s, -1, _SET_A, s, i, -1)
+        factors += [-1.0 / tau, 1.0 / tau]
+    laws = np.empty((len(conductances) + len(coefficients), n_ops))
+    for row, g in enumerate(list(conductances) + list(coefficients)):
+        laws[row] = g
+    A = np.zeros((n_ops, n, n))
+    B = np.zeros((n_ops, n, m))
+    _assemble(np.array(steps, dtype=np.int64).reshape(-1, 4), np.array(factors, dtype=np.float64), laws, A, B)
     return A, B
+
+
+_SUB_A, _ADD_A, _ADD_B, _SET_A, _SET_B = range(5)  # the kinds of `_system_matrices`' steps
+
+
+@njit(cache=True, nogil=True)
+def _assemble(steps: np.ndarray, factors: np.ndarray, laws: np.ndarray, A: np.ndarray,
+              B: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Apply `_system_matrices`' steps in order to every operating point: subtract or add law × factor, or set the
+    factor, at (row, column) of A or B."""
+    for k in range(steps.shape[0]):
+        kind, i, j, law = steps[k, 0], steps[k, 1], steps[k, 2], steps[k, 3]
+        for o in range(A.shape[0]):
+            if kind == _SUB_A:
+                A[o, i, j] -= laws[law, o] * factors[k]
+            elif kind == _ADD_A:
+                A[o, i, j] += laws[law, o] * factors[k]
+            elif kind == _ADD_B:
+                B[o, i, j] += laws[law, o] * factors[k]
+            elif kind == _SET_A:
+                A[o, i, j] = factors[k]
+            else:
+                B[o, i, j] = factors[k]
 
 
 def _coefficient_terms(network: ThermalNetwork) -> list[tuple]:
@@ -203,15 +243,49 @@ def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     return Ad, Bd
 
 
+@njit(cache=True, nogil=True)
+def _factorize(keys: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """Integer keys as (index of each key's distinct value, the distinct values), both in order of first appearance
+    (pandas.factorize's result), by one pass over an open-addressing hash table."""
+    n = keys.shape[0]
+    bits = 4
+    while (1 << bits) < 2 * n:
+        bits += 1
+    mask = (1 << bits) - 1
+    table = np.full(1 << bits, -1, dtype=np.int64)
+    uniques = np.empty(n, dtype=np.int64)
+    codes = np.empty(n, dtype=np.int64)
+    distinct = 0
+    for i in range(n):
+        key = keys[i]
+        if i > 0 and key == keys[i - 1]:  # runs of one value are the usual case
+            codes[i] = codes[i - 1]
+            continue
+        slot = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits)) & mask
+        while True:
+            j = table[slot]
+            if j < 0:
+                table[slot] = distinct
+                uniques[distinct] = key
+                codes[i] = distinct
+                distinct += 1
+                break
+            if uniques[j] == key:
+                codes[i] = j
+                break
+            slot = (slot + 1) & mask
+    return codes, uniques[:distinct].copy()
+
+
 def _combined_key(columns: list[np.ndarray], n: int) -> tuple[np.ndarray, list[np.ndarray]]:
     """Index per sample of the distinct combinations of the key columns, and each column's value per combination."""
     code = np.zeros(n, dtype=np.int64)
     uniques = []
     for col in columns:
-        col_codes, col_uniques = pd.factorize(col)
+        col_codes, col_uniques = _factorize(col)
         uniques.append(col_uniques)
         code = code * len(col_uniques) + col_codes
-    op_index, op_codes = pd.factorize(code)
+    op_index, op_codes = _factorize(code)
     per_column = []
     for col_uniques in reversed(uniques):
         per_column.append(col_uniques[op_codes % len(col_uniques)])
@@ -256,7 +330,7 @@ def _operating_points(laws: list, n: int, resolution: float,
             same = len(columns) - 1
         column_of[i] = same
     if len(columns) == 1:  # one key column (the paper's clutch): its codes are the operating points
-        op_index, col_uniques = pd.factorize(columns[0])
+        op_index, col_uniques = _factorize(columns[0])
         op_index, per_column = op_index.astype(np.int64), [col_uniques]
     else:
         op_index, per_column = _combined_key(columns, n)

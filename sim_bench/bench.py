@@ -136,13 +136,17 @@ class SimPhysics:
         temps = self.plant.sensor_temperatures(states)
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
         self._record_truth(k0, temps["_states"])
-        # what the sensors read on this grid: noise per sample, resistances in one vectorised call each
+        # what the sensors read on this grid: the node's two sensors, then the DMM's channels, one row each: noise
+        # per sample (drawn row after row, one call per noise level), resistances in one vectorised call
         sc, rng = self.cfg.sensors, self.rng_sensor
-        temps["_R_node"] = np.column_stack([cvd.resistance(temps["T_flywheel"] + rng.normal(0.0, sc.node_noise_k, n))
-                                            for _ in range(2)])  # the node's two sensors
-        for ch, name in self.cfg.dmm_channels.items():
-            true = cols["T_ambient"] if name == "T_ambient" else temps[name]
-            temps[f"_R_dmm{ch}"] = cvd.resistance(true + rng.normal(0.0, sc.wired_noise_k, n))
+        noisy = np.stack([temps["T_flywheel"]] * 2 + [cols["T_ambient"] if name == "T_ambient" else temps[name]
+                                                      for name in self.cfg.dmm_channels.values()])
+        noisy[:2] += rng.normal(0.0, sc.node_noise_k, (2, n))
+        noisy[2:] += rng.normal(0.0, sc.wired_noise_k, (len(noisy) - 2, n))
+        resistances = cvd.resistance(noisy)
+        temps["_R_node"] = np.ascontiguousarray(resistances[:2].T)
+        for i, ch in enumerate(self.cfg.dmm_channels, start=2):
+            temps[f"_R_dmm{ch}"] = resistances[i]
         noise_speed = rng.normal(0.0, sc.speed_noise_rpm, (n, 2))
         noise_torque = rng.normal(0.0, sc.torque_noise_nm, n)
         # what the controllers' actual values are made of, one row per grid point (actuals_at takes rows)
@@ -242,25 +246,40 @@ class SimPhysics:
         self._ensure(self._index(t))
         self.t_setpoints = t
 
+    def _newest_chunk(self, times: np.ndarray) -> tuple[int, dict[str, np.ndarray]] | None:
+        """Compute up to the last of `times` (increasing); the newest chunk's (first grid index, matrices) if all of
+        `times` fall in it, else None."""
+        self._ensure(self._index(times[-1]))
+        k0, _, temps = self._chunks[-1]
+        return (k0, temps) if self._index(times[0]) >= k0 else None
+
     def _rows_at(self, times: "np.ndarray | list[float]", name: str) -> np.ndarray:
         """Rows of the per-grid-point matrix `name` at each of `times` (increasing), computed where needed."""
         times = np.asarray(times, dtype=float)
-        self._ensure(self._index(times[-1]))
-        k0, _, temps = self._chunks[-1]
-        if self._index(times[0]) >= k0:  # all in the newest chunk (the usual case)
-            return _grid_rows(times, self.dt, k0, temps[name])
+        newest = self._newest_chunk(times)
+        if newest is not None:  # the usual case
+            return _grid_rows(times, self.dt, newest[0], newest[1][name])
         k = np.floor(times / self.dt + 1e-6).astype(np.int64)
         k = np.maximum(k, self._chunks[0][0])  # older than kept: the oldest sample we have
-        rows = np.empty((len(k), temps[name].shape[1]))
+        rows = np.empty((len(k), self._chunks[-1][2][name].shape[1]))
         for k0, _, temps in self._chunks:
             sel = (k >= k0) & (k < k0 + len(temps[name]))
             rows[sel] = temps[name][k[sel] - k0]
         return rows
 
+    def actuals_matrix(self, times: np.ndarray) -> np.ndarray:
+        """What the controllers measure at each of `times` (DrivetrainActuals' fields by row, one column per time):
+        the drivetrain's values plus sensor noise; the usual case (all in the newest chunk) in one compiled pass."""
+        times = np.asarray(times, dtype=float)
+        newest = self._newest_chunk(times)
+        if newest is not None:
+            return _measured_at(times, self.dt, newest[0], newest[1]["_actuals"], self.cfg.position_stroke_mm,
+                                self.gear)
+        return _measured(self._rows_at(times, "_actuals"), self.cfg.position_stroke_mm, self.gear)
+
     def actuals_at(self, times: np.ndarray) -> DrivetrainActuals:
-        """What the controllers measure at each of `times`: the drivetrain's values plus sensor noise."""
-        measured = _measured(self._rows_at(times, "_actuals"), self.cfg.position_stroke_mm, self.gear)
-        return DrivetrainActuals(*measured)
+        """`actuals_matrix` as DrivetrainActuals."""
+        return DrivetrainActuals(*self.actuals_matrix(times))
 
     # -- ResistanceProvider (DMM) -----------------------------------------------------------------------
     def get_resistances(self) -> Mapping[int, float]:
@@ -324,16 +343,32 @@ def _measured(rows: np.ndarray, stroke_mm: float, gear: float) -> np.ndarray:  #
     where a sensor measures, clamp state from the clutch state and friction, torque and speeds not below 0."""
     out = np.empty((7, rows.shape[0]))
     for i in range(rows.shape[0]):
-        is_clamped = rows[i, 4] >= 0.5
-        torque_abs = abs(rows[i, 2])
-        out[0, i] = rows[i, 0] + rows[i, 6]
-        out[1, i] = rows[i, 2]
-        out[2, i] = max(0.0, torque_abs + rows[i, 8]) if torque_abs > 0 else 0.0
-        out[3, i] = 0.0 if is_clamped else stroke_mm
-        out[4, i] = (CLAMP_SLIPPING if rows[i, 3] > 0.0 else CLAMP_CLAMPED) if is_clamped else CLAMP_OPEN
-        out[5, i] = max(0.0, rows[i, 1] + rows[i, 7]) / gear
-        out[6, i] = rows[i, 5]
+        _measure(rows[i], stroke_mm, gear, out, i)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _measured_at(times: np.ndarray, dt: float, k0: int, matrix: np.ndarray, stroke_mm: float,
+                 gear: float) -> np.ndarray:  # pragma: no cover - compiled
+    """`_measured` of the rows of `matrix` (grid points from k0 on) at the grid point of each of `times`."""
+    out = np.empty((7, times.shape[0]))
+    for i in range(times.shape[0]):
+        _measure(matrix[int(math.floor(times[i] / dt + 1e-6)) - k0], stroke_mm, gear, out, i)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _measure(row: np.ndarray, stroke_mm: float, gear: float, out: np.ndarray, i: int) -> None:  # pragma: no cover
+    """Column i of `_measured` from one row."""
+    is_clamped = row[4] >= 0.5
+    torque_abs = abs(row[2])
+    out[0, i] = row[0] + row[6]
+    out[1, i] = row[2]
+    out[2, i] = max(0.0, torque_abs + row[8]) if torque_abs > 0 else 0.0
+    out[3, i] = 0.0 if is_clamped else stroke_mm
+    out[4, i] = (CLAMP_SLIPPING if row[3] > 0.0 else CLAMP_CLAMPED) if is_clamped else CLAMP_OPEN
+    out[5, i] = max(0.0, row[1] + row[7]) / gear
+    out[6, i] = row[5]
 
 
 class SimBench:

@@ -8,6 +8,7 @@ integration steps. Speeds in rpm outside, rad/s inside.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from benchlab.drivetrain import RPM, DrivetrainFacts
 
@@ -53,7 +54,8 @@ class Drivetrain:
 
     def advance(self, n: int, dt: float, stop_at_sync: bool = False) -> dict[str, np.ndarray]:
         """Sample the next n steps (values at the start of each step); stop early at sync if asked."""
-        columns = {name: np.empty(n) for name in CHANNELS}
+        matrix = np.empty((len(CHANNELS), n))
+        columns = dict(zip(CHANNELS, matrix))
         k = 0
         while k < n:
             transmitted, accel = self._acceleration()
@@ -64,21 +66,10 @@ class Drivetrain:
                     m = min(m, max(1, int(np.ceil(gap / accel / dt))))
             elif not self.clamped and self.clutch_rpm > 0 and accel < 0:
                 m = min(m, max(1, int(np.ceil(self.clutch_rpm * RPM / -accel / dt))))
-            t = np.arange(m) * dt
-            omega_c = self.clutch_rpm * RPM + accel * t
-            if self.slipping and accel != 0.0:  # never overshoot synchronism
-                limit = self.engine_rpm * RPM
-                omega_c = np.minimum(omega_c, limit) if accel > 0 else np.maximum(omega_c, limit)
-            omega_c = np.maximum(omega_c, 0.0)
-            sl = slice(k, k + m)
-            columns["engine_speed"][sl] = self.engine_rpm
-            columns["clutch_speed"][sl] = omega_c / RPM
-            slip = self.engine_rpm * RPM - omega_c
-            slipping = self.clamped & (np.abs(slip) > SYNC_TOLERANCE_RPM * RPM)
-            columns["clutch_torque"][sl] = transmitted
-            columns["clutch_state"][sl] = 1.0 if self.clamped else 0.0
-            columns["friction_power"][sl] = np.where(slipping, np.abs(transmitted * slip), 0.0)
-            columns["load_torque"][sl] = self.load_torque_nm
+            # never overshoot synchronism: clip at the engine speed (1: from below, -1: from above, 0: no clip)
+            clip = (1 if accel > 0 else -1) if self.slipping and accel != 0.0 else 0
+            _fill_piece(matrix, k, m, dt, self.clutch_rpm * RPM, accel, clip, self.engine_rpm, self.engine_rpm * RPM,
+                        transmitted, self.clamped, self.load_torque_nm)
             was_slipping = self.slipping
             end_omega = self.clutch_rpm * RPM + accel * m * dt
             if was_slipping and accel != 0.0 and (end_omega - self.engine_rpm * RPM) * accel >= 0:
@@ -88,3 +79,27 @@ class Drivetrain:
             if stop_at_sync and was_slipping and not self.slipping:
                 return {name: col[:k] for name, col in columns.items()}
         return columns
+
+
+@njit(cache=True, nogil=True)
+def _fill_piece(matrix: np.ndarray, k: int, m: int, dt: float, omega0: float, accel: float, clip: int,
+                engine_rpm: float, engine_omega: float, transmitted: float, clamped: bool,
+                load_nm: float) -> None:  # pragma: no cover - compiled
+    """Samples k .. k+m-1 of the CHANNELS rows of `matrix` for one piece of constant acceleration: the input shaft
+    from omega0 (rad/s), clipped at the engine speed (`clip`) and at 0, slip and friction power; the numpy
+    expressions these replace, element by element (np.minimum/np.maximum keep the first operand on ties)."""
+    for i in range(m):
+        omega = omega0 + accel * (i * dt)
+        if clip > 0:
+            omega = omega if omega <= engine_omega else engine_omega
+        elif clip < 0:
+            omega = omega if omega >= engine_omega else engine_omega
+        omega = omega if omega >= 0.0 else 0.0
+        slip = engine_omega - omega
+        slipping = clamped and abs(slip) > SYNC_TOLERANCE_RPM * RPM
+        matrix[0, k + i] = engine_rpm
+        matrix[1, k + i] = omega / RPM
+        matrix[2, k + i] = transmitted
+        matrix[3, k + i] = 1.0 if clamped else 0.0
+        matrix[4, k + i] = abs(transmitted * slip) if slipping else 0.0
+        matrix[5, k + i] = load_nm

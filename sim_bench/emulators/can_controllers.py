@@ -25,8 +25,8 @@ import numpy as np
 from numba import njit
 
 from drivers import can_signals as sig
-from drivers.can_codec import CodecTable, compile_codecs, encode_rows
-from drivers.can_frames import EXTENDED, FRAME, drain, make_frames, send_all
+from drivers.can_codec import CodecTable, compile_codecs, decode_row, encode_rows
+from drivers.can_frames import EXTENDED, drain, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
 
@@ -38,7 +38,13 @@ _ACTUALS = list(DrivetrainActuals.__dataclass_fields__)
 
 
 _ESTOP, _IGNORED = -1, -2  # command owners that are not a controller: the emergency stop; the PC's heartbeat
-_STATUS_OF = {"state": 0, "hb_state": 0, "fault_code": 1}  # signal (after the controller's name) → row of the status pair
+_STATE, _CODE, _COUNT = range(3)  # rows of _due_frames' per-message status
+_STATUS_OF = {"state": _STATE, "hb_state": _STATE, "fault_code": _CODE}  # signal after the controller's name → row
+_CYCLES, _ALIVE, _SILENT, _FROZEN = range(4)  # columns of the per-message counters
+_ALIVE_COL, _MODULO, _ID, _OWNER = range(4)  # the per-message layout's last columns, after source and status source
+_SCALARS = 4
+_ITEM, _LOCAL, _ROW = range(3)  # rows of _due_frames' per-frame index
+_RX_ID, _RX_LENGTH, _RX_EXTENDED, _RX_CONTROLLER = range(4)  # columns of the command slots' matrix
 
 
 @dataclass(slots=True)
@@ -81,16 +87,16 @@ class CanBenchEmulator:
         # command values last taken (NaN: none yet; only the set-point columns count)
         n = len(self.controllers)
         self._last_cmd, self._enabled, self._fault = np.full(n, np.nan), np.zeros(n, dtype=bool), np.zeros(n, np.int64)
-        # the command frames: frame id, length, id kind per slot in the command table, and who takes the slot
+        # the command frames: per slot in the command table its frame id, length, id kind and who takes it (columns
+        # _RX_ID, _RX_LENGTH, _RX_EXTENDED, _RX_CONTROLLER)
         received = ("drive.cmd_alive", "clutch.cmd_alive", "load.cmd_alive", "estop.request", "pc.hb_alive")
         rx = [self._codec_of[key] for key in received]
         self._rx_table = CodecTable(rx)
-        self._rx_id = np.array([codec.message.frame_id for codec in rx], dtype=np.int64)
-        self._rx_length = np.array([codec.length for codec in rx], dtype=np.int64)
-        self._rx_extended = np.array([codec.message.is_extended_frame for codec in rx])
+        self._rx_all_compiled = bool(self._rx_table.compiled.all())
         self._rx_owner = [key.split(".")[0] for key in received]
-        self._rx_controller = np.array([self.controllers[o].index if o in self.controllers else
-                                        _ESTOP if o == "estop" else _IGNORED for o in self._rx_owner])
+        self._rx = np.array([[codec.message.frame_id, codec.length, codec.message.is_extended_frame,
+                              self.controllers[o].index if o in self.controllers else _ESTOP if o == "estop"
+                              else _IGNORED] for codec, o in zip(rx, self._rx_owner)], dtype=np.int64)
         # per command slot and column: whether the value is a set-point (not the alive counter, not a padding column)
         self._setpoint = np.array([[c is not None and not c.endswith("alive") for c in codec.columns]
                                    + [False] * (self._rx_table.width - len(codec.columns)) for codec in rx])
@@ -104,27 +110,30 @@ class CanBenchEmulator:
         codecs = [self._codec_of[key] for key in sent]
         self._table = CodecTable(codecs)
         self._owner = np.array([self.controllers[key.split(".")[0]].index for key in sent])
-        self._frame_id = np.array([codec.message.frame_id for codec in codecs])
         self._cycle = np.array([codec.message.cycle_time / 1000 for codec in codecs])
-        self._sent_cycles = np.ones(len(sent), dtype=np.int64)
-        self._alive = np.zeros(len(sent), dtype=np.int64)
-        self._modulo = np.array([modulo[key] for key in sent])
-        self._silent = np.zeros(len(sent), dtype=bool)
-        self._frozen = np.zeros(len(sent), dtype=bool)
+        # the counters in one integer matrix (one argument for the compiled passes), columns _CYCLES, _ALIVE,
+        # _SILENT, _FROZEN, read and written through the views below
+        self._counters = np.zeros((len(sent), 4), dtype=np.int64)
+        self._sent_cycles, self._alive = self._counters[:, _CYCLES], self._counters[:, _ALIVE]
+        self._silent, self._frozen = self._counters[:, _SILENT], self._counters[:, _FROZEN]
+        self._sent_cycles[:] = 1
         # each message's frame with everything but time stamp and data (make_frames' flags, length, channel)
-        self._template = make_frames(np.zeros(len(sent)), self._frame_id,
+        self._template = make_frames(np.zeros(len(sent)), np.array([codec.message.frame_id for codec in codecs]),
                                      np.zeros((len(sent), self._table.payload_bytes), dtype=np.uint8),
                                      np.array([codec.length for codec in codecs]),
                                      extended=np.array([codec.message.is_extended_frame for codec in codecs]))
         # where each column of each sent message comes from: an actual value (index into _ACTUALS), else -1; the
-        # controller's state or fault code (row of the status pair), else -1; which column is the alive counter
+        # controller's state or fault code (status row), else -1; then which column is the alive counter, its
+        # modulo, the frame id and the controller: one integer matrix (blocks of width, width, _SCALARS columns)
         columns = [list(codec.columns) + [None] * (self._table.width - len(codec.columns)) for codec in codecs]
-        self._source = np.array([[_ACTUALS.index(_ACTUAL_OF[c]) if c in _ACTUAL_OF else -1 for c in cols]
-                                 for cols in columns])
-        self._status_source = np.array([[_STATUS_OF.get(c.split(".", 1)[1], -1)
-                                         if c is not None and c.split(".")[0] == key.split(".")[0] else -1
-                                         for c in cols] for cols, key in zip(columns, sent)])
-        self._alive_col = np.array([cols.index(key) for cols, key in zip(columns, sent)])
+        source = [[_ACTUALS.index(_ACTUAL_OF[c]) if c in _ACTUAL_OF else -1 for c in cols] for cols in columns]
+        status_source = [[_STATUS_OF.get(c.split(".", 1)[1], -1)
+                          if c is not None and c.split(".")[0] == key.split(".")[0] else -1
+                          for c in cols] for cols, key in zip(columns, sent)]
+        scalars = [[cols.index(key), modulo[key], codec.message.frame_id, int(self._owner[p])]
+                   for p, (cols, key, codec) in enumerate(zip(columns, sent, codecs))]
+        self._layout = np.array([a + b + c for a, b, c in zip(source, status_source, scalars)], dtype=np.int64)
+        self._all_compiled = bool(self._table.compiled.all())
 
     # -- fault hooks ---------------------------------------------------------------------------------
     def silence(self, controller: str, on: bool = True) -> None:
@@ -158,14 +167,20 @@ class CanBenchEmulator:
         change something.
         """
         now = self.clock()
-        which, stamps, values, valid = self._commands()
-        i = 0
+        frames = drain(self.bus)
+        table = self._rx_table
+        which, stamps, payloads, values, valid, ok, i = _take_commands(
+            frames, self._rx, table.payload_bytes, table.bits, table.linear, table.compiled, self._rx_all_compiled,
+            now, self._t + COMMAND_LATENCY_S, self._setpoint, self._taken, self._last_cmd, self._enabled,
+            self.command_timeout_s)
+        if not self._rx_all_compiled:  # messages the compiled pass cannot decode: all rows again, then refresh
+            values, valid = table.decode(which, payloads)
+            ok, i = int(np.count_nonzero(valid)), self._refresh(which, stamps, values, valid, 0, now)
+        self.stats.commands_ok += ok
+        self.stats.malformed += len(frames) - ok
         while i < len(which):
-            i = _refresh_commands(which, stamps, values, valid, i, now, self._t + COMMAND_LATENCY_S, self._rx_controller,
-                                  self._setpoint, self._taken, self._last_cmd, self._enabled, self.command_timeout_s)
-            if i < len(which):
-                self._command(int(which[i]), float(stamps[i]), values[i], now)
-                i += 1
+            self._command(int(which[i]), float(stamps[i]), values[i], now)
+            i = self._refresh(which, stamps, values, valid, i + 1, now)
         self._emit_until(now, inclusive=True)
 
     def state(self, controller: str, t: float | None = None) -> tuple[int, int]:
@@ -179,18 +194,11 @@ class CanBenchEmulator:
     def _timed_out(self, c: int, t: float) -> bool:
         return _is_timed_out(t, self._last_cmd[c], self._enabled[c], self.command_timeout_s)
 
-    def _commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The waiting command frames in time order (stable), decoded in one pass: command slot, time stamp, values
-        by codec column, whether they decoded; frames with an unknown id, a wrong length or id kind are left out.
-        Every frame is counted as a command or as malformed."""
-        frames = drain(self.bus)
-        which, stamps, payloads = _known_frames(frames, self._rx_id, self._rx_length, self._rx_extended,
-                                                self._rx_table.payload_bytes)
-        values, valid = self._rx_table.decode(which, payloads)
-        ok = int(np.count_nonzero(valid))
-        self.stats.commands_ok += ok
-        self.stats.malformed += len(frames) - ok
-        return which, stamps, values, valid
+    def _refresh(self, which: np.ndarray, stamps: np.ndarray, values: np.ndarray, valid: np.ndarray, start: int,
+                 now: float) -> int:
+        """`_refresh_commands` from command `start` on: the index of the next command that may change something."""
+        return _refresh_commands(which, stamps, values, valid, start, now, self._t + COMMAND_LATENCY_S, self._rx,
+                                 self._setpoint, self._taken, self._last_cmd, self._enabled, self.command_timeout_s)
 
     def _command(self, slot: int, stamp: float, row: np.ndarray, now: float) -> None:
         """Take one command frame that may change something (see `_refresh_commands` for the ones that cannot)."""
@@ -238,30 +246,25 @@ class CanBenchEmulator:
 
     def _emit_until(self, t_end: float, inclusive: bool) -> None:
         """Send the frames due in [self._t, t_end) (or up to t_end inclusive), cut where a controller times out."""
-        while True:
-            cut = _first_deadline(self._last_cmd, self._enabled, self.command_timeout_s, self._t, t_end)
-            if math.isnan(cut):
-                self._emit_segment(t_end, inclusive)
-                return
-            self._emit_segment(cut, True)
+        while not math.isnan(cut := self._emit_segment(t_end, inclusive)):
             self._apply(cut + 1e-9)
 
-    def _emit_segment(self, t_end: float, inclusive: bool) -> None:
-        """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now."""
-        item, local, stamps, times, row, status, count = _due_frames(
-            self._sent_cycles, self._silent, t_end, 1e-9 if inclusive else -1e-9, self.origin, self._cycle,
-            self._frame_id, self._owner, self._fault, self._last_cmd, self._enabled, self.estop, self.command_timeout_s)
-        self._t = max(self._t, t_end)
-        if not len(item):
-            return
-        actuals = self.provider.actuals_at(times)
-        frames, values = _frames(item, local, row, stamps, np.array([getattr(actuals, name) for name in _ACTUALS]),
-                                 self._source, self._status_source, status, self._alive_col, self._alive,
-                                 self._frozen, self._modulo, count, self._template, np.empty(len(item), FRAME),
-                                 self._table.bits, self._table.linear, self._table.compiled)
-        if not self._table.compiled.all():  # messages the compiled loop cannot encode
-            frames["data"][:, :self._table.payload_bytes] = self._table.encode(item, values)
+    def _emit_segment(self, t_end: float, inclusive: bool) -> float:
+        """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now, up to and
+        including the first instant a controller times out if that comes first: returns that instant (NaN: none)."""
+        index, stamps, times, status, cut = _due_frames(
+            self._counters, self._t, t_end, 1e-9 if inclusive else -1e-9, self.origin, self._cycle, self._layout,
+            self._fault, self._last_cmd, self._enabled, self.estop, self.command_timeout_s)
+        self._t = max(self._t, t_end if math.isnan(cut) else cut)
+        if not len(stamps):
+            return cut
+        frames, values = _frames(index, stamps, self.provider.actuals_matrix(times), self._layout, status,
+                                 self._counters, self._template, self._table.bits, self._table.linear,
+                                 self._table.compiled)
+        if not self._all_compiled:  # messages the compiled loop cannot encode
+            frames["data"][:, :self._table.payload_bytes] = self._table.encode(index[_ITEM], values)
         self.stats.sent += int(np.count_nonzero(send_all(self.bus, frames)))
+        return cut
 
 
 @njit(cache=True, nogil=True)
@@ -298,25 +301,22 @@ def _first_deadline(last_cmd: np.ndarray, enabled: np.ndarray, timeout: float, a
 
 
 @njit(cache=True, nogil=True)
-def _known_frames(frames: np.ndarray, rx_id: np.ndarray, rx_length: np.ndarray, rx_extended: np.ndarray,
-                  width: int) -> tuple:  # pragma: no cover - compiled
-    """The FRAME records of known command messages (id, length and id kind of a slot) in time order (stable):
+def _known_frames(frames: np.ndarray, rx: np.ndarray, width: int) -> tuple:  # pragma: no cover - compiled
+    """The FRAME records of known command messages (id, length and id kind of a slot of `rx`) in time order (stable):
     each one's slot, time stamp and first `width` data bytes."""
     n = frames.shape[0]
-    order = np.arange(n)
-    for i in range(1, n):  # insertion sort: stable, and the frames come (nearly) in order
-        j = i
-        while j > 0 and frames[order[j - 1]].timestamp > frames[order[j]].timestamp:
-            order[j - 1], order[j] = order[j], order[j - 1]
-            j -= 1
+    stamps_in = np.empty(n)
+    for i in range(n):
+        stamps_in[i] = frames[i].timestamp
+    order = np.argsort(stamps_in, kind="mergesort")  # stable: frames of one instant stay in arrival order
     which, stamps = np.empty(n, dtype=np.int64), np.empty(n)
     payloads = np.zeros((n, width), dtype=np.uint8)
     k = 0
     for i in order:
         f = frames[i]
-        for s in range(rx_id.shape[0]):
-            if (f.arbitration_id == rx_id[s] and f.length == rx_length[s]
-                    and ((f.flags & EXTENDED) != 0) == rx_extended[s]):
+        for s in range(rx.shape[0]):
+            if (f.arbitration_id == rx[s, _RX_ID] and f.length == rx[s, _RX_LENGTH]
+                    and ((f.flags & EXTENDED) != 0) == (rx[s, _RX_EXTENDED] != 0)):
                 which[k], stamps[k] = s, f.timestamp
                 for b in range(min(width, f.data.shape[0])):
                     payloads[k, b] = f.data[b]
@@ -326,14 +326,37 @@ def _known_frames(frames: np.ndarray, rx_id: np.ndarray, rx_length: np.ndarray, 
 
 
 @njit(cache=True, nogil=True)
+def _take_commands(frames: np.ndarray, rx: np.ndarray, width: int, bits: np.ndarray, linear: np.ndarray,
+                   compiled: np.ndarray, refresh: bool, now: float, earliest: float, setpoint: np.ndarray,
+                   taken: np.ndarray, last_cmd: np.ndarray, enabled: np.ndarray,
+                   timeout: float) -> tuple:  # pragma: no cover - compiled
+    """The known command frames (`_known_frames`: slot, time stamp, payload) decoded where the codec table compiles
+    their message (values, whether decoded, how many; the others are left for CodecTable.decode), and, if
+    `refresh`, the commands that only refresh a time-out taken (`_refresh_commands` from 0): returns those and the
+    index of the first command left."""
+    which, stamps, payloads = _known_frames(frames, rx, width)
+    values = np.full((which.shape[0], bits.shape[2]), np.nan)
+    valid = np.zeros(which.shape[0], dtype=np.bool_)
+    ok = 0
+    for i in range(which.shape[0]):
+        if compiled[which[i]]:
+            decode_row(payloads[i], which[i], bits, linear, values[i])
+            valid[i] = True
+            ok += 1
+    first = (_refresh_commands(which, stamps, values, valid, 0, now, earliest, rx, setpoint, taken, last_cmd, enabled,
+                               timeout) if refresh else 0)
+    return which, stamps, payloads, values, valid, ok, first
+
+
+@njit(cache=True, nogil=True)
 def _refresh_commands(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, valid: np.ndarray, start: int,
-                      now: float, earliest: float, controller: np.ndarray, setpoint: np.ndarray, taken: np.ndarray,
+                      now: float, earliest: float, rx: np.ndarray, setpoint: np.ndarray, taken: np.ndarray,
                       last_cmd: np.ndarray, enabled: np.ndarray, timeout: float) -> int:  # pragma: no cover
     """From command `start` on, take the commands that only refresh a controller's time-out (the set-points it last
     took again, not timed out: last_cmd = the command's time) and skip the ones nobody acts on (not decoded, the
     PC's heartbeat); stop at the first other one and return its index (len(which): none left)."""
     for i in range(start, which.shape[0]):
-        c = controller[which[i]]
+        c = rx[which[i], _RX_CONTROLLER]
         if not valid[i] or c == _IGNORED:
             continue
         if c < 0:
@@ -349,76 +372,85 @@ def _refresh_commands(which: np.ndarray, stamps: np.ndarray, values: np.ndarray,
 
 
 @njit(cache=True, nogil=True)
-def _due_frames(sent_cycles: np.ndarray, silent: np.ndarray, t_end: float, eps: float, origin: float,
-                cycle: np.ndarray, frame_id: np.ndarray, owner: np.ndarray, fault: np.ndarray, last_cmd: np.ndarray,
-                enabled: np.ndarray, estop: bool, timeout: float) -> tuple:  # pragma: no cover - compiled
-    """The frames of messages p falling due at origin + k·cycle[p] from k = sent_cycles[p] up to t_end + eps,
-    merged in time order (ties by frame id); sent_cycles moves on past them (silenced messages' frames too, but
-    they are not returned). Returns each frame's message p, its number l among p's frames, its time; the distinct
-    times and each frame's among them; per message the (state, fault code) of its controller (`owner`) at its
-    first frame and the number of its frames."""
-    m = sent_cycles.shape[0]
-    status, count = np.zeros((2, m)), np.zeros(m, dtype=np.int64)
+def _due_frames(counters: np.ndarray, t_start: float, t_end: float, eps: float, origin: float, cycle: np.ndarray,
+                layout: np.ndarray, fault: np.ndarray, last_cmd: np.ndarray, enabled: np.ndarray, estop: bool,
+                timeout: float) -> tuple:  # pragma: no cover - compiled
+    """The frames of messages p falling due at origin + k·cycle[p] from k = counters[p, _CYCLES] up to t_end + eps,
+    or up to and including the first instant strictly between t_start and t_end at which a controller times out
+    (`_first_deadline`) if there is one, merged in time order (ties by frame id); the cycle counter moves on past
+    them (silenced messages' frames too, but they are not returned). Returns per frame (rows _ITEM, _LOCAL, _ROW)
+    its message p, its number among p's frames and its time's index among the distinct times; the frames' times;
+    the distinct times; per message (rows _STATE, _CODE) the (state, fault code) of its controller at its first
+    frame and (row _COUNT) the number of its frames; the time-out instant (NaN: none)."""
+    cut = _first_deadline(last_cmd, enabled, timeout, t_start, t_end)
+    if not math.isnan(cut):
+        t_end, eps = cut, 1e-9
+    m, w = counters.shape[0], (layout.shape[1] - _SCALARS) // 2
+    status = np.zeros((3, m))
+    count = np.zeros(m, dtype=np.int64)
     for p in range(m):
         k1 = int(np.floor((t_end + eps - origin) / cycle[p])) + 1
-        k0 = sent_cycles[p]
+        k0 = counters[p, _CYCLES]
         if k1 > k0:
-            if not silent[p]:
+            if not counters[p, _SILENT]:
                 count[p] = k1 - k0
-                c = owner[p]
-                status[0, p], status[1, p] = _status(origin + k0 * cycle[p], fault[c], last_cmd[c], enabled[c], estop,
-                                                     timeout)
-            sent_cycles[p] = k1
+                c = layout[p, 2 * w + _OWNER]
+                status[_STATE, p], status[_CODE, p] = _status(origin + k0 * cycle[p], fault[c], last_cmd[c],
+                                                              enabled[c], estop, timeout)
+            counters[p, _CYCLES] = k1
     n = count.sum()
-    item, local = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
-    stamps, times, row = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
+    index, stamps, times = np.empty((3, n), dtype=np.int64), np.empty(n), np.empty(n)
     taken = np.zeros(m, dtype=np.int64)
     distinct = 0
     for k in range(n):
         best, best_t = -1, 0.0
         for p in range(m):
             if taken[p] < count[p]:
-                t = origin + (sent_cycles[p] - count[p] + taken[p]) * cycle[p]
-                if best < 0 or t < best_t or (t == best_t and frame_id[p] < frame_id[best]):
+                t = origin + (counters[p, _CYCLES] - count[p] + taken[p]) * cycle[p]
+                if best < 0 or t < best_t or (t == best_t and layout[p, 2 * w + _ID] < layout[best, 2 * w + _ID]):
                     best, best_t = p, t
-        item[k], local[k], stamps[k] = best, taken[best], best_t
+        index[_ITEM, k], index[_LOCAL, k], stamps[k] = best, taken[best], best_t
         taken[best] += 1
         if distinct == 0 or best_t != times[distinct - 1]:
             times[distinct] = best_t
             distinct += 1
-        row[k] = distinct - 1
-    return item, local, stamps, times[:distinct].copy(), row, status, count
+        index[_ROW, k] = distinct - 1
+    for p in range(m):
+        status[_COUNT, p] = count[p]
+    return index, stamps, times[:distinct].copy(), status, cut
 
 
 @njit(cache=True, nogil=True)
-def _frames(item: np.ndarray, local: np.ndarray, row: np.ndarray, stamps: np.ndarray, measured: np.ndarray,
-            source: np.ndarray, status_source: np.ndarray, status: np.ndarray, alive_col: np.ndarray,
-            alive: np.ndarray, frozen: np.ndarray, modulo: np.ndarray, count: np.ndarray, template: np.ndarray,
-            frames: np.ndarray, bits: np.ndarray, linear: np.ndarray, compiled: np.ndarray) -> tuple:  # pragma: no cover - compiled
-    """Each frame into `frames` (its message's `template` at its time stamp) and its signal values: a measured actual (source ≥ 0,
-    at the frame's time `row`), its message's state or fault code (status_source ≥ 0) or 0, and the alive counter
-    counting on from `alive` (held while frozen), encoded by the codec table layout (bits, linear, compiled);
-    `alive` then moves on past each message's `count` frames."""
-    n = item.shape[0]
-    values = np.empty((n, source.shape[1]))
+def _frames(index: np.ndarray, stamps: np.ndarray, measured: np.ndarray, layout: np.ndarray, status: np.ndarray,
+            counters: np.ndarray, template: np.ndarray, bits: np.ndarray, linear: np.ndarray,
+            compiled: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """Each frame of `_due_frames`' index, stamps and status as its message's `template` at its time stamp, and its
+    signal values by the message's `layout`: a measured actual (DrivetrainActuals row, at the frame's time:
+    column index[_ROW] of `measured`), its message's state or fault code, or 0, and the alive counter counting on
+    from counters[p, _ALIVE] (held while frozen), encoded by the codec table layout (bits, linear, compiled); the
+    alive counters then move on past each message's frames."""
+    n, w = stamps.shape[0], (layout.shape[1] - _SCALARS) // 2
+    frames = template[index[_ITEM]]
+    values = np.empty((n, w))
     for k in range(n):
-        p = item[k]
-        frames[k] = template[p]
+        p = index[_ITEM, k]
         frames[k].timestamp = stamps[k]
-        for j in range(source.shape[1]):
-            if source[p, j] >= 0:
-                values[k, j] = measured[source[p, j], row[k]]
-            elif status_source[p, j] >= 0:
-                values[k, j] = status[status_source[p, j], p]
+        for j in range(w):
+            if layout[p, j] >= 0:
+                values[k, j] = measured[layout[p, j], index[_ROW, k]]
+            elif layout[p, w + j] >= 0:
+                values[k, j] = status[layout[p, w + j], p]
             else:
                 values[k, j] = 0.0
-        values[k, alive_col[p]] = alive[p] if frozen[p] else (alive[p] + 1 + local[k]) % modulo[p]
+        alive, modulo = counters[p, _ALIVE], layout[p, 2 * w + _MODULO]
+        counted = alive if counters[p, _FROZEN] else (alive + 1 + index[_LOCAL, k]) % modulo
+        values[k, layout[p, 2 * w + _ALIVE_COL]] = counted
     payloads = np.zeros((n, 8), dtype=np.uint8)
-    encode_rows(item, values, bits, linear, compiled, payloads)
+    encode_rows(index[_ITEM], values, bits, linear, compiled, payloads)
     for k in range(n):
         for b in range(8):
             frames[k].data[b] = payloads[k, b]
-    for p in range(alive.shape[0]):
-        if count[p] and not frozen[p]:
-            alive[p] = (alive[p] + count[p]) % modulo[p]
+    for p in range(counters.shape[0]):
+        if status[_COUNT, p] and not counters[p, _FROZEN]:
+            counters[p, _ALIVE] = (counters[p, _ALIVE] + int(status[_COUNT, p])) % layout[p, 2 * w + _MODULO]
     return frames, values

@@ -29,18 +29,23 @@ class DrivetrainActuals:
     load_torque_nm: np.ndarray
 
 
+_FIELDS = tuple(DrivetrainActuals.__dataclass_fields__)
+
+
 class DrivetrainProvider(Protocol):
     """Set-points in from the controllers, actual values out.
 
     `advance(t)` moves the state to absolute time `t` (s); set-points given after it hold from `t` on.
-    `actuals_at(times)` are the actual values at increasing times >= the last `advance`, as arrays
-    (one frame per time), computed with the set-points as they are.
+    `actuals_matrix(times)` are the actual values at increasing times >= the last `advance`, one row per
+    DrivetrainActuals field (in field order) and one column per time (frame), computed with the set-points as
+    they are; `actuals_at(times)` the same as DrivetrainActuals (the emulator takes the matrix: no copy).
     """
 
     def set_drive_speed(self, rpm: float) -> None: ...
     def set_clutch(self, torque_nm: float, open_request: bool) -> None: ...
     def set_load_torque(self, torque_nm: float) -> None: ...
     def advance(self, t: float) -> None: ...
+    def actuals_matrix(self, times: np.ndarray) -> np.ndarray: ...
     def actuals_at(self, times: np.ndarray) -> DrivetrainActuals: ...
 
 
@@ -75,12 +80,15 @@ class FirstOrderDrivetrain:
             self._step(dt)
             self.t += dt
 
-    def actuals_at(self, times: np.ndarray) -> DrivetrainActuals:
+    def actuals_matrix(self, times: np.ndarray) -> np.ndarray:
         rows = []
         for t in times:
             self.advance(float(t))
             rows.append(self._actuals())
-        return DrivetrainActuals(*(np.array(col, dtype=float) for col in zip(*rows)))
+        return np.array(rows, dtype=float).reshape(len(rows), len(_FIELDS)).T
+
+    def actuals_at(self, times: np.ndarray) -> DrivetrainActuals:
+        return DrivetrainActuals(*self.actuals_matrix(times))
 
     def _actuals(self) -> tuple[float, ...]:
         if self.open_request and self.t_clutch < 0.5:

@@ -22,6 +22,7 @@ from typing import Any
 
 import can
 import numpy as np
+from numba import njit
 
 from drivers.can_frames import frames_from_messages, join, messages_from_frames, recv_each
 
@@ -58,10 +59,10 @@ class SimCanBus(can.BusABC):
         """Put FRAME records on the bus in their order (unstamped ones get the channel's clock)."""
         if not len(frames):
             return
-        unstamped = frames["timestamp"] == 0
-        if unstamped.any():
+        if _any_unstamped(frames):
             frames = frames.copy()
-            frames["timestamp"][unstamped] = self._now()
+            stamps = frames["timestamp"]
+            stamps[stamps == 0] = self._now()
         frames.flags.writeable = False
         self._deliver(frames)
 
@@ -124,3 +125,12 @@ class SimCanBus(can.BusABC):
             _clocks.pop(self._channel, None)
         super().shutdown()
 
+
+
+@njit(cache=True, nogil=True)
+def _any_unstamped(frames: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """Whether any FRAME record has time stamp 0 (none given): one compiled pass, no temporary arrays."""
+    for i in range(frames.shape[0]):
+        if frames[i].timestamp == 0:
+            return True
+    return False
