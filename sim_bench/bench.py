@@ -408,6 +408,11 @@ class SimBench:
                 "sim_faults": json.dumps([asdict(fault) for fault in self.injected]),
                 "sim_truth": json.dumps({"params": dict(self.physics.truth_params), "effects": effects})}
 
+    def true_states(self, rows: int) -> dict[str, np.ndarray]:
+        """The plant's true temperatures (degC) on the run's grid rows up to `rows`, for the run file's /truth: the
+        rows this bench computed (a resumed run starts later), NaN where not computed."""
+        return self.physics.true_states(rows)
+
     def _draw_next(self, t: float) -> float:
         if self._dropout_rate <= 0:
             return math.inf

@@ -273,7 +273,7 @@ def _truth_groups(sim: "SimBench | None", writer: RunWriter, resume_state: dict[
     rows = writer.rows
     before = resume_state["truth"] if resume_state else {}
     columns = {"time": (np.arange(rows) * writer.layout.dt, "s")}
-    for name, values in sim.physics.true_states(rows).items():
+    for name, values in sim.true_states(rows).items():
         head = np.full(rows - len(values), np.nan)
         kept = before.get(name, head)[:len(head)]
         head[:len(kept)] = kept
