@@ -73,7 +73,7 @@ def initial_state(network: ThermalNetwork, data: FitData, params: Mapping[str, f
 def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
     """Model outputs at the fitting step for the measured channels of `data`."""
     states = run_network(network, params, data.channels, data.dt, initial_state(network, data, params),
-                         KEY_RESOLUTION)[:-1]
+                         KEY_RESOLUTION, data.memo)[:-1]
     index = {s: i for i, s in enumerate(network.state_names)}
     return {c: states[:, index[network.outputs[c]]] for c in data.targets}
 
@@ -83,16 +83,14 @@ def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datase
     parts = []
     for data in datasets:
         sim = simulate_outputs(network, params, data)
-        for c, target in data.targets.items():
-            use = data.mask & np.isfinite(target)
-            parts.append(sim[c][use] - target[use])
+        for c, (index, target) in data.fitted.items():
+            parts.append(sim[c][index] - target)
     return np.concatenate(parts)
 
 
 def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
     """Per run, the fitting-step sample of each entry of that run's part of `residual_vector` (same order)."""
-    return [np.concatenate([np.flatnonzero(data.mask & np.isfinite(target)) for target in data.targets.values()])
-            for data in datasets]
+    return [np.concatenate([index for index, _ in data.fitted.values()]) for data in datasets]
 
 
 @single_threaded_blas
