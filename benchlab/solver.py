@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from benchlab.network import Channels, Link, Params, Source, ThermalNetwork, as_samples
-from benchlab.solver_memo import NO_MEMO, LawMemo, parameter_bits
+from benchlab.solver_memo import NO_MEMO, LawMemo, float_bits, parameter_bits
 
 DEFAULT_RESOLUTION = 1e-6
 
@@ -333,10 +333,18 @@ def _operating_points(laws: list, n: int, resolution: float,
     value per sample. Laws that share one array (R_PA = R_FA) share one key column; the key columns are
     combined into one integer code per sample and factorised in linear time.
     """
+    op_index, varying = _varying_points(laws, n, resolution, positive)
+    return op_index, _per_point(laws, varying)
+
+
+def _varying_points(laws: list, n: int, resolution: float,
+                    positive: list[bool] | None = None) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """`_operating_points` of the varying laws: the index per sample, and per varying law (by its place in `laws`)
+    its value at each point."""
     positive = positive if positive is not None else [True] * len(laws)
     varying = [i for i, g in enumerate(laws) if isinstance(g, np.ndarray)]
     if not varying:
-        return np.zeros(n, dtype=np.int64), [np.array([g]) for g in laws]
+        return np.zeros(n, dtype=np.int64), {}
     columns: list[np.ndarray] = []
     decoders: list[Callable] = []
     keyed: list[np.ndarray] = []  # the values each column was made from
@@ -356,13 +364,15 @@ def _operating_points(laws: list, n: int, resolution: float,
         op_index, per_column = op_index.astype(np.int64), [col_uniques]
     else:
         op_index, per_column = _combined_key(columns, n)
-    per_op: list[np.ndarray] = []
-    for i, g in enumerate(laws):
-        if i in column_of:
-            per_op.append(decoders[column_of[i]](per_column[column_of[i]]))
-        else:
-            per_op.append(np.full(len(per_column[0]), g))
-    return op_index, per_op
+    return op_index, {i: decoders[column_of[i]](per_column[column_of[i]]) for i in varying}
+
+
+def _per_point(laws: list, varying: dict[int, np.ndarray]) -> list[np.ndarray]:
+    """Every law's value at each operating point: the varying ones' (`_varying_points`), the scalars repeated."""
+    if not varying:
+        return [np.array([g]) for g in laws]
+    points = len(next(iter(varying.values())))
+    return [varying[i] if i in varying else np.full(points, g) for i, g in enumerate(laws)]
 
 
 def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: float,
@@ -378,15 +388,18 @@ def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: 
     conductances = _conductances(network, params, channels, n, memo)
     coefficients = _coefficients(network, params, channels, memo)
     laws = conductances + coefficients
-    if not (stages.same_laws(laws) and stages.points[2:] == (n, resolution)):
-        stages.laws, stages.matrices_key = laws, None
-        stages.points = (*_operating_points(laws, n, resolution,
-                                            [True] * len(conductances) + [False] * len(coefficients)), n, resolution)
-    op_index, per_op = stages.points[:2]
+    arrays = [g for g in laws if isinstance(g, np.ndarray)]
+    keyed_by = (n, resolution, len(conductances), tuple(isinstance(g, np.ndarray) for g in laws))
+    if not (stages.same_laws(arrays) and stages.points[2] == keyed_by):
+        stages.laws, stages.matrices_key = arrays, None
+        stages.points = (*_varying_points(laws, n, resolution, [True] * len(conductances) + [False] * len(coefficients)),
+                         keyed_by)
+    op_index, varying = stages.points[:2]
     stages.assembly = stages.assembly or _assembly(network)
-    key = (parameter_bits(params, [name for _, name in stages.assembly[1] if name]) + parameter_bits({"": dt}, [""])
-           if memo is not NO_MEMO else None)
+    key = (parameter_bits(params, [name for _, name in stages.assembly[1] if name])
+           + float_bits([dt] + [g for g in laws if not isinstance(g, np.ndarray)]) if memo is not NO_MEMO else None)
     if key is None or key != stages.matrices_key:
+        per_op = _per_point(laws, varying)
         A, B = _system_matrices(network, params, per_op[:len(conductances)], per_op[len(conductances):],
                                 len(per_op[0]) if per_op else 1, stages.assembly)
         stages.matrices, stages.matrices_key = _zoh(A, B, dt), key

@@ -16,6 +16,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 from benchlab.network import Channels, Params, ThermalNetwork
@@ -24,9 +25,19 @@ MAX_LAWS = 256  # cached law values per memo before it starts over (a diagnosis 
 MAX_NETWORKS = 32  # networks whose last stages are kept
 
 
+def float_bits(values: Sequence[float]) -> bytes:
+    """The exact bits of the values (-0.0 and 0.0 apart, as a law may tell them apart)."""
+    return _packer(len(values)).pack(*values)
+
+
+@lru_cache(maxsize=None)
+def _packer(count: int) -> struct.Struct:
+    return struct.Struct(f"{count}d")
+
+
 def parameter_bits(params: Params, names: Sequence[str]) -> bytes:
-    """The exact bits of the named parameters' values (-0.0 and 0.0 apart, as a law may tell them apart)."""
-    return struct.pack(f"{len(names)}d", *[params[name] for name in names])
+    """The exact bits of the named parameters' values."""
+    return float_bits([params[name] for name in names])
 
 
 @dataclass
@@ -34,8 +45,8 @@ class Stages:
     """One network's last operating points, discrete matrices and input matrix, with what each was made from."""
 
     network: ThermalNetwork | None = None
-    laws: list = field(default_factory=list)  # the law values the operating points were keyed from
-    points: tuple | None = None  # (op_index, per_op)
+    laws: list = field(default_factory=list)  # the varying law values the operating points were keyed from
+    points: tuple | None = None  # (op_index, per varying law its value per point, what else they were keyed by)
     matrices_key: bytes | None = None  # capacities, time constants and step the matrices were made with
     matrices: tuple | None = None  # (Ad, Bd)
     columns: list = field(default_factory=list)  # the input columns the input matrix was stacked from

@@ -16,6 +16,7 @@ flywheel is smooth again. Measured on a noise-free 1 h run: 0.0088 K of bias at 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
@@ -62,6 +63,23 @@ class FitData:
             index = np.flatnonzero(self.mask & np.isfinite(target))
             out[c] = (index, target[index])
         return out
+
+    def fitted_flat(self, states: list[str], outputs: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
+        """The fitted samples (`fitted`, channel after channel) as indices into the raveled states (samples ×
+        `states`) of a model that outputs each channel from the state `outputs` names, and their targets."""
+        key = (tuple(states), tuple(outputs[c] for c in self.targets))
+        found = self._flat.get(key)
+        if found is None:
+            column = {s: i for i, s in enumerate(states)}
+            flat = [index * len(states) + column[outputs[c]] for c, (index, _) in self.fitted.items()]
+            targets = [target for index, target in self.fitted.values()]
+            found = self._flat[key] = ((np.concatenate(flat), np.concatenate(targets)) if flat else
+                                       (np.zeros(0, dtype=np.int64), np.zeros(0)))
+        return found
+
+    @cached_property
+    def _flat(self) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
+        return {}
 
     def with_mask(self, mask: np.ndarray) -> "FitData":
         return replace(self, mask=mask)
