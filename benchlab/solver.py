@@ -392,8 +392,8 @@ def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: 
     keyed_by = (n, resolution, len(conductances), tuple(isinstance(g, np.ndarray) for g in laws))
     if not (stages.same_laws(arrays) and stages.points[2] == keyed_by):
         stages.laws, stages.matrices_key = arrays, None
-        stages.points = (*_varying_points(laws, n, resolution, [True] * len(conductances) + [False] * len(coefficients)),
-                         keyed_by)
+        positive = [True] * len(conductances) + [False] * len(coefficients)
+        stages.points = (*_varying_points(laws, n, resolution, positive), keyed_by)
     op_index, varying = stages.points[:2]
     stages.assembly = stages.assembly or _assembly(network)
     key = (parameter_bits(params, [name for _, name in stages.assembly[1] if name])
