@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from benchlab.network import Channels, Params, ThermalNetwork, as_samples
+from benchlab.network import Channels, Link, Params, Source, ThermalNetwork, as_samples
+from benchlab.solver_memo import NO_MEMO, LawMemo, float_bits, parameter_bits
 
 DEFAULT_RESOLUTION = 1e-6
 
@@ -33,7 +34,8 @@ class Discretised:
     inputs: np.ndarray  # (N, m) heat flows (W) then boundary temperatures (degC)
 
 
-def _conductances(network: ThermalNetwork, params: Params, channels: Channels, n: int) -> list[np.ndarray | float]:
+def _conductances(network: ThermalNetwork, params: Params, channels: Channels, n: int,
+                  memo: LawMemo = NO_MEMO) -> list[np.ndarray | float]:
     """1/R of every link; links that share one law object (R_PA, R_FA) get the same array, evaluated once."""
     out: list[np.ndarray | float] = []
     by_law: dict[int, np.ndarray | float] = {}
@@ -41,13 +43,18 @@ def _conductances(network: ThermalNetwork, params: Params, channels: Channels, n
         if id(link.resistance) in by_law:
             out.append(by_law[id(link.resistance)])
             continue
-        r = np.asarray(link.resistance(params, channels), dtype=np.float64)
-        if not (_all_positive_finite(r.ravel()) if r.ndim else math.isfinite(float(r)) and float(r) > 0):
-            raise ValueError(f"resistance of link {link.label or (link.a, link.b)} is not positive and finite")
-        g = float(1.0 / r) if r.ndim == 0 else 1.0 / r
+        g = memo.value(link.resistance, params, lambda: _conductance(link, params, channels))
         by_law[id(link.resistance)] = g
         out.append(g)
     return out
+
+
+def _conductance(link: Link, params: Params, channels: Channels) -> np.ndarray | float:
+    """1/R of one link, its resistance checked positive and finite."""
+    r = np.asarray(link.resistance(params, channels), dtype=np.float64)
+    if not (_all_positive_finite(r.ravel()) if r.ndim else math.isfinite(float(r)) and float(r) > 0):
+        raise ValueError(f"resistance of link {link.label or (link.a, link.b)} is not positive and finite")
+    return float(1.0 / r) if r.ndim == 0 else 1.0 / r
 
 
 @njit(cache=True, nogil=True)
@@ -60,22 +67,39 @@ def _all_positive_finite(values: np.ndarray) -> bool:  # pragma: no cover - comp
 
 
 def _system_matrices(network: ThermalNetwork, params: Params, conductances: list[np.ndarray],
-                     coefficients: list[np.ndarray], n_ops: int) -> tuple[np.ndarray, np.ndarray]:
+                     coefficients: list[np.ndarray], n_ops: int,
+                     assembly: tuple[np.ndarray, list[tuple[int, str]]] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Continuous A (n_ops, n, n) and B (n_ops, n, m) for each operating point.
 
     `coefficients`: per (source, node) term of `_coefficient_terms`, the heat flow per kelvin of that node
     (an affine source, e.g. copper loss rising with winding temperature), which goes into A.
-    The entries are written as a list of steps (`_ADD_A`, ...: matrix, row, column, law row or -1, factor) applied in
-    one compiled pass, in the order and with the operations of writing them one by one.
+    The entries are written as a list of steps (`_assembly`) applied in one compiled pass, in the order and with
+    the operations of writing them one by one; `assembly`: the network's, where the caller keeps it.
     """
+    steps, recipe = assembly or _assembly(network)
+    n, m = len(network.state_names), len(network.sources) + len(network.boundaries)
+    factors = np.array([_FACTOR[kind](params[name]) if name else 0.0 for kind, name in recipe], dtype=np.float64)
+    laws = np.empty((len(conductances) + len(coefficients), n_ops))
+    for row, g in enumerate(list(conductances) + list(coefficients)):
+        laws[row] = g
+    A = np.zeros((n_ops, n, n))
+    B = np.zeros((n_ops, n, m))
+    _assemble(steps, factors, laws, A, B)
+    return A, B
+
+
+_FACTOR = {"1/C": lambda c: 1.0 / c, "-1/tau": lambda tau: -1.0 / tau, "1/tau": lambda tau: 1.0 / tau}
+
+
+def _assembly(network: ThermalNetwork) -> tuple[np.ndarray, list[tuple[str, str]]]:
+    """The steps of `_system_matrices` (kind, row, column, law row or -1) and, per step, how its factor is made
+    from a parameter (1/C of the row's node, ∓1/tau of a lag; none, a factor 0, for a lag's row): the network's
+    structure, not its values."""
     states = {name: i for i, name in enumerate(network.state_names)}
     bcol = {b.name: len(network.sources) + j for j, b in enumerate(network.boundaries)}
-    n, m = len(states), len(network.sources) + len(network.boundaries)
-    inv_c = [0.0] * n
-    for node in network.nodes:
-        inv_c[states[node.name]] = 1.0 / params[node.capacity]
+    capacity = {states[node.name]: node.capacity for node in network.nodes}  # a lag's row has none: 1/C is 0
     steps: list[int] = []  # (kind, row, column, law row) after one another
-    factors: list[float] = []
+    recipe: list[tuple[str, str]] = []
     for row, link in enumerate(network.links):
         for here, there in ((link.a, link.b), (link.b, link.a)):
             if here not in states:
@@ -83,26 +107,20 @@ def _system_matrices(network: ThermalNetwork, params: Params, conductances: list
             i = states[here]
             steps += (_SUB_A, i, i, row)
             steps += (_ADD_A, i, states[there], row) if there in states else (_ADD_B, i, bcol[there], row)
-            factors += [inv_c[i], inv_c[i]]
+            recipe += [("1/C", capacity.get(i, "")), ("1/C", capacity.get(i, ""))]
     for k, src in enumerate(network.sources):
         i = states[src.node]
         steps += (_SET_B, i, k, -1)
-        factors.append(inv_c[i])
+        recipe.append(("1/C", capacity.get(i, "")))
     for row, (src, node, _) in enumerate(_coefficient_terms(network), start=len(network.links)):
         i = states[src.node]
         steps += (_ADD_A, i, states[node], row)
-        factors.append(inv_c[i])
+        recipe.append(("1/C", capacity.get(i, "")))
     for lag in network.lags:
-        s, i, tau = states[lag.name], states[lag.node], params[lag.time_constant]
+        s, i = states[lag.name], states[lag.node]
         steps += (_SET_A, s, s, -1, _SET_A, s, i, -1)
-        factors += [-1.0 / tau, 1.0 / tau]
-    laws = np.empty((len(conductances) + len(coefficients), n_ops))
-    for row, g in enumerate(list(conductances) + list(coefficients)):
-        laws[row] = g
-    A = np.zeros((n_ops, n, n))
-    B = np.zeros((n_ops, n, m))
-    _assemble(np.array(steps, dtype=np.int64).reshape(-1, 4), np.array(factors, dtype=np.float64), laws, A, B)
-    return A, B
+        recipe += [("-1/tau", lag.time_constant), ("1/tau", lag.time_constant)]
+    return np.array(steps, dtype=np.int64).reshape(-1, 4), recipe
 
 
 _SUB_A, _ADD_A, _ADD_B, _SET_A, _SET_B = range(5)  # the kinds of `_system_matrices`' steps
@@ -133,15 +151,19 @@ def _coefficient_terms(network: ThermalNetwork) -> list[tuple]:
     return [(src, node, law) for src in network.sources for node, law in src.coefficients]
 
 
-def _coefficients(network: ThermalNetwork, params: Params, channels: Channels) -> list[np.ndarray | float]:
+def _coefficients(network: ThermalNetwork, params: Params, channels: Channels,
+                  memo: LawMemo = NO_MEMO) -> list[np.ndarray | float]:
     """W/K of each temperature-affine source term: a scalar, or one value per sample."""
-    out: list[np.ndarray | float] = []
-    for src, node, law in _coefficient_terms(network):
-        k = np.asarray(law(params, channels), dtype=np.float64)
-        if not np.all(np.isfinite(k)):
-            raise ValueError(f"heat flow of source {src.label} per kelvin of {node} is not finite")
-        out.append(float(k) if k.ndim == 0 else k)
-    return out
+    return [memo.value(law, params, lambda: _coefficient(src, node, law, params, channels))
+            for src, node, law in _coefficient_terms(network)]
+
+
+def _coefficient(src: Source, node: str, law: Callable, params: Params, channels: Channels) -> np.ndarray | float:
+    """One temperature-affine term's W/K, checked finite."""
+    k = np.asarray(law(params, channels), dtype=np.float64)
+    if not np.all(np.isfinite(k)):
+        raise ValueError(f"heat flow of source {src.label} per kelvin of {node} is not finite")
+    return float(k) if k.ndim == 0 else k
 
 
 TAYLOR_THETA = 0.5  # 1-norm of A*h after scaling by 2**-s
@@ -311,10 +333,18 @@ def _operating_points(laws: list, n: int, resolution: float,
     value per sample. Laws that share one array (R_PA = R_FA) share one key column; the key columns are
     combined into one integer code per sample and factorised in linear time.
     """
+    op_index, varying = _varying_points(laws, n, resolution, positive)
+    return op_index, _per_point(laws, varying)
+
+
+def _varying_points(laws: list, n: int, resolution: float,
+                    positive: list[bool] | None = None) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """`_operating_points` of the varying laws: the index per sample, and per varying law (by its place in `laws`)
+    its value at each point."""
     positive = positive if positive is not None else [True] * len(laws)
     varying = [i for i, g in enumerate(laws) if isinstance(g, np.ndarray)]
     if not varying:
-        return np.zeros(n, dtype=np.int64), [np.array([g]) for g in laws]
+        return np.zeros(n, dtype=np.int64), {}
     columns: list[np.ndarray] = []
     decoders: list[Callable] = []
     keyed: list[np.ndarray] = []  # the values each column was made from
@@ -334,30 +364,54 @@ def _operating_points(laws: list, n: int, resolution: float,
         op_index, per_column = op_index.astype(np.int64), [col_uniques]
     else:
         op_index, per_column = _combined_key(columns, n)
-    per_op: list[np.ndarray] = []
-    for i, g in enumerate(laws):
-        if i in column_of:
-            per_op.append(decoders[column_of[i]](per_column[column_of[i]]))
-        else:
-            per_op.append(np.full(len(per_column[0]), g))
-    return op_index, per_op
+    return op_index, {i: decoders[column_of[i]](per_column[column_of[i]]) for i in varying}
+
+
+def _per_point(laws: list, varying: dict[int, np.ndarray]) -> list[np.ndarray]:
+    """Every law's value at each operating point: the varying ones' (`_varying_points`), the scalars repeated."""
+    if not varying:
+        return [np.array([g]) for g in laws]
+    points = len(next(iter(varying.values())))
+    return [varying[i] if i in varying else np.full(points, g) for i, g in enumerate(laws)]
 
 
 def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: float,
-               resolution: float = DEFAULT_RESOLUTION) -> Discretised:
-    """Evaluate the network's laws on the channels and discretise every distinct operating point."""
+               resolution: float = DEFAULT_RESOLUTION, memo: LawMemo | None = None) -> Discretised:
+    """Evaluate the network's laws on the channels and discretise every distinct operating point.
+
+    `memo` (benchlab.solver_memo): what earlier calls on these channels computed, reused where this call repeats
+    it (a fit's finite differences); the result is the same either way.
+    """
+    memo = memo if memo is not None and memo.holds(channels) else NO_MEMO
+    stages = memo.stages(network)
     n = len(next(iter(channels.values())))
-    conductances = _conductances(network, params, channels, n)
-    coefficients = _coefficients(network, params, channels)
+    conductances = _conductances(network, params, channels, n, memo)
+    coefficients = _coefficients(network, params, channels, memo)
     laws = conductances + coefficients
-    op_index, per_op = _operating_points(laws, n, resolution, [True] * len(conductances) + [False] * len(coefficients))
-    A, B = _system_matrices(network, params, per_op[:len(conductances)], per_op[len(conductances):],
-                            len(per_op[0]) if per_op else 1)
-    Ad, Bd = _zoh(A, B, dt)
-    columns = [as_samples(s.heat_flow(params, channels), n) for s in network.sources]
-    columns += [as_samples(b.temperature(channels), n) for b in network.boundaries]
-    inputs = np.ascontiguousarray(np.stack(columns, axis=1)) if columns else np.zeros((n, 0))
-    return Discretised(op_index, Ad, Bd, inputs)
+    arrays = [g for g in laws if isinstance(g, np.ndarray)]
+    keyed_by = (n, resolution, len(conductances), tuple(isinstance(g, np.ndarray) for g in laws))
+    if not (stages.same_laws(arrays) and stages.points[2] == keyed_by):
+        stages.laws, stages.matrices_key = arrays, None
+        positive = [True] * len(conductances) + [False] * len(coefficients)
+        stages.points = (*_varying_points(laws, n, resolution, positive), keyed_by)
+    op_index, varying = stages.points[:2]
+    stages.assembly = stages.assembly or _assembly(network)
+    key = (parameter_bits(params, [name for _, name in stages.assembly[1] if name])
+           + float_bits([dt] + [g for g in laws if not isinstance(g, np.ndarray)]) if memo is not NO_MEMO else None)
+    if key is None or key != stages.matrices_key:
+        per_op = _per_point(laws, varying)
+        A, B = _system_matrices(network, params, per_op[:len(conductances)], per_op[len(conductances):],
+                                len(per_op[0]) if per_op else 1, stages.assembly)
+        stages.matrices, stages.matrices_key = _zoh(A, B, dt), key
+    Ad, Bd = stages.matrices
+    columns = [memo.value(s.heat_flow, params, lambda: as_samples(s.heat_flow(params, channels), n))
+               for s in network.sources]
+    columns += [memo.value(b.temperature, params, lambda: as_samples(b.temperature(channels), n))
+                for b in network.boundaries]
+    if not stages.same_columns(columns):
+        stages.columns = columns
+        stages.inputs = np.ascontiguousarray(np.stack(columns, axis=1)) if columns else np.zeros((n, 0))
+    return Discretised(op_index, Ad, Bd, stages.inputs)
 
 
 @njit(cache=True, nogil=True)
@@ -424,9 +478,9 @@ def propagate(disc: Discretised, x0: np.ndarray) -> np.ndarray:
 
 
 def run_network(network: ThermalNetwork, params: Params, channels: Channels, dt: float, x0: np.ndarray,
-                resolution: float = DEFAULT_RESOLUTION) -> np.ndarray:
-    """Simulate the network over the channels: states (N + 1, n), row k at time k*dt."""
-    return propagate(discretise(network, params, channels, dt, resolution), x0)
+                resolution: float = DEFAULT_RESOLUTION, memo: LawMemo | None = None) -> np.ndarray:
+    """Simulate the network over the channels: states (N + 1, n), row k at time k*dt (`memo`: see discretise)."""
+    return propagate(discretise(network, params, channels, dt, resolution, memo), x0)
 
 
 def conductance_matrices(network: ThermalNetwork, params: Params, links: list[int]) -> tuple[np.ndarray, np.ndarray]:

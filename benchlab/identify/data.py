@@ -16,7 +16,9 @@ flywheel is smooth again. Measured on a noise-free 1 h run: 0.0088 K of bias at 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
@@ -24,6 +26,7 @@ import pandas as pd
 from benchlab.network import ThermalNetwork
 from benchlab.runfile import ALIGNED_UNITS
 from benchlab.simulation import input_channels
+from benchlab.solver_memo import LawMemo
 
 FIT_STEP_S = 0.5
 #: Operating-point quantum per unit of a channel: speeds to 0.5 rpm, temperatures read by laws to 0.1 K.
@@ -46,9 +49,37 @@ class FitData:
     block: int
     mask: np.ndarray  # True where the sample counts in the fit
     units: dict[str, str] = field(default_factory=dict)  # channel -> unit, as the run file gives it
+    #: the solver's memo of these channels, which are never changed after prepare (shared by with_mask's copies)
+    memo: LawMemo = field(default_factory=LawMemo, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.mask)
+
+    @cached_property
+    def fitted(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per target channel: the samples that count in the fit (masked in, target valid) and their targets."""
+        out = {}
+        for c, target in self.targets.items():
+            index = np.flatnonzero(self.mask & np.isfinite(target))
+            out[c] = (index, target[index])
+        return out
+
+    def fitted_flat(self, states: list[str], outputs: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
+        """The fitted samples (`fitted`, channel after channel) as indices into the raveled states (samples ×
+        `states`) of a model that outputs each channel from the state `outputs` names, and their targets."""
+        key = (tuple(states), tuple(outputs[c] for c in self.targets))
+        found = self._flat.get(key)
+        if found is None:
+            column = {s: i for i, s in enumerate(states)}
+            flat = [index * len(states) + column[outputs[c]] for c, (index, _) in self.fitted.items()]
+            targets = [target for index, target in self.fitted.values()]
+            found = self._flat[key] = ((np.concatenate(flat), np.concatenate(targets)) if flat else
+                                       (np.zeros(0, dtype=np.int64), np.zeros(0)))
+        return found
+
+    @cached_property
+    def _flat(self) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
+        return {}
 
     def with_mask(self, mask: np.ndarray) -> "FitData":
         return replace(self, mask=mask)

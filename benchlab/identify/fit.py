@@ -72,27 +72,30 @@ def initial_state(network: ThermalNetwork, data: FitData, params: Mapping[str, f
 
 def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
     """Model outputs at the fitting step for the measured channels of `data`."""
-    states = run_network(network, params, data.channels, data.dt, initial_state(network, data, params),
-                         KEY_RESOLUTION)[:-1]
+    states = _states(network, params, data)
     index = {s: i for i, s in enumerate(network.state_names)}
     return {c: states[:, index[network.outputs[c]]] for c in data.targets}
+
+
+def _states(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> np.ndarray:
+    """The network's states (samples × states) at the fitting step of `data`."""
+    return run_network(network, params, data.channels, data.dt, initial_state(network, data, params),
+                       KEY_RESOLUTION, data.memo)[:-1]
 
 
 def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datasets: Sequence[FitData]) -> np.ndarray:
     """Simulated minus measured, every fitted channel of every run, valid masked samples only."""
     parts = []
     for data in datasets:
-        sim = simulate_outputs(network, params, data)
-        for c, target in data.targets.items():
-            use = data.mask & np.isfinite(target)
-            parts.append(sim[c][use] - target[use])
+        states = _states(network, params, data)
+        flat, targets = data.fitted_flat(network.state_names, network.outputs)
+        parts.append(states.ravel().take(flat) - targets)
     return np.concatenate(parts)
 
 
 def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
     """Per run, the fitting-step sample of each entry of that run's part of `residual_vector` (same order)."""
-    return [np.concatenate([np.flatnonzero(data.mask & np.isfinite(target)) for target in data.targets.values()])
-            for data in datasets]
+    return [np.concatenate([index for index, _ in data.fitted.values()]) for data in datasets]
 
 
 @single_threaded_blas

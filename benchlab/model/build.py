@@ -18,8 +18,18 @@ from benchlab.network import Boundary, Channels, Lag, Link, Node, Params, Source
 NO_TEMPERATURES: dict[str, float] = {}
 
 
-def _law(compiled: Callable) -> Callable[[Params, Channels], "float | np.ndarray"]:
-    return lambda params, channels: compiled(params, channels, NO_TEMPERATURES)
+def _law(compiled: Callable, reads: frozenset[str]) -> Callable[[Params, Channels], "float | np.ndarray"]:
+    """A law of params and channels; `reads`: the parameters it reads (its value changes with nothing else on one
+    run's channels, which lets a fit's solver memo keep it: benchlab.solver_memo)."""
+    def law(params: Params, channels: Channels) -> "float | np.ndarray":
+        return compiled(params, channels, NO_TEMPERATURES)
+    law.reads = tuple(sorted(reads))
+    return law
+
+
+def _parameters_read(model: ModelDefinition, expr: Expression) -> frozenset[str]:
+    return frozenset(name for name, kind in kinds(model.parameters, model.nodes, expr.names).items()
+                     if kind == "parameter")
 
 
 def _first_present(channels: tuple[str, ...]) -> Callable[[Channels], np.ndarray]:
@@ -29,6 +39,7 @@ def _first_present(channels: tuple[str, ...]) -> Callable[[Channels], np.ndarray
             if name in values and not np.all(np.isnan(values[name])):
                 return values[name]
         return values[channels[-1]]
+    temperature.reads = ()  # no parameter: one value per run's channels (benchlab.solver_memo)
     return temperature
 
 
@@ -38,14 +49,16 @@ def build_network(model: ModelDefinition) -> ThermalNetwork:
 
     def law(expr: Expression) -> Callable:
         if expr.text not in laws:
-            laws[expr.text] = _law(compile_expression(expr, kinds(model.parameters, model.nodes, expr.names)))
+            laws[expr.text] = _law(compile_expression(expr, kinds(model.parameters, model.nodes, expr.names)),
+                                   _parameters_read(model, expr))
         return laws[expr.text]
 
     sources = []
     for entry in model.sources:
         constant, coefficients = affine_parts(entry.heat, kinds(model.parameters, model.nodes, entry.heat.names))
-        sources.append(Source(entry.node, _law(constant), entry.name,
-                              tuple((node, _law(k)) for node, k in coefficients.items())))
+        reads = _parameters_read(model, entry.heat)
+        sources.append(Source(entry.node, _law(constant, reads), entry.name,
+                              tuple((node, _law(k, reads)) for node, k in coefficients.items())))
     outputs = {**model.simulated, **model.outputs}
     for lag in model.lags:
         outputs[lag.output] = model.lag_state(lag.output)

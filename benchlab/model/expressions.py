@@ -15,6 +15,7 @@ import operator
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -59,6 +60,13 @@ def parse(text: object) -> Expression:
     source = text if isinstance(text, str) else repr(float(text))
     if len(source) > MAX_LENGTH:
         raise ExpressionError(f"an expression of at most {MAX_LENGTH} characters")
+    return _parsed(source)
+
+
+@lru_cache(maxsize=4096)
+def _parsed(source: str) -> Expression:
+    """`parse` of a string of at most MAX_LENGTH characters, kept: a diagnosis reads the model's laws again for each
+    of the hundreds of candidates it builds (the tree is never changed after, so one may serve them all)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SyntaxWarning)  # "1x": the SyntaxError below says it, once
