@@ -156,7 +156,8 @@ class _RxTable:
         self.key_slices = [slice(0, len(at)) if at == list(range(len(at))) else at for at in self.key_columns]
         self.alive = np.full(len(rx), -1, dtype=np.int64)  # last alive counter per slot (-1: none yet)
         self.faulted = np.zeros(len(self.controllers), dtype=bool)  # per controller
-        self.last = np.full((len(rx), self.codecs.width), np.nan)  # each message's newest values (NaN: none yet)
+        self.last = np.full((len(rx), self.codecs.width), np.nan)  # each message's newest values
+        self.seen = np.zeros(len(rx), dtype=bool)  # whether `last` holds a frame's values yet
         self.last_seen = np.full(len(rx), now)  # each message's newest frame time (at first: when the bench opened)
 
     @staticmethod
@@ -218,9 +219,7 @@ class CanBench:
         received, sent = self._compile(signals, silent_cycles)
         self._rx_table = _RxTable(list(received.values()), list(received), now)
         self._tx_table = _TxTable(sent, now)
-        self._estop_slot = self._tx_table.column_of["estop.request"][0] if "estop.request" in self._tx_table.column_of \
-            else -1
-        if self._estop_slot >= 0:
+        if "estop.request" in self._tx_table.column_of:
             self._tx_table.cyclic[self._estop_slot] = False  # repeated only while an emergency stop is active
 
     @classmethod
@@ -256,8 +255,8 @@ class CanBench:
 
     def emergency_stop(self, source: int = sig.ESTOP_SOURCE_PC) -> None:
         """Send the emergency stop now and repeat it every cycle until `release_emergency_stop()`."""
-        self.estop_active = True
         table, m = self._tx_table, self._estop_slot
+        self.estop_active = True
         table.origin[m], table.cycles[m] = self.clock() + table.cycle[m], 0
         table.cyclic[m] = table.cycle[m] > 0
         self._set({"estop.request": 1, "estop.source": source})
@@ -267,6 +266,11 @@ class CanBench:
         self._set({"estop.request": 0})
         self.estop_active = False
         self._tx_table.cyclic[self._estop_slot] = False
+
+    @property
+    def _estop_slot(self) -> int:
+        """The emergency-stop message's slot among those the PC sends (KeyError if the DBC has none)."""
+        return self._tx_table.column_of["estop.request"][0]
 
     # -- the bus -----------------------------------------------------------------------------------
     def poll(self) -> list[CanSample]:
@@ -369,6 +373,7 @@ class CanBench:
             a, b = bounds[m], bounds[m + 1]
             if b == a:
                 continue
+            table.seen[m] = True
             block = CanBlock(rx.controller, rx.codec.message.name, order[a:b], t[a:b],
                              values[a:b, table.key_slices[m]], table.keys[m])
             if rx.controller == "estop":
@@ -516,8 +521,8 @@ class CanBench:
     def latest(self) -> dict[str, float]:
         """Each received signal's newest value (logical key → physical value), for the signals seen so far."""
         table, latest = self._rx_table, {}
-        for keys, at, row in zip(table.keys, table.key_columns, table.last.tolist()):
-            if at and not math.isnan(row[at[0]]):  # decoded values are numbers; NaN: no frame yet
+        for keys, at, row, seen in zip(table.keys, table.key_columns, table.last.tolist(), table.seen.tolist()):
+            if seen:
                 latest.update(zip(keys, [row[j] for j in at]))
         return latest
 
@@ -592,7 +597,7 @@ def _watch(slot: np.ndarray, values: np.ndarray, t: np.ndarray, meta: np.ndarray
     Returns the order (positions of the decoded frames), each slot's start in it (slots + 1 bounds), their values
     and times in that order, and per position: alive counter not the previous + 1 (and the previous), fault state
     changed (+1 faulted, -1 cleared); and counts: index 0 the frames flagged so, index -reason the frames a reason
-    left undecoded. Updates per slot `alive`, `last` (newest values, NaN: none yet) and `last_seen` (newest
+    left undecoded. Updates per slot `alive`, `last` (newest values) and `last_seen` (newest
     time), and `faulted` per controller (meta OWNER of each slot).
     """
     n, slots = slot.shape[0], meta.shape[0]
@@ -651,8 +656,9 @@ def _due_cyclic(now: float, origin: np.ndarray, cycles: np.ndarray, cycle: np.nd
             continue
         late = now - (origin[m] + cycles[m] * cycle[m])
         if late > max_catch_up:
-            cycles[m] += np.int64(late // cycle[m])
-            skipped += np.int64(late // cycle[m])
+            skip = np.int64(late // cycle[m])
+            cycles[m] += skip
+            skipped += skip
         k = 0
         while origin[m] + (cycles[m] + k) * cycle[m] <= now + 1e-9:
             k += 1

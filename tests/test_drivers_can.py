@@ -508,3 +508,28 @@ def test_the_can_driver_raises_its_own_errors() -> None:
     with pytest.raises(CanBusError, match="adapter gone"):
         bench.receive()
     bus.shutdown()
+
+
+def test_emergency_stop_on_a_dbc_without_one_is_refused_and_changes_no_other_schedule() -> None:
+    """A mapping without the emergency-stop message: asking for one raises, and the cyclic frames the PC does send
+    keep their schedule, frame for frame, as on a twin bench that was never asked (the stop's slot is looked up,
+    never taken as a default)."""
+    signals = {key: where for key, where in sig.BENCH_SIGNALS.items() if not key.startswith("estop.")}
+    received = []
+    for asked in (True, False):
+        channel = f"noestop{next(_chan)}"
+        clock, listener = ManualClock(), can.Bus(interface="virtual", channel=channel)
+        bench = CanBench(can.Bus(interface="virtual", channel=channel), signals=signals, clock=clock,
+                         timestamps="run")
+        try:
+            clock.advance(1.05)  # between two cycles: a schedule started anew here would fall due at other times
+            if asked:
+                with pytest.raises(KeyError):
+                    bench.emergency_stop()
+            clock.advance(1.0)
+            bench.send_due()
+            received.append([m.arbitration_id for m in iter(lambda: listener.recv(0), None)])
+        finally:
+            bench.close()
+            listener.shutdown()
+    assert received[0] and received[0] == received[1]
