@@ -353,49 +353,22 @@ class ClutchNodeGateway:
         return True
 
     def _block(self, rows: np.ndarray, now: float) -> NodeBlock:
-        """The accepted frames among `rows` (node_frame.FIELDS order, as received) as samples.
-
-        A run of plainly consecutive frames (seq + 1, node clock forward by at most the drop-out limit, no reset flag,
-        no drop-out running) is taken in one step; any other frame goes through `_accept`.
-        """
+        """The accepted frames among `rows` (node_frame.FIELDS order, as received) as samples, each through `_accept`
+        (the reads that are not plainly consecutive frames: the usual read is `_read_plain`)."""
         n = len(rows)
         if not n:
             return NodeBlock(_NO_ROWS, now, _NO_T, _NO_TABLE, -1, math.nan)
-        plain, span, _ = _plainly_consecutive(rows, self._last_seq or 0, self._last_ms, self.period_s, self.dropout_s)
-        plain_list = plain.tolist()
-        node_s, keep = np.empty(n), np.zeros(n, dtype=bool)
-        runs: list[tuple[int, int, ClockMap]] = []  # accepted rows [i, j) and the node clock's map they belong to
-        i = 0
-        while i < n:
-            if plain_list[i] and self._last_seq is not None and not self._in_dropout:
-                j = i + 1
-                while j < n and plain_list[j]:
-                    j += 1
-                node_s[i:j] = self._take_plain(rows[i:j], span[i:j], now)
-            else:
-                j = i + 1
-                if not self._accept(rows[i].tolist(), now):
-                    i = j
-                    continue
-                node_s[i] = self._node_s
+        keep, t = np.zeros(n, dtype=bool), np.empty(n)
+        accepted: list[tuple[int, float, ClockMap]] = []  # row, node clock time, the node clock's map it belongs to
+        for i, row in enumerate(rows.tolist()):
+            if self._accept(row, now):
+                keep[i] = True
+                accepted.append((i, self._node_s, self.clock_map))
                 self.clock_map.observe(self._node_s, now)
-            keep[i:j] = True
-            runs.append((i, j, self.clock_map))
-            i = j
-        t = np.empty(n)
-        for i, j, clock_map in runs:
-            t[i:j] = np.minimum(clock_map.to_run(node_s[i:j]), now)
+        for i, node_s, clock_map in accepted:  # each with its map as the whole read left it
+            t[i] = min(clock_map.to_run(node_s), now)
         rows, t = rows[keep], t[keep]
         return NodeBlock(rows, now, t, *_table(rows, t, self._settings))
-
-    def _take_plain(self, rows: np.ndarray, span: np.ndarray, now: float) -> np.ndarray:
-        """`_accept` of plainly consecutive frames in one step (nothing lost, no event): their node clock times."""
-        node_s = np.cumsum(np.concatenate(([self._node_s], span)))[1:]  # one by one, as _accept adds them
-        self._node_s = float(node_s[-1])
-        self.clock_map.observe_together(node_s, now)
-        self.stats.frames_ok += len(rows)
-        self._last_seq, self._last_ms, self._last_host = int(rows[-1, 2]), int(rows[-1, 3]), now
-        return node_s
 
 
 @njit(cache=True, nogil=True)
@@ -423,8 +396,9 @@ def _plain_block(rows: np.ndarray, last_seq: int, last_ms: int, node_s: float, c
                  settings: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int, float]:  # pragma: no cover - compiled
     """The usual read in one pass: if every frame of `rows` follows the one before plainly (the first after frame
     `last_seq`, `last_ms`), their node clock times counted on from `node_s` one by one, the clock map `clock`
-    updated with them (ClockMap.observe_together), their run times and `_table`; else nothing changed and no rows."""
-    plain, span, all_plain = _plainly_consecutive(rows, last_seq, last_ms, settings[_PERIOD], settings[_DROPOUT])
+    updated with them (`observe_into` of frames received together: the offset of taking them one by one), their run
+    times and `_table`; else nothing changed and no rows."""
+    span, all_plain = _plainly_consecutive(rows, last_seq, last_ms, settings[_PERIOD], settings[_DROPOUT])
     if not all_plain:
         return np.empty((0, len(TABLE_COLUMNS))), np.empty(0), node_s, -1, np.nan
     n = rows.shape[0]
@@ -467,22 +441,23 @@ def _table(rows: np.ndarray, t: np.ndarray, settings: np.ndarray) -> tuple[np.nd
 
 @njit(cache=True, nogil=True)
 def _plainly_consecutive(rows: np.ndarray, last_seq: int, last_ms: int, period_s: float,
-                         dropout_s: float) -> tuple[np.ndarray, np.ndarray, bool]:  # pragma: no cover - compiled
-    """Per frame (rows in node_frame.FIELDS order; the first after a frame `last_seq`, `last_ms`): whether it follows
-    the frame before plainly (seq + 1, no full wrap, no reset flag, node clock forward by at most `dropout_s`), and
-    the node clock's step to it in s; and whether all do."""
+                         dropout_s: float) -> tuple[np.ndarray, bool]:  # pragma: no cover - compiled
+    """The node clock's step to each frame in s (rows in node_frame.FIELDS order; the first after a frame `last_seq`,
+    `last_ms`), and whether every frame follows the one before plainly (seq + 1, no full wrap, no reset flag, node
+    clock forward by at most `dropout_s`)."""
     n = rows.shape[0]
-    plain, span = np.empty(n, dtype=np.bool_), np.empty(n)
+    span = np.empty(n)
+    all_plain = True
     prev_seq, prev_ms = last_seq, last_ms
     for i in range(n):
         seq, t_ms = rows[i, 2], rows[i, 3]
         node_dt = (t_ms - prev_ms) & 0xFFFFFFFF
         span[i] = node_dt / 1000
-        plain[i] = (((seq - prev_seq) & 0xFFFF) == 1 and rows[i, 1] & node_frame.NODE_RESET == 0
-                    and node_dt < 1 << 31 and span[i] <= dropout_s
-                    and np.round((node_dt / (1000 * period_s) - 1) / 65536) <= 0)
+        all_plain = all_plain and (((seq - prev_seq) & 0xFFFF) == 1 and rows[i, 1] & node_frame.NODE_RESET == 0
+                                   and node_dt < 1 << 31 and span[i] <= dropout_s
+                                   and np.round((node_dt / (1000 * period_s) - 1) / 65536) <= 0)
         prev_seq, prev_ms = seq, t_ms
-    return plain, span, bool(np.all(plain))
+    return span, all_plain
 
 
 @njit(cache=True, nogil=True)

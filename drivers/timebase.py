@@ -41,10 +41,6 @@ class ClockMap:
         """Update the offset with one frame and return the frame's run time (never later than its receipt)."""
         return device_t + observe_into(self.state, device_t, device_t, received_t)
 
-    def observe_together(self, device_t: np.ndarray, received_t: float) -> None:
-        """`observe` of frames received together at `received_t`, in order (the offset is the same as one by one)."""
-        observe_into(self.state, float(device_t[0]), float(np.max(device_t)), received_t)
-
     def to_run(self, device_t: "float | np.ndarray") -> "float | np.ndarray":
         """Run time of a device stamp (or stamps) with the current offset (NaN before the first frame)."""
         return device_t + self.offset
