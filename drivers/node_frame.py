@@ -98,8 +98,8 @@ def _crc16(data: np.ndarray, start: int, stop: int) -> int:  # pragma: no cover 
 
 @njit(cache=True, nogil=True)
 def wire_of_rows(fields: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """`encode_rows` for compiled callers: wire bytes (n, ENCODED_LEN + 1) of frames given as rows in FIELDS order: the _BODY layout (little-endian),
-    CRC-16/CCITT-FALSE big-endian, COBS, the 0x00 delimiter."""
+    """`encode_rows` for compiled callers: wire bytes (n, ENCODED_LEN + 1) of frames given as rows in FIELDS order:
+    the _BODY layout (little-endian), CRC-16/CCITT-FALSE big-endian, COBS, the 0x00 delimiter."""
     out = np.zeros((fields.shape[0], PAYLOAD_LEN + 2), dtype=np.uint8)
     payload = np.empty(PAYLOAD_LEN, dtype=np.uint8)
     for i in range(fields.shape[0]):
@@ -151,8 +151,8 @@ def _decode_into(src: np.ndarray, start: int, stop: int, payload: np.ndarray,
 
 @njit(cache=True, nogil=True)
 def decode_chunks(src: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:  # pragma: no cover - compiled
-    """`decode_stream` for compiled callers: every 0x00-terminated chunk of `src` decoded: rows (FIELDS order), a status per chunk, and where the
-    unterminated rest begins."""
+    """`decode_stream` for compiled callers: every 0x00-terminated chunk of `src` decoded: rows (FIELDS order), a
+    status per chunk, and where the unterminated rest begins."""
     count = 0
     for i in range(src.shape[0]):
         if src[i] == 0:

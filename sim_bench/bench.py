@@ -117,7 +117,7 @@ class SimPhysics:
 
     # -- grid and chunks -----------------------------------------------------------------------------
     def _index(self, t: float) -> int:
-        return int(math.floor(t / self.dt + 1e-6))
+        return grid_index(t, self.dt)
 
     def _ambient(self, k: np.ndarray) -> np.ndarray:
         a = self.cfg.ambient
@@ -259,7 +259,7 @@ class SimPhysics:
         newest = self._newest_chunk(times)
         if newest is not None:  # the usual case
             return _grid_rows(times, self.dt, newest[0], newest[1][name])
-        k = np.floor(times / self.dt + 1e-6).astype(np.int64)
+        k = np.array([self._index(t) for t in times.tolist()], dtype=np.int64)  # not all in the newest chunk: rare
         k = np.maximum(k, self._chunks[0][0])  # older than kept: the oldest sample we have
         rows = np.empty((len(k), self._chunks[-1][2][name].shape[1]))
         for k0, _, temps in self._chunks:
@@ -329,11 +329,17 @@ _ACTUAL_SOURCES = ("engine_speed", "clutch_speed", "clutch_torque", "friction_po
 
 
 @njit(cache=True, nogil=True)
+def grid_index(t: float, dt: float) -> int:  # pragma: no cover - compiled
+    """The grid point a time falls on (the one at or before it, 1e-6 of a step of slack for rounding)."""
+    return int(math.floor(t / dt + 1e-6))
+
+
+@njit(cache=True, nogil=True)
 def _grid_rows(times: np.ndarray, dt: float, k0: int, matrix: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """Rows of `matrix` (grid points from k0 on) at the grid point of each of `times` (SimPhysics._index's rule)."""
+    """Rows of `matrix` (grid points from k0 on) at the grid point of each of `times`."""
     rows = np.empty((times.shape[0], matrix.shape[1]))
     for i in range(times.shape[0]):
-        rows[i] = matrix[int(math.floor(times[i] / dt + 1e-6)) - k0]
+        rows[i] = matrix[grid_index(times[i], dt) - k0]
     return rows
 
 
@@ -353,7 +359,7 @@ def _measured_at(times: np.ndarray, dt: float, k0: int, matrix: np.ndarray, stro
     """`_measured` of the rows of `matrix` (grid points from k0 on) at the grid point of each of `times`."""
     out = np.empty((7, times.shape[0]))
     for i in range(times.shape[0]):
-        _measure(matrix[int(math.floor(times[i] / dt + 1e-6)) - k0], stroke_mm, gear, out, i)
+        _measure(matrix[grid_index(times[i], dt) - k0], stroke_mm, gear, out, i)
     return out
 
 

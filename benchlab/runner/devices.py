@@ -238,8 +238,8 @@ def _derived(clamp: np.ndarray, torque: np.ndarray, engine: np.ndarray, clutch: 
 BENCH_CHANNELS = {name: unit for name, unit in ALIGNED_UNITS.items() if name not in ("time", "T_engine")}
 
 
-CAN_HOLD_CYCLES = 2.5
-REPEAT_EVENT_S = 10.0  # a device error repeating (a port gone, a muted instrument) is one event per this long  # a status value holds on the grid for one lost frame, not for two
+CAN_HOLD_CYCLES = 2.5  # a status value holds on the grid for one lost frame, not for two
+REPEAT_EVENT_S = 10.0  # a device error repeating (a port gone, a muted instrument) is one event per this long
 
 
 @functools.lru_cache(maxsize=8)
