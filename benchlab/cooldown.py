@@ -42,6 +42,7 @@ from benchlab.errors import InputError
 from benchlab.progress import SILENT, Progress, Task
 from benchlab.runfile import (Event, load_analysis, load_attrs, load_events, load_run, load_schedule,
                               write_analysis)
+from benchlab.runfile.schema import END_CONDITION
 from benchlab.simulation import initial_state, input_channels
 from benchlab.solver import run_network
 from protocols.schedule import Step
@@ -79,7 +80,8 @@ class CooldownResult:
 
 
 def segments(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, dict[str, float]]]:
-    """(cycle, t_start, t_end, point) of every completed cool-down of the run.
+    """(cycle, t_start, t_end, point) of every completed cool-down of the run (its `cooldown_end`'s reason:
+    the step's condition was met).
 
     The times are the `cooldown_start`/`cooldown_end` events'; the operating point is that of the step in the
     stored schedule the events belong to (their `step`; see `_cooldown_point` for files without it).
@@ -93,7 +95,7 @@ def segments(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, di
             open_[event.cycle] = (event.time, _cooldown_point(path, steps, event, started))
         elif event.kind == "cooldown_end" and event.cycle in open_:
             t0, point = open_.pop(event.cycle)
-            if event.detail.startswith("condition"):
+            if event.reason == END_CONDITION:  # ended by its condition, not on time or by an abort
                 out.append((event.cycle, t0, event.time, point))
     return out
 

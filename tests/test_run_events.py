@@ -1,8 +1,11 @@
-"""/events carry the step of /schedule they belong to; files written before the `step` column still read.
+"""/events carry the step of /schedule they belong to and a `reason` to match (the interlock's name, why a step
+ended); files written before the `step` or `reason` column still read.
 
 A short simulated run, aborted by an interlock and resumed: every step_start names its own row of /schedule,
-every event of a step lies inside it. Files without `step` (written with h5py, or an old run resumed) read
-with step -1 through load_events, the live view and the cool-down analysis.
+every event of a step lies inside it, the interlock and step ends carry their reason. Files without `step`
+(written with h5py, or an old run resumed) read with step -1 through load_events, the live view and the
+cool-down analysis; files without `reason` read with the reason their detail text gave, and a reworded detail
+changes nothing the readers find.
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ import pytest
 
 from benchlab.cooldown import segments
 from benchlab.errors import InputError
-from benchlab.runfile import load_events, load_schedule
+from benchlab.runfile import event_steps, load_events, load_schedule
+from benchlab.runfile.schema import END_CONDITION, END_SYNCHRONISED, END_TIME
 from benchlab.runner.session import RunRequest, execute
 from benchlab.watch.live import LiveRun
 from crashed import abort_on_silent_load  # tests/crashed.py
@@ -38,13 +42,13 @@ def aborted(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def _resumed(aborted: Path, tmp_path: Path, drop_step: bool = False) -> Path:
+def _resumed(aborted: Path, tmp_path: Path, drop: tuple[str, ...] = ()) -> Path:
     out = tmp_path / "run.h5"
     shutil.copy(aborted, out)
     shutil.copy(aborted.with_suffix(".blf"), out.with_suffix(".blf"))
-    if drop_step:  # as a file written before events carried their step
-        with h5py.File(out, "r+") as f:
-            del f["events/step"]
+    with h5py.File(out, "r+") as f:  # as a file written before events carried these columns
+        for column in drop:
+            del f[f"events/{column}"]
     code, summary = execute(RunRequest("custom", out, resume=True, install_signals=False,
                                        bench=SimulatedBench(options={"dropouts": False})))
     assert code == 0 and summary.status == "complete"
@@ -54,9 +58,13 @@ def _resumed(aborted: Path, tmp_path: Path, drop_step: bool = False) -> Path:
 def test_every_event_carries_the_step_it_happened_in(aborted, tmp_path):
     with h5py.File(aborted, "r") as f:
         assert f["events/step"].dtype == np.int64 and f["events/step"].attrs["units"] == "1"
+    with h5py.File(aborted, "r") as f:
+        assert f["events/reason"].dtype == np.dtype("S32") and f["events/reason"].attrs["units"] == ""
     first = load_events(aborted)
     stopped = {(e.kind, e.step) for e in first if e.kind in ("interlock", "run_aborted")}
     assert stopped == {("interlock", 0), ("run_aborted", 0)}  # the step the interlock interrupted
+    assert [(e.kind, e.reason) for e in first if e.reason] == [("interlock", "controller_lost"),
+                                                               ("interlock", "stale_clutch_speed")]
     out = _resumed(aborted, tmp_path)
     schedule, events = load_schedule(out), load_events(out)
     assert schedule == STEPS
@@ -65,6 +73,10 @@ def test_every_event_carries_the_step_it_happened_in(aborted, tmp_path):
     for e in starts:  # the row it names is the step that ran: its cycle and its phase (the runner's detail)
         assert e.cycle == schedule[e.step].cycle and e.detail.split()[0] == schedule[e.step].phase
     assert [e.step for e in events if e.kind == "step_end"] == [1, 2, 3]
+    for e in events:  # why each step ended, as the text for people says it
+        if e.kind == "step_end":
+            assert e.reason in (END_TIME, END_CONDITION, END_SYNCHRONISED)
+            assert e.detail == f"{schedule[e.step].phase}: {e.reason}"
     assert [(e.step, e.cycle) for e in events if e.kind == "resume"] == [(1, 0)]
     assert [e.step for e in events if e.kind == "cycle_start"] == [0, 1]
     assert [e.step for e in events if e.kind == "run_complete"] == [-1]
@@ -79,11 +91,37 @@ def test_every_event_carries_the_step_it_happened_in(aborted, tmp_path):
 
 
 def test_resuming_a_file_without_the_step_column_adds_it(aborted, tmp_path):
-    out = _resumed(aborted, tmp_path, drop_step=True)
+    out = _resumed(aborted, tmp_path, drop=("step", "reason"))
     events = load_events(out)
     resume = next(i for i, e in enumerate(events) if e.kind == "resume")
     assert resume > 0 and all(e.step == -1 for e in events[:resume])  # not known before the resume
     assert [e.step for e in events[resume:] if e.kind == "step_start"] == [1, 2, 3]
+    # the reason of the events before the resume: from their detail text, written into the resumed file
+    assert [(e.kind, e.reason) for e in events[:resume] if e.reason] == [("interlock", "controller_lost"),
+                                                                         ("interlock", "stale_clutch_speed")]
+    with h5py.File(out, "r") as f:
+        assert f["events/reason"][:resume].tolist() == [e.reason.encode() for e in events[:resume]]
+
+
+def _live_interlocks(path: Path) -> list[str]:
+    """The interlocks the live view shows active at the end of the file."""
+    live = LiveRun(path)
+    try:
+        return sorted(live.update(width=100)["status"]["interlocks"])
+    finally:
+        live.close()
+
+
+def test_the_live_view_names_interlocks_by_reason_whatever_their_text_and_in_old_files(aborted, tmp_path):
+    assert _live_interlocks(aborted) == ["controller_lost", "stale_clutch_speed"]  # the run ended held by both
+    reworded, old = tmp_path / "reworded.h5", tmp_path / "old.h5"
+    shutil.copy(aborted, reworded)
+    shutil.copy(aborted, old)
+    with h5py.File(reworded, "r+") as f:
+        f["events/detail"][...] = b"tripped: see the log"
+    with h5py.File(old, "r+") as f:  # as written before `reason`: the name from the text of then
+        del f["events/reason"]
+    assert _live_interlocks(reworded) == _live_interlocks(old) == ["controller_lost", "stale_clutch_speed"]
 
 
 def _old_format(path: Path, events: list[tuple[float, int, str, str]], steps: tuple[Step, ...] = ()) -> Path:
@@ -104,18 +142,33 @@ def _old_format(path: Path, events: list[tuple[float, int, str, str]], steps: tu
     return path
 
 
-def test_a_file_without_the_step_column_reads_with_step_minus_one(tmp_path):
-    rows = [(0.0, 0, "cycle_start", ""), (0.0, 0, "step_start", "drive"), (5.0, 0, "step_end", "drive: time"),
+def test_a_file_without_step_and_reason_reads_with_step_minus_one_and_the_reason_its_text_gave(tmp_path):
+    rows = [(0.0, 0, "cycle_start", ""), (0.0, 0, "step_start", "drive"),
+            (1.0, 0, "interlock", "T_air_max: 80.2 degC above 80 (hold)"), (2.0, 0, "interlock_cleared", "T_air_max"),
+            (3.0, 0, "cooldown_end", "condition; engine_speed=800"), (5.0, 0, "step_end", "drive: time"),
             (5.5, -1, "run_complete", "")]
+    reasons = ["", "", "T_air_max", "", END_CONDITION, END_TIME, ""]
     path = _old_format(tmp_path / "old.h5", rows)
-    assert [tuple(e) for e in load_events(path)] == [(*r, -1) for r in rows]
+    assert [tuple(e) for e in load_events(path)] == [(*r, -1, why) for r, why in zip(rows, reasons)]
     live = LiveRun(path)
     try:
         answer = live.update(width=100, events_from=0)
-        assert [(e["time"], e["cycle"], e["kind"], e["detail"], e["step"]) for e in answer["events"]["items"]] == [
-            (*r, -1) for r in rows]
+        assert [(e["time"], e["cycle"], e["kind"], e["detail"], e["step"], e["reason"])
+                for e in answer["events"]["items"]] == [(*r, -1, why) for r, why in zip(rows, reasons)]
     finally:
         live.close()
+
+
+def test_old_files_step_starts_take_their_step_from_their_place_in_the_cycle(tmp_path):
+    steps = (Step("open", 10.0, 800.0, cycle=0), Step("drive", 10.0, 800.0, cycle=0), Step("open", 10.0, 800.0, cycle=1))
+    rows = [(0.0, 0, "cycle_start", ""), (0.0, 0, "step_start", ""), (9.0, 0, "engagement_start", ""),
+            (10.0, 0, "step_start", ""), (12.0, 0, "resume", ""),  # killed in step 1, resumed: cycle 0 again
+            (12.0, 0, "cycle_start", ""), (12.0, 0, "step_start", ""), (22.0, 0, "step_start", ""),
+            (32.0, 1, "cycle_start", ""), (32.0, 1, "step_start", ""), (40.0, 1, "step_start", "")]
+    events = load_events(_old_format(tmp_path / "old.h5", rows, steps))
+    assert event_steps(events, steps) == [-1, 0, -1, 1, -1, -1, 0, 1, -1, 2, -1]  # cycle 1 has no second step
+    stamped = [e._replace(step=5) if e.kind == "step_start" else e for e in events]
+    assert event_steps(stamped, steps) == [5 if e.kind == "step_start" else -1 for e in events]  # a stored step wins
 
 
 def test_cooldown_points_from_the_events_step_and_in_old_files_from_the_cycles_order(tmp_path):

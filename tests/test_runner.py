@@ -8,6 +8,7 @@ frame.
 from __future__ import annotations
 
 import math
+import shutil
 import signal
 import subprocess
 import sys
@@ -17,7 +18,7 @@ import h5py
 import numpy as np
 import pytest
 
-from benchlab.runfile import load_run
+from benchlab.runfile import load_events, load_run
 from benchlab.drivetrain import friction_power
 from benchlab.runner.devices import BenchStatus
 from benchlab.runner.session import RunRequest, execute
@@ -166,6 +167,29 @@ def test_validation_protocol_runs(tmp_path):
     starts = [t for t, k, d in events if k == "step_start" and "validation_cooldown" in d]
     assert len(starts) >= 9
     assert np.nanmax(run["T_flywheel"]) > 69.0  # each long cool-down starts hot
+    # the report's long cool-downs: their steps in /schedule, whatever the event text, and in an old file
+    new, reworded, old = _validation_cooldowns_of(tmp_path / "v.h5", tmp_path)
+    assert [(cycle, text) for cycle, _, _, text in new] == [
+        (0, "open → open → open"), (1, "launch → drive → drive → drive"), (2, "open → launch → drive → open")]
+    cycle_starts = {e.cycle: e.time for e in load_events(tmp_path / "v.h5") if e.kind == "cycle_start"}
+    for cycle, t0, t1, _ in new:  # from the heat's end to the next cycle's start
+        assert cycle_starts[cycle] < t0 < t1 == cycle_starts[cycle + 1]
+    assert reworded == old == new
+
+
+def _validation_cooldowns_of(path, tmp_path):
+    """The report's long cool-downs of the run at `path`, of a copy with the detail text reworded and of a copy
+    as written before events carried `step` and `reason`."""
+    from benchlab.report.index import validation_cooldowns
+
+    reworded, old = tmp_path / "reworded.h5", tmp_path / "old.h5"
+    shutil.copy(path, reworded)
+    shutil.copy(path, old)
+    with h5py.File(reworded, "r+") as f:
+        f["events/detail"][...] = b"reworded for people"
+    with h5py.File(old, "r+") as f:
+        del f["events/step"], f["events/reason"]
+    return [validation_cooldowns(p) for p in (path, reworded, old)]
 
 
 def test_real_time_loop_on_emulated_devices(tmp_path):

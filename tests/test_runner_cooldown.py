@@ -82,6 +82,30 @@ def test_operating_points_come_from_the_stored_schedule_not_the_event_text(sweep
     assert exc.value.field == "/schedule" and "cycle 0" in str(exc.value)
 
 
+def test_cool_downs_count_by_their_end_reason_not_their_text_in_new_and_old_files(sweep, tmp_path):
+    out, _ = sweep
+    found = segments(out)
+    assert [(cycle, point["engine_speed"]) for cycle, _, _, point in found] == [(0, 800.0), (1, 2500.0), (2, 1200.0)]
+    assert all(t0 < t1 for _, t0, t1, _ in found)
+    with h5py.File(out, "r") as f:
+        ends = [i for i, k in enumerate(f["events/kind"][:]) if k == b"cooldown_end"]
+        assert f["events/reason"][ends].tolist() == [b"condition"] * 3
+    reworded, old = tmp_path / "reworded.h5", tmp_path / "old.h5"
+    shutil.copy(out, reworded)
+    shutil.copy(out, old)
+    with h5py.File(reworded, "r+") as f:  # the text for people reworded: the same cool-downs
+        f["events/detail"][...] = b"ended on time; reworded"
+    assert segments(reworded) == found
+    with h5py.File(old, "r+") as f:  # written before `reason`: read from the text of then
+        del f["events/reason"]
+    assert segments(old) == found
+    with h5py.File(reworded, "r+") as f:  # a cool-down that ended on time is not fitted
+        f["events/reason"][ends[1]] = b"time"
+    with h5py.File(old, "r+") as f:
+        f["events/detail"][ends[1]] = b"time; engine_speed=2500"
+    assert segments(reworded) == segments(old) == [found[0], found[2]]
+
+
 def test_stored_analysis_reads_back_as_written(sweep, tmp_path):
     out, _ = sweep
     copy = tmp_path / "sweep.h5"

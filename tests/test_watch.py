@@ -113,11 +113,12 @@ def test_follows_the_writer_through_growth_and_close_reading_only_what_is_new(tm
             t = second - 1 + k / 10
             writer.add("s", t, (20.0 + t / 10, 1500.0 if k != 3 else np.nan))
         if second == 40:
-            writer.event(39.5, "step_end", 0, "drive: time", step=0)
+            writer.event(39.5, "step_end", 0, "drive: time", step=0, reason="time")
             writer.state["next_step"] = 1
             writer.event(39.5, "step_start", 0, "open", step=1)
         if second == 60:
-            writer.event(59.5, "interlock", 0, "stale_T_air: no valid reading for 5.2 s (hold)", step=1)
+            writer.event(59.5, "interlock", 0, "stale_T_air: no valid reading for 5.2 s (hold)", step=1,
+                         reason="stale_T_air")
             writer.state["held"] = 1
         if second == 70:
             writer.event(69.5, "interlock_cleared", 0, "stale_T_air")
@@ -144,8 +145,9 @@ def test_follows_the_writer_through_growth_and_close_reading_only_what_is_new(tm
     assert len(inodes) >= 2  # grew past its capacity: a new file under the same name, followed
     step = live.update()["status"]["step"]
     assert (step["index"], step["phase"], step["until"]) == (1, "open", "T_flywheel <= 60")
-    assert [(e["kind"], e["step"]) for e in live.events] == [
-        ("step_start", 0), ("step_end", 0), ("step_start", 1), ("interlock", 1), ("interlock_cleared", -1)]
+    assert [(e["kind"], e["step"], e["reason"]) for e in live.events] == [
+        ("step_start", 0, ""), ("step_end", 0, "time"), ("step_start", 1, ""), ("interlock", 1, "stale_T_air"),
+        ("interlock_cleared", -1, "")]
     assert step["elapsed_s"] == pytest.approx(100.0 - 39.5) and step["left_s"] == pytest.approx(200 - 60.5)
     writer.close("complete")  # compacted and compressed: read through h5py from now on
     answer = live.update(width=400, level=level, have=have)

@@ -30,7 +30,7 @@ import numpy as np
 from isal import isal_zlib
 from numba import njit
 
-from benchlab.runfile.read import read_progress
+from benchlab.runfile.read import complete_events, read_progress
 from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA
 
 _EPS = 1e-9
@@ -293,7 +293,7 @@ class RunWriter:
         self.builder = AlignedBuilder(layout)
         self._raw = {s.name: _Readings(len(s.columns)) for s in layout.streams}
         self._raw_rows = {s.name: 0 for s in layout.streams}
-        self._events: list[tuple[float, int, str, str, int]] = []  # rows of /events, columns as EVENT_FIELDS
+        self._events: list[tuple[float, int, str, str, int, str]] = []  # rows of /events, columns as EVENT_FIELDS
         self._event_rows = 0
         self._last_flush_t = 0.0
         self._now = 0.0
@@ -322,10 +322,12 @@ class RunWriter:
             readings.flat.append(t)
             readings.flat.extend(row)
 
-    def event(self, t: float, kind: str, cycle: int = -1, detail: str = "", *, step: int = -1) -> None:
+    def event(self, t: float, kind: str, cycle: int = -1, detail: str = "", *, step: int = -1,
+              reason: str = "") -> None:
         """An entry of the events table (cycle start, engagement, interlock, fault, drop-out, ...); `step` is the
-        row of /schedule it belongs to (-1: none)."""
-        self._events.append((float(t), int(cycle), kind, detail, int(step)))
+        row of /schedule it belongs to (-1: none), `reason` what a program matches (EVENT_FIELDS), `detail` is
+        for people."""
+        self._events.append((float(t), int(cycle), kind, detail, int(step), reason))
 
     def advance(self, now: float, force: bool = False) -> bool:
         """Data up to `now` is complete; flush once `flush_every_s` of data has accumulated. True if flushed."""
@@ -598,9 +600,8 @@ class RunWriter:
             for col in ("time", *s.names):
                 data[f"raw/{s.name}/{col}"] = src["raw"][s.name][col][:n]
         n_ev = int(progress["event_rows"])
-        for name in EVENT_FIELDS:
-            if name in src["events"]:  # a column newer than the file (`step`) is written as not known
-                data[f"events/{name}"] = src["events"][name][:n_ev]
+        stored = {name: ds[:n_ev] for name, ds in src["events"].items() if name in EVENT_FIELDS}
+        data.update({f"events/{name}": column for name, column in complete_events(stored, n_ev).items()})
         meta_attrs = {k: v for k, v in src.attrs.items()}
         meta_attrs["status"] = status
         meta_attrs.update(dict(attrs or {}))

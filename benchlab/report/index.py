@@ -22,7 +22,7 @@ from benchlab.metrics import nrmse_pct, rmse_k
 from benchlab.params import ModelParams
 from benchlab.report.page import number
 from benchlab.report.scores import estimate
-from benchlab.runfile import load_attrs, load_events
+from benchlab.runfile import event_steps, load_attrs, load_events, load_schedule
 
 PAGE = "index.html"
 #: The paper's published error figures (section 4): Table 1 identification, five validation runs, and the
@@ -44,18 +44,21 @@ class Cooldown:
 
 
 def validation_cooldowns(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, str]]:
-    """(cycle, start s, end s, set-points) of each long cool-down of a validation run, from its step events."""
+    """(cycle, start s, end s, set-points) of each long cool-down of a validation run: the spans of its steps
+    labelled COOLDOWN_LABEL in the stored schedule (the step_start events' steps), described by their phases."""
+    events, steps = load_events(path), load_schedule(path)
     spans: dict[int, list[Any]] = {}
-    for t, cycle, kind, detail, _ in load_events(path):
-        if kind not in ("step_start", "cycle_start", "run_complete", "run_aborted"):
+    for event, row in zip(events, event_steps(events, steps)):
+        if event.kind not in ("step_start", "cycle_start", "run_complete", "run_aborted"):
             continue
-        inside = kind == "step_start" and COOLDOWN_LABEL in detail
+        step = steps[row] if event.kind == "step_start" and 0 <= row < len(steps) else None
+        inside = step is not None and step.label == COOLDOWN_LABEL
         for c, span in spans.items():  # any other step, or a new cycle, ends an open cool-down
-            if span[2] is None and (c != cycle or not inside):
-                span[2] = t
+            if span[2] is None and (c != event.cycle or not inside):
+                span[2] = event.time
         if inside:
-            span = spans.setdefault(cycle, [t, [], None])
-            span[1].append(detail.split()[0])
+            span = spans.setdefault(event.cycle, [event.time, [], None])
+            span[1].append(steps[row].phase)
             span[2] = None
     return [(c, s[0], s[2], " → ".join(s[1])) for c, s in sorted(spans.items()) if s[2] is not None]
 

@@ -21,9 +21,9 @@ import typing as _typing
 if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` imports them on first use
     from benchlab.runfile.analysis import StoredAnalysis, load_analysis, write_analysis
     from benchlab.runfile.groups import StoredColumn, StoredGroup, StoredStreams, load_streams
-    from benchlab.runfile.read import (Event, StoppedRun, load_attrs, load_events, load_progress, load_run,
-                                       load_schedule, load_stopped_run, load_truth, open_run, read_progress,
-                                       read_schedule)
+    from benchlab.runfile.read import (Event, StoppedRun, event_steps, load_attrs, load_events, load_progress,
+                                       load_run, load_schedule, load_stopped_run, load_truth, open_run,
+                                       read_progress, read_schedule)
     from benchlab.runfile.schema import (ALIGNED_MEANING, ALIGNED_UNITS, COOLDOWN_UNITS, EQ11_UNITS,
                                          EVENT_COLUMNS, REQUIRED, SCHEDULE_UNITS, SCHEMA, time_step_tolerance,
                                          unmeasurable_sample)
@@ -32,7 +32,7 @@ if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` i
 _HOMES = {
     "analysis": ("StoredAnalysis", "load_analysis", "write_analysis"),
     "groups": ("StoredColumn", "StoredGroup", "StoredStreams", "load_streams"),
-    "read": ("Event", "StoppedRun", "load_attrs", "load_events", "load_progress", "load_run", "load_schedule",
+    "read": ("Event", "StoppedRun", "event_steps", "load_attrs", "load_events", "load_progress", "load_run", "load_schedule",
              "load_stopped_run", "load_truth", "open_run", "read_progress", "read_schedule"),
     "schema": ("ALIGNED_MEANING", "ALIGNED_UNITS", "COOLDOWN_UNITS", "EQ11_UNITS", "EVENT_COLUMNS", "REQUIRED",
                "SCHEDULE_UNITS", "SCHEMA", "time_step_tolerance", "unmeasurable_sample"),

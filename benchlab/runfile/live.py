@@ -24,7 +24,7 @@ import h5py
 import numpy as np
 
 from benchlab.errors import InputError
-from benchlab.runfile.read import grid_step, read_schedule, text
+from benchlab.runfile.read import complete_events, grid_step, read_schedule, text
 from benchlab.runfile.schema import EVENT_FIELDS, EVENT_REQUIRED, SCHEMA
 from protocols.schedule import Step
 
@@ -194,13 +194,13 @@ class RunFileVersion:
         return out
 
     def read_events(self, start: int, stop: int) -> list[dict[str, Any]]:
-        """Events [start, stop) as dicts time (s), cycle, kind, detail, step (-1 in a file without `step`)."""
+        """Events [start, stop) as dicts time (s), cycle, kind, detail, step, reason (a file written before a
+        column existed: as complete_events fills it)."""
         if not self.events or stop <= start:
             return []
-        cols = {c: self.events[c].read(start, stop) if c in self.events else np.full(stop - start, fill)
-                for c, (_, _, fill) in EVENT_FIELDS.items()}
+        cols = complete_events({c: column.read(start, stop) for c, column in self.events.items()}, stop - start)
         return [{"time": float(t), "cycle": int(c), "kind": text(k).rstrip("\x00"), "detail": text(d).rstrip("\x00"),
-                 "step": int(s)} for t, c, k, d, s in zip(*cols.values())]
+                 "step": int(s), "reason": text(r).rstrip("\x00")} for t, c, k, d, s, r in zip(*cols.values())]
 
     def replaced(self) -> bool:
         """Whether the run's name now points to another file (the writer's os.replace), or to none."""

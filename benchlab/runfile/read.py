@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
@@ -59,18 +59,44 @@ def load_progress(path: "str | os.PathLike[str]") -> dict[str, float]:
 
 
 class Event(NamedTuple):
-    """One row of /events (docs/runfile.md): `step` is the row of /schedule it belongs to, -1 for none."""
+    """One row of /events (docs/runfile.md): `step` is the row of /schedule it belongs to, -1 for none; `reason`
+    what a program matches (the interlock's name, why a step ended), "" for none."""
 
     time: float
     cycle: int
     kind: str
     detail: str
     step: int
+    reason: str
+
+
+def legacy_reason(kind: str, detail: str) -> str:
+    """An event's `reason` in a file written before /events had the column, from the runner's detail text of
+    then (`NAME: what it saw (action)`, `REASON; point`, `PHASE: REASON`): the one place that text is parsed."""
+    if kind == "interlock":
+        return detail.split(":", 1)[0]
+    if kind == "cooldown_end":
+        return detail.split(";", 1)[0].strip()
+    if kind == "step_end":
+        return detail.partition(": ")[2].strip()
+    return ""
+
+
+def complete_events(stored: Mapping[str, np.ndarray], rows: int) -> dict[str, np.ndarray]:
+    """Every column of EVENT_FIELDS for `rows` events, as stored, from the columns a file holds (`stored`):
+    one newer than the file reads as its writer would have written it: `step` -1 (not known), `reason` from
+    the detail text (legacy_reason)."""
+    columns = {name: stored[name][:rows] if name in stored else np.full(rows, fill, dtype=dtype)
+               for name, (dtype, _, fill) in EVENT_FIELDS.items()}
+    if "reason" not in stored:
+        reasons = [legacy_reason(text(k), text(d)).encode("utf-8") for k, d in zip(columns["kind"], columns["detail"])]
+        columns["reason"] = np.array(reasons, dtype=EVENT_FIELDS["reason"][0])
+    return columns
 
 
 def load_events(path: "str | os.PathLike[str]") -> list[Event]:
-    """The run's /events, up to the progress record of a file still running; `step` -1 throughout in a file
-    written before events carried it."""
+    """The run's /events, up to the progress record of a file still running; a file written before a column
+    existed reads as complete_events fills it."""
     path = Path(path)
     with open_run(path) as f:
         if "events" not in f:
@@ -79,8 +105,30 @@ def load_events(path: "str | os.PathLike[str]") -> list[Event]:
         n = len(g["time"])
         if "acquire/progress" in f:
             n = min(n, int(read_progress(f).get("event_rows", n)))
-        columns = [g[c][:n] if c in g else np.full(n, fill) for c, (_, _, fill) in EVENT_FIELDS.items()]
-        return [Event(float(t), int(c), text(k), text(d), int(s)) for t, c, k, d, s in zip(*columns)]
+        columns = complete_events({c: g[c][:n] for c in EVENT_FIELDS if c in g}, n)
+        return [Event(float(t), int(c), text(k), text(d), int(s), text(r))
+                for t, c, k, d, s, r in zip(*columns.values())]
+
+
+def event_steps(events: Sequence[Event], steps: Sequence[Step]) -> list[int]:
+    """The row of /schedule (`steps`) each event belongs to: its `step`, or, for a `step_start` of a file written
+    before events carried it (-1), its place: the k-th step_start after its cycle's latest `cycle_start` starts
+    the cycle's k-th step (the runner starts every cycle at its first step: a resume the next cycle, an interlock
+    skips the rest of the cycle). -1 where there is none."""
+    rows_of = {cycle: [i for i, s in enumerate(steps) if s.cycle == cycle] for cycle in {s.cycle for s in steps}}
+    started: dict[int, int] = {}  # cycle -> step_starts since its latest cycle_start
+    out = []
+    for event in events:
+        step = event.step
+        if event.kind == "cycle_start":
+            started[event.cycle] = 0
+        elif event.kind == "step_start":
+            k = started[event.cycle] = started.get(event.cycle, 0) + 1
+            rows = rows_of.get(event.cycle, [])
+            if step < 0 and k <= len(rows):
+                step = rows[k - 1]
+        out.append(step)
+    return out
 
 
 def read_schedule(f: h5py.File, path: Path) -> tuple[Step, ...]:

@@ -27,15 +27,22 @@ ALIGNED_MEANING: dict[str, str] = {
 }
 EVENT_KIND_LEN = 32
 EVENT_DETAIL_LEN = 160
+EVENT_REASON_LEN = 32
 #: /events: one dataset per column, in this order, as (dtype, units, value of a row not written). `cycle` and
-#: `step` (the row of /schedule the event belongs to) are -1 outside a cycle or step; kind and detail are
-#: fixed-length UTF-8 text.
+#: `step` (the row of /schedule the event belongs to) are -1 outside a cycle or step; kind, detail and reason
+#: are fixed-length UTF-8 text. `detail` is for people; `reason` is what a program matches: the interlock's
+#: name for `interlock`, why the step ended (END_*) for `step_end` and `cooldown_end`, "" else.
 EVENT_FIELDS: dict[str, tuple[str, str, object]] = {
     "time": ("f8", "s", float("nan")), "cycle": ("i8", "1", -1), "kind": (f"S{EVENT_KIND_LEN}", "", b""),
-    "detail": (f"S{EVENT_DETAIL_LEN}", "", b""), "step": ("i8", "1", -1)}
+    "detail": (f"S{EVENT_DETAIL_LEN}", "", b""), "step": ("i8", "1", -1),
+    "reason": (f"S{EVENT_REASON_LEN}", "", b"")}
 EVENT_COLUMNS = tuple(EVENT_FIELDS)
-#: The columns every /events holds; files written before `step` existed lack it (read as -1, "no step").
+#: The columns every /events holds; files written before `step` or `reason` existed lack them (read back as
+#: benchlab.runfile.read.complete_events fills them).
 EVENT_REQUIRED = ("time", "cycle", "kind", "detail")
+#: Why a step ended (`reason` of step_end and cooldown_end): its time ran out, its `until` condition was met,
+#: a launch reached synchronism.
+END_TIME, END_CONDITION, END_SYNCHRONISED = "time", "condition", "synchronised"
 #: /schedule: units of the Step fields that have one (the rest are stored with units "").
 SCHEDULE_UNITS = {"duration_s": "s", "engine_speed_rpm": "rpm", "clutch_torque_nm": "N*m",
                   "load_torque_nm": "N*m", "cycle": "1", "estimate_s": "s", "pulse_s": "s", "rest_s": "s"}

@@ -23,6 +23,7 @@ from benchlab.acquire import RunWriter
 from benchlab.progress import Task
 from benchlab.runner.clock import Clock
 from benchlab.runner.devices import BenchStatus
+from benchlab.runfile.schema import END_CONDITION, END_SYNCHRONISED, END_TIME
 from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
 from protocols.schedule import Condition, Step, setpoints
@@ -96,18 +97,22 @@ class Runner:
         self.summary = RunSummary(len({s.cycle for s in self.steps}))
         self.stop_request: str | None = None
         self.cycle = -1
-        self.current_step = -1  # index in `steps` of the step under way (its events carry it), -1 between steps
+        self._step = 0  # index in `steps` of the last step started: the progress bar shows it after it ends too
+        self._in_step = False  # between that step's step_start and step_end
         self.synced = True
         self._last_progress = -math.inf
         self._planned_before = np.concatenate([[0.0], np.cumsum([s.expected_s for s in self.steps])])
         self._reported = 0.0
         self._t_step_start = clock()
         self._history: collections.deque[tuple[float, float]] = collections.deque()
-        # the step the progress bar shows: the last one started, kept after it ends (current_step is -1 then)
-        self._progress_step = 0
         self._commanded = False
 
     # -- public ---------------------------------------------------------------------------------------
+    @property
+    def current_step(self) -> int:
+        """Index in `steps` of the step under way (the step its events carry), -1 between steps."""
+        return self._step if self._in_step else -1
+
     def request_stop(self, reason: str, code: int = 130) -> None:
         self.stop_request = reason
         self._stop_code = code
@@ -138,7 +143,7 @@ class Runner:
                     self.writer.event(self.clock(), "cycle_skipped", cycle, "after an interlock",
                                       step=self.current_step)
                     self.summary.events["cycle_skipped"] += 1
-                    self.current_step = -1
+                    self._in_step = False
             self.bench.safe_state()
             self._tick(interlocks=False)  # already safe: nothing left to interlock
             self.writer.event(self.clock(), "run_complete", self.cycle)
@@ -162,7 +167,7 @@ class Runner:
     # -- steps ----------------------------------------------------------------------------------------
     def _run_step(self, index: int, step: Step) -> None:
         now = self.clock()
-        self.current_step = self._progress_step = index
+        self._step, self._in_step = index, True
         if step.cycle != self.cycle:
             self.cycle = step.cycle
             self.synced = True
@@ -178,7 +183,7 @@ class Runner:
         self._t_step_start = now
         heat = _Pulses(step, now) if step.phase == "heat" else None
         self._apply(step, heat)
-        reason = "time"
+        reason = END_TIME
         while True:
             fast = step.phase == "launch" or (self.bench.status.slipping and heat is None) or self._commanded
             self._commanded = False
@@ -187,10 +192,10 @@ class Runner:
             st = self.bench.status
             if step.phase == "launch" and st.locked and now > self._step_t0 + 2 * self.fast_tick_s:
                 self.writer.event(now, "synchronised", step.cycle, f"after {now - self._step_t0:.2f} s", step=index)
-                reason = "synchronised"
+                reason = END_SYNCHRONISED
                 break
             if step.until and self._conditions_met(step.until, now):
-                reason = "condition"
+                reason = END_CONDITION
                 break
             if now >= t_end - 1e-9:
                 if step.phase == "launch":
@@ -206,10 +211,11 @@ class Runner:
             if heat is not None and heat.update(now, st, self._target(step)):
                 self._apply(step, heat)
         if step.label == "cooldown":
-            self.writer.event(self.clock(), "cooldown_end", step.cycle, f"{reason}; {_point_text(step)}", step=index)
-        self.writer.event(self.clock(), "step_end", step.cycle, f"{step.phase}: {reason}", step=index)
+            self.writer.event(self.clock(), "cooldown_end", step.cycle, f"{reason}; {_point_text(step)}", step=index,
+                              reason=reason)
+        self.writer.event(self.clock(), "step_end", step.cycle, f"{step.phase}: {reason}", step=index, reason=reason)
         self.writer.state["next_step"] = index + 1
-        self.current_step = -1
+        self._in_step = False
 
     @property
     def _step_t0(self) -> float:
@@ -291,7 +297,7 @@ class Runner:
         self.bench.safe_state()
         for trip in trips:
             self.writer.event(now, "interlock", self.cycle, f"{trip.name}: {trip.detail} ({trip.action})",
-                              step=self.current_step)
+                              step=self.current_step, reason=trip.name)
             self.summary.events[f"interlock {trip.name}"] += 1
         aborting = [t.name for t in trips if t.action == "abort"]
         if aborting:
@@ -331,7 +337,7 @@ class Runner:
         if wall - self._last_progress < self.progress_every_s:
             return
         self._last_progress = wall
-        index = min(self._progress_step, len(self.steps) - 1)
+        index = min(self._step, len(self.steps) - 1)
         step = self.steps[index]
         done = self._planned_before[index] + min(max(now - self._t_step_start, 0.0), step.expected_s)
         self.progress.advance(done - self._reported)

@@ -164,7 +164,7 @@ class LiveRun:
         if kind in ("step_start", "step_end"):
             self.last_step_event = (kind, event["time"])
         elif kind == "interlock":
-            self.interlocks[event["detail"].split(":", 1)[0]] = event["detail"]
+            self.interlocks[event["reason"]] = event["detail"]
         elif kind in ("interlock_cleared", "resume"):
             self.interlocks.clear()
 
