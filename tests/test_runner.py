@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 
 import h5py
 import numpy as np
@@ -20,12 +21,13 @@ import pytest
 
 from benchlab.runfile import load_events, load_run
 from benchlab.drivetrain import friction_power
+from benchlab.progress import Progress, Task
 from benchlab.runner.devices import BenchStatus
 from benchlab.runner.session import RunRequest, execute
 from drivers.can_bench import CanBlock
 from drivers.can_signals import CLAMP_OPEN, CLAMP_SLIPPING
 from protocols.limits import BenchLimits
-from protocols.schedule import Step
+from protocols.schedule import Step, duration_s
 from sim_bench.bench import SimulatedBench
 from sim_bench.faults import Fault
 
@@ -273,3 +275,39 @@ def test_friction_energy_of_a_polls_frames_in_bulk_equals_frame_by_frame():
                 a, b = getattr(bulk, name), getattr(reference, name)
                 assert a == b or (math.isnan(a) and math.isnan(b)), name
             assert bulk.friction_energy_j == pytest.approx(reference.friction_energy_j, rel=1e-12, abs=1e-12)
+
+
+class _RecordedTask(Task):
+    """A progress bar that keeps what the runner reports: each advance and each note."""
+
+    def __init__(self) -> None:
+        self.advances: list[float] = []
+        self.notes: list[str] = []
+
+    def advance(self, amount: float = 1.0) -> None:
+        self.advances.append(amount)
+
+    def note(self, text: str) -> None:
+        self.notes.append(text)
+
+
+def test_progress_bar_moves_forward_through_the_steps_in_order(tmp_path, monkeypatch):
+    from benchlab.runner import engine
+
+    task = _RecordedTask()
+    progress = Progress()
+    monkeypatch.setattr(progress, "task", lambda what, total, unit="it": task)
+    wall = iter(range(10**9))  # a second of wall time per look at the clock: every tick reports
+    monkeypatch.setattr(engine, "time", types.SimpleNamespace(perf_counter=lambda: float(next(wall))))
+    steps = (Step("open", 10.0, 1500.0, 0.0, 0.0, 0), Step("launch", 5.0, 1500.0, 45.0, 500.0, 1),
+             Step("drive", 10.0, 1500.0, 45.0, 500.0, 1), Step("open", 10.0, 1500.0, 0.0, 500.0, 1))
+    code, _ = execute(RunRequest("custom", tmp_path / "run.h5", steps=steps, progress=progress, install_signals=False,
+                                 bench=SimulatedBench(options={"dropouts": False})))
+    assert code == 0
+    assert sum(task.advances) == pytest.approx(duration_s(steps))  # the whole plan once the run is done
+    shown = [note.split()[2] for note in task.notes]  # "cycle 1/2 open ..." -> the phase of the step shown
+    assert [p for i, p in enumerate(shown) if i == 0 or p != shown[i - 1]] == [s.phase for s in steps]
+    planned_before = np.concatenate([[0.0], np.cumsum([s.expected_s for s in steps])])
+    index = np.cumsum([i > 0 and p != shown[i - 1] for i, p in enumerate(shown)])  # the step each note shows
+    done = np.cumsum(task.advances[:len(task.notes)])  # a note follows each advance but the final one
+    assert np.all(planned_before[index] - 1e-9 <= done) and np.all(done <= planned_before[index + 1] + 1e-9)
