@@ -73,7 +73,10 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
             np.testing.assert_array_equal(kinds.samples, f["events/kind"][()])
             np.testing.assert_array_equal(kinds.timestamps, f["events/time"][()])
             np.testing.assert_array_equal(mdf.get("events.cycle").samples, f["events/cycle"][()])
+            reasons = mdf.get("events.reason").samples
+            np.testing.assert_array_equal(reasons, f["events/reason"][()])
         assert "run_complete" in {k.decode() for k in kinds.samples}
+        assert {"synchronised", "time"} & {r.decode() for r in reasons}  # the launch's and the steps' ends
         assert 'name="schema">benchlab-run/1<' in mdf.header.comment
     finally:
         mdf.close()
