@@ -21,9 +21,9 @@ import numpy as np
 
 from benchlab.acquire import RunWriter
 from benchlab.progress import Task
+from benchlab.runfile.schema import END_CONDITION, END_SYNCHRONISED, END_TIME
 from benchlab.runner.clock import Clock
 from benchlab.runner.devices import BenchStatus
-from benchlab.runfile.schema import END_CONDITION, END_SYNCHRONISED, END_TIME
 from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
 from protocols.schedule import Condition, Step, setpoints
