@@ -32,8 +32,8 @@ if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` i
 _HOMES = {
     "analysis": ("StoredAnalysis", "load_analysis", "write_analysis"),
     "groups": ("StoredColumn", "StoredGroup", "StoredStreams", "load_streams"),
-    "read": ("Event", "StoppedRun", "event_steps", "load_attrs", "load_events", "load_progress", "load_run", "load_schedule",
-             "load_stopped_run", "load_truth", "open_run", "read_progress", "read_schedule"),
+    "read": ("Event", "StoppedRun", "event_steps", "load_attrs", "load_events", "load_progress", "load_run",
+             "load_schedule", "load_stopped_run", "load_truth", "open_run", "read_progress", "read_schedule"),
     "schema": ("ALIGNED_MEANING", "ALIGNED_UNITS", "COOLDOWN_UNITS", "EQ11_UNITS", "EVENT_COLUMNS", "REQUIRED",
                "SCHEDULE_UNITS", "SCHEMA", "time_step_tolerance", "unmeasurable_sample"),
     "write": ("write_results", "write_run", "write_simulated"),
