@@ -21,7 +21,8 @@ import cloudpickle  # noqa: E402 - comes with distributed
 from benchlab.batch import plan, table, trends  # noqa: E402
 from benchlab.batch.cluster import LOOPBACK, connect  # noqa: E402
 from benchlab.cli import main  # noqa: E402
-from benchlab.diagnose.parallel import map_indices, workers  # noqa: E402
+from benchlab.diagnose import parallel  # noqa: E402
+from benchlab.diagnose.parallel import map_indices  # noqa: E402
 from benchlab.model.catalog import BUILTIN  # noqa: E402
 from benchlab.params import load_params, paper_params, save_params  # noqa: E402
 from benchlab.runfile import load_run, write_run  # noqa: E402
@@ -97,13 +98,14 @@ def test_map_indices_in_a_dask_worker_process_runs_serially_and_the_cluster_is_l
     assert seen["malloc_trim"] is None  # dask's 65536 would make every fit's large arrays mmap'ed afresh
 
 
-def test_map_indices_in_a_dask_worker_thread_runs_serially_where_it_would_fork_elsewhere(scheduler):
+def test_map_indices_in_a_dask_worker_thread_runs_serially_where_it_would_fork_elsewhere(scheduler, monkeypatch):
+    monkeypatch.setattr(parallel, "workers", lambda: 2)  # two cores to fork onto, however many this process has
     with distributed.Client(scheduler) as client:
         seen = client.submit(_map_in_worker, pure=False).result(timeout=60)
     assert not seen["daemon"] and seen["pid"] == os.getpid()  # a thread of this very process
     assert seen["squares"] == [0, 1, 4, 9] and seen["pids"] == {os.getpid()}
-    if workers() > 1:  # outside a worker the same call forks: the serial path above was chosen, not default
-        assert _map_in_worker()["pids"] != {os.getpid()}
+    # outside a worker the same call forks: the serial path above was chosen, not the default
+    assert _map_in_worker()["pids"] != {os.getpid()}
 
 
 # ----------------------------------------------------------------------------- batches
