@@ -99,7 +99,7 @@ class _Page:
 
 def test_json_updates_follow_a_simulated_run_read_only_and_the_run_is_as_without_watcher(tmp_path):
     watched, plain = tmp_path / "watched.h5", tmp_path / "plain.h5"
-    proc = _start_run(watched, seed=5, duration_s=300, watch=True)
+    proc = _start_run(watched, seed=5, duration_s=900, watch=True)  # long enough to be seen growing
     page, seen, modes, last_status = _Page(), [], [], None
     try:
         url = _url(proc)
@@ -138,7 +138,7 @@ def test_json_updates_follow_a_simulated_run_read_only_and_the_run_is_as_without
     np.testing.assert_array_equal(page.min[:, :complete - page.first], want_min[:, page.first:complete])
     np.testing.assert_array_equal(page.max[:, :complete - page.first], want_max[:, page.first:complete])
 
-    proc = _start_run(plain, seed=5, duration_s=300, watch=False)
+    proc = _start_run(plain, seed=5, duration_s=900, watch=False)
     proc.communicate(timeout=DEADLINE_S)
     assert proc.returncode == 0
     with h5py.File(watched, "r") as a, h5py.File(plain, "r") as b:
@@ -172,7 +172,9 @@ def test_headless_chromium_shows_the_run_arriving(tmp_path):
     from PIL import Image
 
     out = tmp_path / "run.h5"
-    proc = _start_run(out, seed=2, duration_s=1200, watch=True)
+    # long enough that the page sees it grow on a loaded core (a simulated run goes ~500x real time); the test
+    # stops it once it has seen enough
+    proc = _start_run(out, seed=2, duration_s=14400, watch=True)
     browser = None
     try:
         url = _url(proc)
