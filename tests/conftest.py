@@ -28,6 +28,16 @@ def pytest_configure(config: pytest.Config) -> None:
     os.sched_setaffinity(0, share)
 
 
+#: Files of long diagnoses on runs simulated without the drivers, collected first. The longest tests first balance
+#: best across workers (an idle worker takes queued tests from the end of a busy one's queue), and at start-up
+#: only the other worker compiles the drivers' and emulators' kernels (≈ 40 s of numba on a fresh clone).
+FIRST = ("test_diagnose.py", "test_diagnose_unseen.py")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    items.sort(key=lambda item: item.path.name not in FIRST)  # stable: the order within each part is kept
+
+
 @pytest.fixture(scope="session")
 def short_run():
     """A 20-minute Table 1 run on the simulated bench with the paper's nonlinear clutch."""
