@@ -178,6 +178,12 @@ def open_bench(bench_choice: BenchChoice, config: BenchConfig, can_log: Path, t0
     return bench, clock, sim, config
 
 
+def _restore_signals(previous: dict) -> None:
+    """The signal handlers `execute` replaced, put back."""
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
+
+
 def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     """Run (or resume) and return (exit code, summary)."""
     if request.dry_run:
@@ -195,9 +201,6 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     t0 = resume_state["t0"] if resume_state else 0.0
     seed = request.seed + (7919 * resume_state["resumes"] if resume_state else 0)
     can_log = can_log_path(request.out, resume_state["resumes"] if resume_state else 0)
-    bench, clock, sim, config = open_bench(request.bench, config, can_log, t0, seed,
-                                           resume_state["initial"] if resume_state else None)
-    layout = bench.layout
     runner: Runner | None = None
     pending: list[tuple[str, int]] = []  # a signal that came before the runner existed
 
@@ -209,9 +212,16 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             runner.request_stop(name, code)
 
     previous = {}
-    if request.install_signals:  # before the run file exists: a signal from then on ends it as aborted
-        for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
+    if request.install_signals:  # before the bench opens (it makes the CAN log): a signal from then on ends the
+        for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):  # run as aborted, its files whole
             previous[sig] = signal.signal(sig, lambda s, f, c=code: stop(s, c))
+    try:
+        bench, clock, sim, config = open_bench(request.bench, config, can_log, t0, seed,
+                                               resume_state["initial"] if resume_state else None)
+    except BaseException:
+        _restore_signals(previous)
+        raise
+    layout = bench.layout
     try:
         if resume_state:
             writer = RunWriter.resume(request.out, layout, extra_s=duration_s(steps[resume_state["start"]:]),
@@ -254,8 +264,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             task.close()
         writer.close(summary.status, groups=_truth_groups(sim, writer, resume_state))
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        _restore_signals(previous)
         bench.close()
         if sim is not None:
             sim.close()
