@@ -68,7 +68,9 @@ class CanBlock:
     message: str
     index: np.ndarray  # each frame's position among all frames of that receive (arrival order across messages)
     t: np.ndarray  # run-clock time each frame was received by the interface
-    matrix: np.ndarray  # (frames, signals) physical values; column j holds logical signal keys[j]
+    # (frames, signals) physical values, C-ordered (compiled consumers see one layout, so compile once, whatever
+    # the number of frames); column j holds logical signal keys[j]
+    matrix: np.ndarray
     keys: tuple[str, ...]
 
     @property
@@ -375,7 +377,7 @@ class CanBench:
                 continue
             table.seen[m] = True
             block = CanBlock(rx.controller, rx.codec.message.name, order[a:b], t[a:b],
-                             values[a:b, table.key_slices[m]], table.keys[m])
+                             np.ascontiguousarray(values[a:b, table.key_slices[m]]), table.keys[m])
             if rx.controller == "estop":
                 events += self._estop_events(block)
             blocks.append(block)

@@ -58,7 +58,7 @@ def validation_cooldowns(path: "str | os.PathLike[str]") -> list[tuple[int, floa
                 span[2] = event.time
         if inside:
             span = spans.setdefault(event.cycle, [event.time, [], None])
-            span[1].append(steps[row].phase)
+            span[1].append(step.phase)
             span[2] = None
     return [(c, s[0], s[2], " → ".join(s[1])) for c, s in sorted(spans.items()) if s[2] is not None]
 

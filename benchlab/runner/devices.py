@@ -121,9 +121,8 @@ class BenchStatus:
         held = np.array([self.engine_speed, self.clutch_speed, self.clutch_torque, float(self.clamp_state),
                          self.friction_power, self.t_frame, 0.0] + [math.nan] * len(_STATUS_HELD))
         parts = [_NO_STATUS_BLOCK] * len(_STATUS_BLOCK_ORDER)
-        for b in blocks:  # the matrix C-ordered (a block's may be a view): one compiled signature, compiled once
-            parts[_STATUS_BLOCK_ORDER[b.controller]] = (b.index, b.t, np.ascontiguousarray(b.matrix),
-                                                        _held_columns(b.keys))
+        for b in blocks:
+            parts[_STATUS_BLOCK_ORDER[b.controller]] = (b.index, b.t, b.matrix, _held_columns(b.keys))
         _take_status_frames(*parts[0], *parts[1], *parts[2], held, gear_ratio)
         engine, clutch, torque, clamp, self.friction_power, self.t_frame, energy, *seen = held.tolist()
         self.engine_speed, self.clutch_speed, self.clutch_torque, self.clamp_state = engine, clutch, torque, int(clamp)
