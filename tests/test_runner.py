@@ -194,9 +194,9 @@ def _validation_cooldowns_of(path, tmp_path):
     return [validation_cooldowns(p) for p in (path, reworded, old)]
 
 
-def _launch_and_open(path, clock=None):
+def _launch_and_open(path, clock=None, stop_first: bool = False):
     """A launch to 2000 rpm and an open step through the drivers against the emulators, on `clock` (the real one),
-    or on the simulated bench's own clock; the run summary."""
+    or on the simulated bench's own clock (`stop_first`: a stop asked before the run starts); the run summary."""
     from benchlab.acquire import RunWriter
     from benchlab.runner.devices import BenchConfig, DriverBench
     from benchlab.runner.engine import STATE_FIELDS, Runner
@@ -210,12 +210,24 @@ def _launch_and_open(path, clock=None):
     writer = RunWriter(path, bench.layout, protocol="rt", planned_s=5, state_fields=STATE_FIELDS,
                        durable=clock is not None)
     try:
-        summary = Runner(bench, sim.clock, steps, writer, BenchLimits(), tick_s=0.1, fast_tick_s=0.02, dt=0.01).run()
+        runner = Runner(bench, sim.clock, steps, writer, BenchLimits(), tick_s=0.1, fast_tick_s=0.02, dt=0.01)
+        if stop_first:
+            runner.request_stop("SIGINT", 130)
+        summary = runner.run()
         writer.close(summary.status)
         return summary
     finally:
         bench.close()
         sim.close()
+
+
+def test_a_stop_asked_before_the_run_starts_commands_no_step(tmp_path):
+    """A Ctrl-C while the bench opens (the session notes it until the runner exists) ends the run before its first
+    step sets anything."""
+    summary = _launch_and_open(tmp_path / "run.h5", stop_first=True)
+    assert summary.status == "aborted" and summary.exit_code == 130
+    kinds = [e.kind for e in load_events(tmp_path / "run.h5")]
+    assert "run_aborted" in kinds and not {"step_start", "engagement_start", "cycle_start"} & set(kinds)
 
 
 def test_real_time_loop_on_emulated_devices(tmp_path):

@@ -117,6 +117,11 @@ class Runner:
         self.stop_request = reason
         self._stop_code = code
 
+    def _stop_if_asked(self) -> None:
+        """Raise Stopped if a stop was asked for (a signal, the session)."""
+        if self.stop_request is not None:
+            raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))
+
     def run(self, start_step: int = 0) -> RunSummary:
         wall0, t0 = time.perf_counter(), self.clock()
         self.summary.energy_j = float(self.writer.state.get("energy_j", 0.0) or 0.0) if start_step else 0.0
@@ -130,6 +135,7 @@ class Runner:
         try:
             i = start_step
             while i < len(self.steps):
+                self._stop_if_asked()  # asked before this step began: it commands nothing
                 step = self.steps[i]
                 try:
                     self._run_step(i, step)
@@ -262,8 +268,8 @@ class Runner:
         now = self.clock()
         target = round(min(now + tick, max(until, now + self.dt)) / self.dt) * self.dt
         self.clock.sleep_until(target)
-        if self.stop_request is not None and interlocks:
-            raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))
+        if interlocks:
+            self._stop_if_asked()
         readings, events = self.bench.poll()
         now = self.clock()
         w = self.writer
@@ -311,8 +317,7 @@ class Runner:
         t_clear = None
         while True:
             self._tick(interlocks=False)
-            if self.stop_request is not None:
-                raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))
+            self._stop_if_asked()
             now, st = self.clock(), self.bench.status
             more = self.interlocks.check(st, self.engagements, now)
             if more:
