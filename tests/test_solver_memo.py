@@ -1,9 +1,13 @@
-"""The solver memo of a fit's run (benchlab.solver_memo) changes no number: with it, every discretisation and every
-residual equals the one computed from scratch, bit for bit, as parameters move one at a time and all at once."""
+"""The solver's shortcuts for fits change no number. With the memo of a fit's run (benchlab.solver_memo) every
+discretisation and every residual equals the one computed from scratch, bit for bit, as parameters move one at a time
+and all at once; so do the parameter sets of a Jacobian computed together (benchlab.solver_sets), and a fit takes the
+very steps it takes with scipy's own forward differences."""
 
 from __future__ import annotations
 
 from dataclasses import replace
+
+import benchlab.identify.fit as fit_module
 
 import numpy as np
 import pytest
@@ -11,11 +15,13 @@ import pytest
 from benchlab.diagnose.engine import STEP_S, diagnosed_spec
 from benchlab.diagnose.library import candidates
 from benchlab.identify.data import prepare
-from benchlab.identify.fit import KEY_RESOLUTION, residual_vector
+from benchlab.identify.fit import KEY_RESOLUTION, fit, residual_vector, residual_vectors
+from benchlab.network import Boundary, Link, Node, Source, ThermalNetwork
 from benchlab.model.catalog import resolve_model
 from benchlab.params import paper_params
 from benchlab.runfile import ALIGNED_UNITS
-from benchlab.solver import discretise
+from benchlab.solver import discretise, run_network
+from benchlab.solver_sets import run_network_sets
 from benchlab.solver_memo import LawMemo
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P
@@ -73,3 +79,60 @@ def test_memo_serves_only_the_channels_it_was_bound_to(setting):
                           residual_vector(spec.network, params, [expected]))
     assert not np.array_equal(residual_vector(spec.network, params, [other]),
                               residual_vector(spec.network, params, [data]))
+
+
+def _jacobian_sets(spec, start):
+    """A forward-difference Jacobian's sets (each parameter moved alone, by scipy's relative step and by a large one),
+    then all parameters moved at once, and the start itself."""
+    for step in (1.5e-8, 1e-3):
+        for p in spec.free:
+            yield {**start, p.name: start[p.name] * (1 + step)}
+    yield {**start, **{p.name: start[p.name] * 0.999 for p in spec.free}}
+    yield start
+
+
+def test_sets_computed_together_are_bit_identical(setting):
+    data, specs = setting
+    for spec in specs:
+        start = {**spec.fixed, **{p.name: p.initial for p in spec.free}}
+        sets = list(_jacobian_sets(spec, start))
+        together = residual_vectors(spec.network, start, sets, [data])
+        for params, residuals in zip(sets, together):
+            assert np.array_equal(residuals, residual_vector(spec.network, params, [data])), spec.name
+
+
+def test_fit_takes_the_same_steps_as_with_one_run_per_jacobian_column(setting, monkeypatch):
+    data, specs = setting
+    spec = specs[-1]  # the nonlinear model with an extra heat source: convection laws, a source, a fitted start
+    together = fit(spec, [data], max_nfev=6)
+    monkeypatch.setattr(fit_module, "residual_vectors",
+                        lambda network, base, sets, datasets: [residual_vector(network, p, datasets) for p in sets])
+    one_by_one = fit(spec, [data], max_nfev=6)
+    assert together.params == one_by_one.params and together.cost == one_by_one.cost
+    assert np.array_equal(together.jacobian, one_by_one.jacobian)
+
+
+def _law(function, reads):
+    function.reads = reads
+    return function
+
+
+def test_sets_that_regroup_operating_points_or_read_unnamed_parameters_are_still_exact():
+    """A moved law that splits an operating point (two samples of equal resistance that now differ) is discretised
+    on its own; a law that does not name what it reads is evaluated for every set."""
+    n = 400
+    x = np.tile([1.0, 2.0], n // 2)
+    channels = {"x": x, "y": 3.0 - x, "u": np.linspace(0.0, 50.0, n), "Ta": np.full(n, 25.0)}
+    network = ThermalNetwork(
+        nodes=(Node("P", "C_P"),), boundaries=(Boundary("amb", _law(lambda ch: ch["Ta"], ())),),
+        links=(Link("P", "amb", _law(lambda p, ch: p["a"] + p["b"] * ch["x"] + p["c"] * ch["y"], ("a", "b", "c"))),
+               Link("P", "amb", lambda p, ch: p["r2"] * (1.0 + 0.0 * ch["x"]))),
+        sources=(Source("P", _law(lambda p, ch: p["q"] * ch["u"], ("q",))),), outputs={"T": "P"})
+    base = {"C_P": 500.0, "a": 0.5, "b": 0.1, "c": 0.1, "r2": 2.0, "q": 0.2}
+    sets = [{**base, name: base[name] * 1.01} for name in base] + [base]
+    x0s = np.full((len(sets), 1), 30.0)
+    assert len(discretise(network, base, channels, 1.0).Ad) == 1  # x and y trade places: one resistance
+    assert len(discretise(network, sets[list(base).index("b")], channels, 1.0).Ad) == 2  # b moved: two
+    runs = run_network_sets(network, base, sets, channels, 1.0, x0s, KEY_RESOLUTION, LawMemo())
+    for params, x0, states in zip(sets, x0s, runs):
+        assert np.array_equal(states, run_network(network, params, channels, 1.0, x0, KEY_RESOLUTION)), params

@@ -7,7 +7,7 @@ several points spread around the neutral priors and the best is polished to conv
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,6 +19,7 @@ from benchlab.identify.spec import ModelSpec
 from benchlab.network import ThermalNetwork
 from benchlab.progress import Task
 from benchlab.solver import run_network
+from benchlab.solver_sets import run_network_sets
 
 KEY_RESOLUTION = 1e-12  # operating points are already exact repeats after prepare(); keep them apart exactly
 
@@ -93,6 +94,20 @@ def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datase
     return np.concatenate(parts)
 
 
+def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_sets: Sequence[Mapping[str, float]],
+                     datasets: Sequence[FitData]) -> list[np.ndarray]:
+    """`residual_vector` of each parameter set, bit for bit, computed together: the sets of a forward-difference
+    Jacobian, each near `base` (benchlab.solver_sets)."""
+    parts: list[list[np.ndarray]] = [[] for _ in param_sets]
+    for data in datasets:
+        x0s = np.array([initial_state(network, data, params) for params in param_sets])
+        runs = run_network_sets(network, base, param_sets, data.channels, data.dt, x0s, KEY_RESOLUTION, data.memo)
+        flat, targets = data.fitted_flat(network.state_names, network.outputs)
+        for part, states in zip(parts, runs):
+            part.append(states[:-1].ravel().take(flat) - targets)
+    return [np.concatenate(part) for part in parts]
+
+
 def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
     """Per run, the fitting-step sample of each entry of that run's part of `residual_vector` (same order)."""
     return [np.concatenate([index for index, _ in data.fitted.values()]) for data in datasets]
@@ -106,11 +121,19 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
     lo, hi = coordinate_bounds(spec)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
 
+    last = [x0]  # the point least_squares evaluated last: where it then takes the Jacobian
+
     def fun(x: np.ndarray) -> np.ndarray:
+        last[0] = x.copy()
         return residual_vector(spec.network, from_coordinates(spec, x), datasets)
 
+    def columns(_fun: object, points: Iterable[np.ndarray]) -> list[np.ndarray]:
+        """scipy's forward differences (its steps, its quotients), their residuals computed together."""
+        return residual_vectors(spec.network, from_coordinates(spec, last[0]),
+                                [from_coordinates(spec, x) for x in points], datasets)
+
     sol = least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10)
+                        xtol=1e-10, ftol=1e-10, gtol=1e-10, workers=columns)
     params = from_coordinates(spec, sol.x)
     scale = np.array([params[p.name] if p.log else p.linear_scale for p in spec.free])
     jac = sol.jac / scale  # chain rule: d r / d p = d r / d x * d x / d p
