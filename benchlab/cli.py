@@ -1,6 +1,8 @@
 """`benchlab` console script: one module per command in benchlab.commands, discovered at start.
 
-A command module defines NAME, HELP, add_arguments(parser) and run(args) -> int. Bad input
+A command module defines NAME, HELP, add_arguments(parser) and run(args) -> int, and stays light to import
+(argparse and constants: `benchlab --help` loads no numpy); run imports the implementation, holding Ctrl-C
+while it does (benchlab.interrupts.interrupts_held, as here around the parser). Bad input
 (InputError) is one line on stderr and exit 2; any other failure is one line and exit 1; Ctrl-C, from the
 moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
 early (`benchlab run --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends other tools.
@@ -104,7 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _dispatch(argv: Sequence[str] | None) -> int:
     args = None
     try:
-        with interrupts_held():  # imports every command module; a Ctrl-C meanwhile comes right after
+        with interrupts_held():  # imports the command modules; a Ctrl-C meanwhile comes right after
             parser = build_parser()
         args = parser.parse_args(argv)
         configure_logging(args.verbose)
