@@ -5,10 +5,10 @@ pandas, h5py and numba. `benchlab._blas` comes first: it defaults the BLAS threa
 anything loads numpy (see there for the limit applied during every fit).
 """
 
-import importlib as _importlib
 import typing as _typing
 
 from benchlab import _blas  # noqa: F401 - first: thread variables before numpy loads
+from benchlab._lazy import lazy_exports as _lazy_exports
 
 if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` imports them on first use
     from benchlab.params import load_params
@@ -18,17 +18,5 @@ if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` i
 __all__ = ["load_run", "load_params", "simulate"]
 __version__ = "0.1.0"
 
-_HOMES = {"load_run": "benchlab.runfile", "load_params": "benchlab.params", "simulate": "benchlab.simulation"}
-
-
-def __getattr__(name: str) -> _typing.Any:
-    """`benchlab.load_run` and the rest of `__all__`, imported from their modules on first use."""
-    if name not in _HOMES:
-        raise AttributeError(f"module 'benchlab' has no attribute {name!r}")
-    value = getattr(_importlib.import_module(_HOMES[name]), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = _lazy_exports(__name__, {".runfile": ("load_run",), ".params": ("load_params",),
+                                                ".simulation": ("simulate",)})

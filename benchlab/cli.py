@@ -1,6 +1,8 @@
 """`benchlab` console script: one module per command in benchlab.commands, discovered at start.
 
-A command module defines NAME, HELP, add_arguments(parser) and run(args) -> int. Bad input
+A command module defines NAME, HELP, add_arguments(parser) and run(args) -> int, and stays light to import
+(argparse and constants: `benchlab --help` loads no numpy); run imports the implementation, holding Ctrl-C
+while it does (benchlab.interrupts.interrupts_held, as here around the parser). Bad input
 (InputError) is one line on stderr and exit 2; any other failure is one line and exit 1; Ctrl-C, from the
 moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
 early (`benchlab run --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends other tools.
@@ -21,10 +23,12 @@ from collections.abc import Sequence
 import benchlab
 import benchlab.commands
 from benchlab.errors import InputError
-from benchlab.interrupts import RedeliverInterrupts, interrupts_held
+from benchlab.interrupts import RedeliverInterrupts, interrupts_answered, interrupts_held
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
 BROKEN_PIPE_EXIT = 141
+#: Exit code after Ctrl-C: 128 + SIGINT, what a shell reports for a tool SIGINT ended.
+INTERRUPTED_EXIT = 130
 _LOG_HANDLER = logging.StreamHandler()
 _LOG_HANDLER.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
 
@@ -87,24 +91,31 @@ def _stdout_reader_gone() -> bool:
 
 
 def _interrupted(args: argparse.Namespace | None) -> int:
+    """The one answer to Ctrl-C: later ones are ignored from here on (see interrupts_answered), one line, 130."""
+    interrupts_answered()
     print(f"benchlab{'' if args is None else ' ' + args.command}: interrupted", file=sys.stderr)
-    return 130
+    return INTERRUPTED_EXIT
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run one command; the exit code (0, 1 failure, 2 bad input, 130 Ctrl-C)."""
+    """Run one command; the exit code (0, 1 failure, 2 bad input, 130 Ctrl-C).
+
+    Having answered a Ctrl-C, main leaves SIGINT ignored: the process is ending (an in-process caller that
+    carries on puts its own handler back)."""
     try:
         with RedeliverInterrupts() as guard:
             code = _dispatch(argv)
     except KeyboardInterrupt:  # a Ctrl-C sent again (see benchlab.interrupts) just as the command ended
         return _interrupted(None)
-    return _interrupted(None) if guard.swallowed else code
+    if guard.swallowed and code != INTERRUPTED_EXIT:  # a Ctrl-C still to be sent again, not answered yet
+        return _interrupted(None)
+    return code
 
 
 def _dispatch(argv: Sequence[str] | None) -> int:
     args = None
     try:
-        with interrupts_held():  # imports every command module; a Ctrl-C meanwhile comes right after
+        with interrupts_held():  # imports the command modules; a Ctrl-C meanwhile comes right after
             parser = build_parser()
         args = parser.parse_args(argv)
         configure_logging(args.verbose)

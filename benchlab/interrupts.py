@@ -5,6 +5,7 @@ weakref callback (h5py releases its objects through them) it can only print "Exc
 a traceback and carry on: a run interrupted during start-up then ran to its end and said "run complete".
 While RedeliverInterrupts is active, such an interrupt is not printed but raised again a moment later,
 when the main thread is back in ordinary code (and again, should it land in a callback once more).
+Once the command has answered a Ctrl-C, `interrupts_answered` makes that answer the process's last word.
 """
 
 from __future__ import annotations
@@ -82,3 +83,17 @@ def interrupts_held() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
         if caught:
             raise KeyboardInterrupt
+
+
+def interrupts_answered() -> None:
+    """Ctrl-C has been answered (exit 130): later ones are ignored while the process ends, and the interpreter
+    forgets the interrupt, so that the process exits with the code it was given.
+
+    CPython records a KeyboardInterrupt that leaves source text run by exec() or eval() as unhandled, even when
+    caught later (dataclasses, namedtuple and numba make their functions from source text: a Ctrl-C while a
+    module imports lands there); `python -m` then ends by sending itself SIGINT (exit -2) whatever sys.exit
+    asked. Running source text again clears that record: CPython resets it whenever it starts source text.
+    """
+    if threading.current_thread() is threading.main_thread():  # only the main thread can set handlers
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # before the exec: no Ctrl-C can land in it and record anew
+    exec("", {})  # noqa: S102 - a constant empty source: see above

@@ -73,3 +73,29 @@ def test_api_names_load_on_first_use() -> None:
     with pytest.raises(AttributeError):
         import benchlab
         benchlab.no_such_name  # noqa: B018
+
+
+#: What a `benchlab` process must not load before its command runs (issue 17: 3.3-3.8 s of CPU for `--help`).
+HEAVY = ("scipy", "pandas", "matplotlib", "h5py", "numba", "can", "asammdf", "dask")
+LOADED_HEAVY = f"print(sorted({{m.split('.')[0] for m in sys.modules}} & set({HEAVY!r})))"
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["watch", "--help"], ["probe", "--help"]])
+def test_cli_help_imports_no_heavy_library(argv) -> None:
+    code = ("import sys, runpy\n"
+            f"sys.argv = ['benchlab', *{argv!r}]\n"
+            "try:\n    runpy.run_module('benchlab.cli', run_name='__main__')\n"  # as `python -m benchlab.cli`
+            "except SystemExit as exc:\n    assert exc.code == 0, exc.code\n"
+            f"{LOADED_HEAVY}\n")
+    out = subprocess.run([sys.executable, "-c", code], env=_clean_env(), capture_output=True, text=True,
+                         check=True).stdout.splitlines()
+    assert out[0].startswith("usage: benchlab") and out[-1] == "[]"
+
+
+def test_building_the_parser_imports_no_heavy_library() -> None:
+    code = ("import sys\nfrom benchlab.cli import build_parser\n"
+            "print(build_parser().parse_args(['watch', 'run.h5']).handler.__module__)\n"
+            f"{LOADED_HEAVY}\n")
+    module, heavy = subprocess.run([sys.executable, "-c", code], env=_clean_env(), capture_output=True, text=True,
+                                   check=True).stdout.splitlines()[:2]
+    assert module == "benchlab.commands.watch" and heavy == "[]"

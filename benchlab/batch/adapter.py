@@ -18,19 +18,13 @@ import pandas as pd
 from benchlab.diagnose.engine import diagnose_runs
 from benchlab.diagnose.report import summarise
 from benchlab.identify.api import Identification, identify
-from benchlab.model.catalog import MODEL_HELP, resolve_model
+from benchlab.model.catalog import resolve_model
 from benchlab.model.definition import ModelDefinition
 from benchlab.model.runs import load_runs
 from benchlab.params import ModelParams, load_params, save_params
 from benchlab.runfile import load_attrs
 from benchlab.values import json_ready
 from benchlab.wear.analysis import analyse_wear
-
-#: What `--model` accepts.
-MODEL_CHOICES_HELP = MODEL_HELP
-#: `--model` when not given: identify and wear fit the paper's nonlinear model; diagnose starts from the
-#: linear one (its own default: the paper's starting point).
-DEFAULT_MODEL = {"identify": "nonlinear", "wear": "nonlinear", "diagnose": "linear"}
 
 
 def model_text(text: str) -> str:

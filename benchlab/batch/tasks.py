@@ -20,7 +20,6 @@ from benchlab.batch import adapter
 from benchlab.errors import InputError
 
 OK, FAILED = "ok", "failed"
-KINDS = ("identify", "diagnose", "wear")
 #: The run attribute that dates a run (written by `benchlab run`); trends use it as their time axis.
 TIME_ATTR = "created_utc"
 SE_SUFFIX = "_se"

@@ -12,13 +12,13 @@ import argparse
 from pathlib import Path
 
 from benchlab import cliargs
-from benchlab.batch import adapter, plan, table, trends
 from benchlab.batch.cluster import EXTRA, Connection, connect, require_distributed
-from benchlab.batch.submit import run_batch
-from benchlab.batch.tasks import FAILED, KINDS, Job
+from benchlab.batch.kinds import DEFAULT_MODEL, KINDS
 from benchlab.bounds import MAX_FIT_STARTS, MAX_LOCAL_WORKERS, MAX_TIMEOUT_S
 from benchlab.diagnose.parallel import workers
 from benchlab.errors import InputError
+from benchlab.interrupts import interrupts_held
+from benchlab.model.names import MODEL_HELP
 from benchlab.progress import for_terminal
 
 NAME = "batch"
@@ -34,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run files or quoted globs ('runs/**/*.h5'); ordered by path, numbers as numbers")
     parser.add_argument("--out", required=True, metavar="DIR", help="directory for the table, trends and per-run files")
     parser.add_argument("--model", metavar="MODEL",
-                        help=f"{adapter.MODEL_CHOICES_HELP}: the model to fit (identify, wear; default nonlinear) or "
+                        help=f"{MODEL_HELP}: the model to fit (identify, wear; default nonlinear) or "
                              "the baseline (diagnose; default linear)")
     parser.add_argument("--params", metavar="P.json",
                         help="wear only: one parameter file for every run instead of a fit per task")
@@ -73,7 +73,11 @@ def describe(conn: Connection) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Plan the tasks, run them on the cluster, write the table and the trends; exit 1 if any run failed."""
-    require_distributed()
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        require_distributed()
+        from benchlab.batch import adapter, plan, table, trends
+        from benchlab.batch.submit import run_batch
+        from benchlab.batch.tasks import FAILED, Job
     if args.params is not None and args.kind != "wear":
         raise InputError("--params", f"batch {args.kind}", "--params only with `batch wear` (identify and diagnose "
                                                            "fit their own parameters)")
@@ -82,8 +86,8 @@ def run(args: argparse.Namespace) -> int:
     out = output_dir(args.out)
     tasks = plan.plan(plan.expand(args.runs), args.group_by)
     runs = sum(len(t.runs) for t in tasks)
-    job = Job(args.kind, adapter.model_text(args.model or adapter.DEFAULT_MODEL[args.kind]), str(out.resolve()), args.starts, args.seed,
-              None if args.params is None else str(Path(args.params).resolve()))
+    job = Job(args.kind, adapter.model_text(args.model or DEFAULT_MODEL[args.kind]), str(out.resolve()), args.starts,
+              args.seed, None if args.params is None else str(Path(args.params).resolve()))
     with connect(args.scheduler, args.workers, args.connect_timeout) as conn:
         print(f"batch {args.kind}: {runs} run(s) in {len(tasks)} task(s) on a {describe(conn)}", flush=True)
         print(f"dashboard: {conn.dashboard or f'none (bokeh not installed: {EXTRA} installs it)'}", flush=True)

@@ -11,6 +11,7 @@ from pathlib import Path
 from benchlab import cliargs
 from benchlab.bounds import MAX_SAMPLE_PERIOD_S
 from benchlab.errors import InputError
+from benchlab.interrupts import interrupts_held
 
 NAME = "cooldown"
 HELP = "fit R_FA = R_PA for every cool-down of a cooldown-sweep run, then eq. (11); stores /analysis"
@@ -47,9 +48,10 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from benchlab.cooldown import analyse, fit_eq11, store, table_lines
-    from benchlab.progress import for_terminal
-    from benchlab.runfile import load_run
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.cooldown import analyse, fit_eq11, store, table_lines
+        from benchlab.progress import for_terminal
+        from benchlab.runfile import load_run
 
     path = Path(args.run)
     load_run(path)  # checks the file (InputError on a bad one)

@@ -6,18 +6,19 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from benchlab import cliargs
-from benchlab.diagnose.engine import MIN_DURATION_S, Diagnosis, diagnose_runs
-from benchlab.diagnose.regimes import worst_regimes
-from benchlab.diagnose.report import summarise
 from benchlab.errors import InputError
-from benchlab.model.catalog import MODEL_HELP, resolve_model
-from benchlab.model.definition import ModelDefinition, to_toml
-from benchlab.model.runs import load_runs
+from benchlab.interrupts import interrupts_held
+from benchlab.model.names import MODEL_HELP
 from benchlab.progress import for_terminal
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from benchlab.diagnose.engine import Diagnosis
+    from benchlab.model.definition import ModelDefinition
 
 NAME = "diagnose"
 HELP = "find what the model gets wrong, name the cause, extend the model and measure the gain"
@@ -37,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def print_report(result: dict) -> None:
     """The human-readable summary: baseline, worst held-out regime, strongest evidence, each finding, the best model."""
+    with interrupts_held():  # see benchlab.cli
+        from benchlab.diagnose.regimes import worst_regimes
+
     base = result["baseline"]
     print(f"baseline {base['model']}: held-out RMSE {base['rmse_K']:.3f} K ({base['nrmse_pct']:.2f} %)")
     worst = worst_regimes(result["regimes"]["baseline"], 1)
@@ -68,6 +72,10 @@ def check_report_dir(path: str) -> Path:
 def load_diagnosed_runs(paths: list[str], model: ModelDefinition) -> list[pd.DataFrame]:
     """The run files, each holding what the model reads and long enough for the blocked cross-validation
     (two FOLD_S blocks)."""
+    with interrupts_held():  # the reading's imports (see benchlab.cli)
+        from benchlab.diagnose.engine import MIN_DURATION_S
+        from benchlab.model.runs import load_runs
+
     runs = load_runs(paths, model)
     for path, run in zip(paths, runs):
         duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
@@ -85,6 +93,11 @@ def best_model(diagnosis: Diagnosis) -> ModelDefinition:
 
 def run(args: argparse.Namespace) -> int:
     out = check_report_dir(args.report) if args.report else None
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.diagnose.engine import diagnose_runs
+        from benchlab.diagnose.report import summarise
+        from benchlab.model.catalog import resolve_model
+        from benchlab.model.definition import to_toml
     model = resolve_model(args.baseline, "--model")
     runs = load_diagnosed_runs(args.runs, model)
     diagnosis = diagnose_runs(runs, model, seed=args.seed, progress=for_terminal(args.quiet))
@@ -97,7 +110,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         print_report(result)
     if out is not None:
-        from benchlab.diagnose.page import write_page  # matplotlib only when a page is asked for
+        with interrupts_held():  # matplotlib only when a page is asked for
+            from benchlab.diagnose.page import write_page
 
         page = write_page(diagnosis, result, runs, out)
         if not args.json:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from benchlab import cliargs
+from benchlab.interrupts import interrupts_held
 
 NAME = "export"
 HELP = "write a run file as MDF4 (.mf4: every stream at its own rate, for asammdf/CANape), CSV or Parquet (/aligned)"
@@ -18,7 +19,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from benchlab.export import export  # asammdf and pyarrow load only when exporting
+    with interrupts_held():  # asammdf and pyarrow load only when exporting (Ctrl-C meanwhile: see benchlab.cli)
+        from benchlab.export import export
 
     content = export(args.run, args.to, args.force)
     groups = content.groups if args.to.lower().endswith(".mf4") else content.groups[:1]

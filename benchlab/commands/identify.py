@@ -7,11 +7,9 @@ import argparse
 from benchlab import cliargs
 from benchlab.bounds import MAX_FIT_STARTS, MAX_FIT_STEP_S
 from benchlab.errors import InputError
-from benchlab.identify.api import identify, parse_fixed
-from benchlab.identify.data import FIT_STEP_S
-from benchlab.model.catalog import MODEL_HELP, model_spec, resolve_model
-from benchlab.model.runs import load_runs
-from benchlab.params import save_params
+from benchlab.identify.defaults import FIT_STEP_S
+from benchlab.interrupts import interrupts_held
+from benchlab.model.names import MODEL_HELP
 from benchlab.progress import for_terminal
 
 NAME = "identify"
@@ -33,6 +31,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.identify.api import identify, parse_fixed
+        from benchlab.model.catalog import model_spec, resolve_model
+        from benchlab.model.runs import load_runs
+        from benchlab.params import save_params
     try:
         fixed = parse_fixed(args.fix)
     except ValueError as exc:

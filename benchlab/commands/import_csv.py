@@ -17,15 +17,16 @@ import argparse
 import io
 import re
 from pathlib import Path
-
-import numpy as np
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from benchlab import cliargs
 from benchlab.bounds import MAX_RUN_DURATION_S
 from benchlab.errors import InputError
-from benchlab.model.catalog import MODEL_HELP, resolve_model
-from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample, write_run
+from benchlab.interrupts import interrupts_held
+from benchlab.model.names import MODEL_HELP
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 NAME = "import"
 HELP = "convert a CSV (contract channel names, or any channel with its unit) into a run file"
@@ -81,6 +82,8 @@ def _dialect(text: str, sep: str | None, decimal: str | None) -> tuple[str, str]
 def _channel_names(path: Path, titles: list[str]) -> tuple[list[str], dict[str, str]]:
     """Column titles to channel names and the units the titles give; a unit in the title of a contract channel
     must be its contract unit."""
+    from benchlab.runfile import ALIGNED_UNITS
+
     names, units = [], {}
     for title in (str(t).strip() for t in titles):
         match = TITLE_WITH_UNIT.match(title)
@@ -96,10 +99,16 @@ def _channel_names(path: Path, titles: list[str]) -> tuple[list[str], dict[str, 
 
 
 def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None = None,
-             required: tuple[str, ...] = REQUIRED, sep: str | None = None,
+             required: tuple[str, ...] | None = None, sep: str | None = None,
              decimal: str | None = None) -> tuple[pd.DataFrame, float, dict[str, str]]:
-    """Read and check the CSV: required columns, a unit for every column, numeric values, a uniform time grid
-    (or `dt`); return frame, dt and the units."""
+    """Read and check the CSV: required columns (default: the clutch channels, REQUIRED), a unit for every column,
+    numeric values, a uniform time grid (or `dt`); return frame, dt and the units."""
+    import numpy as np
+    import pandas as pd
+
+    from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample
+
+    required = REQUIRED if required is None else required
     if not path.exists():
         raise InputError(path, "file", "an existing CSV file (not found)")
     try:
@@ -152,6 +161,8 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
 
 def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, str]:
     """The unit of every column: the contract's for its channels (a different one given is bad input), else given."""
+    from benchlab.runfile import ALIGNED_UNITS
+
     for name in given:
         if name not in columns:
             raise InputError(path, f"--unit {name}", f"a column of the CSV ({', '.join(columns)})")
@@ -171,7 +182,10 @@ def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, s
 
 
 def run(args: argparse.Namespace) -> int:
-    required = tuple(resolve_model(args.model).required_channels()) if args.model else REQUIRED
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.model.catalog import resolve_model
+        from benchlab.runfile import write_run  # and pandas, for read_csv
+    required = tuple(resolve_model(args.model).required_channels()) if args.model else None
     if Path(args.out).exists() and not args.force:
         raise InputError(args.out, "--out", "a new run file (it exists: --force to overwrite)")
     frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep, args.decimal)

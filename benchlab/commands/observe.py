@@ -6,18 +6,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from benchlab import cliargs
 from benchlab.errors import InputError
-from benchlab.observer.batch import STD_SUFFIX, WEAR_UNITS, estimated_wear, observe
-from benchlab.observer.model import Reset
-from benchlab.observer.noise import tune_noise, with_overrides
+from benchlab.interrupts import interrupts_held
 from benchlab.model.options import add_model_option, load_model_params
-from benchlab.model.runs import load_runs
-from benchlab.runfile import load_truth, write_results
-from benchlab.wear.clutchfile import default_clutch, load_clutch
+
+if TYPE_CHECKING:
+    from benchlab.observer.model import Reset
 
 NAME = "observe"
 HELP = "Kalman observer: every temperature (the pressure plate too) with its spread, from the sensors chosen"
@@ -38,6 +35,9 @@ def _sensors(text: str) -> list[str]:
 
 def _reset(text: str) -> Reset:
     """`CHANNEL@SECONDS` -> a re-initialisation of the state CHANNEL reads, from its reading at that time."""
+    with interrupts_held():  # the observer's imports, at parse time (see benchlab.cli)
+        from benchlab.observer.model import Reset
+
     channel, at, seconds = text.partition("@")
     try:
         value = float(seconds)
@@ -100,6 +100,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        import numpy as np
+
+        from benchlab.model.runs import load_runs
+        from benchlab.observer.batch import STD_SUFFIX, WEAR_UNITS, estimated_wear, observe
+        from benchlab.observer.noise import tune_noise, with_overrides
+        from benchlab.runfile import load_truth, write_results
+        from benchlab.wear.clutchfile import default_clutch, load_clutch
     params = load_model_params(args.params, args.model)
     measured = load_runs([args.run], params.definition)[0]
     clutch = load_clutch(args.clutch) if args.clutch else default_clutch()
@@ -150,7 +158,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  wear at the estimated temperatures: plate {wear['wear_plate_mm'][-1]:.3g} mm, flywheel "
               f"{wear['wear_flywheel_mm'][-1]:.3g} mm per face")
     if args.plot:
-        from benchlab.observer.plot import plot_observation
+        with interrupts_held():  # matplotlib only when a figure is asked for
+            from benchlab.observer.plot import plot_observation
 
         print(f"figure: {plot_observation(measured, result, truth, args.plot)}")
     return 0

@@ -15,20 +15,15 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from benchlab import cliargs
 from benchlab.bounds import MAX_RUN_DURATION_S
-from benchlab.diagnose.engine import diagnose_runs
-from benchlab.diagnose.regimes import worst_regimes
-from benchlab.diagnose.report import summarise
-from benchlab.identify.api import identify
-from benchlab.params import load_params, save_params
+from benchlab.interrupts import interrupts_held
 from benchlab.progress import Progress, for_terminal
-from benchlab.runfile import load_run
-from benchlab.runner.session import RunRequest, execute
-from benchlab.wear import analyse_wear
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 NAME = "pipeline"
 HELP = "run Table 1 and the validation protocol on the simulated bench, identify, report, diagnose, estimate wear"
@@ -49,8 +44,11 @@ def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
 
 def _bench_run(label: str, path: Path, protocol: str, seed: int, progress: Progress, **options: float) -> pd.DataFrame:
     """One protocol on the simulated bench through the runner and the real drivers; the run as loaded back."""
-    from sim_bench.bench import SimulatedBench  # the simulator when the command runs
-    from sim_bench.plant import ThermalPlant
+    with interrupts_held():  # the runner and the simulator (see benchlab.cli)
+        from benchlab.runfile import load_run
+        from benchlab.runner.session import RunRequest, execute
+        from sim_bench.bench import SimulatedBench
+        from sim_bench.plant import ThermalPlant
 
     code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, bench=SimulatedBench(ThermalPlant()),
                                        install_signals=False, progress=progress, **options))
@@ -64,7 +62,11 @@ def _bench_run(label: str, path: Path, protocol: str, seed: int, progress: Progr
 
 def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
     """Diagnose the linear baseline on the fitting run: JSON, page with figures, two labelled lines; the summary."""
-    from benchlab.diagnose.page import write_page  # matplotlib only when the command runs
+    with interrupts_held():  # the diagnosis and its page (matplotlib; see benchlab.cli)
+        from benchlab.diagnose.engine import diagnose_runs
+        from benchlab.diagnose.page import write_page
+        from benchlab.diagnose.regimes import worst_regimes
+        from benchlab.diagnose.report import summarise
 
     diagnosis = diagnose_runs([fitting], "linear", progress=progress)
     summary = summarise(diagnosis, "linear")
@@ -83,10 +85,14 @@ def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from benchlab.report import write_report  # matplotlib only when the command runs
-    from benchlab.report.index import cooldown_scores, write_index
-    from benchlab.report.resistance import standard_errors
-    from benchlab.wear.plot import plot_wear
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.identify.api import identify
+        from benchlab.params import load_params, save_params
+        from benchlab.report import write_report
+        from benchlab.report.index import cooldown_scores, write_index
+        from benchlab.report.resistance import standard_errors
+        from benchlab.wear import analyse_wear
+        from benchlab.wear.plot import plot_wear
 
     progress = for_terminal(args.quiet)
     out = Path(args.out)

@@ -13,15 +13,11 @@ import json
 import time
 from typing import Any
 
-import can
-
 from benchlab import cliargs
 from benchlab.bounds import MAX_CAN_BITRATE, MAX_PROBE_READINGS, MAX_TIMEOUT_S, MIN_CAN_BITRATE
 from benchlab.errors import InputError
-from drivers.can_bench import CanBench
-from drivers.clutch_node import ClutchNodeGateway
+from benchlab.interrupts import interrupts_held
 from drivers.errors import ConnectionLost
-from drivers.pt1000 import Pt1000Scanner
 
 NAME = "probe"
 HELP = "read a few values from one bench device (pt1000 scanner, clutch node gateway, CAN controllers)"
@@ -50,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
     if args.bitrate is not None and args.device != "can":
         raise InputError("command line", "--bitrate", f"only with `probe can` (a CAN bus), not {args.device}")
     if args.url.startswith("sim://"):
-        import sim_bench.emulators  # noqa: F401 - registers the sim:// pyserial handler
+        with interrupts_held():  # each import of a driver or emulator is held: see benchlab.cli
+            import sim_bench.emulators  # noqa: F401 - registers the sim:// pyserial handler
     report = {"pt1000": _probe_pt1000, "node": _probe_node, "can": _probe_can}[args.device](args)
     lines = report.pop("lines")
     print(json.dumps(report, default=str) if args.json else "\n".join(lines))
@@ -58,6 +55,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _probe_pt1000(args: argparse.Namespace) -> dict[str, Any]:
+    with interrupts_held():
+        from drivers.pt1000 import Pt1000Scanner
+
     scanner = _open(lambda: Pt1000Scanner.open(args.url, args.channels, mode=args.mode, timeout=args.timeout), args.url)
     try:
         idn = scanner.identify()
@@ -74,6 +74,9 @@ def _probe_pt1000(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _probe_node(args: argparse.Namespace) -> dict[str, Any]:
+    with interrupts_held():
+        from drivers.clutch_node import ClutchNodeGateway
+
     gateway = _open(lambda: ClutchNodeGateway.open(args.url), args.url)
     try:
         samples = gateway.read(args.count or 10, args.timeout)
@@ -91,6 +94,11 @@ def _probe_node(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _probe_can(args: argparse.Namespace) -> dict[str, Any]:
+    with interrupts_held():
+        import can
+
+        from drivers.can_bench import CanBench
+
     interface, sep, channel = args.url.partition(":")
     if not sep or not interface or not channel:
         raise InputError("--url", args.url, "INTERFACE:CHANNEL for can, e.g. socketcan:can0 or virtual:bench")
@@ -99,7 +107,7 @@ def _probe_can(args: argparse.Namespace) -> dict[str, Any]:
     config = {"interface": interface, "channel": channel}
     if args.bitrate is not None:
         config["bitrate"] = args.bitrate
-    bench = _open(lambda: CanBench.from_config(config, listen_only=True), args.url)
+    bench = _open(lambda: CanBench.from_config(config, listen_only=True), args.url, can.CanError)
     samples = []
     try:
         deadline = time.monotonic() + args.timeout
@@ -121,11 +129,12 @@ def _probe_can(args: argparse.Namespace) -> dict[str, Any]:
             "events": [_row(e) for e in events], "lines": lines}
 
 
-def _open(opener: Any, url: str) -> Any:
-    """Run a driver's opener; a URL that does not open is bad input (exit 2)."""
+def _open(opener: Any, url: str, *errors: type[Exception]) -> Any:
+    """Run a driver's opener; a URL that does not open (an OSError, ..., or one of the driver's `errors`) is bad
+    input (exit 2)."""
     try:
         return opener()
-    except (ConnectionLost, can.CanError, OSError, ValueError, ImportError) as exc:
+    except (ConnectionLost, OSError, ValueError, ImportError, *errors) as exc:
         raise InputError("--url", url, f"a device that opens ({exc})") from None
 
 

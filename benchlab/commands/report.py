@@ -7,10 +7,9 @@ import argparse
 from pathlib import Path
 
 from benchlab.errors import InputError
+from benchlab.interrupts import interrupts_held
 from benchlab.model.options import add_model_option, load_model_params
-from benchlab.model.runs import check_run, load_runs
-from benchlab.params import load_params
-from benchlab.runfile import load_run
+from benchlab.progress import for_terminal
 
 NAME = "report"
 HELP = "figures of the paper (Fig. 3, 4, 5), residual analysis and a Markdown page of error figures"
@@ -27,8 +26,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from benchlab.progress import for_terminal
-    from benchlab.report import write_report  # matplotlib only when the command runs
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.model.runs import check_run, load_runs
+        from benchlab.params import load_params
+        from benchlab.report import write_report
+        from benchlab.runfile import load_run
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

@@ -7,10 +7,10 @@ import sys
 from pathlib import Path
 
 from benchlab import cliargs
-from benchlab.acquire.lock import RunFileLock
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
 from benchlab.commands import watch
 from benchlab.errors import InputError
+from benchlab.interrupts import interrupts_held
 from benchlab.progress import for_terminal
 from protocols.catalog import NAMES
 from sim_bench.faults import SPEC, kinds_help
@@ -61,12 +61,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("command line", "--port", "--watch with it (the live view's port)")
     if args.dry_run:
         return _run(args, out)
+    with interrupts_held():  # the lock's package loads h5py (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.acquire.lock import RunFileLock
     with RunFileLock(out, "--resume" if args.resume else "--out"):  # before anything else: one run per file
         if not args.resume and out.exists() and not args.force:
             raise InputError(out, "--out", "a new run file (it exists: --resume to continue it, --force to overwrite)")
         if not args.watch:
             return _run(args, out)
-        from benchlab.watch.launch import watching
+        with interrupts_held():
+            from benchlab.watch.launch import watching
 
         with watching(out, watch.DEFAULT_PORT if args.port is None else args.port) as url:
             print(f"live view  {url}", file=sys.stderr, flush=True)
@@ -79,11 +82,12 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)}, got {args.protocol!r}")
     if args.bench != "sim" and not Path(args.bench).exists():
         raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
-    from benchlab.runner.session import RunRequest, execute
-
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.runner.session import RunRequest, execute
     bench = args.bench
     if args.fault:  # --bench sim (checked above): the simulated bench with the faults to rehearse
-        from sim_bench.bench import SimulatedBench
+        with interrupts_held():
+            from sim_bench.bench import SimulatedBench
 
         bench = SimulatedBench(faults=tuple(args.fault))
     request = RunRequest(protocol=args.protocol or "", out=out, bench=bench, seed=args.seed, cycles=args.cycles,

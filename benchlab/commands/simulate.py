@@ -6,11 +6,8 @@ from __future__ import annotations
 import argparse
 
 from benchlab import cliargs
-from benchlab.metrics import nrmse_pct, rmse_k
+from benchlab.interrupts import interrupts_held
 from benchlab.model.options import add_model_option, load_model_params
-from benchlab.model.runs import load_runs
-from benchlab.runfile import write_simulated
-from benchlab.simulation import simulate
 
 NAME = "simulate"
 HELP = "drive the model with a run's measured inputs and write /simulated"
@@ -25,6 +22,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.metrics import nrmse_pct, rmse_k
+        from benchlab.model.runs import load_runs
+        from benchlab.runfile import write_simulated
+        from benchlab.simulation import simulate
     params = load_model_params(args.params, args.model)
     measured = load_runs([args.run], params.definition)[0]
     simulated = simulate(measured, params)

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from benchlab import cliargs
+from benchlab.interrupts import interrupts_held
 
 NAME = "watch"
 HELP = "live view of a run file in a web page on 127.0.0.1 (follows a run while it is written; read-only)"
@@ -21,8 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until Ctrl-C (exit 130); a file that is not a run or a port in use is bad input (exit 2)."""
-    from benchlab.watch.live import LiveRun
-    from benchlab.watch.server import HOST, listen, serve
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.watch.live import LiveRun
+        from benchlab.watch.server import HOST, listen, serve
 
     live = LiveRun(args.run)
     try:

@@ -5,16 +5,18 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TYPE_CHECKING
 
 from benchlab import cliargs
 from benchlab.bounds import MAX_WEAR_HORIZON, MAX_WEAR_PATHS
 from benchlab.errors import InputError
+from benchlab.interrupts import interrupts_held
 from benchlab.model.options import add_model_option, load_model_params
-from benchlab.model.runs import load_runs
-from benchlab.runfile import REQUIRED
 from benchlab.values import json_ready
-from benchlab.wear.analysis import DEFAULT_HORIZON, DEFAULT_PATHS, WearReport, analyse_wear
-from benchlab.wear.clutchfile import default_clutch, load_clutch
+from benchlab.wear.defaults import DEFAULT_HORIZON, DEFAULT_PATHS
+
+if TYPE_CHECKING:
+    from benchlab.wear.analysis import WearReport
 
 NAME = "wear"
 HELP = "friction energy, lining wear, health and remaining life from a run (eq. 1-3)"
@@ -67,6 +69,11 @@ def _summary(report: WearReport) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse the run; print JSON or a summary, optionally write the figure."""
+    with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.model.runs import load_runs
+        from benchlab.runfile import REQUIRED
+        from benchlab.wear.analysis import analyse_wear
+        from benchlab.wear.clutchfile import default_clutch, load_clutch
     spec = load_clutch(args.clutch) if args.clutch else default_clutch()
     params = load_model_params(args.params, args.model)
     measured = load_runs([args.run], params.definition)[0]
@@ -76,7 +83,9 @@ def run(args: argparse.Namespace) -> int:
     report = analyse_wear(measured, params, spec, horizon=args.predict, paths=args.paths, seed=args.seed,
                           params_source=str(args.params))
     if args.plot:
-        from benchlab.wear.plot import plot_wear
+        with interrupts_held():  # matplotlib only when a figure is asked for
+            from benchlab.wear.plot import plot_wear
+
         plot_wear(report, args.plot)
     if args.json:
         print(json.dumps(json_ready(report.as_dict()), default=float))

@@ -18,7 +18,8 @@ import numpy as np
 import pandas as pd
 
 from benchlab._blas import single_threaded_blas
-from benchlab.identify.data import FIT_STEP_S, FitData, prepare
+from benchlab.identify.data import FitData, prepare
+from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import FitResult, fit, fit_multistart
 from benchlab.identify.residuals import run_residuals

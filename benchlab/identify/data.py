@@ -23,12 +23,12 @@ from functools import cached_property
 import numpy as np
 import pandas as pd
 
+from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.network import ThermalNetwork
 from benchlab.runfile import ALIGNED_UNITS
 from benchlab.simulation import input_channels
 from benchlab.solver_memo import LawMemo
 
-FIT_STEP_S = 0.5
 #: Operating-point quantum per unit of a channel: speeds to 0.5 rpm, temperatures read by laws to 0.1 K.
 QUANTUM = {"rpm": 0.5, "degC": 0.1}
 STATE_CHANNEL = "clutch_state"  # 0 or 1: rounded

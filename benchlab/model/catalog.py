@@ -16,10 +16,10 @@ from benchlab.errors import InputError
 from benchlab.identify.spec import ModelSpec
 from benchlab.model.build import build_spec
 from benchlab.model.definition import ModelDefinition, load_model
+from benchlab.model.names import BUILTIN_NAMES
 
 MODELS_DIR = Path(models.__file__).resolve().parent
-BUILTIN = {"linear": MODELS_DIR / "clutch-linear.toml", "nonlinear": MODELS_DIR / "clutch-nonlinear.toml"}
-MODEL_HELP = "a model file (TOML, contract section 6) or a built-in clutch model: linear, nonlinear"
+BUILTIN = {name: MODELS_DIR / f"clutch-{name}.toml" for name in BUILTIN_NAMES}
 
 
 @lru_cache(maxsize=None)

@@ -4,9 +4,12 @@ file's parameters are for, by default the file's own (contract section 6)."""
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
-from benchlab.model.catalog import MODEL_HELP, resolve_model
-from benchlab.params import ModelParams, load_params
+from benchlab.model.names import MODEL_HELP
+
+if TYPE_CHECKING:
+    from benchlab.params import ModelParams
 
 
 def add_model_option(parser: argparse.ArgumentParser) -> None:
@@ -15,5 +18,9 @@ def add_model_option(parser: argparse.ArgumentParser) -> None:
 
 
 def load_model_params(params: str, model: str | None) -> ModelParams:
-    """The parameter file, for `--model` where it is given (its parameters must be in the file)."""
+    """The parameter file, for `--model` where it is given (its parameters must be in the file); imported here so
+    that the parser's `add_model_option` costs no numpy."""
+    from benchlab.model.catalog import resolve_model
+    from benchlab.params import load_params
+
     return load_params(params, resolve_model(model) if model else None)

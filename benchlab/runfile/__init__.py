@@ -15,8 +15,9 @@ by what each module reads or writes:
 The names below load their module on first use, so `benchlab.runfile.schema` costs no pandas or h5py.
 """
 
-import importlib as _importlib
 import typing as _typing
+
+from benchlab._lazy import lazy_exports as _lazy_exports
 
 if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` imports them on first use
     from benchlab.runfile.analysis import StoredAnalysis, load_analysis, write_analysis
@@ -38,18 +39,5 @@ _HOMES = {
                "SCHEDULE_UNITS", "SCHEMA", "time_step_tolerance", "unmeasurable_sample"),
     "write": ("write_results", "write_run", "write_simulated"),
 }
-_MODULE_OF = {name: module for module, names in _HOMES.items() for name in names}
-__all__ = sorted(_MODULE_OF)
-
-
-def __getattr__(name: str) -> _typing.Any:
-    """A name of `__all__`, imported from its module on first use."""
-    if name not in _MODULE_OF:
-        raise AttributeError(f"module 'benchlab.runfile' has no attribute {name!r}")
-    value = getattr(_importlib.import_module(f"benchlab.runfile.{_MODULE_OF[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__all__ = sorted(name for names in _HOMES.values() for name in names)
+__getattr__, __dir__ = _lazy_exports(__name__, {f".{module}": names for module, names in _HOMES.items()})

@@ -9,6 +9,7 @@ import pandas as pd
 
 from benchlab.params import ModelParams
 from benchlab.wear.clutchfile import ClutchSpec, default_clutch
+from benchlab.wear.defaults import DEFAULT_HORIZON, DEFAULT_PATHS
 from benchlab.wear.energy import (DEFAULT_GAP_S, engagement_spans, engagement_table, friction_energy,
                                   held, run_friction_power, slip_rad_s)
 from benchlab.wear.health import Health, assess
@@ -18,9 +19,6 @@ from benchlab.wear.state import SIDES, WearState
 from benchlab.wear.thermal import heat_split, lining_temperatures
 from benchlab.wear.torque import (ACTUATOR_CHANNEL, estimate_mu, friction_coefficient, normal_force, total_wear_mm,
                                   transmissible_torque)
-
-DEFAULT_HORIZON = 10_000
-DEFAULT_PATHS = 500
 
 
 @dataclass(frozen=True)

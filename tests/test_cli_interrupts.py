@@ -1,0 +1,78 @@
+"""Ctrl-C at the awkward moments of `python -m benchlab.cli`: always exit 130 and one line, never a traceback.
+
+Each case runs the real command line in a subprocess (the exit status is the interpreter's, not main's) through
+a small `-m` module that sends SIGINT at the chosen moment; nothing depends on timing.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import benchlab
+
+WAIT_S = 120.0  # upper bound on a subprocess; never reached on a working machine
+
+#: The first Ctrl-C lands in the command's own code, or while source text runs under exec(): as it does when it
+#: comes while a dataclass, a namedtuple or a numba function is being made (seen in `benchlab run`: a dataclass
+#: of python-can made while the simulated bench was imported), which CPython notes as an unhandled interrupt.
+_CASE = '''
+import functools, os, signal, sys
+import benchlab.cli as cli
+from benchlab.interrupts import RedeliverInterrupts
+
+class DropRaisesCtrlC:
+    def __del__(self):
+        raise KeyboardInterrupt
+
+def configure_logging(verbosity):
+    {before}
+    {first}
+
+class SecondCtrlCAfterTheLine:
+    def __init__(self, stream):
+        self.stream, self.sent = stream, False
+    def write(self, text):
+        written = self.stream.write(text)
+        if "\\n" in text and not self.sent and {while_printing}:
+            self.sent = True
+            signal.raise_signal(signal.SIGINT)
+        return written
+    def flush(self):
+        self.stream.flush()
+
+cli.configure_logging = configure_logging
+cli.RedeliverInterrupts = functools.partial(RedeliverInterrupts, delay_s=60.0)  # pending until main ends
+sys.stderr = SecondCtrlCAfterTheLine(sys.stderr)
+code = cli.main(sys.argv[1:])
+if {after_main}:
+    signal.raise_signal(signal.SIGINT)
+sys.exit(code)
+'''
+
+_IN_SOURCE_TEXT = 'exec("signal.raise_signal(signal.SIGINT)", {"signal": signal})'
+_IN_CODE = "signal.raise_signal(signal.SIGINT)"
+_MOMENTS = {
+    "inside exec'd source text": {"first": _IN_SOURCE_TEXT, "before": "pass", "while_printing": False,
+                                  "after_main": False},
+    "again while the line is printed": {"first": _IN_CODE, "before": "pass", "while_printing": True,
+                                        "after_main": False},
+    "again after main returned": {"first": _IN_CODE, "before": "pass", "while_printing": False, "after_main": True},
+    "also one swallowed by a finaliser": {"first": _IN_CODE, "before": "DropRaisesCtrlC()", "while_printing": False,
+                                          "after_main": False},
+}
+
+
+@pytest.mark.parametrize("moment", list(_MOMENTS))
+def test_ctrl_c_at_an_awkward_moment_is_exit_130_and_one_line(tmp_path, moment):
+    (tmp_path / "ctrl_c_case.py").write_text(_CASE.format(**_MOMENTS[moment]))
+    root = str(Path(benchlab.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), root])}
+    proc = subprocess.run([sys.executable, "-m", "ctrl_c_case", "run", "table1", "--dry-run"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=WAIT_S)
+    assert proc.returncode == 130, proc.stderr  # not -2: Python ending itself by SIGINT after main answered
+    assert proc.stderr.splitlines() == ["benchlab run: interrupted"], proc.stderr
