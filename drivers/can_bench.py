@@ -30,9 +30,10 @@ import cantools
 import numpy as np
 from numba import njit
 
+from drivers import can_codec, can_log, timebase
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, MessageCodec, compile_codecs, decode_row, encode_rows
-from drivers.can_frames import (ERROR, EXTENDED, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
+from drivers.can_frames import (ERROR, EXTENDED, FRAME, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
                                 send_all)
 from drivers.can_log import log_frames
 from drivers.errors import CanBusError, CanConfigError, CanLogError
@@ -334,8 +335,8 @@ class CanBench:
         """Run time of each frame. Interface stamps: the whole batch maps the clocks first (its fastest frame shows
         the offset best; all frames arrive at `now`, so observing the latest stamp is observing every one)."""
         stamps = frames["timestamp"]
-        if self.timestamps == "run":
-            return stamps
+        if self.timestamps == "run":  # a copy: the field is a strided view, which compiled code types apart
+            return stamps.copy()
         if self.timestamps == "interface" and len(stamps):
             stamped = stamps != 0
             if stamped.any():
@@ -697,3 +698,21 @@ def _next_frames(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, aliv
         frames[k].timestamp = stamps[k]
         frames[k].data[:] = payloads[k]
     return frames, rows
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) every kernel a CanBench calls, before a control loop uses one: a
+    first-call compile there stalls the loop for seconds while the bench holds its last commands. Each kernel
+    once on zero frames and zero-length arrays of the dtypes the driver's tables hold (nothing sent, logged or
+    changed)."""
+    can_codec.prime()
+    can_log.prime()
+    timebase.prime()
+    frames, none, index = np.zeros(0, FRAME), np.zeros(0), np.zeros(0, np.int64)
+    meta, bits, linear = np.zeros((0, OWNER + 1), np.int64), np.zeros((0, 4, 0), np.uint64), np.zeros((0, 4, 0))
+    values = np.zeros((0, 0))
+    _sorted_by_time(frames)
+    _classify_decode(frames, index, index, index, meta, bits, linear, index, values)
+    _watch(index, values, none, meta, index, 0.0, np.zeros(0, bool), values, none)
+    _due_cyclic(0.0, none, index, none, np.zeros(0, bool), MAX_CATCH_UP_S)
+    _next_frames(index, none, values, index, index, np.zeros(1, FRAME), bits, linear, np.zeros(0, bool))

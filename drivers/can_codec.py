@@ -220,3 +220,12 @@ def compile_codecs(db: cantools.database.Database, signals: Mapping[str, tuple[s
         db.get_message_by_name(message).get_signal_by_name(signal)  # KeyError names a bad mapping
         names.setdefault(message, {})[signal] = key
     return {m: MessageCodec(db.get_message_by_name(m), n) for m, n in names.items()}
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) CodecTable's kernels for the one signature each is called with, on
+    zero-length arrays of the table's dtypes (nothing decoded or encoded)."""
+    which, bits, linear, compiled = np.zeros(0, np.int64), np.zeros((0, 4, 0), np.uint64), np.zeros((0, 4, 0)), \
+        np.zeros(0, bool)
+    _decode_rows(which, np.zeros((0, 8), np.uint8), bits, linear, compiled, np.zeros((0, 0)))
+    encode_rows(which, np.zeros((0, 0)), bits, linear, compiled, np.zeros((0, 8), np.uint8))

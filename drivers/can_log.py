@@ -14,7 +14,7 @@ import numpy as np
 from can.io import blf
 from numba import njit
 
-from drivers.can_frames import ERROR, EXTENDED, FD, REMOTE, RX, messages_from_frames
+from drivers.can_frames import ERROR, EXTENDED, FD, FRAME, REMOTE, RX, messages_from_frames
 
 _HEADER_SIZE = blf.OBJ_HEADER_BASE_STRUCT.size + blf.OBJ_HEADER_V1_STRUCT.size
 _CAN_OBJECT = np.dtype([("signature", "S4"), ("header_size", "<u2"), ("header_version", "<u2"),
@@ -92,3 +92,10 @@ def _fill_can_objects(frames: np.ndarray, start: float, default_channel: int,
         out.channel = default_channel if frame.channel < 0 else frame.channel + 1
         for b in range(8):
             out.data[b] = frame.data[b]
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) the BLF packing kernels on zero frames (nothing is logged)."""
+    frames = np.zeros(0, FRAME)
+    _any_flag(frames, ERROR)
+    _fill_can_objects(frames, 0.0, 0, np.zeros(0, _CAN_OBJECT))

@@ -20,7 +20,7 @@ import numpy as np
 import serial
 from numba import njit
 
-from drivers import cvd, node_frame
+from drivers import cvd, node_frame, timebase
 from drivers.errors import ConnectionLost, DriverConfigError
 from drivers.timebase import ClockMap, observe_into
 
@@ -474,3 +474,14 @@ def _sensor_status(flags: int, r_mohm: int, ohm: float, deg: float, ch: int,
     if ohm < short_ohm:
         return _SHORT
     return _OK if cvd.T_MIN_C <= deg <= cvd.T_MAX_C else _RANGE
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) every kernel a gateway's read calls, before a control loop polls it (a
+    first-call compile there stalls the loop for seconds): each once on zero frames and a scratch clock map."""
+    node_frame.prime()
+    timebase.prime()
+    cvd.prime()
+    settings = np.zeros(_COEF + 8)
+    _read_plain(b"", 0, 0, 0.0, ClockMap().state, 0.0, settings)
+    _table(_NO_ROWS, _NO_T, settings)

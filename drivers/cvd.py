@@ -78,3 +78,10 @@ def in_range(temperature_c: ArrayLike) -> np.ndarray | bool:
 def _like(result: np.ndarray, arg: ArrayLike) -> np.ndarray | float | bool:
     """Return a Python scalar for a scalar argument, the array otherwise."""
     return result.item() if np.ndim(arg) == 0 else result
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) the conversions a bench's loop calls (one value, an array), before it
+    runs: a first-call compile inside a control loop stalls it."""
+    temperature(PT1000.r0)
+    temperature(np.zeros(0))

@@ -204,3 +204,8 @@ def decode(chunk: bytes) -> NodeFrame:
     if status != OK:
         _raise(status, detail, src)
     return frame_of(row.tolist())
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) the stream decoder as `decode_stream` calls it, on no bytes."""
+    decode_stream(b"")

@@ -63,3 +63,9 @@ def observe_into(state: np.ndarray, first_t: float, latest_t: float,
     offset = min(offset, received_t - latest_t)
     state[_OFFSET], state[_LAST_RECEIVE] = offset, received_t
     return offset
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) `observe_into` for the one signature the drivers call it with, on a
+    scratch state: a control loop must never stall on a first-call compile."""
+    observe_into(ClockMap().state, 0.0, 0.0, 0.0)

@@ -226,8 +226,8 @@ class AlignedBuilder:
                     used = len(data) - rest[i]
                 if used < len(data):
                     pending[i].add_rows(data[used:])
-        for j, channel in self._sourced:
-            out[channel] = grid[:, j]
+        for j, channel in self._sourced:  # contiguous (a column view is too only for one row): one compiled signature
+            out[channel] = np.ascontiguousarray(grid[:, j])  # for `derive`'s kernels, whatever the rows
         if self.layout.derive is not None:
             derived = self.layout.derive(out)
             out.update(derived)
@@ -637,6 +637,22 @@ def _scatter_streams(words: np.ndarray, starts: tuple, rows: np.ndarray, blocks:
     """_scatter for several streams in one call: blocks[s] from row rows[s] into the datasets at starts[s]."""
     for s in range(len(blocks)):
         _scatter(words, starts[s], rows[s], blocks[s])
+
+
+def prime(layout: Layout) -> None:
+    """Compile (or load from numba's cache) the kernels a RunWriter of `layout` calls, and its `derive`, before a
+    control loop flushes one (a first-call compile there stalls the loop): each once on zero rows, with a scratch
+    builder and no file (nothing written)."""
+    builder = AlignedBuilder(layout)
+    held = tuple(np.zeros((0, 1 + len(spec.columns))) for spec in builder._held)  # noqa: SLF001 - its own module
+    grid = np.zeros((0, len(builder.channels)))
+    _hold_streams(builder._carries, held, 0, layout.dt, builder._holds, builder._plans, grid)  # noqa: SLF001
+    _scatter(np.zeros(0), np.zeros(len(layout.aligned_units), np.int64), 0, grid)
+    _scatter_streams(np.zeros(0), tuple(np.zeros(1 + len(s.columns), np.int64) for s in layout.streams),
+                     np.zeros(len(layout.streams), np.int64),
+                     tuple(np.zeros((0, 1 + len(s.columns))) for s in layout.streams))
+    if layout.derive is not None:
+        layout.derive({channel: np.zeros(0) for channel in builder.channels})
 
 
 def _tmp(path: Path) -> Path:

@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
+from benchlab.acquire import writer as acquire_writer
 from benchlab.drivetrain import DrivetrainFacts, friction_power
 from benchlab.runfile.schema import ALIGNED_UNITS
 from drivers import cvd
@@ -201,6 +202,12 @@ def _take_status_frames(index0: np.ndarray, t0: np.ndarray, values0: np.ndarray,
         held[4] = 0.0 if np.isnan(power) else power  # unknown (NaN) counts as no power
 
 
+def prime() -> None:
+    """Compile (or load from numba's cache) the status kernel before a control loop calls it (a first-call compile
+    there stalls the loop), on no frames and a scratch `held` (`_derived` is primed with the writer's layout)."""
+    _take_status_frames(*_NO_STATUS_BLOCK * len(_STATUS_BLOCK_ORDER), np.zeros(7 + len(_STATUS_HELD)), 1.0)
+
+
 def derive_aligned(out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Grid channels computed from held ones: clutch state, friction power, mean flywheel temperature.
 
@@ -327,12 +334,18 @@ class DriverBench:
                  service: Callable[[], None] | None = None, can_log: "str | os.PathLike[str] | None" = None) -> None:
         import can as _can
 
+        from drivers import can_bench, clutch_node
         from drivers.can_bench import CanBench
         from drivers.clutch_node import ClutchNodeGateway
         from drivers.pt1000 import Pt1000Scanner
 
         self.config, self.clock, self.service = config, clock, service
         self.layout = bench_layout(config)
+        # every kernel the loop calls compiled (or loaded from numba's cache) before a device is opened or commanded:
+        # a first-call compile inside the loop stops polling and interlocks for seconds
+        for module_prime in (can_bench.prime, clutch_node.prime, cvd.prime, prime):
+            module_prime()
+        acquire_writer.prime(self.layout)
         self.status = BenchStatus()
         self.events: list[BenchEvent] = []
         self.readings: list[Reading] = []

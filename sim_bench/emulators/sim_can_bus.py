@@ -63,8 +63,9 @@ class SimCanBus(can.BusABC):
             frames = frames.copy()
             stamps = frames["timestamp"]
             stamps[stamps == 0] = self._now()
-        frames.flags.writeable = False
-        self._deliver(frames)
+        shared = frames.view()  # every peer queues the same frames, read-only (the sender's array stays as it was)
+        shared.flags.writeable = False
+        self._deliver(shared)
 
     def _deliver(self, item: "can.Message | np.ndarray") -> None:
         for bus in self._peers:
@@ -99,7 +100,8 @@ class SimCanBus(can.BusABC):
             self._head = 0
         if messages:
             parts.append(frames_from_messages(messages))
-        return join(parts)
+        frames = join(parts)  # the receiver's own writable array, as a hardware bus hands out (one type for its
+        return frames if frames.flags.writeable else frames.copy()  # compiled passes, however many parts)
 
     def _next(self) -> can.Message | None:
         if not self._queue:

@@ -1,0 +1,67 @@
+"""No numba compile inside the real-time control loop: every kernel the bench loop calls is compiled, or loaded
+from numba's cache, when the bench is assembled (DriverBench and the run writer's layout), never at a first call
+after the loop has commanded the bench (a compile there stops polling and interlocks for seconds)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+TESTS = Path(__file__).resolve().parent
+
+# A fresh process (numba's cache warm or cold alike): every new signature numba takes on (compiled or loaded from
+# its cache) is noted with the phase it came in and whether the simulated bench asked for it (a sim_bench frame on
+# the stack: its emulators and plant, not the bench loop's drivers, devices and writer).
+_PROBE = r"""
+import json, sys, tempfile
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+from numba.core.dispatcher import Dispatcher
+
+phase, seen = ["open"], []
+compile_once = Dispatcher.compile
+
+def noting_compile(self, sig):
+    before = len(self.overloads)
+    entry = compile_once(self, sig)
+    if len(self.overloads) > before:
+        frame, simulator = sys._getframe(1), False
+        while frame is not None and not simulator:
+            simulator = frame.f_globals.get("__name__", "").startswith("sim_bench")
+            frame = frame.f_back
+        seen.append([phase[0], f"{self.py_func.__module__}.{self.py_func.__qualname__}", str(sig), simulator])
+    return entry
+
+Dispatcher.compile = noting_compile
+from benchlab.runner.clock import RealClock
+from benchlab.runner.engine import Runner
+from test_runner import _launch_and_open
+
+run_once = Runner.run
+
+def loop_run(self, *args, **kwargs):
+    phase[0] = "loop"  # bench and writer are assembled: from here on the loop commands the bench
+    return run_once(self, *args, **kwargs)
+
+Runner.run = loop_run
+_launch_and_open(Path(tempfile.mkdtemp()) / "rt.h5", RealClock())
+print(json.dumps(seen))
+"""
+
+
+def test_the_real_time_loop_compiles_no_bench_kernel():
+    """A real-time run on the emulated devices from a fresh process: the drivers', devices' and writer's kernels all
+    take their signatures before the loop starts, and none takes another inside it (one signature each)."""
+    out = subprocess.run([sys.executable, "-c", _PROBE, str(TESTS)], capture_output=True, text=True, timeout=900,
+                         cwd=TESTS.parent)
+    assert out.returncode == 0, out.stderr[-2000:]
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    bench = [(phase, name, sig) for phase, name, sig, simulator in seen if not simulator]
+    in_loop = [(name, sig) for phase, name, sig in bench if phase == "loop"]
+    assert not in_loop, f"compiled inside the control loop: {in_loop}"
+    primed = {name for phase, name, _ in bench}
+    for kernel in ("drivers.can_bench._classify_decode", "drivers.can_bench._watch", "drivers.can_bench._next_frames",
+                   "drivers.clutch_node._read_plain", "benchlab.runner.devices._take_status_frames",
+                   "benchlab.runner.devices._derived", "benchlab.acquire.writer._hold_streams",
+                   "benchlab.acquire.writer._scatter_streams", "drivers.can_log._fill_can_objects"):
+        assert kernel in primed, f"{kernel} not primed before the loop"
