@@ -647,6 +647,8 @@ def prime(layout: Layout) -> None:
     held = tuple(np.zeros((0, 1 + len(spec.columns))) for spec in builder._held)  # noqa: SLF001 - its own module
     grid = np.zeros((0, len(builder.channels)))
     _hold_streams(builder._carries, held, 0, layout.dt, builder._holds, builder._plans, grid)  # noqa: SLF001
+    for carry, readings, hold, plan in zip(builder._carries, held, builder._holds, builder._plans):  # noqa: SLF001
+        _hold_on_grid(carry, readings, 0, layout.dt, hold, plan, grid)  # readings out of time order: called alone
     _scatter(np.zeros(0), np.zeros(len(layout.aligned_units), np.int64), 0, grid)
     _scatter_streams(np.zeros(0), tuple(np.zeros(1 + len(s.columns), np.int64) for s in layout.streams),
                      np.zeros(len(layout.streams), np.int64),
