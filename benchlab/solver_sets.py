@@ -75,7 +75,8 @@ def _base(network: ThermalNetwork, params: Params, channels: Channels, dt: float
     stages = memo.stages(network)
     n = len(disc.op_index)
     values = _conductances(network, params, channels, n, memo) + _coefficients(network, params, channels, memo)
-    first = np.unique(disc.op_index, return_index=True)[1]
+    # points are numbered in order of first appearance: a point's first sample is where the running maximum grows
+    first = np.flatnonzero(np.diff(np.maximum.accumulate(disc.op_index), prepend=-1))
     return _Base(values, stages.points[1], disc.op_index, first, disc.Ad, disc.Bd, list(stages.columns), disc.inputs)
 
 
