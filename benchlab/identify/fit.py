@@ -99,7 +99,7 @@ def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_s
     """`residual_vector` of each parameter set, bit for bit, computed together: the sets of a forward-difference
     Jacobian, each near `base` (benchlab.solver_sets)."""
     parts: list[list[np.ndarray]] = [[] for _ in param_sets]
-    for data in datasets:
+    for data in datasets if param_sets else ():
         x0s = np.array([initial_state(network, data, params) for params in param_sets])
         runs = run_network_sets(network, base, param_sets, data.channels, data.dt, x0s, KEY_RESOLUTION, data.memo)
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
