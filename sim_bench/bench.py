@@ -19,6 +19,7 @@ overrides and limits in one object that opens its `SimBench` for the runner's `o
 
 from __future__ import annotations
 
+import copy
 import itertools
 import json
 import math
@@ -35,7 +36,7 @@ from protocols.limits import BenchLimits
 from sim_bench.clock import SimClock
 from benchlab.drivetrain import DrivetrainFacts
 from sim_bench.drivetrain import Drivetrain
-from sim_bench.emulators import registry
+from sim_bench.emulators import can_controllers, clutch_node, registry, sim_can_bus
 from sim_bench.emulators.can_controllers import CanBenchEmulator
 from sim_bench.emulators.clutch_node import ClutchNodeEmulator
 from sim_bench.emulators.drivetrain import DrivetrainActuals
@@ -114,9 +115,18 @@ class SimPhysics:
         self.solver_calls = 0
         self._truth_k0 = k0  # grid index of the first recorded true state
         self._truth = np.full((0, len(self.plant.state_names)), np.nan)
-        # compiled now rather than at the first answer that needs it (actuals older than the newest chunk, as on
-        # wall-clock time): compiling there (≈ 0.2 s) silenced the emulated controllers past the driver's limit
-        _measured(np.empty((0, 0)), float(config.position_stroke_mm), float(self.gear))
+        self.prime()
+
+    def prime(self) -> None:
+        """Compile (or load from numba's cache) the physics' kernels now rather than at the first answer that needs
+        them: on wall-clock time a compile there (seconds on a cold cache) silences the emulated controllers past
+        the driver's limit. The look-ups on no times, drivetrain and plant on two samples from a copy of the
+        drivetrain, nothing computed kept (state, chunks, random generators unchanged)."""
+        width = len(_ACTUAL_SOURCES) + 3  # + speed noise (2) and torque noise, as `_compute` stacks them
+        _grid_rows(np.zeros(0), self.dt, self._end, np.zeros((0, 2)))
+        _measured_at(np.zeros(0), self.dt, self._end, np.zeros((0, width)), self.cfg.position_stroke_mm, self.gear)
+        _measured(np.zeros((0, width)), self.cfg.position_stroke_mm, self.gear)
+        self.plant.prime(self._channels(copy.copy(self.drivetrain), self._end, 2), self.dt)
 
     # -- grid and chunks -----------------------------------------------------------------------------
     def _index(self, t: float) -> int:
@@ -129,12 +139,7 @@ class SimPhysics:
     def _compute(self, n: int) -> None:
         k0 = self._end
         self._apply_stuck(k0 * self.dt)
-        cols = self.drivetrain.advance(n, self.dt)
-        if self.stuck is not None:
-            cols["clutch_state"][:] = 1.0
-        cols["T_ambient"] = self._ambient(np.arange(k0, k0 + n))
-        cols["fault_heat_F"] = np.full(n, self.fault_heat["F"])
-        cols["fault_heat_A"] = np.full(n, self.fault_heat["A"])
+        cols = self._channels(self.drivetrain, k0, n)
         states = self.plant.advance(cols, self.dt)
         temps = self.plant.sensor_temperatures(states)
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
@@ -174,6 +179,16 @@ class SimPhysics:
                 return cols, temps, k - k0
         k0, cols, temps = self._chunks[0]  # older than kept: the oldest sample we have
         return cols, temps, 0
+
+    def _channels(self, drivetrain: Drivetrain, k0: int, n: int) -> dict[str, np.ndarray]:
+        """The plant's channels on grid points k0 .. k0+n-1: `drivetrain` advanced over them, ambient, fault heat."""
+        cols = drivetrain.advance(n, self.dt)
+        if self.stuck is not None:
+            cols["clutch_state"][:] = 1.0
+        cols["T_ambient"] = self._ambient(np.arange(k0, k0 + n))
+        cols["fault_heat_F"] = np.full(n, self.fault_heat["F"])
+        cols["fault_heat_A"] = np.full(n, self.fault_heat["A"])
+        return cols
 
     def _cut(self, t: float) -> None:
         """Set-points change at t: drop everything computed from the first grid point at or after t, restore the state there."""
@@ -404,6 +419,11 @@ class SimBench:
         s = config.sensors
         self._dropout_rate = s.dropouts_per_hour / 3600.0 if config.dropouts else 0.0
         self._next_dropout = self._draw_next(self.clock())
+        # the emulators' kernels compiled (or loaded from numba's cache) before any driver talks to them: a compile
+        # inside a real-time run silences the emulated controllers past the driver's limit (the physics' own
+        # kernels were primed by SimPhysics)
+        for module in (can_controllers, clutch_node, sim_can_bus):
+            module.prime()
 
     @property
     def urls(self) -> dict[str, str]:

@@ -153,14 +153,25 @@ class ThermalPlant:
 
     def advance(self, channels: Mapping[str, np.ndarray], dt: float) -> dict[str, np.ndarray]:
         """True state temperatures at the start of each sample of `channels`; the state moves to their end."""
+        states = self._states_from_now(channels, dt)
+        self.state = states[-1].copy()
+        return {name: states[:-1, i] for i, name in enumerate(self.state_names)}
+
+    def prime(self, channels: Mapping[str, np.ndarray], dt: float) -> None:
+        """Compile (or load from numba's cache) the solver kernels `advance` calls, on a few samples of the
+        channels it is given (a first-call compile in a real-time run stalls the emulated devices); the state
+        is not changed."""
+        self._states_from_now(channels, dt)
+
+    def _states_from_now(self, channels: Mapping[str, np.ndarray], dt: float) -> np.ndarray:
+        """States (N + 1, n) over `channels` from the current state, which is left as it is."""
         if self.state is None:
             raise RuntimeError("reset() the plant before advancing it")
         channels = dict(channels)
         states = run_network(self.network, self.params, self._with_states(channels, None), dt, self.state)
         for _ in range(self.RADIATION_ITERATIONS if self._iterative else 0):
             states = run_network(self.network, self.params, self._with_states(channels, states), dt, self.state)
-        self.state = states[-1].copy()
-        return {name: states[:-1, i] for i, name in enumerate(self.state_names)}
+        return states
 
     def _with_states(self, channels: dict[str, np.ndarray], states: np.ndarray | None) -> dict[str, np.ndarray]:
         if not self._iterative:

@@ -1,6 +1,7 @@
 """No numba compile inside the real-time control loop: every kernel the bench loop calls is compiled, or loaded
-from numba's cache, when the bench is assembled (DriverBench and the run writer's layout), never at a first call
-after the loop has commanded the bench (a compile there stops polling and interlocks for seconds)."""
+from numba's cache, when the bench is assembled (DriverBench and the run writer's layout), and every kernel of the
+simulated bench (emulators, physics, the plant's solver) when it is built, never at a first call after the loop has
+commanded the bench (a compile there stops polling and interlocks, or silences the emulated devices, for seconds)."""
 
 import json
 import subprocess
@@ -10,8 +11,7 @@ from pathlib import Path
 TESTS = Path(__file__).resolve().parent
 
 # A fresh process (numba's cache warm or cold alike): every new signature numba takes on (compiled or loaded from
-# its cache) is noted with the phase it came in and whether the simulated bench asked for it (a sim_bench frame on
-# the stack: its emulators and plant, not the bench loop's drivers, devices and writer).
+# its cache) is noted with the phase it came in.
 _PROBE = r"""
 import json, sys, tempfile
 from pathlib import Path
@@ -25,11 +25,7 @@ def noting_compile(self, sig):
     before = len(self.overloads)
     entry = compile_once(self, sig)
     if len(self.overloads) > before:
-        frame, simulator = sys._getframe(1), False
-        while frame is not None and not simulator:
-            simulator = frame.f_globals.get("__name__", "").startswith("sim_bench")
-            frame = frame.f_back
-        seen.append([phase[0], f"{self.py_func.__module__}.{self.py_func.__qualname__}", str(sig), simulator])
+        seen.append([phase[0], f"{self.py_func.__module__}.{self.py_func.__qualname__}", str(sig)])
     return entry
 
 Dispatcher.compile = noting_compile
@@ -49,19 +45,26 @@ print(json.dumps(seen))
 """
 
 
-def test_the_real_time_loop_compiles_no_bench_kernel():
-    """A real-time run on the emulated devices from a fresh process: the drivers', devices' and writer's kernels all
-    take their signatures before the loop starts, and none takes another inside it (one signature each)."""
+def test_the_real_time_loop_compiles_nothing():
+    """A real-time run on the emulated devices from a fresh process: the drivers', devices' and writer's kernels and
+    the simulated bench's (emulators, physics, solver) all take their signatures before the loop starts, nothing
+    takes one inside it, and each of the simulated bench's kernels takes one signature."""
     out = subprocess.run([sys.executable, "-c", _PROBE, str(TESTS)], capture_output=True, text=True, timeout=900,
                          cwd=TESTS.parent)
     assert out.returncode == 0, out.stderr[-2000:]
     seen = json.loads(out.stdout.strip().splitlines()[-1])
-    bench = [(phase, name, sig) for phase, name, sig, simulator in seen if not simulator]
-    in_loop = [(name, sig) for phase, name, sig in bench if phase == "loop"]
+    in_loop = [(name, sig) for phase, name, sig in seen if phase == "loop"]
     assert not in_loop, f"compiled inside the control loop: {in_loop}"
-    primed = {name for phase, name, _ in bench}
+    primed = {name for phase, name, _ in seen}
     for kernel in ("drivers.can_bench._classify_decode", "drivers.can_bench._watch", "drivers.can_bench._next_frames",
                    "drivers.clutch_node._read_plain", "benchlab.runner.devices._take_status_frames",
                    "benchlab.runner.devices._derived", "benchlab.acquire.writer._hold_streams",
-                   "benchlab.acquire.writer._scatter_streams", "drivers.can_log._fill_can_objects"):
+                   "benchlab.acquire.writer._scatter_streams", "drivers.can_log._fill_can_objects",
+                   "sim_bench.emulators.can_controllers._take_commands", "sim_bench.emulators.can_controllers._due_frames",
+                   "sim_bench.emulators.can_controllers._frames", "sim_bench.emulators.clutch_node._frame_wire",
+                   "sim_bench.emulators.sim_can_bus._any_unstamped", "sim_bench.bench._grid_rows",
+                   "sim_bench.bench._measured_at", "sim_bench.drivetrain._fill_piece", "benchlab.solver._zoh_kernel",
+                   "benchlab.solver._propagate4"):
         assert kernel in primed, f"{kernel} not primed before the loop"
+    simulated = [name for _, name, _ in seen if name.startswith(("sim_bench.", "benchlab.solver."))]
+    assert len(simulated) == len(set(simulated)), f"a simulated bench kernel took two signatures: {sorted(simulated)}"

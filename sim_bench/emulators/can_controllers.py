@@ -26,7 +26,7 @@ from numba import njit
 
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, compile_codecs, decode_row, encode_rows
-from drivers.can_frames import EXTENDED, drain, make_frames, send_all
+from drivers.can_frames import EXTENDED, FRAME, drain, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
 
@@ -343,8 +343,9 @@ def _take_commands(frames: np.ndarray, rx: np.ndarray, width: int, bits: np.ndar
             decode_row(payloads[i], which[i], bits, linear, values[i])
             valid[i] = True
             ok += 1
-    first = (_refresh_commands(which, stamps, values, valid, 0, now, earliest, rx, setpoint, taken, last_cmd, enabled,
-                               timeout) if refresh else 0)
+    # from command 0 as an int64, not a literal: the one signature `_refresh` calls it with from Python
+    first = (_refresh_commands(which, stamps, values, valid, np.int64(0), now, earliest, rx, setpoint, taken, last_cmd,
+                               enabled, timeout) if refresh else 0)
     return which, stamps, payloads, values, valid, ok, first
 
 
@@ -454,3 +455,20 @@ def _frames(index: np.ndarray, stamps: np.ndarray, measured: np.ndarray, layout:
         if status[_COUNT, p] and not counters[p, _FROZEN]:
             counters[p, _ALIVE] = (counters[p, _ALIVE] + int(status[_COUNT, p])) % layout[p, 2 * w + _MODULO]
     return frames, values
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) the emulated controllers' kernels for the one signature each is called
+    with, before a real-time run: a first-call compile inside it silences the controllers past the driver's limit.
+    Each once on zero frames and zero-length arrays of the emulator's dtypes (nothing taken, sent or changed)."""
+    frames, none, index, flags = np.zeros(0, FRAME), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool)
+    bits, linear, values = np.zeros((0, 4, 0), np.uint64), np.zeros((0, 4, 0)), np.zeros((0, 0))
+    rx, setpoint = np.zeros((0, _RX_CONTROLLER + 1), np.int64), np.zeros((0, 0), bool)
+    counters, layout = np.zeros((0, _FROZEN + 1), np.int64), np.zeros((0, _SCALARS), np.int64)
+    _take_commands(frames, rx, 0, bits, linear, flags, True, 0.0, 0.0, setpoint, values, none, flags, 0.0)
+    _refresh_commands(index, none, values, flags, 0, 0.0, 0.0, rx, setpoint, values, none, flags, 0.0)
+    _due_frames(counters, 0.0, 0.0, 0.0, 0.0, none, layout, index, none, flags, False, 0.0)
+    _frames(np.zeros((_ROW + 1, 0), np.int64), none, np.zeros((len(_ACTUALS), 0)), layout,
+            np.zeros((_COUNT + 1, 0)), counters, frames, bits, linear, flags)
+    _status(0.0, 0, math.nan, False, False, 0.0)
+    _is_timed_out(0.0, math.nan, False, 0.0)

@@ -23,14 +23,15 @@ from sim_bench.emulators.providers import ConstantNodeInputs, NodeInputProvider,
 Damage = Literal["flip", "truncate", "garbage"]
 _OPEN = (node_frame.CH1_OPEN, node_frame.CH2_OPEN)
 _SHORT = (node_frame.CH1_SHORT, node_frame.CH2_SHORT)
+SHORT_OHM, LOW_SUPPLY_MV = 150.0, 3600  # the emulator's defaults: a sensor below this is short, a supply low
 
 
 class ClutchNodeEmulator:
     """Serial endpoint producing node frames from `provider.node_inputs_at(times)` every `period_s` of clock time."""
 
     def __init__(self, provider: NodeInputProvider | None = None, *, period_s: float = 0.05,
-                 clock: Callable[[], float] = time.monotonic, short_ohm: float = 150.0,
-                 low_supply_mv: int = 3600) -> None:
+                 clock: Callable[[], float] = time.monotonic, short_ohm: float = SHORT_OHM,
+                 low_supply_mv: int = LOW_SUPPLY_MV) -> None:
         self.provider = provider or ConstantNodeInputs()
         self.period_s, self.clock = period_s, clock
         self.short_ohm, self.low_supply_mv = short_ohm, low_supply_mv
@@ -177,3 +178,11 @@ def _frame_wire(times: np.ndarray, ohm: np.ndarray, link: np.ndarray, t_boot: fl
                 short_ohm: float, low_supply_mv: int) -> np.ndarray:  # pragma: no cover - compiled
     """The wire bytes of `_frame_fields`'s frames (node_frame.encode_rows) in the same compiled call."""
     return node_frame.wire_of_rows(_frame_fields(times, ohm, link, t_boot, seq, reset_flag, short_ohm, low_supply_mv))
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) the node emulator's kernels before a real-time run, for the one
+    signature each is called with: no frame times, one constant link row, the emulator's default limits."""
+    times, ohm, link = np.zeros(0), np.zeros((0, 2)), np.zeros((1, 3), np.int64)
+    _frame_fields(times, ohm, link, 0.0, 0, node_frame.NODE_RESET, SHORT_OHM, LOW_SUPPLY_MV)
+    _frame_wire(times, ohm, link, 0.0, 0, node_frame.NODE_RESET, SHORT_OHM, LOW_SUPPLY_MV)

@@ -24,7 +24,7 @@ import can
 import numpy as np
 from numba import njit
 
-from drivers.can_frames import frames_from_messages, join, messages_from_frames, recv_each
+from drivers.can_frames import FRAME, frames_from_messages, join, messages_from_frames, recv_each
 
 _channels: dict[str, list["SimCanBus"]] = {}
 _clocks: dict[str, Callable[[], float]] = {}
@@ -136,3 +136,8 @@ def _any_unstamped(frames: np.ndarray) -> bool:  # pragma: no cover - compiled
         if frames[i].timestamp == 0:
             return True
     return False
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) the bus's kernel before a real-time run, on zero frames."""
+    _any_unstamped(np.zeros(0, FRAME))
