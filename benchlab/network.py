@@ -120,6 +120,12 @@ def as_samples(value: "float | np.ndarray", n: int) -> np.ndarray:
     return np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr
 
 
+def sample_matrix(columns: "list[np.ndarray]", n: int) -> np.ndarray:
+    """Per-sample columns side by side: a C-ordered (n, columns) matrix, (n, 0) for none (the compiled kernels take
+    one layout)."""
+    return np.ascontiguousarray(np.stack(columns, axis=1)) if columns else np.zeros((n, 0))
+
+
 def state_channels(network: ThermalNetwork) -> dict[str, str]:
     """Each state's channel name for files and figures: the first output that reads it, else the state's own name.
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from benchlab.network import Channels, Link, Params, Source, ThermalNetwork, as_samples
+from benchlab.network import Channels, Link, Params, Source, ThermalNetwork, as_samples, sample_matrix
 from benchlab.solver_memo import NO_MEMO, LawMemo, float_bits, parameter_bits
 
 DEFAULT_RESOLUTION = 1e-6
@@ -410,7 +410,7 @@ def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: 
                 for b in network.boundaries]
     if not stages.same_columns(columns):
         stages.columns = columns
-        stages.inputs = np.ascontiguousarray(np.stack(columns, axis=1)) if columns else np.zeros((n, 0))
+        stages.inputs = sample_matrix(columns, n)
     return Discretised(op_index, Ad, Bd, stages.inputs)
 
 

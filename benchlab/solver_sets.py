@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from benchlab.network import Channels, Params, ThermalNetwork, as_samples
+from benchlab.network import Channels, Params, ThermalNetwork, as_samples, sample_matrix
 from benchlab.solver import (_coefficient, _coefficient_terms, _coefficients, _conductance, _conductances, _per_point,
                              _propagate, _propagate4, _quantised, _system_matrices, _zoh, discretise, propagate)
 from benchlab.solver_memo import LawMemo, NoMemo
@@ -45,6 +45,7 @@ class _Base:
     Bd: np.ndarray
     columns: list[np.ndarray]  # the input columns: heat flows, then boundary temperatures
     inputs: np.ndarray
+    assembly: tuple  # the network's matrix assembly steps (solver._assembly)
 
 
 def _laws(network: ThermalNetwork, channels: Channels) -> list[_Law]:
@@ -77,7 +78,8 @@ def _base(network: ThermalNetwork, params: Params, channels: Channels, dt: float
     values = _conductances(network, params, channels, n, memo) + _coefficients(network, params, channels, memo)
     # points are numbered in order of first appearance: a point's first sample is where the running maximum grows
     first = np.flatnonzero(np.diff(np.maximum.accumulate(disc.op_index), prepend=-1))
-    return _Base(values, stages.points[1], disc.op_index, first, disc.Ad, disc.Bd, list(stages.columns), disc.inputs)
+    return _Base(values, stages.points[1], disc.op_index, first, disc.Ad, disc.Bd, list(stages.columns), disc.inputs,
+                 stages.assembly)
 
 
 def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence[Params], channels: Channels,
@@ -91,9 +93,7 @@ def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence
     n = len(next(iter(channels.values())))
     laws = _laws(network, channels)
     origin = _base(network, base, channels, dt, resolution, memo)
-    stages = memo.stages(network)
-    assembly = stages.assembly
-    factor_names = {name for _, name in assembly[1] if name}
+    factor_names = {name for _, name in origin.assembly[1] if name}
     source_reads = [_reads(src.heat_flow) for src in network.sources]
     matrices_of = np.zeros(len(param_sets), dtype=np.int64)  # 0: the base's; k: the k-th moved set's
     inputs_of = np.zeros(len(param_sets), dtype=np.int64)
@@ -102,7 +102,7 @@ def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence
     for s, params in enumerate(param_sets):
         moved = _moved(base, params)
         if any(law.reads is None or law.reads & moved for law in laws) or factor_names & moved:
-            matrices = _moved_matrices(network, params, moved, laws, origin, assembly, resolution)
+            matrices = _moved_matrices(network, params, moved, laws, origin, resolution)
             if matrices is None:
                 alone[s] = propagate(discretise(network, params, channels, dt, resolution), x0s[s])
                 continue
@@ -112,7 +112,7 @@ def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence
         columns = _moved_columns(network, params, moved, source_reads, channels, origin.columns, n)
         if columns is not None:
             inputs_of[s] = len(moved_inputs)
-            moved_inputs.append(np.ascontiguousarray(np.stack(columns, axis=1)) if columns else np.zeros((n, 0)))
+            moved_inputs.append(sample_matrix(columns, n))
     Ads, Bds = [origin.Ad[None]], [origin.Bd[None]]
     if moved_A:
         Ad, Bd = _zoh(np.concatenate(moved_A), np.concatenate(moved_B), dt)
@@ -130,7 +130,7 @@ def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence
 
 
 def _moved_matrices(network: ThermalNetwork, params: Params, moved: set[str], laws: list[_Law], origin: _Base,
-                    assembly: tuple, resolution: float) -> tuple[np.ndarray, np.ndarray] | None:
+                    resolution: float) -> tuple[np.ndarray, np.ndarray] | None:
     """The continuous (A, B) of a set whose moved parameters change them, on the base's operating points; None where
     the set's laws would group the samples otherwise (a point's samples no longer agree)."""
     values = list(origin.laws)
@@ -153,7 +153,7 @@ def _moved_matrices(network: ThermalNetwork, params: Params, moved: set[str], la
     per_op = _per_point(values, varying)
     conductances = len(network.links)
     return _system_matrices(network, params, per_op[:conductances], per_op[conductances:],
-                            len(per_op[0]) if per_op else 1, assembly)
+                            len(per_op[0]) if per_op else 1, origin.assembly)
 
 
 def _moved_columns(network: ThermalNetwork, params: Params, moved: set[str], source_reads: list,

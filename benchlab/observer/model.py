@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from benchlab.errors import InputError
-from benchlab.network import (Channels, ParamChannelFunction, Params, Source, ThermalNetwork, as_samples,
+from benchlab.network import (Channels, ParamChannelFunction, Params, Source, ThermalNetwork, as_samples, sample_matrix,
                               state_channels)
 from benchlab.observer.noise import ADAPT_DRIFT, ADAPT_INITIAL, NoiseModel
 from benchlab.solver import Discretised, conductance_matrices, discretise
@@ -83,7 +83,7 @@ class ObserverModel:
     def resistances(self, channels: Mapping[str, np.ndarray], samples: int) -> np.ndarray:
         """(samples, adapted laws): each adapted law's resistance (K/W) at every sample, before correction."""
         columns = [as_samples(law(self.params, channels), samples) for law in self._adapt_laws]
-        return np.ascontiguousarray(np.stack(columns, axis=1)) if columns else np.zeros((samples, 0))
+        return sample_matrix(columns, samples)
 
     def initial_covariance(self, first_resistances: np.ndarray) -> np.ndarray:
         """P0: the noise model's spread on every temperature, ADAPT_INITIAL of the law's first resistance on each
