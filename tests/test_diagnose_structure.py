@@ -27,7 +27,7 @@ from protocols.table1 import table1_schedule
 from sim_bench import plant as P
 from sim_bench.bench import SimulatedBench
 from sim_bench.virtual_run import run_schedule
-from tests.test_diagnose import _accepted_as_documented, _floor
+from tests.test_diagnose import _accepted_as_documented, _floor, names_as_promised
 
 HOUR_S = 3600.0
 
@@ -69,8 +69,13 @@ def test_two_effects_from_the_linear_baseline_are_both_named_and_the_model_reach
     plant, run = _bench([P.gearbox_churning(35.0)], seed=211)
     result = diagnose([run], baseline="linear")
     _accepted_as_documented(result)
-    named = {(f["signal"], f["mechanism"]) for f in result["findings"]}
-    assert named == {("engine_speed", "convection"), ("clutch_speed", "heat_source")}, result["findings"]
+    alpha = result["method"]["alpha"]
+    required = [("engine_speed", "convection"), ("clutch_speed", "heat_source")]
+    # eq. (11): the plant's convection depends on the clutch state as well as on the engine speed
+    truth = {*required, ("clutch_state", "convection")}
+    for effect in required:
+        assert any(names_as_promised(f, {effect}, alpha) for f in result["findings"]), (effect, result["findings"])
+    assert all(names_as_promised(f, truth, alpha) for f in result["findings"]), result["findings"]
     assert result["best"]["rmse_K"] < 1.25 * _floor(plant, run)
     assert all(f["at_bound"] == [] for f in result["findings"])
 

@@ -162,6 +162,7 @@ class Alternative:
     gain_pct: float
     p_value: float  # its own block test against the parent
     p_vs_winner: float  # the block test that the accepted extension's held-out error is lower than this one's
+    added: int  # the parameters it would add
 
 
 @dataclass
@@ -361,63 +362,93 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
          failed: list[tuple[str, tuple[str, ...]]], pool: Sequence[Candidate] = (),
          channels: dict[str, np.ndarray] | None = None) -> Finding | None:
     """Polish and cross-validate the best-screened candidates, down the list past failed fits until CROSS_VALIDATED
-    have a good fit (at most MAX_VALIDATED tried). Of the significant ones, the simplest that the largest gain does
+    explanations have a good fit (laws of one explanation count once: they are not alternatives to each other; at
+    most MAX_VALIDATED tried). Of the significant ones, the simplest that the largest gain does
     not beat at ALPHA is the finding (_simplest_equal), with the others that are not significantly worse as its
     alternatives. Where the largest gain reads several signals, its simpler forms in `pool` (the same mechanism at
-    the same nodes on fewer of them) are validated too: a product is named only where the data ask for it. Failed
-    fits are appended to `failed`."""
-    def validate(i: int) -> tuple:  # plain values: a worker's result is pickled, the networks' laws cannot be
-        _, _, spec, params = batch[i]
-        result, bound = _polished(spec, params, current, datasets)
-        if result is None:
-            return None, bound
-        if 100.0 * (1.0 - np.sqrt(result.cost / current.cost)) < IN_SAMPLE_SHARE * MIN_GAIN_PCT:
-            return (), ()  # cannot gain MIN_GAIN_PCT held out: not cross-validated
-        held = _held_out(spec, result.params, datasets)
-        return (result.params, result.cost, result.residuals, held.predictions, held.params), bound
+    the same nodes on fewer of them) are validated too: a product is named only where the data ask for it. Every
+    other screened candidate no more complex than the one about to be named is validated before it is named, so the
+    rule applies over the whole screened list, not over the few that the screen's rough ranking happened to put
+    first. Failed fits are appended to `failed`."""
+    tried: list[Tried] = []
+    seen: set[str] = set()
+    explained: set[tuple] = set()  # the explanations (_explains) with a good fit
 
-    def record(cand: Candidate, spec: ModelSpec, values: tuple) -> None:
-        params, cost, residuals, predictions, fold_params = values
-        held = HeldOut(datasets, predictions, fold_params)
-        tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
-                           100.0 * (1.0 - held.rmse / current_held.rmse)))
+    def run(batch: Sequence[Screened]) -> None:
+        """Polish and cross-validate `batch` (on all cores) and record each."""
+        def validate(i: int) -> tuple:  # plain values: a worker's result is pickled, the networks' laws cannot be
+            _, _, spec, params = batch[i]
+            result, bound = _polished(spec, params, current, datasets)
+            if result is None:
+                return None, bound
+            if 100.0 * (1.0 - np.sqrt(result.cost / current.cost)) < IN_SAMPLE_SHARE * MIN_GAIN_PCT:
+                return (), ()  # cannot gain MIN_GAIN_PCT held out: not cross-validated
+            held = _held_out(spec, result.params, datasets)
+            return (result.params, result.cost, result.residuals, held.predictions, held.params), bound
 
-    tried, good, offered = [], 0, list(scored[:MAX_VALIDATED])
-    while offered and good < CROSS_VALIDATED:
-        batch, offered = offered[:CROSS_VALIDATED - good], offered[CROSS_VALIDATED - good:]
         for (_, cand, spec, _), (values, bound) in zip(batch, map_indices(validate, len(batch))):
+            seen.add(cand.key)
             if values is None:
                 failed.append((cand.key, bound))
                 continue
-            good += 1
+            explained.add(_explains(cand))
             if values:
-                record(cand, spec, values)
-    passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
-    if not passing:
+                params, cost, residuals, predictions, fold_params = values
+                held = HeldOut(datasets, predictions, fold_params)
+                tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
+                                   100.0 * (1.0 - held.rmse / current_held.rmse)))
+
+    offered = list(scored[:MAX_VALIDATED])
+    while offered and len(explained) < CROSS_VALIDATED:
+        batch, offered = offered[:CROSS_VALIDATED - len(explained)], offered[CROSS_VALIDATED - len(explained):]
+        run(batch)
+    named = _named(tried, current)
+    if named is None:
         return None
-    best = max(passing, key=lambda t: t.gain_pct)
+    best = max(_passing(tried), key=lambda t: t.gain_pct)
     simpler = [c for c in pool if c.mechanism == best.candidate.mechanism and c.nodes == best.candidate.nodes
-               and set(c.reads) < set(best.candidate.reads) and c.key not in {t.candidate.key for t in tried}]
+               and set(c.reads) < set(best.candidate.reads) and c.key not in seen]
     if simpler and channels is not None:
         base = current.spec.definition
-        batch = [(0.0, c, spec, _nested_start(spec, current))
-                 for c in simpler for spec in [diagnosed_spec(c.build(base, channels), datasets)]]
-        for (_, cand, spec, _), (values, bound) in zip(batch, map_indices(validate, len(batch))):
-            if values is None:
-                failed.append((cand.key, bound))
-            elif values:
-                record(cand, spec, values)
-        passing = [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
-    best = _simplest_equal(best, passing, current)
-    alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, best.held))
-                    for t in passing if _explains(t.candidate) != _explains(best.candidate)]
-    return _finding(best.candidate, best.spec, best.params, best.cost, best.residuals, current, current_held,
-                    best.held, [a for a in alternatives if a.p_vs_winner >= ALPHA])
+        run([(0.0, c, spec, _nested_start(spec, current))
+             for c in simpler for spec in [diagnosed_spec(c.build(base, channels), datasets)]])
+    while True:
+        named = _named(tried, current)
+        unseen = [s for s in scored if s[1].key not in seen
+                  and _explains(s[1]) != _explains(named.candidate)
+                  and _spec_complexity(s[2], s[1], current) <= _complexity(named, current)]
+        if not unseen:
+            break
+        run(unseen)
+    alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, named.held),
+                                len(_added(t.spec, current)))
+                    for t in _passing(tried) if _explains(t.candidate) != _explains(named.candidate)]
+    return _finding(named.candidate, named.spec, named.params, named.cost, named.residuals, current, current_held,
+                    named.held, [a for a in alternatives if a.p_vs_winner >= ALPHA])
+
+
+def _passing(tried: Sequence[Tried]) -> list[Tried]:
+    """The cross-validated extensions that pass: held-out gain of at least MIN_GAIN_PCT, "no gain" rejected at ALPHA."""
+    return [t for t in tried if t.gain_pct >= MIN_GAIN_PCT and t.p_value < ALPHA]
+
+
+def _named(tried: Sequence[Tried], current: FitResult) -> Tried | None:
+    """The extension a finding names among those cross-validated: the simplest passing one that the largest gain does
+    not beat (_simplest_equal); None where none passes."""
+    passing = _passing(tried)
+    if not passing:
+        return None
+    return _simplest_equal(max(passing, key=lambda t: t.gain_pct), passing, current)
 
 
 def _complexity(tried: Tried, current: FitResult) -> tuple[int, int]:
     """How much an extension asks of the data: the parameters it adds, then the signals it reads."""
-    return len(_added(tried.spec, current)), len(tried.candidate.reads)
+    return _spec_complexity(tried.spec, tried.candidate, current)
+
+
+def _spec_complexity(spec: ModelSpec, cand: Candidate, current: FitResult) -> tuple[int, int]:
+    """_complexity of a candidate's spec before it is fitted."""
+    return len(_added(spec, current)), len(cand.reads)
 
 
 def _added(spec: ModelSpec, current: FitResult) -> tuple[str, ...]:

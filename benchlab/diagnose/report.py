@@ -35,7 +35,8 @@ def _finding_json(f: Finding, model: ModelDefinition) -> dict:
            "ambiguous": bool(f.alternatives),
            "alternatives": [{"candidate": a.candidate.key, "signal": a.candidate.signal,
                              "mechanism": a.candidate.mechanism, "extension": a.candidate.extension,
-                             "gain_pct": a.gain_pct, "p_value": a.p_value, "p_vs_finding": a.p_vs_winner,
+                             "gain_pct": a.gain_pct, "n_params": a.added, "p_value": a.p_value,
+                             "p_vs_finding": a.p_vs_winner,
                              "tell_apart_by": telling_apart(model, c, a.candidate)} for a in f.alternatives]}
     return out
 
@@ -64,7 +65,8 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                    "failed_fits": [{"candidate": key, "at_bound": list(names)} for key, names in result.failed_fits],
                    "baseline_at_bound": list(result.baseline_at_bound),
                    "named": "of the extensions that pass, the simplest other explanation (fewest added parameters, "
-                            "then signals) that the largest gain does not beat at alpha, else the largest gain",
+                            "then signals) that the largest gain does not beat at alpha, else the largest gain; "
+                            "every screened candidate no more complex than the one named is cross-validated first",
                    "alternatives": "other extensions that passed against the same parent and that the finding does "
                                    "not beat at alpha (the same block test between the two), with the measurement "
                                    "that would tell them apart",
