@@ -51,3 +51,14 @@ def channel_nrmse_pct(measured: pd.DataFrame, simulated: pd.DataFrame,
         span = np.nanmax(measured[c].to_numpy()) - np.nanmin(measured[c].to_numpy())
         out[c] = 100.0 * rmse_k(measured, simulated, (c,)) / span if span > 0 else float("nan")
     return out
+
+
+def difference_noise(values: np.ndarray) -> tuple[float, int]:
+    """The white noise in a smooth measured signal, from its second differences (Gasser, Sroka & Jennen-Steinmetz
+    1986): a temperature sampled at seconds barely curves between samples, so v[i-1] - 2 v[i] + v[i+1] is noise of
+    variance 6 sigma^2; the median absolute deviation keeps kinks and steps out. Returns (sigma, differences used)."""
+    d2 = values[2:] - 2.0 * values[1:-1] + values[:-2]
+    d2 = d2[np.isfinite(d2)]
+    if d2.size < 10:
+        return float("nan"), 0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)), int(d2.size)

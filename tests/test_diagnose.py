@@ -40,7 +40,7 @@ def _accepted_as_documented(result: dict) -> None:
 
 def names_as_promised(finding: dict, truth: set[tuple[str | None, str]], alpha: float) -> bool:
     """The finding names a truth, or a truth is listed in its alternatives as not beaten at alpha and adds no fewer
-    parameters: the method names the simplest of the explanations it cannot tell apart (docs/diagnose.md, step 6)."""
+    parameters: the method names the simplest of the explanations it cannot tell apart (docs/diagnose.md, step 7)."""
     if (finding["signal"], finding["mechanism"]) in truth:
         return True
     return any((a["signal"], a["mechanism"]) in truth and a["p_vs_finding"] >= alpha

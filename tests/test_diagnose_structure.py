@@ -11,6 +11,8 @@ Each uses a run no other test uses, generated here; nothing is tuned to the seed
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -92,9 +94,40 @@ def test_a_cover_between_plate_and_air_is_named_as_a_node_bridging_them():
 
 @pytest.mark.parametrize("seed", [231, 232, 233])
 def test_a_correct_model_gets_no_finding(seed):
-    _, run = _bench([], seed)
+    plant, run = _bench([], seed)
     result = diagnose([run], baseline="nonlinear")
     assert result["findings"] == []
+    # the noise floor estimated from the measurements alone is the truth's own error, and the correct model sits on it
+    assert result["floor"]["noise_K"] == pytest.approx(_floor(plant, run), rel=0.1)
+    assert result["floor"]["best_ratio"] < 1.5 and not result["floor"]["beyond_library"]
+
+
+def test_a_baseline_parameter_on_its_bound_does_not_silence_discovery():
+    """A model file whose bound binds (R_Feng at most 2 K/W, the plant's own value): without the engine-side heat the
+    baseline fit presses R_Feng onto that bound, and every fit of the true source leaves it there. Held there while
+    candidates are judged, the true source is named, and the model reaches the floor (issue 31)."""
+    model = builtin("nonlinear")
+    bounded = replace(model.parameters["R_Feng"], max=2.0)
+    model = replace(model, parameters={**model.parameters, "R_Feng": bounded})
+    plant, run = _bench([P.engine_heat(40.0)], seed=251)
+    result = diagnose([run], baseline=model)
+    assert [(b["parameter"], b["bound"]) for b in result["method"]["baseline_bounds"]] == [("R_Feng", "max")]
+    assert result["findings"] and names_as_promised(result["findings"][0], {("engine_speed", "heat_source")},
+                                                    result["method"]["alpha"]), result["findings"]
+    assert not any("R_Feng" in f["at_bound"] for f in result["method"]["failed_fits"])
+    assert result["best"]["rmse_K"] < 1.25 * _floor(plant, run)
+
+
+def test_an_error_beyond_the_library_is_said_to_be_so():
+    """A heater in the chamber that the runs do not record, switched on a clock of its own (40 W for about 5 of every
+    15 minutes, whatever the schedule does): no law of the recorded signals can follow it, so whatever diagnose adds,
+    the final model stays far above the measurements' noise floor, and it says so."""
+    def heater_power(ch):  # the plant is advanced over the whole run at once, at run_schedule's 10 ms
+        time = np.arange(len(ch["engine_speed"])) * 0.01
+        return 40.0 * (np.sin(2.0 * np.pi * time / 900.0) > 0.5)
+    _, run = _bench([P.custom_source("hidden_heater", "A", None, "other", heater_power)], seed=252)
+    result = diagnose([run], baseline="nonlinear")
+    assert result["floor"]["beyond_library"] and result["floor"]["best_ratio"] >= 3.0, result["floor"]
 
 
 def test_a_correct_model_gets_no_finding_on_a_run_through_the_drivers(tmp_path):

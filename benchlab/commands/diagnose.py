@@ -51,14 +51,19 @@ def print_report(result: dict) -> None:
     top = result["evidence"][0]
     print(f"  strongest evidence: {top['signal']} explains {top['explained_pct']:.0f} % of the {top['channel']} "
           f"residual {top['form']} (circular shifts: {top['shifted_pct']:.0f} %, p = {top['p_value']:.3f})")
+    for bound in result["method"]["baseline_bounds"]:
+        print(f"  {bound['parameter']} = {bound['value']:.6g} sits on its {bound['bound']} ({bound['limit']:.6g}): "
+              f"{bound['advice']}")
     if not result["findings"]:
         print("no finding: no extension lowers the held-out error significantly; the model is kept as it is")
     for f in result["findings"]:
         print(f"finding: {f['summary']}\n  signal {f['signal']}, mechanism {f['mechanism']}, extension "
               f"{f['extension']}\n  held-out RMSE {f['rmse_before_K']:.3f} -> {f['rmse_after_K']:.3f} K, "
               f"gain {f['gain_pct']:.1f} % (p = {f['p_value']:.2g})")
-    best = result["best"]
+    best, floor = result["best"], result["floor"]
     print(f"best {best['model']}: held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
+    print(f"noise floor of the measurements {floor['noise_K']:.4f} K: baseline {floor['baseline_ratio']:.1f}x, "
+          f"best {floor['best_ratio']:.1f}x; {floor['verdict']}")
 
 
 def check_report_dir(path: str) -> Path:

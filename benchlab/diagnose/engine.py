@@ -43,7 +43,7 @@ from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import (FitResult, coordinate_bounds, fit, fit_multistart, from_coordinates, residual_vector,
                                    simulate_outputs, to_coordinates)
 from benchlab.identify.spec import ModelSpec
-from benchlab.metrics import nrmse_pct, residual
+from benchlab.metrics import difference_noise, nrmse_pct, residual
 from benchlab.model.build import build_spec
 from benchlab.model.catalog import resolve_model
 from benchlab.model.definition import ModelDefinition
@@ -71,6 +71,7 @@ MAX_VALIDATED = 6  # screened candidates polished at most per round, failed fits
 GLOBAL_STARTS = 2  # the refit after an acceptance: scouts from the model file's neutral start, beside the warm one
 BOUND_TOL = 1e-3  # a fitted coordinate this close to a bound, as a share of its range, is on it
 MAX_ROUNDS = 3
+BEYOND_FLOOR = 3.0  # a final model this many times the measurements' noise floor has an error left no finding explains
 # The flywheel's temperature at t = 0 is fitted per run: a run that starts with a launch leaves one
 # noisy reading to start from, and the fit then bends parameters (and spurious extensions gain
 # 5-10 %) to absorb that start error. Air and housing start from a 10 s line fit (identify.data).
@@ -174,8 +175,18 @@ class Diagnosis:
     findings: list[Finding]
     final: FitResult
     final_held: HeldOut
-    baseline_at_bound: tuple[str, ...] = ()  # the baseline fit's parameters on a bound
+    baseline_at_bound: list[tuple[str, str]] = field(default_factory=list)  # the baseline's parameters on a bound,
+    # with the bound ("min", "max") each sits on: held there while candidates are judged (pinned)
     failed_fits: list[tuple[str, tuple[str, ...]]] = field(default_factory=list)  # candidate, parameters on a bound
+    noise_floor: float = float("nan")  # K: the measurements' own noise at the fitting step (noise_floor)
+
+
+def noise_floor(datasets: Sequence[FitData]) -> float:
+    """The RMSE a perfect model would score, K: the fitting targets' white noise (metrics.difference_noise), pooled
+    over every target of every run. Measured on the simulated bench it is within 3 % of the true sensors' error."""
+    pooled = [difference_noise(values) for d in datasets for values in d.targets.values()]
+    count = sum(n for _, n in pooled)
+    return float(np.sqrt(sum(sigma ** 2 * n for sigma, n in pooled if n) / count)) if count else float("nan")
 
 
 def _folds(datasets: Sequence[FitData]) -> list[tuple[list[FitData], list[FitData]]]:
@@ -235,9 +246,27 @@ Screened = tuple[float, Candidate, ModelSpec, dict[str, float]]  # in-sample cos
 
 def at_bound(result: FitResult) -> tuple[str, ...]:
     """The free parameters a fit left on (within BOUND_TOL of the range of) a bound: where they sit, the fit failed."""
+    return tuple(name for name, _ in bound_sides(result))
+
+
+def bound_sides(result: FitResult) -> list[tuple[str, str]]:
+    """Each free parameter on a bound with the side it sits on ("min" or "max"): the bound a user would widen."""
     x, (lo, hi) = to_coordinates(result.spec, result.params), coordinate_bounds(result.spec)
-    near = np.minimum(x - lo, hi - x) <= BOUND_TOL * (hi - lo)
-    return tuple(p.name for p, n in zip(result.spec.free, near) if n)
+    tol = BOUND_TOL * (hi - lo)
+    return [(p.name, "min" if x[j] - lo[j] <= tol[j] else "max") for j, p in enumerate(result.spec.free)
+            if min(x[j] - lo[j], hi[j] - x[j]) <= tol[j]]
+
+
+def pinned(current: FitResult, datasets: Sequence[FitData]) -> FitResult:
+    """The current fit with its model's parameters that sit on a bound held there, the rest refitted from where they
+    are: candidates are then judged by what they add, and only their own new parameters on a bound can fail them
+    (a real model file's bounds bind, and a baseline parameter on its bound must not silence discovery)."""
+    model = current.spec.definition
+    held = {name: current.params[name] for name in at_bound(current) if name in model.parameters}
+    if not held:
+        return current
+    spec = diagnosed_spec(model.with_fixed(held), datasets)
+    return fit(spec, datasets, max_nfev=HELD_OUT_NFEV, start={p.name: current.params[p.name] for p in spec.free})
 
 
 def _nested_start(spec: ModelSpec, current: FitResult) -> dict[str, float]:
@@ -329,18 +358,21 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
 def _polished(spec: ModelSpec, warm: dict[str, float], current: FitResult,
               datasets: Sequence[FitData]) -> tuple[FitResult | None, tuple[str, ...]]:
     """A candidate fitted to convergence from its warm (screened) start, and from the model file's neutral start
-    (the new parameters nested) scouted and polished where it does better; the better fit with no parameter on a
-    bound, or None and the parameters on a bound."""
+    (the new parameters nested) scouted and polished where it does better; the better fit with none of the
+    candidate's own new parameters on a bound, or None and those parameters."""
     neutral = {**{p.name: p.initial for p in spec.free},
                **{k: v for k, v in current.params.items() if k.startswith("init_") and k in warm}}
     fits = [fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: warm[p.name] for p in spec.free})]
     scout = fit(spec, datasets, max_nfev=SCOUT_NFEV, start={p.name: neutral[p.name] for p in spec.free})
     if scout.cost < fits[0].cost or at_bound(fits[0]):
         fits.append(fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: scout.params[p.name] for p in spec.free}))
-    good = [r for r in fits if not at_bound(r)]
+    def own_at_bound(r: FitResult) -> tuple[str, ...]:
+        return tuple(name for name in at_bound(r) if name not in current.params)
+
+    good = [r for r in fits if not own_at_bound(r)]
     if good:
         return min(good, key=lambda r: r.cost), ()
-    return None, at_bound(min(fits, key=lambda r: r.cost))
+    return None, own_at_bound(min(fits, key=lambda r: r.cost))
 
 
 @dataclass
@@ -564,16 +596,17 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
     for round_ in range(1, MAX_ROUNDS + 1):
         used = {f.candidate.key for f in findings}
         remaining = [c for c in library if c.key not in used]
-        finding = None
+        finding, judged = None, pinned(current, datasets)
         for physical, what in ((True, "mechanisms"), (False, "learned flows")):
             if finding is None:
                 pool = [c for c in remaining if c.physical == physical]
-                finding = _try(_screen(pool, current, datasets, channels, progress,
-                                       f"diagnose round {round_}: {what}"), current, current_held, datasets, failed,
+                finding = _try(_screen(pool, judged, datasets, channels, progress,
+                                       f"diagnose round {round_}: {what}"), judged, current_held, datasets, failed,
                                pool, channels)
         if finding is None:
             break
-        parent, current = current, global_fit(finding.spec, finding.params, datasets, seed + round_)
+        released = diagnosed_spec(finding.candidate.build(current.spec.definition, channels), datasets)
+        parent, current = current, global_fit(released, finding.params, datasets, seed + round_)
         held = _held_out(current.spec, current.params, datasets)
         finding = _finding(finding.candidate, current.spec, current.params, current.cost, current.residuals, parent,
                            current_held, held, finding.alternatives)
@@ -582,4 +615,4 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
         current_held = held
     findings, current, current_held = _accept(findings, current, current_held, base, base_held, datasets, channels)
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held,
-                     at_bound(base), failed)
+                     bound_sides(base), failed, noise_floor(datasets))

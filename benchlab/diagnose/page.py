@@ -91,6 +91,17 @@ def _why(summary: dict, evidence_png: Path, finding_pngs: Sequence[tuple[dict, s
 
 def _added(summary: dict) -> list[str]:
     parts = ["## What was added"]
+    bounds = summary["method"]["baseline_bounds"]
+    if bounds:
+        parts += ["The baseline's fit leaves these parameters on a bound of the model file; each was held there while "
+                  "the candidates were judged, so an extension is credited only with what it adds:",
+                  table(("parameter", "value", "bound", "limit", "what to do"),
+                        [(f"`{b['parameter']}`", f"{b['value']:.6g}", b["bound"], f"{b['limit']:.6g}", b["advice"])
+                         for b in bounds])]
+    floor = summary["floor"]
+    parts.append(f"Noise floor of the measurements (what a perfect model scores): **{floor['noise_K']:.4f} K**; the "
+                 f"baseline is {floor['baseline_ratio']:.1f}x it, the final model {floor['best_ratio']:.1f}x: "
+                 f"{floor['verdict']}.")
     if not summary["findings"]:
         return parts + ["Nothing: no extension lowers the held-out error significantly, so the model is kept as it is."]
     for f in summary["findings"]:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import pandas as pd
 
-from benchlab.diagnose.engine import (ALPHA, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT, SCORED_FITS, STEP_S,
-                                     STRUCTURAL_FITS, Diagnosis,
-                                     Finding, diagnose_runs)
+from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT, SCORED_FITS,
+                                     STEP_S, STRUCTURAL_FITS, Diagnosis, Finding, diagnose_runs)
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.library import telling_apart
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
@@ -41,6 +41,36 @@ def _finding_json(f: Finding, model: ModelDefinition) -> dict:
     return out
 
 
+def bounds_json(result: Diagnosis) -> list[dict]:
+    """The baseline's parameters on a bound: which bound, the value, and what to widen in the model file."""
+    specs = {p.name: p for p in result.baseline.spec.free}
+    out = []
+    for name, side in result.baseline_at_bound:
+        limit = specs[name].lower if side == "min" else specs[name].upper
+        out.append({"parameter": name, "bound": side, "value": result.baseline.params[name], "limit": limit,
+                    "advice": f"held at its {side} while candidates were judged; where values "
+                              f"{'below' if side == 'min' else 'above'} {limit:.6g} are physical, widen "
+                              f"{name}'s {side} in the model file and diagnose again"})
+    return out
+
+
+def floor_json(result: Diagnosis) -> dict:
+    """The measurements' noise floor, how far above it the baseline and the final model stay, and, where the final
+    model stays far above it, that the rest of the error is beyond what the library can name."""
+    floor = result.noise_floor
+    baseline, best = result.baseline_held.rmse / floor, result.final_held.rmse / floor
+    if not math.isfinite(best):
+        verdict = "no noise floor: no target has ten valid samples in a row"
+    elif best < BEYOND_FLOOR:
+        verdict = f"the final model is within {BEYOND_FLOOR:g}x the noise floor: nothing large is left unexplained"
+    else:
+        verdict = (f"the remaining error is {best:.1f}x the noise floor and no candidate of the library explains it: "
+                   "its cause is beyond what diagnose can name (see the evidence and the regimes for where it sits)")
+    return {"noise_K": floor, "baseline_ratio": baseline, "best_ratio": best,
+            "beyond_library": bool(math.isfinite(best) and best >= BEYOND_FLOOR),
+            "verdict": verdict}
+
+
 def summarise(result: Diagnosis, baseline: str) -> dict:
     """Contract JSON of a diagnosis: baseline held-out error, findings by gain, best model, regimes, evidence."""
     final = result.final
@@ -50,6 +80,7 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
         "findings": [_finding_json(f, result.baseline.spec.definition) for f in result.findings],
         "best": {"model": final.spec.name, "rmse_K": result.final_held.rmse,
                  "nrmse_pct": result.final_held.nrmse_pct, "params": final.params},
+        "floor": floor_json(result),
         "regimes": {"baseline": regime_errors(result.baseline_held), "best": regime_errors(result.final_held)},
         "evidence": [e.as_dict() for e in residual_evidence(result.baseline_held, result.baseline.spec,
                                                              result.baseline.params)],
@@ -63,7 +94,8 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                              f"{CROSS_VALIDATED} best of those are fitted from the warm and the neutral start and "
                              "cross-validated; after each acceptance the whole model is refitted with multistart",
                    "failed_fits": [{"candidate": key, "at_bound": list(names)} for key, names in result.failed_fits],
-                   "baseline_at_bound": list(result.baseline_at_bound),
+                   "baseline_at_bound": [name for name, _ in result.baseline_at_bound],
+                   "baseline_bounds": bounds_json(result),
                    "named": "of the extensions that pass, the simplest other explanation (fewest added parameters, "
                             "then signals) that the largest gain does not beat at alpha, else the largest gain; "
                             "every screened candidate no more complex than the one named is cross-validated first",
@@ -72,6 +104,9 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                                    "that would tell them apart",
                    "gain": "held-out RMSE without the extension vs with it; with several findings, "
                            "the combined model without it (drop-one) vs the combined model",
+                   "floor": "noise_K: the fitting targets' white noise from their second differences "
+                            "(median absolute deviation / sqrt(6), pooled), what a perfect model scores; ratios are "
+                            f"held-out RMSE / noise_K; beyond_library where the final model stays >= {BEYOND_FLOOR:g}x",
                    "bic_delta": "second to the held-out test and reported, not decided on: in-sample BIC with the "
                                 "extension minus without it, n taken as the residuals' effective sample size "
                                 "n (1 - rho) / (1 + rho); negative favours the extension",

@@ -123,6 +123,12 @@ class ModelDefinition:
                   else p for k, p in self.parameters.items()}
         return replace(self, parameters=params, name=name or self.name, alias=None)
 
+    def with_fixed(self, values: Mapping[str, float]) -> "ModelDefinition":
+        """The same model with the named parameters held at the given values (a parameter on its bound, held while
+        diagnose judges what an extension adds)."""
+        params = {k: replace(p, fixed=float(values[k])) if k in values else p for k, p in self.parameters.items()}
+        return replace(self, parameters=params)
+
     def to_doc(self) -> dict[str, Any]:
         """The model file's tables as plain data (TOML or the parameter file's JSON "network")."""
         doc: dict[str, Any] = {"schema": SCHEMA, "name": self.name}
