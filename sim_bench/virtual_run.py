@@ -8,7 +8,7 @@ and diagnosis tests at many seeds and magnitudes.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -100,13 +100,19 @@ def _dropout_mask(n: int, dt: float, sensors: SensorConfig, rng: np.random.Gener
 
 def run_schedule(steps: Sequence[Step], plant: ThermalPlant, seed: int, dt: float = 0.01,
                  sensors: SensorConfig = SensorConfig(), ambient: AmbientConfig = AmbientConfig(),
-                 initial_c: float | None = None) -> pd.DataFrame:
-    """Aligned channels of the contract's /aligned group for the schedule; attrs carry dt, events and truth."""
+                 initial_c: float | None = None,
+                 engine_c: Callable[[np.ndarray], np.ndarray] | None = None) -> pd.DataFrame:
+    """Aligned channels of the contract's /aligned group for the schedule; attrs carry dt, events and truth.
+
+    `engine_c`: the engine side's temperature (degC) against time (s), where the bench has one (an engine-side
+    heater): the plant's engine boundary reads it and the run records it as `T_engine`, wired like `T_air`."""
     rng = np.random.default_rng(seed)
     truth, events = drive_schedule(steps, dt)
     n = len(truth["engine_speed"])
     time = np.arange(n) * dt
     truth["T_ambient"] = ambient.mean_c + ambient.drift_k * np.sin(2 * np.pi * time / ambient.period_s)
+    if engine_c is not None:
+        truth["T_engine"] = np.asarray(engine_c(time), dtype=np.float64)
     plant.reset(truth["T_ambient"][0] if initial_c is None else initial_c)
     states = plant.advance(truth, dt)
     at_sensor = plant.sensor_temperatures(states)
@@ -126,8 +132,9 @@ def run_schedule(steps: Sequence[Step], plant: ThermalPlant, seed: int, dt: floa
         out[name] = _held_readings(at_sensor["T_flywheel"], node, rng, sensors.node_noise_k, sensors.quantum_k)
         out[name][radio_lost] = np.nan
     out["T_flywheel"] = 0.5 * (out["T_flywheel_1"] + out["T_flywheel_2"])
-    for name, values in (("T_air", at_sensor["T_air"]), ("T_housing", at_sensor["T_housing"]),
-                         ("T_ambient", truth["T_ambient"])):
+    wired_channels = [("T_air", at_sensor["T_air"]), ("T_housing", at_sensor["T_housing"]),
+                      ("T_ambient", truth["T_ambient"])] + ([("T_engine", truth["T_engine"])] if engine_c else [])
+    for name, values in wired_channels:
         out[name] = _held_readings(values, wired, rng, sensors.wired_noise_k, sensors.quantum_k)
     out["load_torque"] = truth["load_torque"]
     frame = pd.DataFrame(out)

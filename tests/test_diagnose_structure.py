@@ -21,6 +21,7 @@ from benchlab.diagnose.engine import STEP_S
 from benchlab.diagnose.library import candidates
 from benchlab.identify.data import prepare
 from benchlab.model.catalog import builtin
+from benchlab.model.definition import parse_model
 from benchlab.network import Link, Node
 from benchlab.params import paper_params
 from benchlab.runfile import load_run
@@ -115,6 +116,25 @@ def test_a_baseline_parameter_on_its_bound_does_not_silence_discovery():
     assert result["findings"] and names_as_promised(result["findings"][0], {("engine_speed", "heat_source")},
                                                     result["method"]["alpha"]), result["findings"]
     assert not any("R_Feng" in f["at_bound"] for f in result["method"]["failed_fits"])
+    assert result["best"]["rmse_K"] < 1.25 * _floor(plant, run)
+
+
+def test_a_measured_boundary_the_model_ignores_is_named():
+    """An engine-side heater warms the crankshaft side from 25 to about 70 degC and the run records it as T_engine;
+    the user's model file ties the flywheel's crankshaft link to ambient (the paper's own assumption). The flywheel's
+    path to T_engine, a channel the model does not read, is named, with the plant's resistance, at the floor."""
+    doc = builtin("nonlinear").to_doc()
+    doc["boundaries"]["eng"] = "T_ambient"
+    model = parse_model({**doc, "name": "clutch-engine-at-ambient"}, "user.toml")
+    plant = P.ThermalPlant(paper_params("nonlinear"))
+    run = run_schedule(table1_schedule(262, duration_s=HOUR_S), plant, seed=262,
+                       engine_c=lambda t: 25.0 + 45.0 * (1.0 - np.exp(-t / 1200.0)))
+    result = diagnose([run], baseline=model)
+    first = result["findings"][0]
+    assert (first["signal"], first["mechanism"]) == ("T_engine", "conduction"), result["findings"]
+    assert first["candidate"] in ("link_F_T_engine", "boundary_eng_T_engine")
+    if first["candidate"] == "link_F_T_engine":
+        assert first["params"]["R_F_T_engine"] == pytest.approx(plant.params["R_Feng"], rel=0.1)
     assert result["best"]["rmse_K"] < 1.25 * _floor(plant, run)
 
 

@@ -311,8 +311,8 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
             x[j] += SCORE_STEP
             columns.append(residual_vector(spec.network, {**spec.fixed, **from_coordinates(spec, x)}, datasets) - r0)
         rest = project(r0)
-        if not columns:
-            return float(r0 @ r0)
+        if not columns:  # a candidate with no new parameter (a re-pointed boundary): the current ones' step counts
+            return float(r0 @ r0 if nested else rest @ rest)
         a = project(np.column_stack(columns))
         step, *_ = np.linalg.lstsq(a, rest, rcond=1e-10)
         left = rest - a @ step

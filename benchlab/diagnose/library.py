@@ -288,6 +288,17 @@ def link_probes(model: ModelDefinition, resistance: str) -> Callable[[Mapping[st
     return lambda values: [{resistance: typical_resistance(model, values)}]
 
 
+def repoint_probes(model: ModelDefinition, boundary: str) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening starts of a re-pointed boundary (no nested start: the links now reach another temperature): its plain
+    links at their current resistance and at 10 and 100 times it (a link fitted to the wrong boundary is often
+    strong where the right one is weak)."""
+    plain = [l.resistance.text for l in model.links if boundary in l.between and l.resistance.text in model.parameters]
+
+    def probes(values: Mapping[str, float]) -> list[dict[str, float]]:
+        return [{name: factor * values[name] for name in plain if name in values} for factor in (1.0, 10.0, 100.0)]
+    return probes
+
+
 def sensor_lag(output: str, node: str) -> Build:
     """The sensor of `output` follows its node with a first-order lag, from NESTED_LAG_S."""
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
@@ -456,6 +467,64 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     return out
 
 
+def unused_temperatures(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[str]:
+    """Measured temperatures of the runs that the model does not read and that vary: a boundary it could reach or
+    should read instead (an engine-side temperature beside a model that ties the crankshaft to ambient). A sensor's
+    own copy of an output (`T_flywheel_1` beside `T_flywheel`) measures a node of the model, not a boundary."""
+    outputs = set(model.outputs) | set(model.simulated)
+    return [c for c in sorted(channels) if units.get(c) == TEMPERATURE_UNIT and c not in model.channels()
+            and c not in outputs and not any(c.startswith(f"{o}_") for o in outputs)
+            and np.nanmax(channels[c]) > np.nanmin(channels[c])]
+
+
+def repointed_boundary(boundary: str, channel: str, key: str) -> Build:
+    """The boundary read from another measured channel: no new parameter, the same links."""
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        def edit(doc: Doc) -> None:
+            doc["boundaries"][boundary] = channel
+        return revise(model, key, edit)
+    return build
+
+
+def boundary_link(node: str, channel: str, key: str) -> Build:
+    """A link from `node` to a measured temperature the model does not read, as a new boundary `ext_<channel>`
+    (boundaries and channels never share a name), from NESTED_RESISTANCE (none)."""
+    resistance, boundary = f"R_{node}_{_slug(channel)}", f"ext_{_slug(channel)}"
+
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        def edit(doc: Doc) -> None:
+            doc["boundaries"][boundary] = channel
+            doc["links"].append({"name": resistance, "between": [node, boundary], "resistance": resistance})
+            _parameter(doc, resistance, NESTED_RESISTANCE, 1e-3, 10 * NESTED_RESISTANCE, "K/W")
+        return revise(model, key, edit)
+    return build
+
+
+def unused_channel_candidates(model: ModelDefinition, temperatures: list[str],
+                              link_mechanism: Callable[[tuple[str, ...]], str]) -> list[Candidate]:
+    """Each unused measured temperature as the channel a boundary should read (re-pointed, its links' mechanism),
+    and as a new boundary that each node could reach through a link of its own (conduction)."""
+    out = []
+    for channel in temperatures:
+        for boundary, read in model.boundaries.items():
+            links = tuple(l.name for l in model.links if boundary in l.between)
+            key = f"boundary_{_slug(boundary)}_{_slug(channel)}"
+            out.append(Candidate(key, channel, link_mechanism(links) if links else "conduction",
+                                 f"boundary {boundary} = {channel} (was {read[0]})",
+                                 f"boundary {boundary} follows {channel}, a measured channel the model does not read, "
+                                 f"not {read[0]}", repointed_boundary(boundary, channel, key),
+                                 nodes=tuple(n for l in model.links if boundary in l.between for n in l.between
+                                             if n in model.nodes), exact=False, signals=(channel,),
+                                 probes=repoint_probes(model, boundary)))
+        for node in model.nodes:
+            key = f"link_{_slug(node)}_{_slug(channel)}"
+            out.append(Candidate(key, channel, "conduction", f"new link R_{node}_{channel} between {node} and {channel}",
+                                 f"node {node} exchanges heat with {channel}, a measured channel the model does not "
+                                 "read", boundary_link(node, channel, key), nodes=(node,), exact=False,
+                                 signals=(channel,), probes=link_probes(model, f"R_{node}_{_slug(channel)}")))
+    return out
+
+
 def learned(signals: list[str], nodes: list[str]) -> list[Candidate]:
     """The learned piecewise-linear heat flows, one per signal and node: tried only where no physical term gains."""
     return [Candidate(f"learned_{signal}_{node}", signal, "other", f"learned heat flow into {node} = g({signal}), "
@@ -562,9 +631,10 @@ def _clutch_mechanism(links: tuple[str, ...]) -> str:
     return "conduction" if links == ("R_Feng",) else "convection"
 
 
-def clutch_candidates(model: ModelDefinition, channels: Channels) -> list[Candidate]:
+def clutch_candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[Candidate]:
     """The clutch's library: the generator on the clutch signals with the physical names, eq. (11) where the
-    baseline lacks it, the clamped plate–flywheel conduction and radiation; learned flows into flywheel and air."""
+    baseline lacks it, the clamped plate–flywheel conduction and radiation, the measured temperatures it does not
+    read as boundaries; learned flows into flywheel and air."""
     signals = [s for s in CLUTCH_SIGNALS if _available(s, channels) and np.ptp(signal_values(s, channels)) > 0]
     out = [] if "a1" in model.parameters else [Candidate(
         "speed_convection", "engine_speed", "convection", "R_FA = R_PA = a*exp(b*engine_speed) + R0",
@@ -578,6 +648,8 @@ def clutch_candidates(model: ModelDefinition, channels: Channels) -> list[Candid
     out += [Candidate("radiation", "T_flywheel", "other", "radiation eps_A*sigma*(T_F^4 - T_T^4) from plate and flywheel",
                       "hot plate and flywheel lose heat by radiation to the housing", radiation, nodes=("P", "F", "T"),
                       exact=False, probes=radiation_probes(model))]
+    out += [replace(c, summary=_clutch_words(c.summary))
+            for c in unused_channel_candidates(model, unused_temperatures(model, channels, units), _clutch_mechanism)]
     return out + learned([s for s in CLUTCH_FALLBACK_SIGNALS if _available(s, channels)], ["F", "A"])
 
 
@@ -615,10 +687,12 @@ def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, s
     """The library for this model, none on a channel the runs lack (`load_torque` is optional in a run file)."""
     units = dict(units or {})
     if is_clutch(model):
-        found = clutch_candidates(model, channels)
+        found = clutch_candidates(model, channels, units)
     else:
         signals = network_signals(model, channels, units)
-        found = generated(model, signals, channels) + learned(signals, list(model.nodes))
+        found = (generated(model, signals, channels)
+                 + unused_channel_candidates(model, unused_temperatures(model, channels, units), lambda links: "convection")
+                 + learned(signals, list(model.nodes)))
     return [c for c in found if all(_available(s, channels) for s in c.reads)]
 
 
