@@ -66,5 +66,7 @@ class TerminalProgress(Progress):
 
 
 def for_terminal(quiet: bool = False) -> Progress:
-    """Bars when stderr is a terminal and the user did not ask for quiet; silent otherwise (pipes, files, CI)."""
-    return TerminalProgress() if not quiet and sys.stderr.isatty() else SILENT
+    """Bars when stderr is a terminal and the user did not ask for quiet; silent otherwise (pipes, files, CI, and a
+    stderr an embedding program replaced with a stream that cannot say: no `isatty`)."""
+    isatty = getattr(sys.stderr, "isatty", None)
+    return TerminalProgress() if not quiet and isatty is not None and isatty() else SILENT

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from typing import Any
 
 import h5py
@@ -17,9 +18,15 @@ from sim_bench.virtual_run import run_schedule
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Under pytest-xdist, each worker keeps to its share of the cores: the suite already runs one test per core,
+    """Ctrl-C answered in this process and the commands it starts, however the suite was launched: a shell without
+    job control starts a background job (`cmd &`, a CI runner's) with SIGINT ignored, which every child inherits,
+    and the tests of Ctrl-C would then time out or see the command run on past the interrupt.
+
+    Under pytest-xdist, each worker keeps to its share of the cores: the suite already runs one test per core,
     and a diagnosis in a worker that may use every core forks a pool onto cores the other workers are busy on
     (≈ 17 % more CPU for the same fits). benchlab.diagnose.parallel uses the cores the process may run on."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     worker, count = os.environ.get("PYTEST_XDIST_WORKER"), os.environ.get("PYTEST_XDIST_WORKER_COUNT")
     if worker is None or count is None or not hasattr(os, "sched_setaffinity"):
         return
