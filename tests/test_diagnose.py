@@ -183,6 +183,8 @@ def test_two_runs_are_diagnosed_together():
     assert [(f["signal"], f["mechanism"]) for f in result["findings"]] == [(effect.signal, effect.mechanism)]
     floor = np.sqrt(np.mean([_floor(plant, run) ** 2 for run in runs]))
     assert result["best"]["rmse_K"] < 1.25 * floor
+    assert result["findings"][0]["run_gain_pct"] > 50.0  # a real effect carries to the run it was not fitted on
+
 
 
 def test_a_run_without_the_optional_channels_is_diagnosed():

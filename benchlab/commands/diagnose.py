@@ -59,7 +59,8 @@ def print_report(result: dict) -> None:
     for f in result["findings"]:
         print(f"finding: {f['summary']}\n  signal {f['signal']}, mechanism {f['mechanism']}, extension "
               f"{f['extension']}\n  held-out RMSE {f['rmse_before_K']:.3f} -> {f['rmse_after_K']:.3f} K, "
-              f"gain {f['gain_pct']:.1f} % (p = {f['p_value']:.2g})")
+              f"gain {f['gain_pct']:.1f} % (p = {f['p_value']:.2g})"
+              + (f", {f['run_gain_pct']:.1f} % on runs it was not fitted on" if f["run_gain_pct"] is not None else ""))
     best, floor = result["best"], result["floor"]
     print(f"best {best['model']}: held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
     print(f"noise floor of the measurements {floor['noise_K']:.4f} K: baseline {floor['baseline_ratio']:.1f}x, "

@@ -144,6 +144,7 @@ class Finding:
     bic_delta: float  # in-sample BIC with the extension minus without it, on the effective sample size
     alternatives: list["Alternative"] = field(default_factory=list)  # not significantly worse than this one
     at_bound: tuple[str, ...] = ()  # parameters of the refit with this extension left on a bound (a failed fit)
+    run_gain_pct: float | None = None  # leave-one-run-out gain when it was named (several runs only)
 
     @property
     def gain_pct(self) -> float:
@@ -178,6 +179,7 @@ class Diagnosis:
     baseline_at_bound: list[tuple[str, str]] = field(default_factory=list)  # the baseline's parameters on a bound,
     # with the bound ("min", "max") each sits on: held there while candidates are judged (pinned)
     failed_fits: list[tuple[str, tuple[str, ...]]] = field(default_factory=list)  # candidate, parameters on a bound
+    not_carried: list[tuple[str, float]] = field(default_factory=list)  # candidate, its leave-one-run-out gain (%)
     noise_floor: float = float("nan")  # K: the measurements' own noise at the fitting step (noise_floor)
 
 
@@ -212,6 +214,21 @@ def _held_out(spec: ModelSpec, start: dict[str, float], datasets: Sequence[FitDa
         for pred, d in zip(predictions, test):
             for c, values in simulate_outputs(spec.network, result.params, d).items():
                 pred[c][d.mask] = values[d.mask]
+    return HeldOut(datasets, predictions, params)
+
+
+def _held_out_runs(spec: ModelSpec, start: dict[str, float], datasets: Sequence[FitData]) -> HeldOut:
+    """Leave-one-run-out: each run predicted by a fit (warm-started at `start`) on the other runs only, from its first
+    readings (its own fitted start temperatures are not used): held out means another run, not interpolation between
+    blocks of the same run."""
+    predictions, params = [], []
+    for i, d in enumerate(datasets):
+        own = {name: start[name] for name in start if name.endswith(f"@{d.name}")}
+        held = spec.with_fixed(own)
+        result = fit(held, [e for j, e in enumerate(datasets) if j != i], max_nfev=HELD_OUT_NFEV,
+                     start={p.name: start[p.name] for p in held.free})
+        params.append(result.params)
+        predictions.append(simulate_outputs(spec.network, {k: v for k, v in result.params.items() if k not in own}, d))
     return HeldOut(datasets, predictions, params)
 
 
@@ -392,7 +409,8 @@ class Tried:
 
 def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, datasets: Sequence[FitData],
          failed: list[tuple[str, tuple[str, ...]]], pool: Sequence[Candidate] = (),
-         channels: dict[str, np.ndarray] | None = None) -> Finding | None:
+         channels: dict[str, np.ndarray] | None = None,
+         not_carried: list[tuple[str, float]] | None = None) -> Finding | None:
     """Polish and cross-validate the best-screened candidates, down the list past failed fits until CROSS_VALIDATED
     explanations have a good fit (laws of one explanation count once: they are not alternatives to each other; at
     most MAX_VALIDATED tried). Of the significant ones, the simplest that the largest gain does
@@ -401,7 +419,10 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
     the same nodes on fewer of them) are validated too: a product is named only where the data ask for it. Every
     other screened candidate no more complex than the one about to be named is validated before it is named, so the
     rule applies over the whole screened list, not over the few that the screen's rough ranking happened to put
-    first. Failed fits are appended to `failed`."""
+    first. With several runs the named one must also carry to runs it was not fitted on (leave-one-run-out RMSE
+    MIN_GAIN_PCT below the current model's); one that does not is appended to `not_carried` with that gain and the
+    next is named.
+    Failed fits are appended to `failed`."""
     tried: list[Tried] = []
     seen: set[str] = set()
     explained: set[tuple] = set()  # the explanations (_explains) with a good fit
@@ -452,11 +473,26 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
         if not unseen:
             break
         run(unseen)
+    run_gain = None
+    if len(datasets) > 1:
+        parent_runs = _held_out_runs(current.spec, current.params, datasets).rmse
+        while named is not None:
+            run_gain = 100.0 * (1.0 - _held_out_runs(named.spec, named.params, datasets).rmse / parent_runs)
+            if run_gain >= MIN_GAIN_PCT:
+                break
+            if not_carried is not None:
+                not_carried.append((named.candidate.key, run_gain))
+            tried = [t for t in tried if _explains(t.candidate) != _explains(named.candidate)]
+            named = _named(tried, current)
+        if named is None:
+            return None
     alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, named.held),
                                 len(_added(t.spec, current)))
                     for t in _passing(tried) if _explains(t.candidate) != _explains(named.candidate)]
-    return _finding(named.candidate, named.spec, named.params, named.cost, named.residuals, current, current_held,
-                    named.held, [a for a in alternatives if a.p_vs_winner >= ALPHA])
+    finding = _finding(named.candidate, named.spec, named.params, named.cost, named.residuals, current, current_held,
+                       named.held, [a for a in alternatives if a.p_vs_winner >= ALPHA])
+    finding.run_gain_pct = run_gain
+    return finding
 
 
 def _passing(tried: Sequence[Tried]) -> list[Tried]:
@@ -547,7 +583,8 @@ def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], f
         return refit.cost, _held_out(spec, refit.params, datasets)
 
     return [Finding(f.candidate, final.spec, final.params, f.added, held, final_held, _block_test(held, final_held),
-                    _bic_delta(cost, final.cost, final.residuals, len(f.added)), f.alternatives, f.at_bound)
+                    _bic_delta(cost, final.cost, final.residuals, len(f.added)), f.alternatives, f.at_bound,
+                    f.run_gain_pct)
             for f, (cost, held) in zip(findings, map_indices(without, len(findings)))]
 
 
@@ -592,7 +629,7 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
     library = candidates(model, channels, units)
-    current, current_held, findings, failed = base, base_held, [], []
+    current, current_held, findings, failed, not_carried = base, base_held, [], [], []
     for round_ in range(1, MAX_ROUNDS + 1):
         used = {f.candidate.key for f in findings}
         remaining = [c for c in library if c.key not in used]
@@ -602,17 +639,19 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
                 pool = [c for c in remaining if c.physical == physical]
                 finding = _try(_screen(pool, judged, datasets, channels, progress,
                                        f"diagnose round {round_}: {what}"), judged, current_held, datasets, failed,
-                               pool, channels)
+                               pool, channels, not_carried)
         if finding is None:
             break
+        run_gain = finding.run_gain_pct
         released = diagnosed_spec(finding.candidate.build(current.spec.definition, channels), datasets)
         parent, current = current, global_fit(released, finding.params, datasets, seed + round_)
         held = _held_out(current.spec, current.params, datasets)
         finding = _finding(finding.candidate, current.spec, current.params, current.cost, current.residuals, parent,
                            current_held, held, finding.alternatives)
-        finding.at_bound = at_bound(current)
+        finding.at_bound, finding.run_gain_pct = at_bound(current), run_gain
         findings.append(finding)
         current_held = held
     findings, current, current_held = _accept(findings, current, current_held, base, base_held, datasets, channels)
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held,
-                     bound_sides(base), failed, noise_floor(datasets))
+                     baseline_at_bound=bound_sides(base), failed_fits=failed, noise_floor=noise_floor(datasets),
+                     not_carried=not_carried)

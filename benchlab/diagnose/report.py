@@ -32,6 +32,7 @@ def _finding_json(f: Finding, model: ModelDefinition) -> dict:
            "p_value": f.p_value, "bic_delta": f.bic_delta, "candidate": c.key,
            "params": {name: f.params[name] for name in f.added},
            "units": {name: _unit(f, name) for name in f.added}, "at_bound": list(f.at_bound),
+           "run_gain_pct": f.run_gain_pct,
            "ambiguous": bool(f.alternatives),
            "alternatives": [{"candidate": a.candidate.key, "signal": a.candidate.signal,
                              "mechanism": a.candidate.mechanism, "extension": a.candidate.extension,
@@ -94,6 +95,11 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                              f"{CROSS_VALIDATED} best of those are fitted from the warm and the neutral start and "
                              "cross-validated; after each acceptance the whole model is refitted with multistart",
                    "failed_fits": [{"candidate": key, "at_bound": list(names)} for key, names in result.failed_fits],
+                   "not_carried": [{"candidate": key, "run_gain_pct": gain} for key, gain in result.not_carried],
+                   "held_out_runs": "with several runs, the named extension must also lower the leave-one-run-out "
+                                    f"RMSE by {MIN_GAIN_PCT:g} % (each run predicted by a fit on the others, from its "
+                                    "first readings); run_gain_pct is that gain, not_carried the named ones that did "
+                                    "not",
                    "baseline_at_bound": [name for name, _ in result.baseline_at_bound],
                    "baseline_bounds": bounds_json(result),
                    "named": "of the extensions that pass, the simplest other explanation (fewest added parameters, "
