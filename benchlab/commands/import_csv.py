@@ -24,6 +24,7 @@ from benchlab.bounds import MAX_RUN_DURATION_S
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
 from benchlab.model.names import MODEL_HELP
+from benchlab.outputs import check_output
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -48,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
     parser.add_argument("--decimal", choices=(".", ","),
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
-    parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file (a regular file)")
 
 
 def parse_units(items: list[str]) -> dict[str, str]:
@@ -186,8 +187,7 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.model.catalog import resolve_model
         from benchlab.runfile import write_run  # and pandas, for read_csv
     required = tuple(resolve_model(args.model).required_channels()) if args.model else None
-    if Path(args.out).exists() and not args.force:
-        raise InputError(args.out, "--out", "a new run file (it exists: --force to overwrite)")
+    check_output(args.out, "--out", args.force, inputs=[args.csv], run_file=True)
     frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep, args.decimal)
     write_run(args.out, frame, dt, protocol="imported", units=units)
     print(f"{args.out}: {len(frame)} samples at dt={dt:g} s, {len(frame.columns)} channels")

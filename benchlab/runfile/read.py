@@ -40,6 +40,16 @@ def open_run(path: "str | os.PathLike[str]", mode: str = "r") -> h5py.File:
         raise InputError(path, "file", "an HDF5 run file (cannot be opened as HDF5)") from None
 
 
+def stored_schema(path: "str | os.PathLike[str]") -> str | None:
+    """The root attribute `schema` of an HDF5 file if it is the run files' (SCHEMA); None for any other file,
+    HDF5 or not (benchlab.outputs: a run file is never written over by mistake)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return SCHEMA if text(f.attrs.get("schema", "")) == SCHEMA else None
+    except OSError:
+        return None
+
+
 def load_attrs(path: "str | os.PathLike[str]") -> dict[str, str]:
     """Every root attribute of the run file as text (JSON-valued ones such as `sim_truth` stay JSON text)."""
     with open_run(path) as f:
