@@ -27,12 +27,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                              "report writes (never a run file)")
 
 
+def sweep_file(path: str) -> None:
+    """--sweep: the file `benchlab cooldown --out` wrote, or a run file at all (the events it needs are checked by the
+    analysis); InputError otherwise."""
+    with interrupts_held():  # see benchlab.cli
+        from benchlab.runfile import load_analysis, load_run
+    if load_analysis(path) is None:
+        load_run(path)
+
+
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.model.runs import check_run, load_runs
         from benchlab.params import load_params
         from benchlab.report import write_report
-        from benchlab.runfile import load_analysis, load_run
 
     out = check_output_dir(args.out, "--out", args.force)
     params = load_model_params(args.params, args.model)
@@ -42,8 +50,8 @@ def run(args: argparse.Namespace) -> int:
     if compare is not None:
         for run in [measured, *validation]:
             check_run(compare.definition, run)
-    if args.sweep and load_analysis(args.sweep) is None:  # `cooldown --out`'s file, or a run file at all
-        load_run(args.sweep)  # (the events it needs are checked by the analysis)
+    if args.sweep:
+        sweep_file(args.sweep)
     page = write_report(measured, params, out, compare, validation, args.sweep, progress=for_terminal(args.quiet))
     print(page)
     return 0
