@@ -81,8 +81,8 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
-def check_target(path: "str | os.PathLike[str]", option: str, force: bool, inputs: Sequence[str | os.PathLike[str]] = (),
-                 run_file: bool = False) -> Path:
+def check_target(path: "str | os.PathLike[str]", option: str, force: bool,
+                 inputs: Sequence[str | os.PathLike[str]] = (), run_file: bool = False) -> Path:
     """`path` if the rule lets it be written; else InputError naming the path and `option` (e.g. "--out").
 
     `inputs`: files the command reads (never written over); `run_file`: writing run files is the command's job."""

@@ -20,19 +20,6 @@ def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _refused(argv: list[str], capsys: pytest.CaptureFixture[str], *words: str) -> str:
-    """`benchlab ARGV` is exit 2 with one line holding `words`."""
-    try:
-        code = main(argv)
-    except SystemExit as exc:
-        code = exc.code
-    err = capsys.readouterr().err.strip()
-    assert code == 2, err
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    for word in words:
-        assert word in err, err
-    return err
-
 
 #: Each command with the option that names its output; RUN is the run file it reads, P the parameter file, OUT the
 #: output under test.
@@ -55,7 +42,8 @@ def _argv(command: str, run: Path, params: Path, out: Path, tmp_path: Path) -> l
 
 @pytest.mark.parametrize("force", [False, True])
 @pytest.mark.parametrize("command", sorted(COMMANDS))
-def test_no_command_writes_over_the_run_file_it_reads(command, force, foreign_run, params_file, tmp_path, capsys):
+def test_no_command_writes_over_the_run_file_it_reads(command, force, foreign_run, params_file, tmp_path,
+                                                      refused):
     """`identify c.h5 --out c.h5` used to turn the measurement into JSON; by any name and with --force, it is refused."""
     run = foreign_run
     if command == "export":  # export wants a known suffix: the same run file under a .csv name (a hard link)
@@ -63,18 +51,18 @@ def test_no_command_writes_over_the_run_file_it_reads(command, force, foreign_ru
         run = tmp_path / "run.csv"
     before = _digest(run)
     argv = _argv(command, run, params_file, run, tmp_path) + (["--force"] if force else [])
-    _refused(argv, capsys, str(run))
+    refused(argv, str(run))
     assert _digest(run) == before
     alias = tmp_path / ("alias.csv" if command == "export" else "alias.h5")
     os.link(run, alias)  # another name for the same file
     argv = _argv(command, run, params_file, alias, tmp_path) + ["--force"]
-    _refused(argv, capsys, "other input it reads")
+    refused(argv, "other input it reads")
     assert _digest(run) == before and not (tmp_path / "est.h5").exists()
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_no_command_but_a_run_writer_replaces_another_run_file(command, foreign_run, run_file, params_file, tmp_path,
-                                                                capsys):
+                                                                refused):
     """A run file that is not an input is a measurement too: only run, import and simulate may replace one (--force)."""
     target = tmp_path / ("other.csv" if command == "export" else "other.h5")
     target.write_bytes(run_file.read_bytes())
@@ -84,13 +72,14 @@ def test_no_command_but_a_run_writer_replaces_another_run_file(command, foreign_
         assert main(argv) == 0
         assert load_attrs(target)["source_run"] == str(foreign_run)
         return
-    _refused(argv, capsys, "run file")
+    refused(argv, "run file")
     assert _digest(target) == before
 
 
 @pytest.mark.parametrize("kind", ["directory", "fifo", "symlink"])
 @pytest.mark.parametrize("command", sorted(COMMANDS) + ["run", "import"])
-def test_force_never_replaces_what_is_not_a_regular_file(command, kind, foreign_run, params_file, tmp_path, capsys):
+def test_force_never_replaces_what_is_not_a_regular_file(command, kind, foreign_run, params_file, tmp_path,
+                                                         refused):
     outside = tmp_path / "elsewhere"
     outside.mkdir()
     (outside / "precious.txt").write_text("keep me")
@@ -108,7 +97,7 @@ def test_force_never_replaces_what_is_not_a_regular_file(command, kind, foreign_
         argv = ["import", str(tmp_path / "d.csv"), "--out", str(out)]
     else:
         argv = _argv(command, foreign_run, params_file, out, tmp_path)
-    _refused(argv + ["--force"], capsys, str(out), {"directory": "a directory", "fifo": "a FIFO",
+    refused(argv + ["--force"], str(out), {"directory": "a directory", "fifo": "a FIFO",
                                                      "symlink": "a symbolic link"}[kind])
     assert (outside / "precious.txt").read_text() == "keep me"
     assert {"directory": out.is_dir, "fifo": out.is_fifo, "symlink": out.is_symlink}[kind]()
@@ -116,7 +105,7 @@ def test_force_never_replaces_what_is_not_a_regular_file(command, kind, foreign_
 
 @pytest.mark.parametrize("command", ["run", "import", "simulate", "identify", "export", "observe", "wear --plot",
                                      "diagnose --save-model", "cooldown --out"])
-def test_an_existing_output_is_refused_without_force(command, foreign_run, params_file, tmp_path, capsys):
+def test_an_existing_output_is_refused_without_force(command, foreign_run, params_file, tmp_path, refused):
     out = tmp_path / ("old.csv" if command == "export" else "old.out")
     out.write_text("an earlier result")
     if command == "run":
@@ -125,12 +114,12 @@ def test_an_existing_output_is_refused_without_force(command, foreign_run, param
         argv = ["import", str(tmp_path / "d.csv"), "--out", str(out)]
     else:
         argv = _argv(command, foreign_run, params_file, out, tmp_path)
-    _refused(argv, capsys, str(out), "--force")
+    refused(argv, str(out), "--force")
     assert out.read_text() == "an earlier result"
 
 
 @pytest.mark.parametrize("command", ["identify", "simulate", "export"])
-def test_force_replaces_a_regular_file_whole(command, foreign_run, params_file, tmp_path, capsys):
+def test_force_replaces_a_regular_file_whole(command, foreign_run, params_file, tmp_path):
     out = tmp_path / ("old.csv" if command == "export" else "old.out")
     out.write_text("an earlier result")
     assert main(_argv(command, foreign_run, params_file, out, tmp_path) + ["--force"]) == 0
@@ -139,25 +128,25 @@ def test_force_replaces_a_regular_file_whole(command, foreign_run, params_file, 
 
 
 @pytest.mark.parametrize("argv", [["run", "--out", "R", "--cycles", "1", "table1"], ["import", "CSV", "--out", "R"]])
-def test_run_writers_replace_a_run_file_only_with_force(argv, foreign_run, run_file, tmp_path, capsys):
+def test_run_writers_replace_a_run_file_only_with_force(argv, foreign_run, run_file, tmp_path, refused):
     (tmp_path / "d.csv").write_text(load_run(run_file).iloc[:100].to_csv(index=False))
     names = {"R": str(foreign_run), "CSV": str(tmp_path / "d.csv")}
     argv = [names.get(a, a) for a in argv]
     before = _digest(foreign_run)
-    _refused(argv, capsys, "--force")
+    refused(argv, "--force")
     assert _digest(foreign_run) == before
     if argv[0] == "import":
         assert main(argv + ["--force"]) == 0 and len(load_run(foreign_run)) == 100
 
 
-def test_cooldown_leaves_the_run_file_alone_unless_asked(foreign_run, params_file, tmp_path, capsys):
+def test_cooldown_leaves_the_run_file_alone_unless_asked(foreign_run, params_file, tmp_path, refused):
     """`cooldown RUN.h5` used to write /analysis into the run by default; now only --store does (or --out elsewhere).
     The foreign run has no cool-downs: refused as such, and the file is untouched either way."""
     before = _digest(foreign_run)
-    _refused(["cooldown", str(foreign_run), "--params", str(params_file)], capsys, "/events")
+    refused(["cooldown", str(foreign_run), "--params", str(params_file)], "/events")
     assert _digest(foreign_run) == before
-    _refused(["cooldown", str(foreign_run), "--params", str(params_file), "--store", "--out", str(tmp_path / "a.h5")],
-             capsys, "--store")
+    refused(["cooldown", str(foreign_run), "--params", str(params_file), "--store", "--out", str(tmp_path / "a.h5")],
+            "--store")
 
 
 @pytest.mark.parametrize("argv, option", [
@@ -167,14 +156,14 @@ def test_cooldown_leaves_the_run_file_alone_unless_asked(foreign_run, params_fil
     (["batch", "identify", "RUN", "--out", "DIR"], "--out"),
 ])
 def test_an_output_directory_holding_files_needs_force_and_a_run_file_is_not_one(argv, option, foreign_run,
-                                                                                 params_file, tmp_path, capsys):
+                                                                                 params_file, tmp_path, refused):
     folder = tmp_path / "earlier"
     folder.mkdir()
     (folder / "report.md").write_text("an earlier page")
     names = {"RUN": str(foreign_run), "P": str(params_file)}
-    _refused([names.get(a, str(folder) if a == "DIR" else a) for a in argv], capsys, str(folder), option, "--force")
+    refused([names.get(a, str(folder) if a == "DIR" else a) for a in argv], str(folder), option, "--force")
     assert (folder / "report.md").read_text() == "an earlier page"
-    _refused([names.get(a, str(foreign_run) if a == "DIR" else a) for a in argv], capsys, option, "a directory")
+    refused([names.get(a, str(foreign_run) if a == "DIR" else a) for a in argv], option, "a directory")
 
 
 def test_replacing_refuses_a_run_file_and_leaves_nothing_on_failure(foreign_run, tmp_path):

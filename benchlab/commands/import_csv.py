@@ -20,8 +20,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from benchlab import cliargs
-from benchlab.bounds import MAX_RUN_DURATION_S
-from benchlab.errors import InputError
+from benchlab.bounds import MAX_CSV_COLUMNS, MAX_RUN_DURATION_S
+from benchlab.errors import InputError, read_document
 from benchlab.interrupts import interrupts_held
 from benchlab.model.names import MODEL_HELP
 from benchlab.outputs import check_output
@@ -80,6 +80,13 @@ def _dialect(text: str, sep: str | None, decimal: str | None) -> tuple[str, str]
     return sep, decimal
 
 
+def _check_width(path: Path, text: str, sep: str) -> None:
+    """At most MAX_CSV_COLUMNS columns, counted on the header line before any row is parsed."""
+    columns = text.partition("\n")[0].count(sep) + 1
+    if columns > MAX_CSV_COLUMNS:
+        raise InputError(path, "header", f"at most {MAX_CSV_COLUMNS} columns (channels), got {columns}")
+
+
 def _channel_names(path: Path, titles: list[str]) -> tuple[list[str], dict[str, str]]:
     """Column titles to channel names and the units the titles give; a unit in the title of a contract channel
     must be its contract unit."""
@@ -110,13 +117,13 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample
 
     required = REQUIRED if required is None else required
-    if not path.exists():
-        raise InputError(path, "file", "an existing CSV file (not found)")
+    # a spreadsheet's byte-order mark is not part of the header (utf-8-sig)
+    text = read_document(path, "CSV file", str, (), "a CSV table", encoding="utf-8-sig")
     try:
-        text = path.read_text(encoding="utf-8-sig")  # a spreadsheet's byte-order mark is not part of the header
         sep, decimal = _dialect(text, sep, decimal)
+        _check_width(path, text, sep)
         frame = pd.read_csv(io.StringIO(text), sep=sep, dtype=str, keep_default_na=False)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(path, "file", f"a CSV table ({str(exc).splitlines()[0]})") from None
     names, title_units = _channel_names(path, list(frame.columns))
     frame.columns = names

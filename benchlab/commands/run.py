@@ -81,8 +81,9 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     """Check the rest of the command line, run (or dry-run) the protocol, print the summary."""
     if not args.resume and args.protocol not in NAMES:
         raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)}, got {args.protocol!r}")
-    if args.bench != "sim" and not Path(args.bench).exists():
-        raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
+    if args.bench != "sim" and not Path(args.bench).is_file():
+        found = "a directory" if Path(args.bench).is_dir() else "not found"
+        raise InputError(args.bench, "--bench", f"'sim' or an existing BENCH.toml ({found})")
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.runner.session import RunRequest, execute
     bench = args.bench

@@ -37,6 +37,34 @@ def check_run(model: ModelDefinition, run: pd.DataFrame) -> None:
     for name in model.parameters:
         if name in run.columns:
             raise InputError(model.source, f"parameters.{name}", f"a name no channel of {source} has")
+    check_laws(model, run)
+
+
+def check_laws(model: ModelDefinition, run: pd.DataFrame) -> None:
+    """Bad input where a law, at the parameters' starting (or fixed) values on the run's samples, is not a number
+    the solver can use: a resistance that is not positive and finite, a heat flow that is not finite (a division by
+    zero, an overflow of exp). Samples where a channel the law reads is NaN are not asked."""
+    from benchlab.model.build import build_network  # the identify package: only once a run is at hand
+
+    params = {p.name: p.start if p.fixed is None else p.fixed for p in model.parameters.values()}
+    network = build_network(model)
+    laws = [(f"links[{entry.name}].resistance", link.resistance, entry.resistance.names, True)
+            for entry, link in zip(model.links, network.links)]
+    laws += [(f"sources[{entry.name}].heat", source.heat_flow, entry.heat.names, False)
+             for entry, source in zip(model.sources, network.sources)]
+    channels = {c: run[c].to_numpy(np.float64) for c in model.law_channels() if c in run.columns}
+    for entry, law, names, positive in laws:
+        reads = [channels[c] for c in names if c in channels]
+        asked = np.logical_and.reduce([np.isfinite(v) for v in reads]) if reads else np.ones(len(run), bool)
+        with np.errstate(all="ignore"):
+            values = np.broadcast_to(np.asarray(law(params, channels), dtype=np.float64), asked.shape)
+        bad = asked & ~(np.isfinite(values) & ((values > 0) if positive else True))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            what = "a positive finite resistance in K/W" if positive else "a finite heat flow in W"
+            raise InputError(model.source, entry, f"{what} at the parameters' starting values on "
+                                                  f"{run.attrs.get('source', 'the run')}, got {values[i]:g} at sample "
+                                                  f"{i} (a division by zero or an overflow?)")
 
 
 def load_runs(paths: Sequence["str | os.PathLike[str]"], model: ModelDefinition) -> list[pd.DataFrame]:
