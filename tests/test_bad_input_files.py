@@ -14,7 +14,6 @@ import h5py
 import pytest
 
 from benchlab.bounds import MAX_CSV_COLUMNS, MAX_GRID_STEP_S, MAX_RESUMES
-from benchlab.cli import main
 from benchlab.model.catalog import BUILTIN
 from test_resume_checks import aborted_run  # noqa: F401 - the fixture: a run aborted in cycle 0, resumable
 
