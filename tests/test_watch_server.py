@@ -7,14 +7,13 @@ from __future__ import annotations
 import logging
 import socket
 import struct
-import threading
 import time
 from collections.abc import Callable
 
 import pytest
 
 from benchlab.watch import server as watch_server
-from benchlab.watch.live import LiveRun
+from test_watch import serving  # tests/test_watch.py
 
 #: The time-out and bound the tests give the server (its own are READ_TIMEOUT_S, MAX_CONNECTIONS): small, so the
 #: tests stay short.
@@ -24,15 +23,8 @@ CONNECTIONS = 3
 
 @pytest.fixture()
 def served(run_file):
-    live = LiveRun(run_file)
-    server = watch_server.WatchServer(live, watch_server.listen(0), read_timeout_s=TIMEOUT_S,
-                                      max_connections=CONNECTIONS)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield server
-    server.shutdown()
-    server.server_close()
-    live.close()
+    with serving(run_file, read_timeout_s=TIMEOUT_S, max_connections=CONNECTIONS) as server:
+        yield server
 
 
 def _connect(server: watch_server.WatchServer) -> socket.socket:
