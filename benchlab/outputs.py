@@ -40,7 +40,7 @@ class OutputError(Exception):
 
 def is_no_space(exc: BaseException) -> bool:
     """Whether `exc` says the disk is full (or the file-size limit was reached), by errno or by HDF5's text."""
-    if isinstance(exc, OSError) and exc.errno in NO_SPACE_ERRNOS:
+    if isinstance(exc, OutputError) or isinstance(exc, OSError) and exc.errno in NO_SPACE_ERRNOS:
         return True
     return any(text in str(exc) for text in NO_SPACE_TEXTS)
 
