@@ -25,7 +25,7 @@ import benchlab
 import benchlab.commands
 from benchlab.errors import InputError
 from benchlab.interrupts import RedeliverInterrupts, interrupts_answered, interrupts_held
-from benchlab.outputs import OutputError
+from benchlab.outputs import OutputError, is_no_space, no_space
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
 BROKEN_PIPE_EXIT = 141
@@ -145,6 +145,10 @@ def _failed(args: argparse.Namespace | None, exc: Exception) -> int:
     if args is None or args.debug:  # a failure while building the parser is a bug: show it
         raise exc
     text = " ".join(str(exc).split())  # one line, whatever the library's text (HDF5's spans several)
+    if is_no_space(exc):  # a file some library writes (the CAN log, a figure): one line, as benchlab.outputs says
+        print(f"benchlab {args.command}: {no_space(getattr(exc, 'filename', None) or 'a file', text)}",
+              file=sys.stderr)
+        return 1
     print(f"benchlab {args.command}: failed: {type(exc).__name__}: {text}", file=sys.stderr)
     return 1
 

@@ -80,3 +80,16 @@ def test_a_full_disk_elsewhere_is_one_line_and_the_earlier_file_is_kept(argv, ou
     _one_line(done.stderr, target)
     assert target.read_text() == "an earlier result"
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["run.h5", "p.json", out])  # no partial output
+
+
+def test_a_disk_too_full_for_the_run_file_is_one_line_and_no_file(tmp_path):
+    """The run file is allocated for the planned run when it starts: no room, no file (and no CAN log without it)."""
+    out = tmp_path / "run.h5"
+    done = _child(f"""
+        from benchlab.cli import main
+        limit(1_000_000)
+        sys.exit(main(["run", "table1", "--bench", "sim", "--duration", "1800", "--out", {str(out)!r}, "--quiet"]))
+        """, tmp_path)
+    assert done.returncode == 1, done.stderr
+    _one_line(done.stderr, out)
+    assert list(tmp_path.iterdir()) == []

@@ -554,6 +554,10 @@ class RunWriter:
         try:
             self._write_file(tmp, capacity, meta, data, compact)
             os.replace(tmp, path)
+        except Exception as exc:
+            if is_no_space(exc):
+                raise no_space(path, "no room for the file; nothing written") from None
+            raise
         finally:  # interrupted: no half-made file left
             tmp.unlink(missing_ok=True)
 
