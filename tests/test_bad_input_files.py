@@ -111,6 +111,21 @@ def test_a_law_the_solver_cannot_use_is_refused_where_the_model_is_checked(law, 
     assert "RuntimeWarning" not in err and not (tmp_path / "fit.json").exists()
 
 
+@pytest.mark.parametrize("command", ["simulate", "wear", "observe", "report"])
+def test_a_parameter_file_whose_values_overflow_a_law_is_refused(command, foreign_run, params_file, tmp_path, refused):
+    """b1 = 100 1/rpm: exp(b1·ω_e) overflows at any engine speed (it used to end in exit 1 and a RuntimeWarning)."""
+    doc = json.loads(params_file.read_text())
+    doc["params"]["b1"] = 100.0
+    bad = tmp_path / "overflow.json"
+    bad.write_text(json.dumps(doc))
+    argv = {"simulate": ["simulate", str(foreign_run), "--params", str(bad), "--out", str(tmp_path / "s.h5")],
+            "wear": ["wear", str(foreign_run), "--params", str(bad)],
+            "observe": ["observe", str(foreign_run), "--params", str(bad), "--out", str(tmp_path / "o.h5")],
+            "report": ["report", str(foreign_run), "--params", str(bad), "--out", str(tmp_path / "r")]}[command]
+    refused(argv, str(bad), "links[R_PA].resistance", "got inf")
+    assert not any(p.suffix in (".h5", ".png") and p.name != "f.h5" for p in tmp_path.rglob("*"))
+
+
 def test_a_heat_flow_that_overflows_is_refused(foreign_run, tmp_path, refused):
     model = tmp_path / "m.toml"
     text = BUILTIN["linear"].read_text()

@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         check_output(args.plot, "--plot", args.force, inputs=[*inputs, args.out])
     params = load_model_params(args.params, args.model)
-    measured = load_runs([args.run], params.definition)[0]
+    measured = load_runs([args.run], params.definition, params, args.params)[0]
     clutch = load_clutch(args.clutch) if args.clutch else default_clutch()
     network = params.network
     channels = [*args.sensors, *(r.channel for r in args.reinit)]

@@ -45,11 +45,11 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_dir(args.out, "--out", args.force)
     params = load_model_params(args.params, args.model)
     compare = load_params(args.compare) if args.compare else None
-    measured = load_runs([args.run], params.definition)[0]
-    validation = load_runs(args.validate, params.definition)
+    measured = load_runs([args.run], params.definition, params, args.params)[0]
+    validation = load_runs(args.validate, params.definition, params, args.params)
     if compare is not None:
         for run in [measured, *validation]:
-            check_run(compare.definition, run)
+            check_run(compare.definition, run, compare, args.compare)
     if args.sweep:
         sweep_file(args.sweep)
     page = write_report(measured, params, out, compare, validation, args.sweep, progress=for_terminal(args.quiet))

@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
                      inputs=[args.run, args.params, *([args.clutch] if args.clutch else [])])
     spec = load_clutch(args.clutch) if args.clutch else default_clutch()
     params = load_model_params(args.params, args.model)
-    measured = load_runs([args.run], params.definition)[0]
+    measured = load_runs([args.run], params.definition, params, args.params)[0]
     for channel in REQUIRED:  # friction energy and slip need the clutch's channels, whatever the thermal model
         if channel not in measured.columns:
             raise InputError(args.run, f"/aligned/{channel}", "a clutch channel wear needs (missing)")
