@@ -43,5 +43,8 @@ MAX_RESUMES = 10_000
 #: Most columns of a CSV `benchlab import` reads: a run file holds a few dozen channels; the bound is checked on
 #: the header line, before any row is parsed (a 100 000-column file used to take 104 s to be refused).
 MAX_CSV_COLUMNS = 1_000
+#: Largest time stamp of a run file's grid, s: run time, or Unix time of an imported log (1e10 s is the year 2286).
+#: Beyond it float64 no longer resolves a 10 ms grid, and the uniform-grid check would pass anything.
+MAX_TIME_STAMP_S = 1e10
 #: Most worker processes of a local batch cluster: each takes a core and a run in memory; more is a typo.
 MAX_LOCAL_WORKERS = 256

@@ -195,3 +195,44 @@ def test_a_tampered_resume_file_is_exit_2_and_the_bench_never_moves(case, aborte
     refused(["run", "--resume", str(out), "--bench", "sim", "--quiet"], f"{out}: ", field, expected)
     assert opened_benches == []
     assert hashlib.sha256(out.read_bytes()).hexdigest() == before and not out.with_suffix(".resume1.blf").exists()
+
+
+def _rewrite(path: Path, name: str, values) -> None:
+    with h5py.File(path, "a") as f:
+        units = f["aligned"][name].attrs["units"]
+        del f["aligned"][name]
+        f["aligned"].create_dataset(name, data=values).attrs["units"] = units
+
+
+@pytest.mark.parametrize("case, field, expected", [
+    ("negative friction power", "/aligned/friction_power", "values in [0, "),
+    ("time stamps of 1e15 s", "/aligned/time", "time stamps within"),
+    ("dt of 1e9 s", "/aligned/time", "time stamps within"),
+])
+def test_absurd_values_in_a_run_file_are_refused(case, field, expected, foreign_run, params_file, tmp_path, refused):
+    """Values that used to be accepted silently: heat drawn out of the clutch by friction, a grid in geological
+    time (where float64 no longer resolves the step and the uniform-grid check passes anything)."""
+    import numpy as np
+
+    with h5py.File(foreign_run) as f:
+        time = f["aligned/time"][()].astype(np.float64)
+    if case == "negative friction power":
+        _rewrite(foreign_run, "friction_power", np.full(len(time), -5000.0))
+    elif case == "time stamps of 1e15 s":
+        _rewrite(foreign_run, "time", time + 1e15)
+    else:
+        _rewrite(foreign_run, "time", np.arange(len(time)) * 1e9)
+        with h5py.File(foreign_run, "a") as f:
+            f["aligned"].attrs["dt"] = 1e9
+    refused(["simulate", str(foreign_run), "--params", str(params_file), "--out", str(tmp_path / "s.h5")],
+            str(foreign_run), field, expected)
+
+
+def test_an_imported_csv_in_geological_time_is_refused(run_file, tmp_path, refused):
+    from benchlab.runfile import load_run
+
+    frame = load_run(run_file).iloc[:50]
+    frame["time"] += 1e15
+    csv = tmp_path / "d.csv"
+    frame.to_csv(csv, index=False)
+    refused(["import", str(csv), "--out", str(tmp_path / "r.h5")], str(csv), "column time", "time stamps within")

@@ -202,7 +202,7 @@ def serving(run_file, **options):
     """A WatchServer for the run file on a free port of 127.0.0.1, serving in a thread (options: WatchServer's)."""
     live = LiveRun(run_file)
     server = WatchServer(live, listen(0), **options)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
     thread.start()
     try:
         yield server

@@ -4,7 +4,6 @@ a client that goes away is a debug line, never a traceback. All on 127.0.0.1."""
 
 from __future__ import annotations
 
-import logging
 import socket
 import struct
 import time
@@ -12,6 +11,7 @@ from collections.abc import Callable
 
 import pytest
 
+from benchlab.cli import configure_logging
 from benchlab.watch import server as watch_server
 from test_watch import serving  # tests/test_watch.py
 
@@ -130,17 +130,23 @@ def test_connections_beyond_the_bound_are_answered_503_and_served_again_once_fre
     assert _ask(served, f"GET / HTTP/1.1\r\nHost: {_host(served)}\r\n\r\n")[0] == 200
 
 
-def test_a_client_that_resets_mid_answer_is_a_debug_line_not_a_traceback(served, capsys, caplog):
-    """A browser tab closed during a poll used to print a full traceback."""
-    caplog.set_level(logging.DEBUG, logger="benchlab.watch.server")
-    request = f"GET /api/update?width=8192 HTTP/1.1\r\nHost: {_host(served)}\r\n\r\n".encode()
-    for _ in range(20):
-        sock = _connect(served)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # close = reset
-        sock.sendall(request)
-        sock.close()
-    assert _wait(lambda: "went away" in caplog.text)
-    time.sleep(2 * TIMEOUT_S)  # any connection still open has timed out by now
-    assert "Traceback" not in capsys.readouterr().err
-    assert all(r.levelno == logging.DEBUG for r in caplog.records if r.name == "benchlab.watch.server")
+def test_a_client_that_resets_mid_answer_is_a_debug_line_not_a_traceback(served, capsys):
+    """A browser tab closed during a poll used to print a full traceback. Logged as `benchlab -vv watch` logs."""
+    configure_logging(2)  # benchlab's DEBUG lines on stderr, as the CLI's -vv sets them up
+    try:
+        request = f"GET /api/update?width=8192 HTTP/1.1\r\nHost: {_host(served)}\r\n\r\n".encode()
+        seen: list[str] = []
+        for _ in range(20):
+            sock = _connect(served)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # close = reset
+            sock.sendall(request)
+            sock.close()
+        assert _wait(lambda: seen.append(capsys.readouterr().err) or "went away" in "".join(seen))
+        time.sleep(2 * TIMEOUT_S)  # any connection still open has timed out by now
+        seen.append(capsys.readouterr().err)
+    finally:
+        configure_logging(0)
+    text = "".join(seen)
+    assert "Traceback" not in text and "ERROR" not in text
+    assert all(line.startswith("DEBUG benchlab.watch.server: ") for line in text.splitlines()), text
     assert _ask(served, f"GET / HTTP/1.1\r\nHost: {_host(served)}\r\n\r\n")[0] == 200

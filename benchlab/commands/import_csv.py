@@ -115,6 +115,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     import pandas as pd
 
     from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample
+    from benchlab.runfile.schema import time_stamp_problem
 
     required = REQUIRED if required is None else required
     # a spreadsheet's byte-order mark is not part of the header (utf-8-sig)
@@ -161,6 +162,8 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     time = frame["time"].to_numpy()
     if len(time) < 2 or not np.all(np.isfinite(time)):
         raise InputError(path, "column time", "at least two finite time stamps")
+    if problem := time_stamp_problem(time):
+        raise InputError(path, "column time", problem)
     dt = float(np.median(np.diff(time)))
     if dt <= 0 or np.max(np.abs(np.diff(time) - dt)) > time_step_tolerance(time, dt, np.dtype(np.float64)):
         raise InputError(path, "column time", "a uniform time grid in s (resample before importing)")

@@ -18,8 +18,8 @@ import numpy as np
 
 from benchlab.bounds import MAX_CYCLES, MAX_GRID_STEP_S, MAX_RESUMES, MAX_RUN_DURATION_S
 from benchlab.errors import InputError
-from benchlab.runfile.schema import (ALIGNED_UNITS, EVENT_FIELDS, REQUIRED, SCHEMA, time_step_tolerance,
-                                     unmeasurable_sample)
+from benchlab.runfile.schema import (ALIGNED_UNITS, EVENT_FIELDS, REQUIRED, SCHEMA, time_stamp_problem,
+                                     time_step_tolerance, unmeasurable_sample)
 from protocols.schedule import Step, steps_from_rows
 
 if TYPE_CHECKING:  # pandas loads where a frame is built: the run and watch paths read no frame
@@ -268,6 +268,8 @@ def _read_channels(path: Path, group: h5py.Group,
 def _check_time(path: Path, time: np.ndarray, dt: float, stored: np.dtype) -> None:
     if len(time) < 2:
         raise InputError(path, "/aligned/time", "at least two samples")
+    if (problem := time_stamp_problem(time)) and np.all(np.isfinite(time)):
+        raise InputError(path, "/aligned/time", problem)
     step_error = np.abs(np.diff(time) - dt)
     tolerance = time_step_tolerance(time, dt, stored) if np.all(np.isfinite(time)) else 0.0
     if not np.all(np.isfinite(time)) or np.max(step_error) > tolerance:
