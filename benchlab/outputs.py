@@ -34,13 +34,14 @@ NO_SPACE_TEXTS = ("No space left on device", "File too large", "Disk quota excee
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 HDF5_OFFSETS = (0, 512, 1024, 2048, 4096)
 
+
 class OutputError(Exception):
     """A file could not be written (a full disk): one line naming the file; the CLI exits 1."""
 
 
 def is_no_space(exc: BaseException) -> bool:
     """Whether `exc` says the disk is full (or the file-size limit was reached), by errno or by HDF5's text."""
-    if isinstance(exc, OutputError) or isinstance(exc, OSError) and exc.errno in NO_SPACE_ERRNOS:
+    if isinstance(exc, OutputError) or (isinstance(exc, OSError) and exc.errno in NO_SPACE_ERRNOS):
         return True
     return any(text in str(exc) for text in NO_SPACE_TEXTS)
 
