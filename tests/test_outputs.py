@@ -164,6 +164,11 @@ def test_an_output_directory_holding_files_needs_force_and_a_run_file_is_not_one
     refused([names.get(a, str(folder) if a == "DIR" else a) for a in argv], str(folder), option, "--force")
     assert (folder / "report.md").read_text() == "an earlier page"
     refused([names.get(a, str(foreign_run) if a == "DIR" else a) for a in argv], option, "a directory")
+    os.mkfifo(tmp_path / "fifo")
+    (tmp_path / "link").symlink_to(folder)  # a directory elsewhere, behind a link
+    for other, kind in (("fifo", "a FIFO"), ("link", "a symbolic link")):
+        refused([names.get(a, str(tmp_path / other) if a == "DIR" else a) for a in argv] + ["--force"], option, kind)
+    assert sorted(p.name for p in folder.iterdir()) == ["report.md"]
 
 
 def test_replacing_refuses_a_run_file_and_leaves_nothing_on_failure(foreign_run, tmp_path):
