@@ -83,10 +83,12 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def check_target(path: "str | os.PathLike[str]", option: str, force: bool,
-                 inputs: Sequence[str | os.PathLike[str]] = (), run_file: bool = False) -> Path:
+                 inputs: Sequence[str | os.PathLike[str]] = (), run_file: bool = False, hint: str = "") -> Path:
     """`path` if the rule lets it be written; else InputError naming the path and `option` (e.g. "--out").
 
-    `inputs`: files the command reads (never written over); `run_file`: writing run files is the command's job."""
+    `inputs`: files the command reads (never written over); `run_file`: writing run files is the command's job;
+    `hint`: what else the user may mean where the file exists (`run`: "--resume to continue it")."""
+    hint = f"{hint}, " if hint else ""
     path = Path(path)
     for source in inputs:
         if _same_file(path, Path(source)):
@@ -100,20 +102,21 @@ def check_target(path: "str | os.PathLike[str]", option: str, force: bool,
     if kind is not None:
         raise InputError(path, option, f"a new file or, with --force, a regular file to replace (it is {kind})")
     if is_run_file(path) and not (run_file and force):
-        need = "--force to replace it" if run_file else "a file of another name (it is a run file: a measurement)"
+        need = (f"{hint}--force to replace it" if run_file else
+                "a file of another name (it is a run file: a measurement)")
         raise InputError(path, option, f"a new file ({need})")
     if not force:
-        raise InputError(path, option, "a new file (it exists: --force to replace it)")
+        raise InputError(path, option, f"a new file (it exists: {hint}--force to replace it)")
     return path
 
 
 def check_output(path: "str | os.PathLike[str]", option: str, force: bool,
-                 inputs: Sequence[str | os.PathLike[str]] = (), run_file: bool = False) -> Path:
+                 inputs: Sequence[str | os.PathLike[str]] = (), run_file: bool = False, hint: str = "") -> Path:
     """check_target for a file given on the command line, whose directory must exist."""
     path = Path(path)
     if not path.parent.is_dir():
         raise InputError(path, option, f"a file in an existing directory ({path.parent} not found)")
-    return check_target(path, option, force, inputs, run_file)
+    return check_target(path, option, force, inputs, run_file, hint)
 
 
 def check_output_dir(path: "str | os.PathLike[str]", option: str, force: bool) -> Path:

@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         return _run(args, out)
     if not args.resume:  # the output rule (benchlab.outputs) before the lock file is made beside it
-        check_output(out, "--out", args.force, run_file=True)
+        check_output(out, "--out", args.force, run_file=True, hint="--resume to continue it")
     with interrupts_held():  # the lock's package loads h5py (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.acquire.lock import RunFileLock
     with RunFileLock(out, "--resume" if args.resume else "--out"):  # before anything else: one run per file
