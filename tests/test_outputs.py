@@ -44,7 +44,7 @@ def _argv(command: str, run: Path, params: Path, out: Path, tmp_path: Path) -> l
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_no_command_writes_over_the_run_file_it_reads(command, force, foreign_run, params_file, tmp_path,
                                                       refused):
-    """`identify c.h5 --out c.h5` used to turn the measurement into JSON; by any name and with --force, it is refused."""
+    """`identify c.h5 --out c.h5` used to turn the measurement into JSON; by any name, with --force, it is refused."""
     run = foreign_run
     if command == "export":  # export wants a known suffix: the same run file under a .csv name (a hard link)
         os.link(foreign_run, tmp_path / "run.csv")
