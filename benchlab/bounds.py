@@ -35,5 +35,16 @@ MIN_CAN_BITRATE = 5_000
 MAX_CAN_BITRATE = 1_000_000
 #: Longest residual sampling period of the cool-down analysis: one sample an hour still shows a trend.
 MAX_SAMPLE_PERIOD_S = 3600.0
+#: Coarsest /aligned grid of a run file `benchlab run` continues (`--resume`): a bench samples at 10 ms, so a
+#: stored step of a minute is already a tampered or foreign file (and rows × dt sets the resumed run's clock).
+MAX_GRID_STEP_S = 60.0
+#: Most times one run may be resumed: each resume is a crash or a Ctrl-C and a CAN log of its own.
+MAX_RESUMES = 10_000
+#: Most columns of a CSV `benchlab import` reads: a run file holds a few dozen channels; the bound is checked on
+#: the header line, before any row is parsed (a 100 000-column file used to take 104 s to be refused).
+MAX_CSV_COLUMNS = 1_000
+#: Largest time stamp of a run file's grid, s: run time, or Unix time of an imported log (1e10 s is the year 2286).
+#: Beyond it float64 no longer resolves a 10 ms grid, and the uniform-grid check would pass anything.
+MAX_TIME_STAMP_S = 1e10
 #: Most worker processes of a local batch cluster: each takes a core and a run in memory; more is a typo.
 MAX_LOCAL_WORKERS = 256

@@ -3,7 +3,8 @@
 A command module defines NAME, HELP, add_arguments(parser) and run(args) -> int, and stays light to import
 (argparse and constants: `benchlab --help` loads no numpy); run imports the implementation, holding Ctrl-C
 while it does (benchlab.interrupts.interrupts_held, as here around the parser). Bad input
-(InputError) is one line on stderr and exit 2; any other failure is one line and exit 1; Ctrl-C, from the
+(InputError) is one line on stderr and exit 2; a full disk (benchlab.outputs.OutputError) and any other failure
+are one line and exit 1; Ctrl-C, from the
 moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
 early (`benchlab run --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends other tools.
 `-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`.
@@ -24,6 +25,7 @@ import benchlab
 import benchlab.commands
 from benchlab.errors import InputError
 from benchlab.interrupts import RedeliverInterrupts, interrupts_answered, interrupts_held
+from benchlab.outputs import OutputError, is_no_space, no_space
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
 BROKEN_PIPE_EXIT = 141
@@ -127,6 +129,9 @@ def _dispatch(argv: Sequence[str] | None) -> int:
     except InputError as exc:
         print(f"benchlab {args.command}: {exc}", file=sys.stderr)
         return 2
+    except OutputError as exc:  # a full disk: the file named, no partial output left
+        print(f"benchlab {args.command}: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return _interrupted(args)
     except Exception as exc:  # noqa: BLE001 - the CLI's last line of defence
@@ -139,7 +144,12 @@ def _failed(args: argparse.Namespace | None, exc: Exception) -> int:
     """An unexpected failure: one line and exit 1 (a traceback with --debug, or while building the parser)."""
     if args is None or args.debug:  # a failure while building the parser is a bug: show it
         raise exc
-    print(f"benchlab {args.command}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+    text = " ".join(str(exc).split())  # one line, whatever the library's text (HDF5's spans several)
+    if is_no_space(exc):  # a file some library writes (the CAN log, a figure): one line, as benchlab.outputs says
+        print(f"benchlab {args.command}: {no_space(getattr(exc, 'filename', None) or 'a file', text)}",
+              file=sys.stderr)
+        return 1
+    print(f"benchlab {args.command}: failed: {type(exc).__name__}: {text}", file=sys.stderr)
     return 1
 
 

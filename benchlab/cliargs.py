@@ -1,4 +1,5 @@
-"""argparse types that check command-line values at parse time: bounded numbers, channel lists, output files.
+"""argparse types that check command-line values at parse time: bounded numbers, channel lists, output files'
+directories (the output rule itself is benchlab.outputs', applied when --force is known).
 
 A value they refuse is argparse's usage error: one line `benchlab CMD: argument --NAME: what was expected,
 got ...` and exit 2, before anything is read, opened or moved. The bounds live in benchlab.bounds.
@@ -58,12 +59,10 @@ def channel_list(text: str) -> list[int]:
 
 
 def output_file(text: str) -> str:
-    """A file to write: in a directory that exists, and not itself a directory."""
+    """A file to write in a directory that exists (at parse time; what may be replaced is benchlab.outputs')."""
     path = Path(text)
     if not path.parent.is_dir():
         raise argparse.ArgumentTypeError(f"{text}: a file in an existing directory ({path.parent} not found)")
-    if path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text}: a file to write, not a directory")
     return text
 
 

@@ -41,7 +41,7 @@ from benchlab.clutch import clutch_network, convection_resistance
 from benchlab.errors import InputError
 from benchlab.progress import SILENT, Progress, Task
 from benchlab.runfile import (Event, load_analysis, load_attrs, load_events, load_run, load_schedule,
-                              write_analysis)
+                              write_analysis, write_analysis_file)
 from benchlab.runfile.schema import END_CONDITION
 from benchlab.simulation import initial_state, input_channels
 from benchlab.solver import run_network
@@ -282,10 +282,15 @@ def fit_eq11(results: Sequence[CooldownResult]) -> dict[str, float]:
 
 
 def store(path: "str | os.PathLike[str]", results: Sequence[CooldownResult], eq11: Mapping[str, float] | None,
-          params_source: str = "") -> None:
-    """Write /analysis/cooldowns (one dataset per column, with units) and /analysis/eq11 into the run file."""
-    write_analysis(path, [asdict(r) for r in results], eq11,
-                   {"coverage_k": COVERAGE_K, "params": params_source, "method": METHOD})
+          params_source: str = "", out: "str | os.PathLike[str] | None" = None) -> None:
+    """Write /analysis/cooldowns (one dataset per column, with units) and /analysis/eq11 into the file `out` of its
+    own (the run file `path` untouched), or into the run file where `out` is None (asked for explicitly)."""
+    rows = [asdict(r) for r in results]
+    attrs = {"coverage_k": COVERAGE_K, "params": params_source, "method": METHOD}
+    if out is None:
+        write_analysis(path, rows, eq11, attrs)
+    else:
+        write_analysis_file(out, path, rows, eq11, attrs)
 
 
 @dataclass(frozen=True)

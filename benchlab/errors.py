@@ -22,15 +22,19 @@ class InputError(Exception):
 
 
 def read_document(path: "str | os.PathLike[str]", what: str, parse: Callable[[str], Any],
-                  malformed: tuple[type[Exception], ...], form: str) -> Any:
-    """A user's file parsed by `parse`; InputError on its `file` field where it is missing, a directory, not text
-    or (one of `malformed`) not `form`. `what` names the file for the message, e.g. "parameter file"."""
+                  malformed: tuple[type[Exception], ...], form: str, encoding: str | None = None) -> Any:
+    """A user's file parsed by `parse`; InputError on its `file` field where it is missing, a directory, not text,
+    nested deeper than the parser goes, or (one of `malformed`) not `form`. `what` names the file for the
+    message, e.g. "parameter file"."""
     path = Path(path)
     try:
-        return parse(path.read_text())
+        return parse(path.read_text(encoding=encoding))
     except FileNotFoundError:
         raise InputError(path, "file", f"an existing {what} (not found)") from None
     except IsADirectoryError:
         raise InputError(path, "file", f"a {what}, not a directory") from None
+    except RecursionError:
+        raise InputError(path, "file", f"{form} of tables and lists nested a few levels deep (nested too deeply "
+                                       "to read)") from None
     except (UnicodeDecodeError, *malformed) as exc:
         raise InputError(path, "file", f"{form} ({exc})") from None

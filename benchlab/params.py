@@ -18,6 +18,7 @@ from benchlab.model.build import build_network
 from benchlab.model.catalog import BUILTIN, builtin
 from benchlab.model.definition import ModelDefinition, parse_model
 from benchlab.network import ThermalNetwork
+from benchlab.outputs import write_text
 from benchlab.values import finite_number
 
 #: Contract section 2: a linear parameter file may omit eq. (11)'s terms and means a1 = a2 = 0.
@@ -112,7 +113,7 @@ def save_params(path: "str | os.PathLike[str]", params: ModelParams, extra: Mapp
     if model.alias is None:
         doc["network"] = model.to_doc()
     doc.update({**params.extra, **dict(extra or {})})
-    Path(path).write_text(json.dumps(doc, indent=2, default=float) + "\n")
+    write_text(path, json.dumps(doc, indent=2, default=float) + "\n")
 
 
 def paper_params(model: str = "nonlinear") -> ModelParams:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+from collections.abc import Callable
 from typing import Any
 
 import h5py
@@ -82,6 +83,26 @@ def params_file(tmp_path):
     path = tmp_path / "p.json"
     save_params(path, paper_params("nonlinear"))
     return path
+
+
+@pytest.fixture
+def refused(capsys: pytest.CaptureFixture[str]) -> Callable[..., str]:
+    """`refused(argv, *words)`: `benchlab ARGV` run in-process is bad input as the contract says (exit 2, one line
+    on stderr holding each of `words`, no traceback, no `failed:`); returns that line."""
+    from benchlab.cli import main
+
+    def check(argv: list[str], *words: str) -> str:
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse's usage errors
+            code = exc.code
+        err = capsys.readouterr().err.strip()
+        assert code == 2, err
+        assert len(err.splitlines()) == 1 and "Traceback" not in err and "failed:" not in err, err
+        for word in words:
+            assert word in err, err
+        return err
+    return check
 
 
 @pytest.fixture

@@ -126,3 +126,23 @@ def test_stored_analysis_reads_back_as_written(sweep, tmp_path):
     with pytest.raises(InputError) as exc:
         stored(copy)
     assert exc.value.field == "/analysis/cooldowns/R"
+
+
+def test_cooldown_out_writes_the_analysis_beside_the_run_and_report_reads_it(sweep, tmp_path, capsys):
+    """`benchlab cooldown RUN --out A.h5`: the run file keeps its bytes, A.h5 holds /analysis with its source, and
+    `report --sweep A.h5` takes it as it takes a run's /analysis (issue 30: analyses never write into a run)."""
+    from benchlab.cli import main
+    from benchlab.commands.report import sweep_file
+
+    out, _ = sweep
+    before = out.read_bytes()
+    analysis = tmp_path / "analysis.h5"
+    assert main(["cooldown", str(out), "--params", "sim-truth", "--out", str(analysis)]) == 0
+    assert out.read_bytes() == before
+    back = stored(analysis)
+    assert back is not None and len(back.results) >= 3 and back.params_source == "sim-truth"
+    with h5py.File(analysis) as f:
+        assert f.attrs["source_run"] == str(out) and "aligned" not in f and "schema" not in f.attrs
+    sweep_file(str(analysis))  # accepted by report --sweep without /aligned
+    assert main(["cooldown", str(out), "--params", "sim-truth", "--out", str(analysis)]) == 2  # exists: --force
+    assert "--force" in capsys.readouterr().err

@@ -16,6 +16,7 @@ import sys
 import threading
 import urllib.error
 import urllib.request
+from contextlib import contextmanager
 
 import h5py
 import numpy as np
@@ -196,16 +197,25 @@ def test_step_status_reads_the_runner_state():
 
 
 # -- server -----------------------------------------------------------------------------------------------
+@contextmanager
+def serving(run_file, **options):
+    """A WatchServer for the run file on a free port of 127.0.0.1, serving in a thread (options: WatchServer's)."""
+    live = LiveRun(run_file)
+    server = WatchServer(live, listen(0), **options)
+    thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    thread.start()
+    try:
+        yield server
+    finally:
+        server.shutdown()
+        server.server_close()
+        live.close()
+
+
 @pytest.fixture()
 def served(run_file):
-    live = LiveRun(run_file)
-    server = WatchServer(live, listen(0))
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield server
-    server.shutdown()
-    server.server_close()
-    live.close()
+    with serving(run_file) as server:
+        yield server
 
 
 def _get(url, host=None):

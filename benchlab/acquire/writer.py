@@ -13,6 +13,10 @@ how far the data is valid (at most `flush_every_s` of data behind the kill). Gro
 resuming, and closing build a new file next to the old one and `os.replace` it in one step, so there is
 always exactly one complete file under the run's name; an interrupted rebuild removes its half-made copy.
 Closing also compacts (exact lengths, compressed). One run per file is the caller's lock (acquire/lock.py).
+
+A full disk (or the process's file-size limit) while growing or closing leaves the file as it was, readable up to
+its last flush, with root attribute `status` "aborted" where HDF5 can still write that in place, and raises
+benchlab.outputs.OutputError: one line naming the file (the CLI's exit 1).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+import struct
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,10 +35,17 @@ import numpy as np
 from isal import isal_zlib
 from numba import njit
 
-from benchlab.runfile.read import complete_events, read_progress
+from benchlab.outputs import OutputError, is_no_space, no_space
+from benchlab.runfile.read import complete_events, read_progress, text
 from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA
 
 _EPS = 1e-9
+#: The running file's `status` as HDF5 stores a variable-length string: a global heap object (its size as 8 bytes,
+#: then the bytes), written with the attributes at the start of the file. On a full disk the writer overwrites these
+#: 7 bytes with "aborted" through the mapping (HDF5 would allocate a new heap object: a full disk has no room).
+RUNNING_ON_DISK = struct.pack("<Q", 7) + b"running"
+#: How far into the file the attributes' heap objects are searched for it.
+STATUS_SEARCH_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -300,6 +312,7 @@ class RunWriter:
         self.flushes = 0
         self.durable = durable
         self._fd: int | None = None
+        self._status_at: int | None = None  # where the status "running" lies in the file (see RUNNING_ON_DISK)
         self._mm: np.memmap | None = None
         self._views: dict[str, np.ndarray] = {}
         self._closing_groups: dict[str, Mapping[str, tuple[np.ndarray, str]]] = {}
@@ -375,10 +388,13 @@ class RunWriter:
         """
         if self._fd is None:
             return
-        self.flush()
-        self._close_fd()
-        self._closing_groups = dict(groups or {})
-        self._rebuild(None, compact=True, status=status, attrs=attrs)
+        try:
+            self.flush()
+            self._close_fd()
+            self._closing_groups = dict(groups or {})
+            self._rebuild(None, compact=True, status=status, attrs=attrs)
+        except OutputError:
+            raise self._aborted_for_space() from None
 
     @property
     def rows(self) -> int:
@@ -425,6 +441,11 @@ class RunWriter:
             with h5py.File(self.path, "r") as src:
                 self._copy(src, tmp, capacity, compact=compact, status=status, attrs=attrs)
             os.replace(tmp, self.path)
+        except Exception as exc:
+            if is_no_space(exc):  # the run file as it was: its data up to the last flush
+                raise no_space(self.path, "the run file could not be rebuilt; it holds the data up to its last "
+                                          f"flush at {self._last_flush_t:.1f} s") from None
+            raise
         finally:  # interrupted (Ctrl-C, a full disk): no half-made copy is left beside the run file
             tmp.unlink(missing_ok=True)
 
@@ -449,6 +470,10 @@ class RunWriter:
         self._raw_capacity = [self._capacity(f"raw/{s.name}/time") for s in self.layout.streams]
         self._stream_words = tuple(np.array([self._word(f"raw/{s.name}/{c}") for c in ("time", *s.names)])
                                    for s in self.layout.streams)
+        head = whole[:STATUS_SEARCH_BYTES].tobytes()
+        at = head.find(RUNNING_ON_DISK)
+        unique = at >= 0 and head.find(RUNNING_ON_DISK, at + 1) < 0
+        self._status_at = at + 8 if unique else None
 
     def _word(self, name: str) -> int:
         """Index in the file's 8-byte words of float64 dataset `name`'s first value (the file aligns datasets)."""
@@ -456,6 +481,21 @@ class RunWriter:
         if dtype != np.dtype("<f8") or offset % 8:
             raise RuntimeError(f"{name}: not an 8-byte aligned float64 dataset")
         return offset // 8
+
+    def _aborted_for_space(self) -> OutputError:
+        """The run file as its last flush left it, its status "running" overwritten by "aborted" in place (the bytes
+        found by `_status_at` when the file was opened; nothing allocated): the one-line error to raise."""
+        self._close_fd()
+        marked = "status left 'running'"
+        if self._status_at is not None:
+            status = np.memmap(self.path, dtype=np.uint8, mode="r+", offset=self._status_at, shape=(7,))
+            status[:] = np.frombuffer(b"aborted", dtype=np.uint8)
+            status.flush()
+            del status
+            with h5py.File(self.path, "r", locking=False) as f:
+                marked = f"status {text(f.attrs.get('status'))}"
+        return no_space(self.path, f"run aborted, {marked}; the file holds the data up to its last flush at "
+                                   f"{self._last_flush_t:.1f} s")
 
     def _close_fd(self) -> None:
         if self._fd is not None:
@@ -514,6 +554,10 @@ class RunWriter:
         try:
             self._write_file(tmp, capacity, meta, data, compact)
             os.replace(tmp, path)
+        except Exception as exc:
+            if is_no_space(exc):
+                raise no_space(path, "no room for the file; nothing written") from None
+            raise
         finally:  # interrupted: no half-made file left
             tmp.unlink(missing_ok=True)
 

@@ -21,6 +21,7 @@ from benchlab.identify.api import Identification, identify
 from benchlab.model.catalog import resolve_model
 from benchlab.model.definition import ModelDefinition
 from benchlab.model.runs import load_runs
+from benchlab.outputs import write_text
 from benchlab.params import ModelParams, load_params, save_params
 from benchlab.runfile import load_attrs
 from benchlab.values import json_ready
@@ -84,8 +85,7 @@ def diagnosis(runs: Sequence[pd.DataFrame], baseline: ModelDefinition, seed: int
 
 def save_diagnosis(path: "str | os.PathLike[str]", result: dict) -> None:
     """The diagnosis as `benchlab diagnose --json` prints it."""
-    with open(path, "w") as f:
-        json.dump(result, f, default=float)
+    write_text(path, json.dumps(result, default=float))
 
 
 def wear(run: pd.DataFrame, params: ModelParams, params_source: str, seed: int) -> dict:

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from benchlab.outputs import replacing
+
 #: Columns first in this order; parameters, figures and the rest follow as the tasks wrote them.
 LEADING = ("index", "run", "group", "task", "status", "error", "created")
 #: Counts: integers, empty where a run failed (not floats with NaN).
@@ -36,10 +38,11 @@ def write(table: pd.DataFrame, out_dir: Path, stem: str = "batch") -> Path:
     """`out_dir/stem.parquet` or `.csv` (see table_format); the path written."""
     kind = table_format()
     path = out_dir / f"{stem}.{kind}"
-    if kind == "parquet":
-        table.to_parquet(path, index=False)
-    else:
-        table.to_csv(path, index=False)
+    with replacing(path) as tmp:
+        if kind == "parquet":
+            table.to_parquet(tmp, index=False)
+        else:
+            table.to_csv(tmp, index=False)
     return path
 
 

@@ -18,6 +18,7 @@ import pandas as pd
 
 from benchlab.batch import adapter
 from benchlab.errors import InputError
+from benchlab.outputs import write_text
 
 OK, FAILED = "ok", "failed"
 #: The run attribute that dates a run (written by `benchlab run`); trends use it as their time axis.
@@ -162,7 +163,7 @@ def _wear(job: Job, task: Task, runs: list[Loaded]) -> list[dict]:
             rows.append(failed_row(task, run.path, error_text(exc), run.index))
             continue
         out = Path(job.out_dir) / f"{run.name}.wear.json"
-        out.write_text(json.dumps(doc, default=float))
+        write_text(out, json.dumps(doc, default=float))
         rows.append({"index": run.index, "run": run.path, "created": _created(run.path), "params_file": source,
                      "wear_file": str(out), **shared, **wear_columns(doc)})
     return rows

@@ -19,6 +19,7 @@ from benchlab.diagnose.parallel import workers
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
 from benchlab.model.names import MODEL_HELP
+from benchlab.outputs import check_output_dir, write_text
 from benchlab.progress import for_terminal
 
 NAME = "batch"
@@ -49,17 +50,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--starts", type=cliargs.count("a number of starting points", MAX_FIT_STARTS), default=6,
                         help="starting points of each fit")
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="seed of the fits and the wear Monte Carlo")
-
-
-def output_dir(text: str) -> Path:
-    """The output directory, created where missing; a file of that name is bad input."""
-    path = Path(text)
-    if path.exists() and not path.is_dir():
-        raise InputError(path, "--out", "a directory (a file of that name exists)")
-    if not path.parent.is_dir():
-        raise InputError(path, "--out", f"a directory in an existing folder ({path.parent} not found)")
-    path.mkdir(exist_ok=True)
-    return path
+    parser.add_argument("--force", action="store_true", help="--out may hold files already: replace the ones the "
+                                                             "batch writes (never a run file)")
 
 
 def describe(conn: Connection) -> str:
@@ -83,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
                                                            "fit their own parameters)")
     if args.params is not None:
         adapter.read_params(args.params)  # bad input before any cluster starts
-    out = output_dir(args.out)
+    out = check_output_dir(args.out, "--out", args.force)
+    out.mkdir(exist_ok=True)
     tasks = plan.plan(plan.expand(args.runs), args.group_by)
     runs = sum(len(t.runs) for t in tasks)
     job = Job(args.kind, adapter.model_text(args.model or DEFAULT_MODEL[args.kind]), str(out.resolve()), args.starts,
@@ -103,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     if columns:
         figure = trends.plot(results, columns, out / "trends.png", f"benchlab batch {args.kind}: {out.name}")
         summary = trends.trend_table(results, columns)
-        summary.to_csv(out / "trends.csv", index=False)
+        write_text(out / "trends.csv", summary.to_csv(index=False))
         print(f"trends: {figure}, {out / 'trends.csv'} ({summary['axis'].iloc[0]})")
     for row in results[results["status"] == FAILED].itertuples():
         print(f"failed: {row.error if row.error.startswith(row.run) else f'{row.run}: {row.error}'}")

@@ -1,4 +1,6 @@
-"""`benchlab cooldown RUN.h5 --params P.json`: convection resistance per cool-down and the fit of eq. (11)."""
+"""`benchlab cooldown RUN.h5 --params P.json [--out ANALYSIS.h5 | --store]`: convection resistance per cool-down and
+the fit of eq. (11), printed; stored as /analysis in a file of its own (`--out`) or, asked explicitly, in the run
+file (`--store`). The run file is never modified otherwise (benchlab.outputs)."""
 
 from __future__ import annotations
 
@@ -12,9 +14,10 @@ from benchlab import cliargs
 from benchlab.bounds import MAX_SAMPLE_PERIOD_S
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
+from benchlab.outputs import check_output
 
 NAME = "cooldown"
-HELP = "fit R_FA = R_PA for every cool-down of a cooldown-sweep run, then eq. (11); stores /analysis"
+HELP = "fit R_FA = R_PA for every cool-down of a cooldown-sweep run, then eq. (11); /analysis to --out or --store"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,7 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sample", type=cliargs.positive_float("a sampling period in s", MAX_SAMPLE_PERIOD_S),
                         default=1.0, help="residual sampling period in s (default 1)")
     parser.add_argument("--json", action="store_true", help="print the table and eq. (11) as JSON")
-    parser.add_argument("--no-store", action="store_true", help="do not write /analysis into the run file")
+    parser.add_argument("--out", type=cliargs.output_file, metavar="ANALYSIS.h5",
+                        help="write /analysis into this file of its own (`benchlab report --sweep` reads it)")
+    parser.add_argument("--store", action="store_true",
+                        help="write /analysis into the run file itself (rebuilt beside it and renamed into place)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file (never a run file)")
+    parser.add_argument("--no-store", action="store_true",
+                        help="nothing is written into the run file (the default since --store; kept for scripts)")
 
 
 def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
@@ -54,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.runfile import load_run
 
     path = Path(args.run)
+    if args.store and (args.out or args.no_store):
+        raise InputError("command line", "--store", "--out ANALYSIS.h5 or --store, not both (and not --no-store)")
+    if args.out:
+        check_output(args.out, "--out", args.force, inputs=[path, args.params])
     load_run(path)  # checks the file (InputError on a bad one)
     params = load_analysis_params(args.params, path)
     results = analyse(path, params, args.sample, progress=for_terminal(args.quiet))
@@ -63,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
         eq11 = fit_eq11(results)
     except ValueError:
         eq11 = None
-    if not args.no_store:
-        store(path, results, eq11, args.params)
+    if args.store or args.out:
+        store(path, results, eq11, args.params, out=args.out)
     if args.json:
         clean = lambda v: None if isinstance(v, float) and not math.isfinite(v) else v  # noqa: E731
         print(json.dumps({"cooldowns": [{k: clean(v) for k, v in asdict(r).items()} for r in results],

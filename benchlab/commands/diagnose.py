@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from benchlab import cliargs
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
 from benchlab.model.names import MODEL_HELP
+from benchlab.outputs import check_output, check_output_dir, write_text
 from benchlab.progress import for_terminal
 
 if TYPE_CHECKING:
@@ -34,6 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--save-model", metavar="OUT.toml", type=cliargs.output_file,
                         help="write the best model found as a model file, its fitted values as starting values "
                              "(ready for identify --model OUT.toml)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --save-model file and the files "
+                                                             "of an existing --report directory (never a run file)")
 
 
 def print_report(result: dict) -> None:
@@ -67,14 +69,6 @@ def print_report(result: dict) -> None:
           f"best {floor['best_ratio']:.1f}x; {floor['verdict']}")
 
 
-def check_report_dir(path: str) -> Path:
-    """The --report directory: refused where a file of that name exists (bad input, exit 2)."""
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "--report", "a directory (a file of that name exists)")
-    return out
-
-
 def load_diagnosed_runs(paths: list[str], model: ModelDefinition) -> list[pd.DataFrame]:
     """The run files, each holding what the model reads and long enough for the blocked cross-validation
     (two FOLD_S blocks)."""
@@ -98,7 +92,9 @@ def best_model(diagnosis: Diagnosis) -> ModelDefinition:
 
 
 def run(args: argparse.Namespace) -> int:
-    out = check_report_dir(args.report) if args.report else None
+    if args.save_model:
+        check_output(args.save_model, "--save-model", args.force, inputs=args.runs)
+    out = check_output_dir(args.report, "--report", args.force) if args.report else None
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.diagnose.engine import diagnose_runs
         from benchlab.diagnose.report import summarise
@@ -109,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     diagnosis = diagnose_runs(runs, model, seed=args.seed, progress=for_terminal(args.quiet))
     result = summarise(diagnosis, model.label)
     if args.save_model:
-        Path(args.save_model).write_text(to_toml(best_model(diagnosis)))
+        write_text(args.save_model, to_toml(best_model(diagnosis)))
         result["best"]["model_file"] = str(args.save_model)
     if args.json:
         print(json.dumps(result, default=float))

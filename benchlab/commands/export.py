@@ -15,7 +15,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
     parser.add_argument("--to", required=True, type=cliargs.output_file, metavar="OUT",
                         help="file to write: .mf4 (MDF 4.10), .csv or .parquet (needs the [export] extra)")
-    parser.add_argument("--force", action="store_true", help="overwrite an existing OUT")
+    parser.add_argument("--force", action="store_true", help="replace an existing OUT (a regular file, never a run "
+                                                             "file)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -10,6 +10,7 @@ from benchlab.errors import InputError
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.interrupts import interrupts_held
 from benchlab.model.names import MODEL_HELP
+from benchlab.outputs import check_output
 from benchlab.progress import for_terminal
 
 NAME = "identify"
@@ -20,6 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", help="run files to fit together")
     parser.add_argument("--model", default="nonlinear", help=f"{MODEL_HELP} (default nonlinear)")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="parameter file to write (JSON)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file (never a run file)")
     parser.add_argument("--validate", nargs="*", default=[], help="run files to validate on (not fitted)")
     parser.add_argument("--fix", nargs="*", default=[], metavar="NAME=VALUE", help="hold parameters fixed")
     parser.add_argument("--starts", type=cliargs.count("a number of starting points", MAX_FIT_STARTS), default=6,
@@ -36,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.model.catalog import model_spec, resolve_model
         from benchlab.model.runs import load_runs
         from benchlab.params import save_params
+    check_output(args.out, "--out", args.force, inputs=[*args.runs, *args.validate])
     try:
         fixed = parse_fixed(args.fix)
     except ValueError as exc:

@@ -20,10 +20,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from benchlab import cliargs
-from benchlab.bounds import MAX_RUN_DURATION_S
-from benchlab.errors import InputError
+from benchlab.bounds import MAX_CSV_COLUMNS, MAX_RUN_DURATION_S
+from benchlab.errors import InputError, read_document
 from benchlab.interrupts import interrupts_held
 from benchlab.model.names import MODEL_HELP
+from benchlab.outputs import check_output
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -48,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
     parser.add_argument("--decimal", choices=(".", ","),
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
-    parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file (a regular file)")
 
 
 def parse_units(items: list[str]) -> dict[str, str]:
@@ -79,6 +80,13 @@ def _dialect(text: str, sep: str | None, decimal: str | None) -> tuple[str, str]
     return sep, decimal
 
 
+def _check_width(path: Path, text: str, sep: str) -> None:
+    """At most MAX_CSV_COLUMNS columns, counted on the header line before any row is parsed."""
+    columns = text.partition("\n")[0].count(sep) + 1
+    if columns > MAX_CSV_COLUMNS:
+        raise InputError(path, "header", f"at most {MAX_CSV_COLUMNS} columns (channels), got {columns}")
+
+
 def _channel_names(path: Path, titles: list[str]) -> tuple[list[str], dict[str, str]]:
     """Column titles to channel names and the units the titles give; a unit in the title of a contract channel
     must be its contract unit."""
@@ -107,15 +115,16 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     import pandas as pd
 
     from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample
+    from benchlab.runfile.schema import time_stamp_problem
 
     required = REQUIRED if required is None else required
-    if not path.exists():
-        raise InputError(path, "file", "an existing CSV file (not found)")
+    # a spreadsheet's byte-order mark is not part of the header (utf-8-sig)
+    text = read_document(path, "CSV file", str, (), "a CSV table", encoding="utf-8-sig")
     try:
-        text = path.read_text(encoding="utf-8-sig")  # a spreadsheet's byte-order mark is not part of the header
         sep, decimal = _dialect(text, sep, decimal)
+        _check_width(path, text, sep)
         frame = pd.read_csv(io.StringIO(text), sep=sep, dtype=str, keep_default_na=False)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(path, "file", f"a CSV table ({str(exc).splitlines()[0]})") from None
     names, title_units = _channel_names(path, list(frame.columns))
     frame.columns = names
@@ -153,6 +162,8 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     time = frame["time"].to_numpy()
     if len(time) < 2 or not np.all(np.isfinite(time)):
         raise InputError(path, "column time", "at least two finite time stamps")
+    if problem := time_stamp_problem(time):
+        raise InputError(path, "column time", problem)
     dt = float(np.median(np.diff(time)))
     if dt <= 0 or np.max(np.abs(np.diff(time) - dt)) > time_step_tolerance(time, dt, np.dtype(np.float64)):
         raise InputError(path, "column time", "a uniform time grid in s (resample before importing)")
@@ -186,8 +197,7 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.model.catalog import resolve_model
         from benchlab.runfile import write_run  # and pandas, for read_csv
     required = tuple(resolve_model(args.model).required_channels()) if args.model else None
-    if Path(args.out).exists() and not args.force:
-        raise InputError(args.out, "--out", "a new run file (it exists: --force to overwrite)")
+    check_output(args.out, "--out", args.force, inputs=[args.csv], run_file=True)
     frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep, args.decimal)
     write_run(args.out, frame, dt, protocol="imported", units=units)
     print(f"{args.out}: {len(frame)} samples at dt={dt:g} s, {len(frame.columns)} channels")

@@ -12,6 +12,7 @@ from benchlab import cliargs
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
 from benchlab.model.options import add_model_option, load_model_params
+from benchlab.outputs import check_output
 
 if TYPE_CHECKING:
     from benchlab.observer.model import Reset
@@ -97,6 +98,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="output HDF5 file with /estimated")
     parser.add_argument("--plot", type=cliargs.output_file, help="figure (PNG): estimates, ±2σ band, measurement, "
                                                                   "truth where the run has it")
+    parser.add_argument("--force", action="store_true", help="replace existing --out and --plot files (never a run "
+                                                             "file)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -108,8 +111,12 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.observer.noise import tune_noise, with_overrides
         from benchlab.runfile import load_truth, write_results
         from benchlab.wear.clutchfile import default_clutch, load_clutch
+    inputs = [args.run, args.params, *([args.clutch] if args.clutch else [])]
+    check_output(args.out, "--out", args.force, inputs=inputs)
+    if args.plot:
+        check_output(args.plot, "--plot", args.force, inputs=[*inputs, args.out])
     params = load_model_params(args.params, args.model)
-    measured = load_runs([args.run], params.definition)[0]
+    measured = load_runs([args.run], params.definition, params, args.params)[0]
     clutch = load_clutch(args.clutch) if args.clutch else default_clutch()
     network = params.network
     channels = [*args.sensors, *(r.channel for r in args.reinit)]

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 from benchlab import cliargs
 from benchlab.bounds import MAX_RUN_DURATION_S
 from benchlab.interrupts import interrupts_held
+from benchlab.outputs import check_output_dir, write_text
 from benchlab.progress import Progress, for_terminal
 
 if TYPE_CHECKING:
@@ -35,6 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the bench's noise")
     parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
                         default=3600.0, help="planned Table 1 duration in s")
+    parser.add_argument("--force", action="store_true", help="--out may hold files already (an earlier job's): "
+                                                             "replace the ones the job writes")
 
 
 def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
@@ -70,7 +73,7 @@ def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
 
     diagnosis = diagnose_runs([fitting], "linear", progress=progress)
     summary = summarise(diagnosis, "linear")
-    (out / "diagnose.json").write_text(json.dumps(summary, indent=2, default=float))
+    write_text(out / "diagnose.json", json.dumps(summary, indent=2, default=float))
     page = write_page(diagnosis, summary, [fitting], out / "diagnose")
     base, best = summary["baseline"], summary["best"]
     found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, gain {f['gain_pct']:.0f} %)"
@@ -95,8 +98,8 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.wear.plot import plot_wear
 
     progress = for_terminal(args.quiet)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_output_dir(args.out, "--out", args.force)
+    out.mkdir(exist_ok=True)
     for stale in [out / "table1.h5", out / "validation.h5", *out.glob("table1*.blf"), *out.glob("validation*.blf")]:
         stale.unlink(missing_ok=True)  # the job writes its runs anew each time
     fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, progress, duration_s=args.duration)
@@ -117,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     diagnosis = _diagnose(fitting, out, progress)
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()
-    (out / "wear.json").write_text(json.dumps(wear, indent=2, default=float))
+    write_text(out / "wear.json", json.dumps(wear, indent=2, default=float))
     plot_wear(wear_report, out / "wear.png")
     print(f"wear      {wear['engagements']} engagements, {wear['friction_energy_J'] / 1e6:.2f} MJ -> {out / 'wear.json'}")
     cooldowns = cooldown_scores(validation, out / "validation.h5", [("linear", linear), ("nonlinear", nonlinear)])

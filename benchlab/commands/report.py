@@ -4,11 +4,10 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
 from benchlab.model.options import add_model_option, load_model_params
+from benchlab.outputs import check_output_dir
 from benchlab.progress import for_terminal
 
 NAME = "report"
@@ -22,7 +21,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="directory for report.md and the PNG figures")
     parser.add_argument("--compare", help="second parameter file (typically linear against nonlinear) for Fig. 3 and 5")
     parser.add_argument("--validate", nargs="*", default=[], help="validation run files for Fig. 5 (default: RUN)")
-    parser.add_argument("--sweep", help="cooldown-sweep run file: per-cool-down R with error bars in Fig. 3")
+    parser.add_argument("--sweep", help="cooldown-sweep run file, or the file `benchlab cooldown --out` wrote from "
+                                        "one: per-cool-down R with error bars in Fig. 3")
+    parser.add_argument("--force", action="store_true", help="--out may hold files already: replace the ones the "
+                                                             "report writes (never a run file)")
+
+
+def sweep_file(path: str) -> None:
+    """--sweep: the file `benchlab cooldown --out` wrote, or a run file at all (the events it needs are checked by the
+    analysis); InputError otherwise."""
+    with interrupts_held():  # see benchlab.cli
+        from benchlab.runfile import load_analysis, load_run
+    if load_analysis(path) is None:
+        load_run(path)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,20 +41,17 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.model.runs import check_run, load_runs
         from benchlab.params import load_params
         from benchlab.report import write_report
-        from benchlab.runfile import load_run
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "--out", "a directory (a file of that name exists)")
+    out = check_output_dir(args.out, "--out", args.force)
     params = load_model_params(args.params, args.model)
     compare = load_params(args.compare) if args.compare else None
-    measured = load_runs([args.run], params.definition)[0]
-    validation = load_runs(args.validate, params.definition)
+    measured = load_runs([args.run], params.definition, params, args.params)[0]
+    validation = load_runs(args.validate, params.definition, params, args.params)
     if compare is not None:
         for run in [measured, *validation]:
-            check_run(compare.definition, run)
+            check_run(compare.definition, run, compare, args.compare)
     if args.sweep:
-        load_run(args.sweep)  # a run file at all (the events it needs are checked by the analysis)
+        sweep_file(args.sweep)
     page = write_report(measured, params, out, compare, validation, args.sweep, progress=for_terminal(args.quiet))
     print(page)
     return 0

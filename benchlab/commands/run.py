@@ -11,6 +11,7 @@ from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
 from benchlab.commands import watch
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
+from benchlab.outputs import check_output
 from benchlab.progress import for_terminal
 from protocols.catalog import NAMES
 from sim_bench.faults import SPEC, kinds_help
@@ -36,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fault", type=cliargs.fault, action="append", default=[], metavar=SPEC,
                         help="simulated bench only, repeatable: inject a fault at SECONDS of run time to rehearse "
                         f"what the bench does (recorded in the run file's sim_faults); kinds(keys): {kinds_help()}")
-    parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file (a regular file)")
     parser.add_argument("--watch", action="store_true", help="serve the live view of the run on 127.0.0.1 while it "
                         "runs (as `benchlab watch`, in a process of its own)")
     parser.add_argument("--port", type=watch.port, help=f"with --watch: its port (default {watch.DEFAULT_PORT})")
@@ -61,11 +62,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("command line", "--port", "--watch with it (the live view's port)")
     if args.dry_run:
         return _run(args, out)
+    if not args.resume:  # the output rule (benchlab.outputs) before the lock file is made beside it
+        check_output(out, "--out", args.force, run_file=True, hint="--resume to continue it")
     with interrupts_held():  # the lock's package loads h5py (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.acquire.lock import RunFileLock
     with RunFileLock(out, "--resume" if args.resume else "--out"):  # before anything else: one run per file
-        if not args.resume and out.exists() and not args.force:
-            raise InputError(out, "--out", "a new run file (it exists: --resume to continue it, --force to overwrite)")
         if not args.watch:
             return _run(args, out)
         with interrupts_held():
@@ -80,8 +81,9 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     """Check the rest of the command line, run (or dry-run) the protocol, print the summary."""
     if not args.resume and args.protocol not in NAMES:
         raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)}, got {args.protocol!r}")
-    if args.bench != "sim" and not Path(args.bench).exists():
-        raise InputError(args.bench, "--bench", "'sim' or an existing BENCH.toml (not found)")
+    if args.bench != "sim" and not Path(args.bench).is_file():
+        found = "a directory" if Path(args.bench).is_dir() else "not found"
+        raise InputError(args.bench, "--bench", f"'sim' or an existing BENCH.toml ({found})")
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.runner.session import RunRequest, execute
     bench = args.bench
@@ -100,6 +102,6 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         if args.params and code == 0 and (args.protocol == "cooldown-sweep" or args.resume):
             from benchlab.commands import cooldown
 
-            cooldown.run(argparse.Namespace(run=str(out), params=args.params, sample=1.0, json=False, no_store=False,
-                                            quiet=args.quiet))
+            cooldown.run(argparse.Namespace(run=str(out), params=args.params, sample=1.0, json=False, out=None,
+                                            store=True, force=False, no_store=False, quiet=args.quiet))
     return code

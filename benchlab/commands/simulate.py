@@ -8,6 +8,7 @@ import argparse
 from benchlab import cliargs
 from benchlab.interrupts import interrupts_held
 from benchlab.model.options import add_model_option, load_model_params
+from benchlab.outputs import check_output
 
 NAME = "simulate"
 HELP = "drive the model with a run's measured inputs and write /simulated"
@@ -19,6 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_model_option(parser)
     parser.add_argument("--out", required=True, type=cliargs.output_file,
                         help="file to write: the run's root attributes and /aligned plus /simulated (a run file)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file (never the run it reads)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -27,8 +29,9 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.model.runs import load_runs
         from benchlab.runfile import write_simulated
         from benchlab.simulation import simulate
+    check_output(args.out, "--out", args.force, inputs=[args.run, args.params], run_file=True)
     params = load_model_params(args.params, args.model)
-    measured = load_runs([args.run], params.definition)[0]
+    measured = load_runs([args.run], params.definition, params, args.params)[0]
     simulated = simulate(measured, params)
     write_simulated(args.out, args.run, simulated,
                     {"source_run": str(args.run), "params": str(args.params), "model": params.model})

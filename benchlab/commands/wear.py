@@ -12,6 +12,7 @@ from benchlab.bounds import MAX_WEAR_HORIZON, MAX_WEAR_PATHS
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
 from benchlab.model.options import add_model_option, load_model_params
+from benchlab.outputs import check_output
 from benchlab.values import json_ready
 from benchlab.wear.defaults import DEFAULT_HORIZON, DEFAULT_PATHS
 
@@ -37,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the result as one JSON object")
     parser.add_argument("--plot", metavar="OUT.png", type=cliargs.output_file,
                         help="write a figure of energy, temperature, wear and life")
+    parser.add_argument("--force", action="store_true", help="replace an existing --plot file (never a run file)")
 
 
 def _percentiles(values: dict[str, float | None]) -> str:
@@ -74,9 +76,12 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.runfile import REQUIRED
         from benchlab.wear.analysis import analyse_wear
         from benchlab.wear.clutchfile import default_clutch, load_clutch
+    if args.plot:
+        check_output(args.plot, "--plot", args.force,
+                     inputs=[args.run, args.params, *([args.clutch] if args.clutch else [])])
     spec = load_clutch(args.clutch) if args.clutch else default_clutch()
     params = load_model_params(args.params, args.model)
-    measured = load_runs([args.run], params.definition)[0]
+    measured = load_runs([args.run], params.definition, params, args.params)[0]
     for channel in REQUIRED:  # friction energy and slip need the clutch's channels, whatever the thermal model
         if channel not in measured.columns:
             raise InputError(args.run, f"/aligned/{channel}", "a clutch channel wear needs (missing)")

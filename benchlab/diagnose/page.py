@@ -14,6 +14,7 @@ from benchlab.diagnose.evidence import has_signal
 from benchlab.diagnose.figures import (WINDOW_S, measured_channels, plot_binned, plot_evidence, plot_gains,
                                        plot_regimes, plot_window, worst_window)
 from benchlab.diagnose.regimes import MIN_REGIME_SAMPLES, worst_regimes
+from benchlab.outputs import write_text
 from benchlab.report.page import channel_cell, number, table, unit
 from benchlab.report.plotting import run_name
 
@@ -153,5 +154,5 @@ def write_page(result: Diagnosis, summary: dict, runs: Sequence[pd.DataFrame],
     parts += _added(summary)
     parts += _better(summary, gains_png)
     page = out / PAGE
-    page.write_text("\n\n".join(p for p in parts if p) + "\n")
+    write_text(page, "\n\n".join(p for p in parts if p) + "\n")
     return page

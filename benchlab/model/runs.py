@@ -8,7 +8,7 @@ must too, since the fit compares with it and the state starts from it.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -18,8 +18,10 @@ from benchlab.model.definition import ModelDefinition
 from benchlab.runfile import ALIGNED_UNITS, load_run
 
 
-def check_run(model: ModelDefinition, run: pd.DataFrame) -> None:
-    """Bad input where the run lacks what the model reads, or a channel shares a parameter's name."""
+def check_run(model: ModelDefinition, run: pd.DataFrame, params: Mapping[str, float] | None = None,
+              params_source: str = "") -> None:
+    """Bad input where the run lacks what the model reads, a channel shares a parameter's name, or a law is no number
+    the solver can use on the run (check_laws; at `params`, read from `params_source`, where given)."""
     source = str(run.attrs.get("source", "<run>"))
     usable = {c for c in run.columns if not np.isnan(run[c].to_numpy(np.float64)).all()}
     for channel in model.required_channels():
@@ -37,13 +39,52 @@ def check_run(model: ModelDefinition, run: pd.DataFrame) -> None:
     for name in model.parameters:
         if name in run.columns:
             raise InputError(model.source, f"parameters.{name}", f"a name no channel of {source} has")
+    check_laws(model, run, params, params_source)
 
 
-def load_runs(paths: Sequence["str | os.PathLike[str]"], model: ModelDefinition) -> list[pd.DataFrame]:
-    """Each run file read and checked for the model."""
+def check_laws(model: ModelDefinition, run: pd.DataFrame, params: Mapping[str, float] | None = None,
+               params_source: str = "") -> None:
+    """Bad input where a law on the run's samples is not a number the solver can use: a resistance that is not
+    positive and finite, a heat flow that is not finite (a division by zero, an overflow of exp). Asked at the model's
+    starting (or fixed) values, the model file's fault, then at `params`, the parameter file's. Samples where a
+    channel the law reads is NaN are not asked."""
+    starts = {p.name: p.start if p.fixed is None else p.fixed for p in model.parameters.values()}
+    _check_laws_at(model, run, starts, model.source, "the parameters' starting values")
+    if params is not None:
+        _check_laws_at(model, run, dict(params), params_source or "parameter file",
+                       f"this file's values (model {model.label})")
+
+
+def _check_laws_at(model: ModelDefinition, run: pd.DataFrame, params: dict[str, float], source: str,
+                   values: str) -> None:
+    """check_laws at one set of parameter values; InputError on `source`, saying they are `values`."""
+    from benchlab.model.build import build_network  # the identify package: only once a run is at hand
+
+    network = build_network(model)
+    laws = [(f"links[{entry.name}].resistance", link.resistance, entry.resistance.names, True)
+            for entry, link in zip(model.links, network.links)]
+    laws += [(f"sources[{entry.name}].heat", flow.heat_flow, entry.heat.names, False)
+             for entry, flow in zip(model.sources, network.sources)]
+    channels = {c: run[c].to_numpy(np.float64) for c in model.law_channels() if c in run.columns}
+    for entry, law, names, positive in laws:
+        reads = [channels[c] for c in names if c in channels]
+        asked = np.logical_and.reduce([np.isfinite(v) for v in reads]) if reads else np.ones(len(run), bool)
+        with np.errstate(all="ignore"):
+            law_values = np.broadcast_to(np.asarray(law(params, channels), dtype=np.float64), asked.shape)
+        bad = asked & ~(np.isfinite(law_values) & ((law_values > 0) if positive else True))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            what = "a positive finite resistance in K/W" if positive else "a finite heat flow in W"
+            raise InputError(source, entry, f"{what} at {values} on {run.attrs.get('source', 'the run')}, got "
+                                            f"{law_values[i]:g} at sample {i} (a division by zero or an overflow?)")
+
+
+def load_runs(paths: Sequence["str | os.PathLike[str]"], model: ModelDefinition,
+              params: Mapping[str, float] | None = None, params_source: str = "") -> list[pd.DataFrame]:
+    """Each run file read and checked for the model (its laws at `params` where given: see check_laws)."""
     runs = []
     for path in paths:
         run = load_run(path, required=())
-        check_run(model, run)
+        check_run(model, run, params, params_source)
         runs.append(run)
     return runs

@@ -11,6 +11,7 @@ import pandas as pd
 
 from benchlab.cooldown import CooldownResult, analyse, stored
 from benchlab.errors import InputError
+from benchlab.outputs import write_text
 from benchlab.params import ModelParams
 from benchlab.progress import SILENT, Progress
 from benchlab.report.page import Figures, render
@@ -82,5 +83,5 @@ def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.Path
         )
     rows = [(run, e) for e in on_run] + [(v, e) for v, ests in checks if v is not run for e in ests]
     page = out / PAGE
-    page.write_text(render(run, models, rows, figures, cooldowns, cooldowns_source, res))
+    write_text(page, render(run, models, rows, figures, cooldowns, cooldowns_source, res))
     return page

@@ -19,6 +19,7 @@ from typing import Any
 import pandas as pd
 
 from benchlab.metrics import nrmse_pct, rmse_k
+from benchlab.outputs import write_text
 from benchlab.params import ModelParams
 from benchlab.report.page import number
 from benchlab.report.scores import estimate
@@ -207,6 +208,6 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
              "margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}th{background:#eee}"
              "img{max-width:100%}figure{margin:1em 0}.sim{background:#fff4d6;padding:0.6em;border:1px solid #e0c060}")
     page = out / PAGE
-    page.write_text("<!DOCTYPE html><html><head><meta charset='utf-8'><title>benchlab: the whole job</title>"
+    write_text(page, "<!DOCTYPE html><html><head><meta charset='utf-8'><title>benchlab: the whole job</title>"
                     f"<style>{style}</style></head><body>{''.join(sections)}</body></html>")
     return page

@@ -14,6 +14,8 @@ import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from benchlab.outputs import replacing
+
 #: At most this many points per plotted line: beyond it a line only costs rendering time.
 MAX_POINTS = 20_000
 DPI = 110
@@ -64,6 +66,7 @@ def run_name(run: pd.DataFrame) -> str:
 
 
 def save(fig: Figure, path: "str | os.PathLike[str]") -> Path:
-    """Write the figure as PNG and return its path."""
-    fig.savefig(path, dpi=DPI)
+    """Write the figure as PNG (whole, then renamed into place: benchlab.outputs) and return its path."""
+    with replacing(path) as tmp:
+        fig.savefig(tmp, dpi=DPI, format="png")
     return Path(path)

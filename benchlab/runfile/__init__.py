@@ -7,7 +7,7 @@ by what each module reads or writes:
 - read.py: open_run, root attributes, /aligned (load_run), /events, progress record, /schedule, /truth, and
   where a stopped run stands (`--resume`)
 - groups.py: the time-stamped groups besides /aligned (/raw/<stream>, /events, /simulated) for an export
-- analysis.py: /analysis (`benchlab cooldown` writes it, `benchlab report` reads it)
+- analysis.py: /analysis (`benchlab cooldown` writes it, into its own file or the run's; `benchlab report` reads it)
 - write.py: whole files at once (`benchlab import`, `simulate`, `observe`)
 - live.py: a file still being written, read without HDF5's caches (`benchlab watch`)
 - benchlab/acquire/writer.py: the crash-safe file `benchlab run` writes as data arrives
@@ -20,7 +20,7 @@ import typing as _typing
 from benchlab._lazy import lazy_exports as _lazy_exports
 
 if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` imports them on first use
-    from benchlab.runfile.analysis import StoredAnalysis, load_analysis, write_analysis
+    from benchlab.runfile.analysis import StoredAnalysis, load_analysis, write_analysis, write_analysis_file
     from benchlab.runfile.groups import StoredColumn, StoredGroup, StoredStreams, load_streams
     from benchlab.runfile.read import (Event, StoppedRun, event_steps, load_attrs, load_events, load_progress,
                                        load_run, load_schedule, load_stopped_run, load_truth, open_run,
@@ -31,7 +31,7 @@ if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` i
     from benchlab.runfile.write import write_results, write_run, write_simulated
 
 _HOMES = {
-    "analysis": ("StoredAnalysis", "load_analysis", "write_analysis"),
+    "analysis": ("StoredAnalysis", "load_analysis", "write_analysis", "write_analysis_file"),
     "groups": ("StoredColumn", "StoredGroup", "StoredStreams", "load_streams"),
     "read": ("Event", "StoppedRun", "event_steps", "load_attrs", "load_events", "load_progress", "load_run",
              "load_schedule", "load_stopped_run", "load_truth", "open_run", "read_progress", "read_schedule"),

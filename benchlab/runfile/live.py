@@ -18,6 +18,7 @@ import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
+from stat import S_ISREG
 from typing import Any
 
 import h5py
@@ -89,6 +90,8 @@ class RunFileVersion:
             raise InputError(self.path, "file", f"a readable run file ({exc.strerror})") from None
         try:
             stat = os.fstat(self.fd)
+            if not S_ISREG(stat.st_mode):
+                raise InputError(self.path, "file", "a run file (a regular file, not a directory or a device)")
             self.inode = (stat.st_dev, stat.st_ino)
             self._h5 = self._open_hdf5()
             self._index()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,9 +16,10 @@ from typing import TYPE_CHECKING, NamedTuple
 import h5py
 import numpy as np
 
+from benchlab.bounds import MAX_CYCLES, MAX_GRID_STEP_S, MAX_RESUMES, MAX_RUN_DURATION_S
 from benchlab.errors import InputError
-from benchlab.runfile.schema import (ALIGNED_UNITS, EVENT_FIELDS, REQUIRED, SCHEMA, time_step_tolerance,
-                                     unmeasurable_sample)
+from benchlab.runfile.schema import (ALIGNED_UNITS, EVENT_FIELDS, REQUIRED, SCHEMA, time_stamp_problem,
+                                     time_step_tolerance, unmeasurable_sample)
 from protocols.schedule import Step, steps_from_rows
 
 if TYPE_CHECKING:  # pandas loads where a frame is built: the run and watch paths read no frame
@@ -29,15 +31,51 @@ def text(value: object) -> str:
     return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
 
 
-def open_run(path: "str | os.PathLike[str]", mode: str = "r") -> h5py.File:
-    """The run file opened with h5py; InputError if it does not exist or is not HDF5."""
+#: How HDF5 (through h5py) starts the message of a failed read: a damaged or truncated file's object or data.
+HDF5_READ_FAILED = re.compile(r"^'?(Unable to|Can't|Could not|Cannot)\b")
+
+
+def hdf5_damage(exc: BaseException) -> bool:
+    """Whether `exc` is HDF5 failing to read what the file claims to hold (a corrupt or truncated file), not a
+    mistake of ours: h5py raises OSError, KeyError, RuntimeError or ValueError with HDF5's text."""
+    return isinstance(exc, (OSError, KeyError, RuntimeError, ValueError)) and bool(HDF5_READ_FAILED.match(str(exc)))
+
+
+class RunFile(h5py.File):
+    """A run file opened by open_run: HDF5 failing to read part of it inside its `with` block is InputError naming
+    the file as damaged (exit 2), not a Python error."""
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: object) -> None:
+        super().__exit__(exc_type, exc, tb)
+        if exc is not None and hdf5_damage(exc):
+            detail = " ".join(str(exc).strip("'").split())
+            raise InputError(self.source, "file", f"an intact HDF5 run file (corrupt or truncated: {detail})") from None
+
+
+def open_run(path: "str | os.PathLike[str]", mode: str = "r") -> RunFile:
+    """The run file opened with h5py; InputError if it does not exist, is not a regular file, is not HDF5, or (in
+    its `with` block) is damaged."""
     path = Path(path)
     if not path.exists():
         raise InputError(path, "file", "an existing run file (not found)")
+    if not path.is_file():
+        raise InputError(path, "file", "a run file (a regular file, not a directory or a device)")
     try:
-        return h5py.File(path, mode)
+        f = RunFile(path, mode)
     except OSError:
         raise InputError(path, "file", "an HDF5 run file (cannot be opened as HDF5)") from None
+    f.source = path
+    return f
+
+
+def stored_schema(path: "str | os.PathLike[str]") -> str | None:
+    """The root attribute `schema` of an HDF5 file if it is the run files' (SCHEMA); None for any other file,
+    HDF5 or not (benchlab.outputs: a run file is never written over by mistake)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return SCHEMA if text(f.attrs.get("schema", "")) == SCHEMA else None
+    except OSError:
+        return None
 
 
 def load_attrs(path: "str | os.PathLike[str]") -> dict[str, str]:
@@ -230,6 +268,8 @@ def _read_channels(path: Path, group: h5py.Group,
 def _check_time(path: Path, time: np.ndarray, dt: float, stored: np.dtype) -> None:
     if len(time) < 2:
         raise InputError(path, "/aligned/time", "at least two samples")
+    if (problem := time_stamp_problem(time)) and np.all(np.isfinite(time)):
+        raise InputError(path, "/aligned/time", problem)
     step_error = np.abs(np.diff(time) - dt)
     tolerance = time_step_tolerance(time, dt, stored) if np.all(np.isfinite(time)) else 0.0
     if not np.all(np.isfinite(time)) or np.max(step_error) > tolerance:
@@ -280,12 +320,46 @@ def load_stopped_run(path: "str | os.PathLike[str]", channels: Sequence[str]) ->
         if "acquire/progress" not in f or "schedule" not in f:
             raise InputError(path, "/acquire/progress", "a run file written by benchlab run (no progress record)")
         progress = read_progress(f)
-        rows = int(progress["aligned_rows"])
+        dt = grid_step(path, f["aligned"]) if "aligned" in f else 0.0
+        rows = _check_stopped(path, f, progress, dt)
         last = {name: _last_valid(f[f"aligned/{name}"][:rows] if f"aligned/{name}" in f else np.empty(0))
                 for name in channels}
         truth = {name: ds[:rows] for name, ds in f["truth"].items() if name != "time"} if "truth" in f else {}
-        return StoppedRun(path, {k: text(v) for k, v in f.attrs.items()}, progress, float(f["aligned"].attrs["dt"]),
-                          last, truth, f["schedule"].attrs.get("steps_json"))
+        return StoppedRun(path, {k: text(v) for k, v in f.attrs.items()}, progress, dt, last, truth,
+                          f["schedule"].attrs.get("steps_json"))
+
+
+def _whole(value: float, low: float, high: float) -> bool:
+    return math.isfinite(value) and value == int(value) and low <= value <= high
+
+
+def _check_stopped(path: Path, f: h5py.File, progress: Mapping[str, float], dt: float) -> int:
+    """The rows `--resume` continues after, once every size, step and attribute it reads is checked against
+    benchlab.bounds (a tampered file used to allocate petabytes or fail with a Python error): InputError else."""
+    if "aligned/time" not in f:
+        raise InputError(path, "/aligned/time", "the run's time channel (missing)")
+    if dt > MAX_GRID_STEP_S:
+        raise InputError(path, "/aligned.dt", f"a time step of at most {MAX_GRID_STEP_S:g} s, got {dt:g}")
+    stored = f["aligned/time"].shape[0] if f["aligned/time"].ndim == 1 else 0
+    rows = progress.get("aligned_rows", math.nan)
+    if not _whole(rows, 0, stored) or rows * dt > MAX_RUN_DURATION_S:
+        raise InputError(path, "/acquire/progress aligned_rows", f"a whole number of rows in [0, {stored}] (what "
+                                                                 f"/aligned holds), at most {MAX_RUN_DURATION_S:g} s "
+                                                                 f"of run, got {rows:g}")
+    for field, low, high in (("state/resumes", 0, MAX_RESUMES), ("state/cycle", -1, MAX_CYCLES)):
+        value = progress.get(field, math.nan)
+        if not (math.isnan(value) or _whole(value, low, high)):
+            raise InputError(path, f"/acquire/progress {field}", f"a whole number in [{low}, {high}], got {value:g}")
+    seed = text(f.attrs.get("seed", "0"))
+    if not (seed.isascii() and seed.isdigit()):
+        raise InputError(path, "seed", f"the run's seed, a whole number >= 0, got {seed!r}")
+    try:
+        options = json.loads(text(f.attrs.get("protocol_options", "{}")))
+    except (ValueError, RecursionError):
+        options = None
+    if not isinstance(options, dict):
+        raise InputError(path, "protocol_options", "the protocol's options as a JSON object")
+    return int(rows)
 
 
 def _last_valid(values: np.ndarray) -> float:

@@ -58,6 +58,9 @@ TIME_TOLERANCE = 1e-6  # relative to dt
 #: measurement. Channels in other units are only checked for infinities.
 MEASURABLE_RANGE: dict[str, tuple[float, float]] = {
     "rpm": (-1e5, 1e5), "N*m": (-1e5, 1e5), "W": (-1e8, 1e8), "degC": (-273.15, 1e4)}
+#: Channels whose measurable values are narrower than their unit's: friction power is |T_c·Δω| (eq. 4), never
+#: negative (a negative one used to be accepted and fed to the model as heat drawn out of the clutch).
+CHANNEL_RANGE: dict[str, tuple[float, float]] = {"friction_power": (0.0, MEASURABLE_RANGE["W"][1])}
 #: How far clutch_state (1 clamped, 0 open) may read from 0 or 1: measurement noise, not a third state.
 CLUTCH_STATE_NOISE = 0.05
 
@@ -68,8 +71,8 @@ def unmeasurable_sample(name: str, unit: str, values: np.ndarray) -> tuple[int, 
     if name == "clutch_state":
         near = np.minimum(np.abs(values), np.abs(values - 1.0)) <= CLUTCH_STATE_NOISE
         expected = f"0 (open) or 1 (clamped) within ±{CLUTCH_STATE_NOISE:g}, or NaN"
-    elif unit in MEASURABLE_RANGE:
-        low, high = MEASURABLE_RANGE[unit]
+    elif name in CHANNEL_RANGE or unit in MEASURABLE_RANGE:
+        low, high = CHANNEL_RANGE.get(name) or MEASURABLE_RANGE[unit]
         near = (values >= low) & (values <= high)
         expected = f"values in [{low:g}, {high:g}] {unit} or NaN (not measured)"
     else:
@@ -77,6 +80,17 @@ def unmeasurable_sample(name: str, unit: str, values: np.ndarray) -> tuple[int, 
         expected = "finite values or NaN (not measured)"
     bad = np.flatnonzero(~near & ~np.isnan(values))
     return (int(bad[0]), expected, float(values[bad[0]])) if bad.size else None
+
+
+def time_stamp_problem(time: np.ndarray) -> str | None:
+    """What is wrong with a grid's time stamps as a whole (not finite, beyond MAX_TIME_STAMP_S), or None."""
+    from benchlab.bounds import MAX_TIME_STAMP_S
+
+    if not np.all(np.isfinite(time)):
+        return "finite time stamps"
+    if len(time) and float(np.max(np.abs(time))) > MAX_TIME_STAMP_S:
+        return f"time stamps within ±{MAX_TIME_STAMP_S:g} s, got {float(time[np.argmax(np.abs(time))]):g}"
+    return None
 
 
 def time_step_tolerance(time: np.ndarray, dt: float, stored: np.dtype) -> float:

@@ -1,18 +1,18 @@
 """Writing whole run files and results files in one go: `benchlab import` (write_run), `benchlab simulate`
-(write_simulated) and `benchlab observe` (write_results). The file a run writes as it goes is the acquisition
-writer's (benchlab/acquire/writer.py)."""
+(write_simulated) and `benchlab observe` (write_results). Each is built beside its destination and renamed into
+place when whole (benchlab.outputs.replacing). The file a run writes as it goes is the acquisition writer's
+(benchlab/acquire/writer.py)."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pandas as pd
 
-from benchlab.errors import InputError
+from benchlab.outputs import replacing
 from benchlab.runfile.schema import ALIGNED_UNITS, SCHEMA
 
 
@@ -23,7 +23,7 @@ def write_run(path: "str | os.PathLike[str]", frame: pd.DataFrame, dt: float, pr
     missing = [c for c in frame.columns if c not in units]
     if missing:
         raise ValueError(f"no unit known for channels {missing}")
-    with h5py.File(path, "w") as f:
+    with replacing(path, run_file=True) as tmp, h5py.File(tmp, "w") as f:
         f.attrs.update(schema=SCHEMA, status=status, protocol=protocol)
         group = f.create_group("aligned")
         group.attrs["dt"] = float(dt)
@@ -38,9 +38,7 @@ def write_simulated(path: "str | os.PathLike[str]", run: "str | os.PathLike[str]
     """Write SIM.h5: a run file in its own right (the run's root attributes and /aligned, copied as stored, so
     every command that reads a run reads it) plus the contract's /simulated group on the run's grid (time, s;
     the model's temperatures, degC) and `attrs` saying where it came from (source run, parameters, model)."""
-    if Path(path).resolve() == Path(run).resolve():
-        raise InputError(path, "--out", "a file other than the run file it simulates")
-    with h5py.File(run, "r") as src, h5py.File(path, "w") as f:
+    with replacing(path, run_file=True) as tmp, h5py.File(run, "r") as src, h5py.File(tmp, "w") as f:
         f.attrs.update(src.attrs)
         f.attrs.update(attrs)
         src.copy(src["aligned"], f, "aligned")
@@ -51,7 +49,7 @@ def write_simulated(path: "str | os.PathLike[str]", run: "str | os.PathLike[str]
 def write_results(path: "str | os.PathLike[str]", group_name: str, time: np.ndarray,
                   columns: Mapping[str, tuple[np.ndarray, str]], attrs: Mapping[str, str]) -> None:
     """Write a results file: root attributes and one group of `time` (s) plus channels, each with its unit."""
-    with h5py.File(path, "w") as f:
+    with replacing(path) as tmp, h5py.File(tmp, "w") as f:
         f.attrs.update(attrs)
         _write_group(f, group_name, time, columns)
 

@@ -2,14 +2,23 @@
 
 GET /                 the page (index.html, watch.js: plain <canvas> drawing, nothing fetched from elsewhere)
 GET /api/update?...   LiveRun.update: width (px), span (s, 0 = whole run), level, have, events; JSON
-Requests that name another host than the loopback address are refused (no DNS rebinding onto the bench PC).
+Requests that name another host than the loopback address are refused (no DNS rebinding onto the bench PC):
+403 for a Host header naming another host, 400 for none or two Host headers (RFC 9112 section 3.2) and for an
+absolute-form target (`GET http://other.example/...`) naming another host.
+
+A careful small server: each connection has READ_TIMEOUT_S to send a request (a half-open connection is closed
+after it, not held for ever), at most MAX_CONNECTIONS are served at once (the next is answered 503 and closed), and a
+client that goes away mid-answer (a browser tab closed during a poll) is a debug line of the `benchlab.watch` log,
+never a traceback.
 """
 
 from __future__ import annotations
 
 import errno
 import json
+import logging
 import socket
+import sys
 import threading
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -23,6 +32,15 @@ from benchlab.watch.live import LiveRun
 HOST = "127.0.0.1"
 STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/watch.js": ("watch.js", "text/javascript; charset=utf-8")}
 MAX_WIDTH = 8192  # px: a plot wider than any screen would only make answers bigger
+#: Seconds a connection may take to send a request (and to take an answer): the page asks every second.
+READ_TIMEOUT_S = 10.0
+#: Connections served at once: a few pages polling need a handful; each holds a thread.
+MAX_CONNECTIONS = 32
+#: What a client going away looks like to the server: nothing to tell but a debug line.
+CLIENT_GONE = (ConnectionError, TimeoutError)
+BUSY = (b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nContent-Length: 4\r\nRetry-After: 1\r\n"
+        b"Connection: close\r\n\r\nbusy")
+log = logging.getLogger(__name__)
 
 
 def listen(port: int) -> socket.socket:
@@ -48,7 +66,8 @@ class WatchServer(ThreadingHTTPServer):
 
     daemon_threads = True
 
-    def __init__(self, live: LiveRun, sock: socket.socket) -> None:
+    def __init__(self, live: LiveRun, sock: socket.socket, read_timeout_s: float = READ_TIMEOUT_S,
+                 max_connections: int = MAX_CONNECTIONS) -> None:
         super().__init__(sock.getsockname(), _Handler, bind_and_activate=False)
         self.socket.close()
         self.socket = sock
@@ -56,6 +75,41 @@ class WatchServer(ThreadingHTTPServer):
         self.pages = {path: (_static(name), kind) for path, (name, kind) in STATIC.items()}
         port = sock.getsockname()[1]
         self.hosts = {f"{HOST}:{port}", f"localhost:{port}"}
+        self.read_timeout_s = read_timeout_s
+        self.max_connections = max_connections
+        self.slots = threading.BoundedSemaphore(max_connections)
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        """A thread for the connection while fewer than MAX_CONNECTIONS are served; else 503 and closed."""
+        if not self.slots.acquire(blocking=False):
+            log.debug("%s: %d connections already served, answered 503", client_address, self.max_connections)
+            try:
+                request.settimeout(1.0)
+                request.sendall(BUSY)
+            except OSError:
+                pass
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self.slots.release()
+            raise
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self.slots.release()
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A client that went away is a debug line; anything else one error line (its traceback with -vv)."""
+        exc = sys.exc_info()[1]
+        if isinstance(exc, CLIENT_GONE):
+            log.debug("%s went away: %s", client_address, exc)
+        else:
+            log.error("%s: request failed: %s: %s", client_address, type(exc).__name__, exc)
+            log.debug("request failed", exc_info=True)
 
     @property
     def url(self) -> str:
@@ -75,11 +129,23 @@ class _Handler(BaseHTTPRequestHandler):
     server: WatchServer
     protocol_version = "HTTP/1.1"
 
+    def setup(self) -> None:
+        self.timeout = self.server.read_timeout_s  # per connection: the socket's time-out for every read and write
+        super().setup()
+
     def do_GET(self) -> None:  # noqa: N802 - http.server's name
-        if self.headers.get("Host") not in self.server.hosts:
+        hosts = self.headers.get_all("Host") or []
+        if len(hosts) != 1:
+            self._send(HTTPStatus.BAD_REQUEST, b"exactly one Host header", "text/plain")
+            return
+        if hosts[0] not in self.server.hosts:
             self._send(HTTPStatus.FORBIDDEN, b"only for this computer (127.0.0.1)", "text/plain")
             return
         url = urlsplit(self.path)
+        if not self.path.startswith("/") and (url.scheme not in ("http", "") or url.netloc not in self.server.hosts):
+            self._send(HTTPStatus.BAD_REQUEST, b"a path, or an absolute URL of this computer (127.0.0.1)",
+                       "text/plain")
+            return
         if url.path in self.server.pages:
             body, kind = self.server.pages[url.path]
             self._send(HTTPStatus.OK, body, kind)
@@ -113,7 +179,8 @@ class _Handler(BaseHTTPRequestHandler):
         self.wfile.write(body)
 
     def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - http.server's signature
-        """Quiet: a page polling every second would fill the terminal."""
+        """Debug lines only (`benchlab -vv watch`): a page polling every second would fill the terminal."""
+        log.debug("%s %s", self.address_string(), format % args)
 
 
 def serve(live: LiveRun, sock: socket.socket, stop: threading.Event | None = None) -> None:

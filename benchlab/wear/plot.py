@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after selecting the headless backend
 import numpy as np  # noqa: E402
 
+from benchlab.report.plotting import save  # noqa: E402
 from benchlab.wear.analysis import WearReport  # noqa: E402
 
 
@@ -48,5 +49,7 @@ def plot_wear(report: WearReport, path: "str | os.PathLike[str]") -> None:
         ax.text(0.5, 0.5, "no failure within the searched horizon", ha="center", transform=ax.transAxes)
     ax.set_xlabel("remaining life (engagements)")
     ax.set_ylabel("Monte Carlo paths")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        save(fig, path)
+    finally:
+        plt.close(fig)
