@@ -3,7 +3,7 @@
 Each effect is switchable and scaled and is an edit of the true network, written here on the
 bench side independently of what `benchlab.diagnose` knows, so that hiding an effect in
 simulated data and finding it again is a real test. Effects that depend on the plant's own
-temperatures (radiation) are solved by fixed-point iteration over the whole horizon.
+temperatures (radiation, natural convection) are solved by fixed-point iteration over the whole horizon.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ class Effect:
     mechanism: str
     edit: Edit
     params: Mapping[str, float] = field(default_factory=dict)
+    reads_states: bool = False  # its laws read the plant's own temperatures: solved by fixed-point iteration
 
 
 def _drop_convection(link: Link) -> bool:
@@ -112,7 +113,25 @@ def radiation(emissivity_area_m2: float) -> Effect:
             net = net.with_source(Source(node, flow(node, -1.0), f"radiation {node}"))
             net = net.with_source(Source("T", flow(node, 1.0), f"radiation {node} to housing"))
         return net
-    return Effect("radiation", "T_flywheel", "other", edit, {"eps_area": emissivity_area_m2})
+    return Effect("radiation", "T_flywheel", "other", edit, {"eps_area": emissivity_area_m2}, reads_states=True)
+
+
+def natural_convection(resistance_at_10k: float, exponent: float = 0.25) -> Effect:
+    """Mixed convection: beside the forced convection of eq. (11), plate and flywheel each lose heat to the chamber
+    air by natural convection, whose coefficient grows with their temperature difference (h ~ dT^0.25, laminar):
+    a parallel path R_n * (|dT| / 10 K)^-exponent, read from the plant's own temperatures."""
+    def path(node: str):
+        def law(p, ch):
+            difference = np.maximum(np.abs(ch[f"_state_{node}"] - ch["_state_A"]), 0.1)
+            return p["R_nat"] * (difference / 10.0) ** -p["n_nat"]
+        return law
+
+    def edit(net, p):
+        for node in ("P", "F"):
+            net = net.with_link(Link(node, "A", path(node), f"natural convection {node}"))
+        return net
+    return Effect("natural_convection", "T_flywheel", "convection", edit,
+                  {"R_nat": resistance_at_10k, "n_nat": exponent}, reads_states=True)
 
 
 def custom_source(name: str, node: str, signal: str, mechanism: str,
@@ -138,7 +157,7 @@ class ThermalPlant:
         self.network = network
         self.effects = tuple(effects)
         self.state: np.ndarray | None = None
-        self._iterative = any(e.name == "radiation" for e in effects)
+        self._iterative = any(e.reads_states for e in effects)
 
     @property
     def state_names(self) -> list[str]:

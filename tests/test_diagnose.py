@@ -91,6 +91,8 @@ HIDDEN = [  # (effect, seed, signal, mechanism): two magnitudes per effect, seed
     (P.extra_mass(4000.0, 0.15), 114, None, "capacity"),
     (P.radiation(0.08), 117, "T_flywheel", "other"),
     (P.radiation(0.2), 118, "T_flywheel", "other"),
+    (P.natural_convection(0.5), 119, "T_flywheel", "convection"),  # a law of the temperature difference (issue 31)
+    (P.natural_convection(0.8), 120, "T_flywheel", "convection"),
     (_custom_torque_heat(40.0), 115, "clutch_torque", "other"),
     (_custom_torque_heat(80.0), 116, "clutch_torque", "other"),
 ]

@@ -88,15 +88,34 @@ class Candidate:
         return self.signals or ((self.signal,) if self.signal else ())
 
 
+DIFFERENCE = "dT:"  # a derived signal |a − b| of two measured temperatures: "dT:T_flywheel-T_air"
+
+
+def difference_signal(first: str, second: str) -> str:
+    """The name of the derived signal |first − second| (a temperature difference across a link)."""
+    return f"{DIFFERENCE}{first}-{second}"
+
+
+def difference_channels(name: str) -> tuple[str, str]:
+    """The two channels of a temperature difference signal."""
+    first, second = name.removeprefix(DIFFERENCE).split("-")
+    return first, second
+
+
 def signal_values(name: str, ch: Channels) -> np.ndarray:
-    """A candidate signal from the channels; `slip_speed` is |ω_e − ω_c| in rpm."""
+    """A candidate signal from the channels; `slip_speed` is |ω_e − ω_c| in rpm, a `dT:a-b` signal |a − b| in K."""
     if name == "slip_speed":
         return np.abs(ch["engine_speed"] - ch["clutch_speed"])
+    if name.startswith(DIFFERENCE):
+        first, second = difference_channels(name)
+        return np.abs(ch[first] - ch[second])
     return ch[name]
 
 
 def signal_expression(name: str) -> str:
     """The signal as a model-file expression."""
+    if name.startswith(DIFFERENCE):
+        return "abs({} - {})".format(*difference_channels(name))
     return "abs(engine_speed - clutch_speed)" if name == "slip_speed" else name
 
 
@@ -373,6 +392,26 @@ def link_groups(model: ModelDefinition) -> list[tuple[str, ...]]:
     return [tuple(names) for names in groups.values()]
 
 
+def link_difference(model: ModelDefinition, group: tuple[str, ...], channels: Channels) -> str | None:
+    """The temperature difference across a link group, as a derived signal of the channels that measure its two
+    ends (a node's first output, a boundary's channel in the runs): the first link of the group with both ends
+    measured, None where none has. Laws of it are laws of node temperatures linearised about their measurements,
+    like the radiation candidate: exact where the measurement is the node's temperature."""
+    measured = {}
+    for channel, node in model.outputs.items():
+        measured.setdefault(node, channel)
+    for boundary, reads in model.boundaries.items():
+        present = [c for c in reads if c in channels]
+        if present:
+            measured[boundary] = present[0]
+    for link in model.links:
+        if link.name in group and all(end in measured for end in link.between):
+            first, second = (measured[end] for end in link.between)
+            if first in channels and second in channels and first != second:
+                return difference_signal(first, second)
+    return None
+
+
 def _link_inert(links: tuple[str, ...], signal: str, law: str) -> tuple[str, ...]:
     """The parameter of link_law that has no effect while its factor g is zero."""
     tag = f"{_slug(signal)}_{_slug(links[0])}"
@@ -424,6 +463,19 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
                                      f"heat crosses {' and '.join(group)} at a rate that depends on {signal}",
                                      link_law(group, signal, law), nodes=where, inert=_link_inert(group, signal, law),
                                      signals=(signal,)))
+    for group in link_groups(model):
+        difference = link_difference(model, group, channels)
+        if difference is None:
+            continue
+        first, second = difference_channels(difference)
+        where = tuple(dict.fromkeys(n for name in group for n in link_nodes[name]))
+        for law in LAWS:
+            out.append(Candidate(_slug(f"dT_{first}_{second}_{law}_{'_'.join(group)}"), first, link_mechanism(group),
+                                 f"{' = '.join(group)} = R * f(|{first} - {second}|), {law}",
+                                 f"heat crosses {' and '.join(group)} at a rate that depends on the temperature "
+                                 f"difference {first} - {second} (natural or mixed convection, a contact that "
+                                 "opens as it heats)", link_law(group, difference, law), nodes=where,
+                                 inert=_link_inert(group, difference, law), signals=(first, second)))
     out += _sources(signals, nodes, channels)
     linked = {frozenset(l.between) for l in model.links}
     for a, b in combinations(nodes, 2):
