@@ -1,9 +1,10 @@
 """`benchlab import DATA.csv --out RUN.h5 [--dt S] [--unit NAME=UNIT …] [--model FILE.toml|linear|nonlinear]`:
 a CSV becomes a run file (contract sections 1 and 6).
 
-Columns with the contract's /aligned names carry the contract's units; any other column needs its unit, from its
-title (`name [unit]`, what `benchlab export --to X.csv` writes), a second header line of units or
-`--unit NAME=UNIT`. Without a `time` column, `--dt S` gives the grid. The CSV must hold the clutch channels of
+Columns with the contract's /aligned names are in the contract's units unless their unit is given, in any spelling
+of any unit of that dimension (`°C`, `K`, `Nm`, `1/min`, …: converted by benchlab.units); any other column needs
+its unit. A unit is given by the column's title (`name [unit]`, what `benchlab export --to X.csv` writes), a second
+header line of units or `--unit NAME=UNIT`. Without a `time` column, `--dt S` gives the grid. The CSV must hold the clutch channels of
 section 1, or with `--model` the channels that model names.
 
 The separator is the one of `,` `;` TAB that the header line holds (or `--sep`); with `;` or TAB a decimal
@@ -25,6 +26,7 @@ from benchlab.errors import InputError, read_document
 from benchlab.interrupts import interrupts_held
 from benchlab.model.names import MODEL_HELP
 from benchlab.outputs import check_output
+from benchlab.units import to_stored
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -87,23 +89,17 @@ def _check_width(path: Path, text: str, sep: str) -> None:
         raise InputError(path, "header", f"at most {MAX_CSV_COLUMNS} columns (channels), got {columns}")
 
 
-def _channel_names(path: Path, titles: list[str]) -> tuple[list[str], dict[str, str]]:
-    """Column titles to channel names and the units the titles give; a unit in the title of a contract channel
-    must be its contract unit."""
-    from benchlab.runfile import ALIGNED_UNITS
-
-    names, units = [], {}
+def _channel_names(titles: list[str]) -> tuple[list[str], dict[str, str], dict[str, str]]:
+    """Column titles to channel names, the units the titles give (`name [unit]`) and each name's title."""
+    names, units, shown = [], {}, {}
     for title in (str(t).strip() for t in titles):
         match = TITLE_WITH_UNIT.match(title)
         name = match["name"] if match else title
-        if match:
-            unit = match["unit"].strip()
-            if name in ALIGNED_UNITS and unit != ALIGNED_UNITS[name]:
-                raise InputError(path, f"column {title}", f"{name} in {ALIGNED_UNITS[name]}, got {match['unit']!r}")
-            if unit:
-                units[name] = unit
+        if match and match["unit"].strip():
+            units[name] = match["unit"].strip()
         names.append(name)
-    return names, units
+        shown[name] = title
+    return names, units, shown
 
 
 def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None = None,
@@ -126,7 +122,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
         frame = pd.read_csv(io.StringIO(text), sep=sep, dtype=str, keep_default_na=False)
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(path, "file", f"a CSV table ({str(exc).splitlines()[0]})") from None
-    names, title_units = _channel_names(path, list(frame.columns))
+    names, title_units, titles = _channel_names(list(frame.columns))
     frame.columns = names
     first_line = 2
     if len(frame) and not any(_is_number(v, decimal) for v in frame.iloc[0]):  # a second header line: the units
@@ -140,10 +136,6 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
         raise InputError(path, "column time", "no time column with --dt (one or the other gives the grid)")
     if dt is None and "time" not in frame.columns:
         raise InputError(path, "column time", "a time column in s, or --dt S for one row per step")
-    for name in ("time",) + tuple(required):
-        if name not in frame.columns and not (name == "time" and dt is not None):
-            raise InputError(path, f"column {name}", f"a required channel in {ALIGNED_UNITS.get(name, 'its unit')} "
-                                                     "(missing)")
     for name in frame.columns:
         text = frame[name].astype(str).str.strip()
         if decimal != ".":
@@ -153,9 +145,14 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
         if bad.any():
             row = int(np.flatnonzero(bad.to_numpy())[0])
             raise InputError(path, f"column {name}, line {row + first_line}", f"a number, got {frame[name].iloc[row]!r}")
-        frame[name] = values.astype(np.float64)
+        frame[name], units[name] = to_stored(path, f"column {titles[name]}", name, values.to_numpy(np.float64),
+                                             units[name])
         if name != "time" and (problem := unmeasurable_sample(name, units[name], frame[name].to_numpy())):
             raise InputError(path, f"column {name}, line {problem[0] + first_line}", f"{problem[1]}, got {problem[2]!r}")
+    for name in ("time",) + tuple(required):
+        if name not in frame.columns and not (name == "time" and dt is not None):
+            raise InputError(path, f"column {name}", f"a required channel in {ALIGNED_UNITS.get(name, 'its unit')} "
+                                                     "(missing)")
     if dt is not None:
         frame.insert(0, "time", np.arange(len(frame)) * dt)
         units["time"] = "s"
@@ -171,7 +168,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
 
 
 def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, str]:
-    """The unit of every column: the contract's for its channels (a different one given is bad input), else given."""
+    """The unit of every column as the file gives it: given, else the contract's for its channels."""
     from benchlab.runfile import ALIGNED_UNITS
 
     for name in given:
@@ -179,13 +176,8 @@ def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, s
             raise InputError(path, f"--unit {name}", f"a column of the CSV ({', '.join(columns)})")
     units = {}
     for name in columns:
-        if name in ALIGNED_UNITS:
-            if given.get(name, ALIGNED_UNITS[name]) != ALIGNED_UNITS[name]:
-                raise InputError(path, f"column {name}", f"unit {ALIGNED_UNITS[name]!r} (contract section 1), "
-                                                         f"got {given[name]!r}")
-            units[name] = ALIGNED_UNITS[name]
-        elif name in given:
-            units[name] = given[name]
+        if name in given or name in ALIGNED_UNITS:
+            units[name] = given.get(name, ALIGNED_UNITS.get(name))
         else:
             raise InputError(path, f"column {name}", f"one of the contract's channels {sorted(ALIGNED_UNITS)}, or a "
                                                      "channel with its unit (--unit NAME=UNIT or a second header line)")
