@@ -26,21 +26,23 @@ from benchlab.errors import InputError, read_document
 from benchlab.interrupts import interrupts_held
 from benchlab.model.names import MODEL_HELP
 from benchlab.outputs import check_output
-from benchlab.units import to_stored
 
 if TYPE_CHECKING:
     import pandas as pd
 
 NAME = "import"
-HELP = "convert a CSV (contract channel names, or any channel with its unit) into a run file"
+HELP = "convert a CSV or an MDF file (contract channel names, a mapping, any channel with its unit) into a run file"
 SEPARATORS = {",": ",", ";": ";", "tab": "\t"}
+#: What asammdf reads (benchlab.importing.mdf.SUFFIXES, kept here so that `--help` loads no asammdf).
+MDF_SUFFIXES = (".mf4", ".mdf", ".dat")
 #: A column title with its unit, `T_flywheel [degC]`.
 TITLE_WITH_UNIT = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\]]*)\]$")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("csv", help="CSV file, one column per channel, header = channel names or `name [unit]` "
-                                    "(optionally a second header line of units)")
+    parser.add_argument("csv", metavar="DATA", help="CSV file, one column per channel, header = channel names or "
+                                                    "`name [unit]` (optionally a second header line of units); or "
+                                                    "an MDF file (.mf4, .mdf, .dat) with --dt")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="run file to write")
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
                         help="time step in s of a CSV without a time column (one row per step)")
@@ -51,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
     parser.add_argument("--decimal", choices=(".", ","),
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
+    parser.add_argument("--mapping", metavar="MAP.toml", help="an MDF file's channels: run-file channel = source "
+                                                              "channel, with group, unit, scale, offset, rule "
+                                                              "(benchlab/importing/mapping.py)")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file (a regular file)")
 
 
@@ -112,6 +117,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
 
     from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample
     from benchlab.runfile.schema import time_stamp_problem
+    from benchlab.units import to_stored
 
     required = REQUIRED if required is None else required
     # a spreadsheet's byte-order mark is not part of the header (utf-8-sig)
@@ -184,13 +190,41 @@ def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, s
     return units
 
 
+def _read_mdf(args: argparse.Namespace, required: tuple[str, ...] | None) -> tuple[pd.DataFrame, dict, dict]:
+    """An MDF file's channels on the grid --dt, with the required ones (default: the clutch channels)."""
+    from benchlab.importing.mapping import read_mapping
+    from benchlab.importing.mdf import read_mdf
+    from benchlab.runfile import REQUIRED
+
+    for flag, given in (("--unit", args.unit), ("--sep", args.sep), ("--decimal", args.decimal)):
+        if given:
+            raise InputError(args.csv, flag, "nothing for an MDF file (units and scales go in --mapping)")
+    if args.dt is None:
+        raise InputError(args.csv, "--dt", "the grid step in s for an MDF file's channels, e.g. --dt 0.01")
+    frame, units, attrs = read_mdf(args.csv, read_mapping(args.mapping) if args.mapping else [], args.dt)
+    for name in REQUIRED if required is None else required:
+        if name not in frame.columns:
+            raise InputError(args.csv, f"channel {name}", "a required channel: a channel of that name, or one "
+                                                          "mapped to it in --mapping")
+    return frame, units, attrs
+
+
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.model.catalog import resolve_model
         from benchlab.runfile import write_run  # and pandas, for read_csv
     required = tuple(resolve_model(args.model).required_channels()) if args.model else None
     check_output(args.out, "--out", args.force, inputs=[args.csv], run_file=True)
-    frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep, args.decimal)
-    write_run(args.out, frame, dt, protocol="imported", units=units)
+    if Path(args.csv).suffix.lower() in MDF_SUFFIXES:
+        frame, units, attrs = _read_mdf(args, required)
+        dt = args.dt
+    else:
+        if args.mapping:
+            raise InputError(args.csv, "--mapping", f"an MDF file ({', '.join(MDF_SUFFIXES)}); a CSV names its "
+                                                    "channels in its header")
+        frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep,
+                                    args.decimal)
+        attrs = {"source_file": Path(args.csv).name}
+    write_run(args.out, frame, dt, protocol="imported", units=units, attrs=attrs)
     print(f"{args.out}: {len(frame)} samples at dt={dt:g} s, {len(frame.columns)} channels")
     return 0
