@@ -150,6 +150,8 @@ def test_an_mdf_needs_dt_and_its_required_channels(tmp_path, recorder_part, refu
     (tmp_path / "few.toml").write_text('[channels]\nT_air = "T_Luft"')
     refused(["import", str(src), "--mapping", str(tmp_path / "few.toml"), "--dt", "0.1", "--out",
              str(tmp_path / "r.h5")], "channel engine_speed", "required")
+    refused(["import", str(src), "--mapping", str(tmp_path / "few.toml"), "--dt", "1e-9", "--out",
+             str(tmp_path / "r.h5")], "--dt", "rows")
     (tmp_path / "bad.mf4").write_bytes(b"not an MDF file at all" * 10)
     refused(["import", str(tmp_path / "bad.mf4"), "--dt", "0.1", "--out", str(tmp_path / "r.h5")], "file", "MDF")
 

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from benchlab.bounds import MAX_RUN_DURATION_S
+from benchlab.bounds import MAX_IMPORT_ROWS, MAX_RUN_DURATION_S
 from benchlab.errors import InputError
 from benchlab.importing.grid import resample
 from benchlab.importing.mapping import Mapped
@@ -95,7 +95,11 @@ def read_mdf(path: "str | os.PathLike[str]", mapped: list[Mapped], dt: float
     span = max(float(np.nanmax(t)) for t in stamps) - t0 if stamps else 0.0
     if span > MAX_RUN_DURATION_S:
         raise InputError(path, "time stamps", f"a run of at most {MAX_RUN_DURATION_S:g} s, got {span:g} s")
-    time = np.arange(int(np.floor(span / dt + 1e-9)) + 1) * dt
+    rows = int(np.floor(span / dt + 1e-9)) + 1
+    if rows > MAX_IMPORT_ROWS:
+        raise InputError(path, "--dt", f"a grid of at most {MAX_IMPORT_ROWS} rows over the file's {span:g} s, "
+                                       f"got {rows} at dt={dt:g} s")
+    time = np.arange(rows) * dt
     frame = pd.DataFrame({"time": time, **{name: resample(t - t0, v, time, rule)
                                            for name, ((t, v, _, rule), _) in series.items()}})
     units = {"time": "s", **{name: s[2] for name, (s, _) in series.items()}}
