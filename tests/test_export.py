@@ -75,6 +75,11 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
             np.testing.assert_array_equal(mdf.get("events.cycle").samples, f["events/cycle"][()])
             reasons = mdf.get("events.reason").samples
             np.testing.assert_array_equal(reasons, f["events/reason"][()])
+            # and each row an MDF event (mdf.events): a marker at its time, named by its kind
+            assert [e.name for e in mdf.events] == [k.decode() for k in f["events/kind"][()]]
+            np.testing.assert_allclose([e.value for e in mdf.events], f["events/time"][()], rtol=1e-12)
+            details = [d.decode() for d in f["events/detail"][()]]
+            assert all(d in e.comment for d, e in zip(details, mdf.events))
         assert "run_complete" in {k.decode() for k in kinds.samples}
         assert {"synchronised", "time"} & {r.decode() for r in reasons}  # the launch's and the steps' ends
         assert 'name="schema">benchlab-run/1<' in mdf.header.comment
