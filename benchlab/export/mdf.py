@@ -37,14 +37,27 @@ def header_comment(content: RunContent) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def _value_to_text(texts: dict[int, str] | None) -> dict[str, Any] | None:
+    """asammdf's value-to-text conversion (MDF CC_TABX) for an enum's table; values without text show the number."""
+    if not texts:
+        return None
+    conversion: dict[str, Any] = {}
+    for i, (value, text) in enumerate(sorted(texts.items())):
+        conversion[f"val_{i}"], conversion[f"text_{i}"] = float(value), text.encode()
+    conversion["default_addr"] = {"a": 1.0, "b": 0.0}  # any other value (and NaN): the number as it is
+    return conversion
+
+
 def _append(mdf: Any, group: ChannelGroup) -> None:
     """One channel group. Numbers go as a DataFrame, asammdf's fastest path (no per-signal copies, no temporary
-    compression), each channel's comment then set on its block; text (event kinds) needs asammdf's Signals."""
-    if any(c.values.dtype.kind == "S" for c in group.channels):
+    compression), each channel's comment then set on its block; text (event kinds) and enums with their value
+    tables need asammdf's Signals."""
+    if any(c.values.dtype.kind == "S" or c.texts for c in group.channels):
         from asammdf import Signal
 
         mdf.append([Signal(c.values, group.time, unit=c.unit, name=c.name, comment=c.comment, encoding="utf-8"
-                           if c.values.dtype.kind == "S" else None, master_metadata=(group.master, 1))
+                           if c.values.dtype.kind == "S" else None, master_metadata=(group.master, 1),
+                           conversion=_value_to_text(c.texts))
                     for c in group.channels], acq_name=group.path, comment=group.comment, common_timebase=True)
         return
     frame = pd.DataFrame({c.name: c.values for c in group.channels}, index=pd.Index(group.time, name=group.master))

@@ -62,6 +62,8 @@ def _series(path: Path, mdf: Any, entry: Mapped) -> tuple[np.ndarray, np.ndarray
     """One source channel: time stamps, values in the run file's unit (invalid samples NaN), that unit, the rule."""
     group, index = _location(path, mdf, entry)
     sig = mdf.get(group=group, index=index, ignore_invalidation_bits=True)  # every sample, with its bit
+    if sig.samples.dtype.kind in "SUO":  # an enum shown as its value table's texts: the numbers behind them
+        sig = mdf.get(group=group, index=index, ignore_invalidation_bits=True, raw=True)
     field = f"channel {entry.channel} ← {entry.source}"
     if sig.samples.dtype.kind not in "iufb" or sig.samples.ndim != 1:
         raise InputError(path, field, f"a numeric channel, got samples of type {sig.samples.dtype}")
