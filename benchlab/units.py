@@ -101,15 +101,28 @@ def convert(values: np.ndarray, unit: str, target: str) -> np.ndarray:
     return np.asarray(registry().Quantity(values, source).to(wanted).magnitude, dtype=np.float64)
 
 
-def to_stored(source: object, field: str, name: str, values: np.ndarray, unit: str) -> tuple[np.ndarray, str]:
-    """A channel's values and the unit a run file stores them in: a contract channel (`T_air`, …) converted to the
-    contract's unit and spelling, any other channel as given. InputError on `field` of `source` for a unit that is
-    not its contract unit's dimension."""
+def _canonical(unit: str) -> str:
+    """The spelling a run file stores a channel's unit in: the contract's where `unit` is one of its units spelled
+    another way (`°C` → `degC`, `Nm` → `N*m`, `1/min` → `rpm`), else `unit` as given."""
     from benchlab.runfile.schema import ALIGNED_UNITS
 
-    if name not in ALIGNED_UNITS:
-        return np.asarray(values, dtype=np.float64), unit
+    return next((c for c in dict.fromkeys(ALIGNED_UNITS.values()) if same(unit, c)), unit)
+
+
+def to_stored(source: object, field: str, name: str, values: np.ndarray, unit: str) -> tuple[np.ndarray, str]:
+    """A channel's values and the unit a run file stores them in: a contract channel (`T_air`, …) converted to the
+    contract's unit, any other temperature to degC (every temperature a model reads is in degC), any other channel
+    as given, its unit in the contract's spelling where it is one of the contract's units. InputError on `field` of
+    `source` for a unit that is not its contract unit's dimension."""
+    from benchlab.runfile.schema import ALIGNED_UNITS
+
+    target = ALIGNED_UNITS.get(name)
+    if target is None:
+        parsed = _parsed(unit)
+        if parsed is None or parsed.dimensionality != _parsed("degC").dimensionality:
+            return np.asarray(values, dtype=np.float64), _canonical(unit) if parsed is not None else unit
+        target = "degC"
     try:
-        return convert(values, unit, ALIGNED_UNITS[name]), ALIGNED_UNITS[name]
+        return convert(values, unit, target), target
     except UnitMismatch as exc:
         raise InputError(str(source), field, f"{name} in {exc}") from None

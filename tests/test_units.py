@@ -70,3 +70,15 @@ def test_a_run_file_may_spell_the_contract_units_its_own_way(foreign_run):
         f["aligned/T_air"].attrs["units"], f["aligned/clutch_torque"].attrs["units"] = "°C", "Nm"
     run = benchlab.load_run(foreign_run)
     assert run.attrs["units"]["T_air"] == "degC" and run.attrs["units"]["clutch_torque"] == "N*m"
+
+
+def test_channels_beyond_the_contract_keep_their_unit_but_temperatures_are_degc(tmp_path, short_run):
+    csv = tmp_path / "d.csv"
+    part = short_run.iloc[:20].drop(columns="time").assign(rotor=300.15, stator=20.5, speed=1500.0, IqFbk=12.5)
+    part.rename(columns={"rotor": "rotor [K]", "stator": "stator [°C]", "speed": "speed [1/min]",
+                         "IqFbk": "IqFbk [A]"}).to_csv(csv, index=False, sep=";", decimal=",")
+    assert main(["import", str(csv), "--out", str(tmp_path / "r.h5"), "--dt", "0.01"]) == 0
+    run = benchlab.load_run(tmp_path / "r.h5")
+    assert {k: run.attrs["units"][k] for k in ("rotor", "stator", "speed", "IqFbk")} == {
+        "rotor": "degC", "stator": "degC", "speed": "rpm", "IqFbk": "A"}  # a model's temperatures are in degC
+    np.testing.assert_allclose(run["rotor"], 27.0, atol=1e-9)

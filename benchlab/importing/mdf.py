@@ -71,6 +71,8 @@ def _series(path: Path, mdf: Any, entry: Mapped) -> tuple[np.ndarray, np.ndarray
     if sig.invalidation_bits is not None:
         values[np.asarray(sig.invalidation_bits, dtype=bool)] = np.nan
     unit = entry.unit if entry.unit is not None else str(sig.unit or "")
+    if not unit and entry.channel not in ALIGNED_UNITS:
+        raise InputError(path, field, "a unit (the MDF file gives none): unit in the mapping file, \"1\" for a number")
     values, stored = to_stored(path, f"{field} [{unit}]", entry.channel, values, unit)
     if (problem := unmeasurable_sample(entry.channel, stored, values)) is not None:
         raise InputError(path, f"{field}, sample {problem[0]}", f"{problem[1]}, got {problem[2]!r}")
