@@ -30,6 +30,15 @@ _KINDS = {"degC": "temperature", "N*m": "torque", "rpm": "rotational speed", "W"
           "1": "number"}
 
 
+#: How a stored unit is shown to people (figures, pages): the contract's spellings are ASCII for files and code.
+DISPLAY = {"degC": "°C", "N*m": "N·m", "um": "µm"}
+
+
+def display(unit: str) -> str:
+    """`unit` as a figure or a page shows it (`degC` → `°C`, `N*m` → `N·m`); a file keeps the stored spelling."""
+    return DISPLAY.get(unit, unit)
+
+
 class UnitMismatch(ValueError):
     """A unit that is unknown or of another dimension than the one expected; str() says what was expected."""
 

@@ -82,3 +82,7 @@ def test_channels_beyond_the_contract_keep_their_unit_but_temperatures_are_degc(
     assert {k: run.attrs["units"][k] for k in ("rotor", "stator", "speed", "IqFbk")} == {
         "rotor": "degC", "stator": "degC", "speed": "rpm", "IqFbk": "A"}  # a model's temperatures are in degC
     np.testing.assert_allclose(run["rotor"], 27.0, atol=1e-9)
+
+
+def test_figures_show_the_units_people_write_files_keep_the_stored_spelling():
+    assert [units.display(u) for u in ("degC", "N*m", "rpm", "A")] == ["°C", "N·m", "rpm", "A"]
