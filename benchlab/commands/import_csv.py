@@ -1,11 +1,12 @@
-"""`benchlab import DATA.csv --out RUN.h5 [--dt S] [--unit NAME=UNIT …] [--model FILE.toml|linear|nonlinear]`:
-a CSV becomes a run file (contract sections 1 and 6).
+"""`benchlab import DATA.csv|DATA.mf4 --out RUN.h5 [--dt S] [--mapping MAP.toml] [--unit NAME=UNIT …]
+[--model FILE.toml|linear|nonlinear]`: a CSV or an MDF file becomes a run file (contract sections 1 and 6). An MDF
+file is read by benchlab.importing.mdf (channels by name or mapping, onto the grid --dt); the CSV reader is here.
 
 Columns with the contract's /aligned names are in the contract's units unless their unit is given, in any spelling
 of any unit of that dimension (`°C`, `K`, `Nm`, `1/min`, …: converted by benchlab.units); any other column needs
 its unit. A unit is given by the column's title (`name [unit]`, what `benchlab export --to X.csv` writes), a second
-header line of units or `--unit NAME=UNIT`. Without a `time` column, `--dt S` gives the grid. The CSV must hold the clutch channels of
-section 1, or with `--model` the channels that model names.
+header line of units or `--unit NAME=UNIT`. Without a `time` column, `--dt S` gives the grid. The CSV must hold
+the clutch channels of section 1, or with `--model` the channels that model names.
 
 The separator is the one of `,` `;` TAB that the header line holds (or `--sep`); with `;` or TAB a decimal
 comma is read as a number when the data holds commas (German spreadsheets: `21,5;1500`), or as `--decimal`
@@ -45,7 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                     "an MDF file (.mf4, .mdf, .dat) with --dt")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="run file to write")
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
-                        help="time step in s of a CSV without a time column (one row per step)")
+                        help="time step in s of a CSV without a time column (one row per step); an MDF "
+                             "file's grid (required for MDF)")
     parser.add_argument("--unit", action="extend", nargs="+", default=[], metavar="NAME=UNIT",
                         help="the unit of each column beyond the contract's channels, e.g. --unit IqFbk=A speed=rpm")
     parser.add_argument("--model", help=f"{MODEL_HELP}: the CSV must hold the channels it names "
