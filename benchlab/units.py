@@ -20,7 +20,8 @@ from benchlab.errors import InputError
 #: metre"), and a plain reciprocal time (`1/min`, `U/min`, `min^-1`) counts revolutions (not radians).
 _ENGINEERS = (
     (re.compile(r"(?<![A-Za-z])([kM]?)Nm(?![A-Za-z])"), r"\1N*m"),
-    (re.compile(r"(?<![\w.])(?:1|U|r|rev|Upm)\s*/\s*(min|s)\b"), r"revolution/\1"),
+    (re.compile(r"(?<![\w.])(?:1|U|r|rev)\s*/\s*(min|s)\b"), r"revolution/\1"),
+    (re.compile(r"(?<![\w.])U[pP][mM](?!\w)"), "rpm"),  # German "Umdrehungen pro Minute"
     (re.compile(r"(?<![\w.])(min|s)\s*(?:\^|\*\*)?\s*(?:-1|⁻¹)(?![\d])"), r"revolution/\1"),
     (re.compile(r"℃"), "degC"),
     (re.compile(r"^\s*-\s*$"), ""),

@@ -14,7 +14,8 @@ from benchlab.cli import main
 @pytest.mark.parametrize("unit, target, one", [
     ("°C", "degC", 1.0), ("℃", "degC", 1.0), ("K", "degC", 1.0 - 273.15), ("degF", "degC", (1.0 - 32) * 5 / 9),
     ("Nm", "N*m", 1.0), ("N m", "N*m", 1.0), ("N·m", "N*m", 1.0), ("kN·m", "N*m", 1000.0), ("kNm", "N*m", 1000.0),
-    ("1/min", "rpm", 1.0), ("U/min", "rpm", 1.0), ("min^-1", "rpm", 1.0), ("rad/s", "rpm", 30 / np.pi),
+    ("1/min", "rpm", 1.0), ("U/min", "rpm", 1.0), ("Upm", "rpm", 1.0), ("min^-1", "rpm", 1.0),
+    ("rad/s", "rpm", 30 / np.pi),
     ("kW", "W", 1000.0), ("ms", "s", 1e-3), ("min", "s", 60.0), ("h", "s", 3600.0), ("-", "1", 1.0),
 ])
 def test_engineers_spellings_convert_to_the_contract_unit(unit, target, one):
