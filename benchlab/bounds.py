@@ -48,3 +48,6 @@ MAX_CSV_COLUMNS = 1_000
 MAX_TIME_STAMP_S = 1e10
 #: Most worker processes of a local batch cluster: each takes a core and a run in memory; more is a typo.
 MAX_LOCAL_WORKERS = 256
+#: Most grid rows `benchlab import` puts an MDF file's channels on: a week's run on the bench's 10 ms grid (a
+#: finer --dt over a long recording is a typo that would allocate memory until the machine gives up).
+MAX_IMPORT_ROWS = int(MAX_RUN_DURATION_S / 0.01)

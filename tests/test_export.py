@@ -65,7 +65,7 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
                 for column, ds in group.items():
                     if column == "time":
                         continue
-                    sig = mdf.get(f"{stream}.{column}")
+                    sig = mdf.get(f"{stream}.{column}", raw=True)  # the stored numbers (enums: before the texts)
                     np.testing.assert_array_equal(sig.samples, ds[()][order])
                     np.testing.assert_array_equal(sig.timestamps, group["time"][()][order])
                     assert sig.unit == ds.attrs["units"]
@@ -75,6 +75,15 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
             np.testing.assert_array_equal(mdf.get("events.cycle").samples, f["events/cycle"][()])
             reasons = mdf.get("events.reason").samples
             np.testing.assert_array_equal(reasons, f["events/reason"][()])
+            # and each row an MDF event (mdf.events): a marker at its time, named by its kind
+            assert [e.name for e in mdf.events] == [k.decode() for k in f["events/kind"][()]]
+            np.testing.assert_allclose([e.value for e in mdf.events], f["events/time"][()], rtol=1e-12)
+            details = [d.decode() for d in f["events/detail"][()]]
+            assert all(d in e.comment for d, e in zip(details, mdf.events))
+        # enums show the DBC's value tables (VAL_): the launch slips, every controller runs
+        assert {b"Open", b"Slipping"} <= set(mdf.get("can_clutch.clamp_state").samples)
+        assert {b"Running"} == set(mdf.get("can_drive.state").samples) & {b"Running", b"Fault"}
+        assert b"None" in set(mdf.get("can_load.fault_code").samples)
         assert "run_complete" in {k.decode() for k in kinds.samples}
         assert {"synchronised", "time"} & {r.decode() for r in reasons}  # the launch's and the steps' ends
         assert 'name="schema">benchlab-run/1<' in mdf.header.comment
@@ -186,3 +195,14 @@ def test_mf4_of_a_simulate_output_puts_model_beside_measurement(run_file, params
             np.testing.assert_array_equal(mdf.get("T_flywheel").samples, f["aligned/T_flywheel"][()])
     finally:
         mdf.close()
+
+
+def test_mf4_of_a_bench_run_goes_back_into_a_run_file_with_its_enums_as_numbers(bench_run, tmp_path):
+    mf4, back, mapping = tmp_path / "run.mf4", tmp_path / "back.h5", tmp_path / "map.toml"
+    assert main(["export", str(bench_run), "--to", str(mf4)]) == 0
+    mapping.write_text('[channels.clamp_state]\nsource = "can_clutch.clamp_state"\nunit = "1"\n')
+    assert main(["import", str(mf4), "--mapping", str(mapping), "--dt", "0.01", "--out", str(back)]) == 0
+    run, source = load_run(back), load_run(bench_run)
+    assert run.attrs["units"]["clamp_state"] == "1" and {0.0, 1.0} <= set(run["clamp_state"].dropna())
+    rows = min(len(run), len(source))
+    np.testing.assert_array_equal(run["T_air"].to_numpy()[:rows], source["T_air"].to_numpy()[:rows])

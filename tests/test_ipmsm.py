@@ -74,7 +74,7 @@ def test_held_out_profiles_beat_the_articles_network(imported, identified, capsy
 
 def test_a_unit_that_contradicts_the_contract_or_a_missing_unit_is_bad_input(tmp_path, capsys):
     csv = tmp_path / "m.csv"
-    csv.write_text("speed,T_ambient,rotor\nrpm,K,degC\n1,20,30\n2,20,31\n")
+    csv.write_text("speed,T_ambient,rotor\nrpm,Nm,degC\n1,20,30\n2,20,31\n")  # a temperature in N·m
     assert main(["import", str(csv), "--out", str(tmp_path / "r.h5"), "--dt", "1", "--model", str(MODEL)]) == 2
     assert "column T_ambient" in capsys.readouterr().err
     csv.write_text("speed,rotor\n1,30\n2,31\n")

@@ -1,10 +1,12 @@
-"""`benchlab import DATA.csv --out RUN.h5 [--dt S] [--unit NAME=UNIT …] [--model FILE.toml|linear|nonlinear]`:
-a CSV becomes a run file (contract sections 1 and 6).
+"""`benchlab import DATA.csv|DATA.mf4 --out RUN.h5 [--dt S] [--mapping MAP.toml] [--unit NAME=UNIT …]
+[--model FILE.toml|linear|nonlinear]`: a CSV or an MDF file becomes a run file (contract sections 1 and 6). An MDF
+file is read by benchlab.importing.mdf (channels by name or mapping, onto the grid --dt); the CSV reader is here.
 
-Columns with the contract's /aligned names carry the contract's units; any other column needs its unit, from its
-title (`name [unit]`, what `benchlab export --to X.csv` writes), a second header line of units or
-`--unit NAME=UNIT`. Without a `time` column, `--dt S` gives the grid. The CSV must hold the clutch channels of
-section 1, or with `--model` the channels that model names.
+Columns with the contract's /aligned names are in the contract's units unless their unit is given, in any spelling
+of any unit of that dimension (`°C`, `K`, `Nm`, `1/min`, …: converted by benchlab.units); any other column needs
+its unit. A unit is given by the column's title (`name [unit]`, what `benchlab export --to X.csv` writes), a second
+header line of units or `--unit NAME=UNIT`. Without a `time` column, `--dt S` gives the grid. The CSV must hold
+the clutch channels of section 1, or with `--model` the channels that model names.
 
 The separator is the one of `,` `;` TAB that the header line holds (or `--sep`); with `;` or TAB a decimal
 comma is read as a number when the data holds commas (German spreadsheets: `21,5;1500`), or as `--decimal`
@@ -30,18 +32,22 @@ if TYPE_CHECKING:
     import pandas as pd
 
 NAME = "import"
-HELP = "convert a CSV (contract channel names, or any channel with its unit) into a run file"
+HELP = "convert a CSV or an MDF file (contract channel names, a mapping, any channel with its unit) into a run file"
 SEPARATORS = {",": ",", ";": ";", "tab": "\t"}
+#: What asammdf reads (benchlab.importing.mdf.SUFFIXES, kept here so that `--help` loads no asammdf).
+MDF_SUFFIXES = (".mf4", ".mdf", ".dat")
 #: A column title with its unit, `T_flywheel [degC]`.
 TITLE_WITH_UNIT = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\]]*)\]$")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("csv", help="CSV file, one column per channel, header = channel names or `name [unit]` "
-                                    "(optionally a second header line of units)")
+    parser.add_argument("csv", metavar="DATA", help="CSV file, one column per channel, header = channel names or "
+                                                    "`name [unit]` (optionally a second header line of units); or "
+                                                    "an MDF file (.mf4, .mdf, .dat) with --dt")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="run file to write")
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
-                        help="time step in s of a CSV without a time column (one row per step)")
+                        help="time step in s of a CSV without a time column (one row per step); an MDF "
+                             "file's grid (required for MDF)")
     parser.add_argument("--unit", action="extend", nargs="+", default=[], metavar="NAME=UNIT",
                         help="the unit of each column beyond the contract's channels, e.g. --unit IqFbk=A speed=rpm")
     parser.add_argument("--model", help=f"{MODEL_HELP}: the CSV must hold the channels it names "
@@ -49,6 +55,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
     parser.add_argument("--decimal", choices=(".", ","),
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
+    parser.add_argument("--mapping", metavar="MAP.toml", help="an MDF file's channels: run-file channel = source "
+                                                              "channel, with group, unit, scale, offset, rule "
+                                                              "(benchlab/importing/mapping.py)")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file (a regular file)")
 
 
@@ -87,23 +96,17 @@ def _check_width(path: Path, text: str, sep: str) -> None:
         raise InputError(path, "header", f"at most {MAX_CSV_COLUMNS} columns (channels), got {columns}")
 
 
-def _channel_names(path: Path, titles: list[str]) -> tuple[list[str], dict[str, str]]:
-    """Column titles to channel names and the units the titles give; a unit in the title of a contract channel
-    must be its contract unit."""
-    from benchlab.runfile import ALIGNED_UNITS
-
-    names, units = [], {}
+def _channel_names(titles: list[str]) -> tuple[list[str], dict[str, str], dict[str, str]]:
+    """Column titles to channel names, the units the titles give (`name [unit]`) and each name's title."""
+    names, units, shown = [], {}, {}
     for title in (str(t).strip() for t in titles):
         match = TITLE_WITH_UNIT.match(title)
         name = match["name"] if match else title
-        if match:
-            unit = match["unit"].strip()
-            if name in ALIGNED_UNITS and unit != ALIGNED_UNITS[name]:
-                raise InputError(path, f"column {title}", f"{name} in {ALIGNED_UNITS[name]}, got {match['unit']!r}")
-            if unit:
-                units[name] = unit
+        if match and match["unit"].strip():
+            units[name] = match["unit"].strip()
         names.append(name)
-    return names, units
+        shown[name] = title
+    return names, units, shown
 
 
 def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None = None,
@@ -116,6 +119,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
 
     from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample
     from benchlab.runfile.schema import time_stamp_problem
+    from benchlab.units import to_stored
 
     required = REQUIRED if required is None else required
     # a spreadsheet's byte-order mark is not part of the header (utf-8-sig)
@@ -126,7 +130,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
         frame = pd.read_csv(io.StringIO(text), sep=sep, dtype=str, keep_default_na=False)
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(path, "file", f"a CSV table ({str(exc).splitlines()[0]})") from None
-    names, title_units = _channel_names(path, list(frame.columns))
+    names, title_units, titles = _channel_names(list(frame.columns))
     frame.columns = names
     first_line = 2
     if len(frame) and not any(_is_number(v, decimal) for v in frame.iloc[0]):  # a second header line: the units
@@ -140,10 +144,6 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
         raise InputError(path, "column time", "no time column with --dt (one or the other gives the grid)")
     if dt is None and "time" not in frame.columns:
         raise InputError(path, "column time", "a time column in s, or --dt S for one row per step")
-    for name in ("time",) + tuple(required):
-        if name not in frame.columns and not (name == "time" and dt is not None):
-            raise InputError(path, f"column {name}", f"a required channel in {ALIGNED_UNITS.get(name, 'its unit')} "
-                                                     "(missing)")
     for name in frame.columns:
         text = frame[name].astype(str).str.strip()
         if decimal != ".":
@@ -153,9 +153,14 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
         if bad.any():
             row = int(np.flatnonzero(bad.to_numpy())[0])
             raise InputError(path, f"column {name}, line {row + first_line}", f"a number, got {frame[name].iloc[row]!r}")
-        frame[name] = values.astype(np.float64)
+        frame[name], units[name] = to_stored(path, f"column {titles[name]}", name, values.to_numpy(np.float64),
+                                             units[name])
         if name != "time" and (problem := unmeasurable_sample(name, units[name], frame[name].to_numpy())):
             raise InputError(path, f"column {name}, line {problem[0] + first_line}", f"{problem[1]}, got {problem[2]!r}")
+    for name in ("time",) + tuple(required):
+        if name not in frame.columns and not (name == "time" and dt is not None):
+            raise InputError(path, f"column {name}", f"a required channel in {ALIGNED_UNITS.get(name, 'its unit')} "
+                                                     "(missing)")
     if dt is not None:
         frame.insert(0, "time", np.arange(len(frame)) * dt)
         units["time"] = "s"
@@ -171,7 +176,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
 
 
 def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, str]:
-    """The unit of every column: the contract's for its channels (a different one given is bad input), else given."""
+    """The unit of every column as the file gives it: given, else the contract's for its channels."""
     from benchlab.runfile import ALIGNED_UNITS
 
     for name in given:
@@ -179,17 +184,31 @@ def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, s
             raise InputError(path, f"--unit {name}", f"a column of the CSV ({', '.join(columns)})")
     units = {}
     for name in columns:
-        if name in ALIGNED_UNITS:
-            if given.get(name, ALIGNED_UNITS[name]) != ALIGNED_UNITS[name]:
-                raise InputError(path, f"column {name}", f"unit {ALIGNED_UNITS[name]!r} (contract section 1), "
-                                                         f"got {given[name]!r}")
-            units[name] = ALIGNED_UNITS[name]
-        elif name in given:
-            units[name] = given[name]
+        if name in given or name in ALIGNED_UNITS:
+            units[name] = given.get(name, ALIGNED_UNITS.get(name))
         else:
             raise InputError(path, f"column {name}", f"one of the contract's channels {sorted(ALIGNED_UNITS)}, or a "
                                                      "channel with its unit (--unit NAME=UNIT or a second header line)")
     return units
+
+
+def _read_mdf(args: argparse.Namespace, required: tuple[str, ...] | None) -> tuple[pd.DataFrame, dict, dict]:
+    """An MDF file's channels on the grid --dt, with the required ones (default: the clutch channels)."""
+    from benchlab.importing.mapping import read_mapping
+    from benchlab.importing.mdf import read_mdf
+    from benchlab.runfile import REQUIRED
+
+    for flag, given in (("--unit", args.unit), ("--sep", args.sep), ("--decimal", args.decimal)):
+        if given:
+            raise InputError(args.csv, flag, "nothing for an MDF file (units and scales go in --mapping)")
+    if args.dt is None:
+        raise InputError(args.csv, "--dt", "the grid step in s for an MDF file's channels, e.g. --dt 0.01")
+    frame, units, attrs = read_mdf(args.csv, read_mapping(args.mapping) if args.mapping else [], args.dt)
+    for name in REQUIRED if required is None else required:
+        if name not in frame.columns:
+            raise InputError(args.csv, f"channel {name}", "a required channel: a channel of that name, or one "
+                                                          "mapped to it in --mapping")
+    return frame, units, attrs
 
 
 def run(args: argparse.Namespace) -> int:
@@ -198,7 +217,16 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.runfile import write_run  # and pandas, for read_csv
     required = tuple(resolve_model(args.model).required_channels()) if args.model else None
     check_output(args.out, "--out", args.force, inputs=[args.csv], run_file=True)
-    frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep, args.decimal)
-    write_run(args.out, frame, dt, protocol="imported", units=units)
+    if Path(args.csv).suffix.lower() in MDF_SUFFIXES:
+        frame, units, attrs = _read_mdf(args, required)
+        dt = args.dt
+    else:
+        if args.mapping:
+            raise InputError(args.csv, "--mapping", f"an MDF file ({', '.join(MDF_SUFFIXES)}); a CSV names its "
+                                                    "channels in its header")
+        frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep,
+                                    args.decimal)
+        attrs = {"source_file": Path(args.csv).name}
+    write_run(args.out, frame, dt, protocol="imported", units=units, attrs=attrs)
     print(f"{args.out}: {len(frame)} samples at dt={dt:g} s, {len(frame.columns)} channels")
     return 0

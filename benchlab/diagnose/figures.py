@@ -13,6 +13,7 @@ from benchlab.diagnose.engine import ALPHA, Diagnosis, HeldOut
 from benchlab.diagnose.evidence import FORMS, binned_means, residual_forms, run_signal, signal_unit
 from benchlab.metrics import RESIDUAL_LABEL
 from benchlab.report.plotting import colour, label, new_figure, save, symbol
+from benchlab.units import display
 
 WINDOW_S = 600.0
 WINDOW_STEP_S = 60.0
@@ -113,7 +114,7 @@ def _inputs(speeds, d, start: int, stop: int, minutes: np.ndarray) -> None:
         shown = [c for c in d.channels if c != "time" and d.units.get(c) != "degC"][:2]
         for i, (ax, name) in enumerate(zip((speeds, speeds.twinx()), shown)):
             ax.plot(minutes, d.channels[name][start:stop], color=f"C{i + 4}", label=name)
-            ax.set_ylabel(f"{name} ({d.units.get(name, '1')})")
+            ax.set_ylabel(f"{name} ({display(d.units.get(name, '1'))})")
     speeds.legend(fontsize=8, loc="upper left")
 
 

@@ -17,17 +17,20 @@ from pathlib import Path
 import numpy as np
 
 from benchlab.errors import InputError
+from benchlab.export.enums import value_texts
 from benchlab.runfile import ALIGNED_MEANING, StoredGroup, load_attrs, load_run, load_streams
 
 
 @dataclass(frozen=True)
 class Channel:
-    """One channel: its export name (unique in the export), values, unit and comment."""
+    """One channel: its export name (unique in the export), values, unit, comment and, for an enum, the text of
+    each value (the DBC's value table)."""
 
     name: str
     values: np.ndarray
     unit: str
     comment: str
+    texts: dict[int, str] | None = None
 
 
 @dataclass(frozen=True)
@@ -71,8 +74,9 @@ def read_content(path: "str | os.PathLike[str]") -> RunContent:
     groups = [ChannelGroup("/aligned", "time", run["time"].to_numpy()[:rows], channels,
                            f"uniform grid, dt = {run.attrs['dt']:g} s; NaN = not measured")]
     skipped = 0
+    texts = value_texts(attrs) if any(g.name.startswith("can_") for g in stored.groups) else {}
     for group in stored.groups:
-        channel_group, dropped = _in_time_order(group)
+        channel_group, dropped = _in_time_order(group, texts)
         skipped += dropped
         if channel_group.channels:
             groups.append(channel_group)
@@ -89,8 +93,9 @@ def _aligned_comment(name: str, source: dict | None, description: str | None) ->
     return "; ".join(parts)
 
 
-def _in_time_order(group: StoredGroup) -> tuple[ChannelGroup, int]:
-    """A stored group as exported: finite time stamps only, in time order; (group, rows skipped)."""
+def _in_time_order(group: StoredGroup, texts: dict[str, dict[int, str]]) -> tuple[ChannelGroup, int]:
+    """A stored group as exported: finite time stamps only, in time order, enums with their `texts`; (group, rows
+    skipped)."""
     time = group.time
     keep = np.isfinite(time)
     if keep.all() and np.all(time[1:] >= time[:-1]):  # as the writer stores them: no copy, no sort
@@ -99,7 +104,8 @@ def _in_time_order(group: StoredGroup) -> tuple[ChannelGroup, int]:
         order = np.flatnonzero(keep)
         order = order[np.argsort(time[order], kind="stable")]
     channels = tuple(Channel(f"{group.name}.{c.name}", c.values[order], c.unit,
-                             c.description or f"{group.path}/{c.name} as stored") for c in group.columns)
+                             c.description or f"{group.path}/{c.name} as stored", texts.get(f"{group.name}.{c.name}"))
+                     for c in group.columns)
     attrs = ", ".join(f"{k} = {v}" for k, v in group.attrs.items())
     comment = f"{group.path}: own time stamps" + (f"; {attrs}" if attrs else "")
     return ChannelGroup(group.path, f"{group.name}.time", time[order], channels, comment), int(len(time) - keep.sum())

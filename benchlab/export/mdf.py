@@ -3,8 +3,9 @@
 MDF is what automotive bench tools open (asammdf's GUI, CANape, MDF4 Lib): each group of the run file
 (/aligned, /raw/<stream>, /events, /simulated) becomes a channel group named after its HDF5 path, with its
 own time channel (`time`, `can_drive.time`, ...), so a 100 Hz CAN stream and a 2 Hz scanner keep their
-own stamps. NaN stays NaN (not measured). Event kinds and details are UTF-8 string channels. The run
-file's root attributes go into the file header's comment as common properties.
+own stamps. NaN stays NaN (not measured). Event kinds and details are UTF-8 string channels, and every event is
+also an MDF event (`mdf.events`: a marker at its time named by its kind, what asammdf's GUI and CANape show on
+the time axis). The run file's root attributes go into the file header's comment as common properties.
 """
 
 from __future__ import annotations
@@ -36,14 +37,27 @@ def header_comment(content: RunContent) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def _value_to_text(texts: dict[int, str] | None) -> dict[str, Any] | None:
+    """asammdf's value-to-text conversion (MDF CC_TABX) for an enum's table; values without text show the number."""
+    if not texts:
+        return None
+    conversion: dict[str, Any] = {}
+    for i, (value, text) in enumerate(sorted(texts.items())):
+        conversion[f"val_{i}"], conversion[f"text_{i}"] = float(value), text.encode()
+    conversion["default_addr"] = {"a": 1.0, "b": 0.0}  # any other value (and NaN): the number as it is
+    return conversion
+
+
 def _append(mdf: Any, group: ChannelGroup) -> None:
     """One channel group. Numbers go as a DataFrame, asammdf's fastest path (no per-signal copies, no temporary
-    compression), each channel's comment then set on its block; text (event kinds) needs asammdf's Signals."""
-    if any(c.values.dtype.kind == "S" for c in group.channels):
+    compression), each channel's comment then set on its block; text (event kinds) and enums with their value
+    tables need asammdf's Signals."""
+    if any(c.values.dtype.kind == "S" or c.texts for c in group.channels):
         from asammdf import Signal
 
         mdf.append([Signal(c.values, group.time, unit=c.unit, name=c.name, comment=c.comment, encoding="utf-8"
-                           if c.values.dtype.kind == "S" else None, master_metadata=(group.master, 1))
+                           if c.values.dtype.kind == "S" else None, master_metadata=(group.master, 1),
+                           conversion=_value_to_text(c.texts))
                     for c in group.channels], acq_name=group.path, comment=group.comment, common_timebase=True)
         return
     frame = pd.DataFrame({c.name: c.values for c in group.channels}, index=pd.Index(group.time, name=group.master))
@@ -51,6 +65,28 @@ def _append(mdf: Any, group: ChannelGroup) -> None:
     comments = {c.name: c.comment for c in group.channels}
     for block in mdf.groups[-1].channels:
         block.comment = comments.get(block.name, block.comment)
+
+
+def _events(group: ChannelGroup) -> list[Any]:
+    """The rows of /events as MDF event blocks: a point marker at each row's time (s, run time), named by its kind,
+    its comment the detail, reason, cycle and step."""
+    from asammdf.blocks import v4_constants as v4c
+    from asammdf.blocks.v4_blocks import EventBlock
+
+    column = {c.name.removeprefix("events."): c.values for c in group.channels}
+    text = {k: [bytes(v).decode("utf-8", "replace") for v in column[k]] for k in ("kind", "detail", "reason")
+            if k in column}
+    events = []
+    for row, time in enumerate(group.time):
+        event = EventBlock(cause=v4c.EVENT_CAUSE_TOOL, range_type=v4c.EVENT_RANGE_TYPE_POINT,
+                           sync_type=v4c.EVENT_SYNC_TYPE_S, event_type=v4c.EVENT_TYPE_MARKER)
+        event.value = float(time)
+        event.name = text["kind"][row]
+        parts = [text[k][row] for k in ("detail", "reason") if k in text and text[k][row]]
+        parts += [f"{k} {int(column[k][row])}" for k in ("cycle", "step") if k in column and column[k][row] >= 0]
+        event.comment = "; ".join(parts)
+        events.append(event)
+    return events
 
 
 def write_mdf(content: RunContent, out: Path) -> Path:
@@ -67,6 +103,8 @@ def write_mdf(content: RunContent, out: Path) -> Path:
                 pass  # not an ISO time: the header keeps asammdf's default (now)
         for group in content.groups:
             _append(mdf, group)
+            if group.path == "/events":
+                mdf.events.extend(_events(group))
         return Path(mdf.save(out, overwrite=True, compression=COMPRESSION))
     finally:
         mdf.close()

@@ -20,6 +20,7 @@ from benchlab.bounds import MAX_CYCLES, MAX_GRID_STEP_S, MAX_RESUMES, MAX_RUN_DU
 from benchlab.errors import InputError
 from benchlab.runfile.schema import (ALIGNED_UNITS, EVENT_FIELDS, REQUIRED, SCHEMA, time_stamp_problem,
                                      time_step_tolerance, unmeasurable_sample)
+from benchlab.units import same as same_unit
 from protocols.schedule import Step, steps_from_rows
 
 if TYPE_CHECKING:  # pandas loads where a frame is built: the run and watch paths read no frame
@@ -249,8 +250,10 @@ def _read_channels(path: Path, group: h5py.Group,
         if "units" not in ds.attrs:
             raise InputError(path, f"/aligned/{name}.units", f"a units attribute ({ALIGNED_UNITS.get(name, 'any')})")
         unit = text(ds.attrs["units"])
-        if name in ALIGNED_UNITS and unit != ALIGNED_UNITS[name]:
-            raise InputError(path, f"/aligned/{name}.units", f"{ALIGNED_UNITS[name]!r}, got {unit!r}")
+        if name in ALIGNED_UNITS:  # another tool may spell the contract's unit its own way (°C, Nm, 1/min)
+            if not same_unit(unit, ALIGNED_UNITS[name]):
+                raise InputError(path, f"/aligned/{name}.units", f"{ALIGNED_UNITS[name]!r}, got {unit!r}")
+            unit = ALIGNED_UNITS[name]
         if length is not None and ds.shape[0] != length:
             raise InputError(path, f"/aligned/{name}", f"length {length} like /aligned/time, got {ds.shape[0]}")
         length = ds.shape[0]

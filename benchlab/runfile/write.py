@@ -17,13 +17,16 @@ from benchlab.runfile.schema import ALIGNED_UNITS, SCHEMA
 
 
 def write_run(path: "str | os.PathLike[str]", frame: pd.DataFrame, dt: float, protocol: str,
-              status: str = "complete", units: Mapping[str, str] | None = None) -> None:
-    """Write a complete run file: root attributes and every column of `frame` into /aligned."""
+              status: str = "complete", units: Mapping[str, str] | None = None,
+              attrs: Mapping[str, str] | None = None) -> None:
+    """Write a complete run file: root attributes (`attrs` beside the contract's) and every column of `frame` into
+    /aligned."""
     units = {**ALIGNED_UNITS, **dict(units or {})}
     missing = [c for c in frame.columns if c not in units]
     if missing:
         raise ValueError(f"no unit known for channels {missing}")
     with replacing(path, run_file=True) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs.update(dict(attrs or {}))
         f.attrs.update(schema=SCHEMA, status=status, protocol=protocol)
         group = f.create_group("aligned")
         group.attrs["dt"] = float(dt)

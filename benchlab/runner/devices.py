@@ -152,6 +152,9 @@ _CAN_STREAMS = {
                  ("state", "load.state", "1"), ("fault_code", "load.fault_code", "1")),
 }
 _CAN_KEYS = {stream: tuple(key for _, key, _ in cols) for stream, cols in _CAN_STREAMS.items()}
+#: The DBC signal (logical key of drivers.can_signals.BENCH_SIGNALS) each raw CAN column holds, by (stream, column):
+#: what `benchlab export` gives the DBC's value tables from.
+CAN_COLUMN_SIGNALS = {(stream, column): key for stream, cols in _CAN_STREAMS.items() for column, key, _ in cols}
 _STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_load"}
 
 

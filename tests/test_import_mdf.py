@@ -1,0 +1,168 @@
+"""`benchlab import` of MDF files written by another tool (asammdf, the way a bench recorder writes them), with a
+mapping file, onto one grid; and a run exported to MF4 and imported back identifies to the same parameters."""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime, timedelta, timezone
+
+import h5py
+import numpy as np
+import pytest
+
+import benchlab
+from benchlab.cli import main
+from benchlab.importing.grid import resample
+
+START = datetime(2026, 3, 2, 7, 45, 12, tzinfo=timezone.utc)
+MAPPING = """
+[channels]
+engine_speed = "n_Motor"
+clutch_speed = "n_Getriebe"
+clutch_torque = "M_Kupplung"
+clutch_state = "KU_Zustand"
+load_torque = "M_Last"
+T_air = "T_Luft"
+T_ambient = "T_Umgebung"
+T_flywheel = "T_Schwungrad"
+[channels.T_housing]
+source = "T_Gehaeuse"
+group = 2
+[channels.friction_power]
+source = "P_Reib_raw"
+unit = "kW"
+scale = 0.001
+"""
+#: The temperature sample (2 Hz group, 100 s) the recorder marked invalid: dropped instead of NaN, it would be
+#: bridged (its neighbours are two periods apart, within the grid's gap rule).
+INVALID = 200
+
+
+def _recorder_mdf(path, run):
+    """`run` as a bench recorder would log it (asammdf): a 100 Hz CAN group whose stamps are 4 ms off the grid, a
+    20 Hz node group, a 2 Hz scanner group with invalidation bits, a master per group, vendor names and units;
+    `T_Gehaeuse` in two groups (the mapping says which)."""
+    from asammdf import MDF, Signal
+
+    t = run["time"].to_numpy()
+    can, node, scan = slice(None), slice(None, None, 5), slice(None, None, 50)
+    col = {c: run[c].to_numpy() for c in run.columns}
+    bits = np.zeros(len(t[scan]), dtype=bool)
+    bits[INVALID % len(bits)] = True
+    mdf = MDF(version="4.10")
+    mdf.append([Signal(col["engine_speed"][can], t[can] + 0.004, unit="1/min", name="n_Motor"),
+                Signal(col["clutch_speed"][can], t[can] + 0.004, unit="U/min", name="n_Getriebe"),
+                Signal(col["clutch_torque"][can], t[can] + 0.004, unit="Nm", name="M_Kupplung"),
+                Signal(col["clutch_state"][can].astype(np.uint8), t[can] + 0.004, unit="-", name="KU_Zustand"),
+                Signal(col["load_torque"][can], t[can] + 0.004, unit="N·m", name="M_Last"),
+                Signal(col["friction_power"][can], t[can] + 0.004, unit="", name="P_Reib_raw")],
+               acq_name="CAN1 100 Hz", comment="drive CAN")
+    mdf.append([Signal(col["T_flywheel"][node], t[node], unit="°C", name="T_Schwungrad"),
+                Signal(col["T_housing"][node] + 273.15, t[node], unit="K", name="T_Gehaeuse")],
+               acq_name="node 20 Hz")
+    mdf.append([Signal(col["T_air"][scan], t[scan], unit="°C", name="T_Luft", invalidation_bits=bits),
+                Signal(col["T_ambient"][scan], t[scan], unit="°C", name="T_Umgebung", invalidation_bits=bits),
+                Signal(col["T_housing"][scan] + 273.15, t[scan], unit="K", name="T_Gehaeuse")],
+               acq_name="scanner 2 Hz")
+    mdf.header.start_time = START
+    mdf.header.comment = "Prüfstand 3, Kupplung K7, Messung 12"
+    mdf.save(path, overwrite=True)
+    mdf.close()
+
+
+@pytest.fixture(scope="module")
+def recorder_part(short_run):
+    """The first 10 minutes of the simulated run."""
+    return short_run[short_run["time"] < 600.0].reset_index(drop=True)
+
+
+def test_a_recorders_mdf_with_a_mapping_becomes_a_run_file_identify_accepts(tmp_path, recorder_part):
+    src, mapping, out = tmp_path / "messung.mf4", tmp_path / "map.toml", tmp_path / "r.h5"
+    _recorder_mdf(src, recorder_part)
+    mapping.write_text(MAPPING)
+    assert main(["import", str(src), "--mapping", str(mapping), "--dt", "0.1", "--out", str(out)]) == 0
+    run = benchlab.load_run(out)
+    assert run.attrs["dt"] == pytest.approx(0.1) and run["time"].iloc[-1] == pytest.approx(599.99 - 0.01, abs=0.1)
+    with h5py.File(out) as f:
+        attrs = dict(f.attrs)
+        units = {k: f["aligned"][k].attrs["units"] for k in f["aligned"]}
+    assert units == {**{k: "degC" for k in ("T_air", "T_ambient", "T_flywheel", "T_housing")}, "time": "s",
+                     "engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": "N*m", "load_torque": "N*m",
+                     "clutch_state": "1", "friction_power": "W"}
+    assert datetime.fromisoformat(attrs["created_utc"]) == START  # the scanner's first sample is at 0 s
+    assert "Kupplung K7" in attrs["source_comment"] and attrs["source_file"] == "messung.mf4"
+    picked = json.loads(attrs["source_channels"])
+    assert picked["clutch_state"]["rule"] == "hold" and picked["T_air"]["rule"] == "interpolate"
+
+    source = recorder_part.set_index(np.round(recorder_part["time"].to_numpy(), 6))
+    grid = np.round(run["time"].to_numpy(), 6)
+    on_scan = np.isin(grid, np.round(np.arange(0, 600, 0.5), 6))
+    housing = source["T_housing"].reindex(grid).to_numpy()
+    np.testing.assert_allclose(run["T_housing"].to_numpy()[on_scan], housing[on_scan], atol=1e-9)  # K → °C
+    # the invalid scanner sample at 100 s is NaN, and so is the grid between it and its neighbours
+    air = run["T_air"].to_numpy()
+    assert np.isnan(air[(grid > 99.5) & (grid < 100.5)]).all()
+    assert np.isfinite(air[(grid <= 99.5) | ((grid >= 100.5) & (grid <= 599.5))]).all()
+    assert np.isnan(air[grid > 599.5]).all()  # after the scanner's last sample (the CAN group goes on to 599.994 s)
+    state = run["clutch_state"].to_numpy()
+    assert np.isnan(state[0]) and set(np.unique(state[1:])) == {0.0, 1.0}  # held; nothing before the CAN's 4 ms
+    np.testing.assert_allclose(run["friction_power"].max(), recorder_part["friction_power"].max(), rtol=0.05)
+    speed_err = run["engine_speed"].to_numpy() - source["engine_speed"].reindex(grid).to_numpy()
+    assert np.nanmedian(np.abs(speed_err)) < 1.0  # 100 Hz interpolated 4 ms off: within a rpm
+
+    assert main(["identify", str(out), "--model", "linear", "--out", str(tmp_path / "p.json"), "-q"]) == 0
+
+
+def test_a_run_exported_to_mf4_and_imported_back_identifies_to_the_same_parameters(tmp_path, run_file):
+    mf4, back = tmp_path / "run.mf4", tmp_path / "back.h5"
+    assert main(["export", str(run_file), "--to", str(mf4)]) == 0
+    assert main(["import", str(mf4), "--dt", "0.01", "--out", str(back)]) == 0
+    fits = []
+    for path in (run_file, back):
+        out = tmp_path / f"{path.stem}.json"
+        assert main(["identify", str(path), "--model", "linear", "--out", str(out), "-q"]) == 0
+        fits.append(json.loads(out.read_text()))
+    for name, value in fits[0]["params"].items():
+        assert abs(fits[1]["params"][name] - value) <= fits[0]["uncertainty"][name], name
+
+
+@pytest.mark.parametrize("mapping, field", [
+    ('[channels]\nT_air = "no_such_channel"', "channel T_air ← no_such_channel"),
+    ('[channels]\nT_housing = "T_Gehaeuse"', "channel T_housing ← T_Gehaeuse"),    # in two groups
+    ('[channels.T_air]\nsource = "M_Kupplung"', "channel T_air ← M_Kupplung [Nm]"),  # a temperature in N·m
+    ('[channels.T_air]\nsource = "T_Luft"\nrule = "smooth"', "channels.T_air.rule"),
+    ('[channels.T_air]\nsource = "T_Luft"\nscale = "2"', "channels.T_air.scale"),
+    ('[channels.T_air]\nsorce = "T_Luft"', "channels.T_air.sorce"),
+])
+def test_a_bad_mapping_is_one_line_naming_the_field(mapping, field, tmp_path, recorder_part, refused):
+    src, path = tmp_path / "m.mf4", tmp_path / "map.toml"
+    _recorder_mdf(src, recorder_part.iloc[:2000])
+    path.write_text(mapping)
+    refused(["import", str(src), "--mapping", str(path), "--dt", "0.1", "--out", str(tmp_path / "r.h5")], field)
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_an_mdf_needs_dt_and_its_required_channels(tmp_path, recorder_part, refused):
+    src = tmp_path / "m.mf4"
+    _recorder_mdf(src, recorder_part.iloc[:2000])
+    refused(["import", str(src), "--out", str(tmp_path / "r.h5")], "--dt")
+    refused(["import", str(src), "--dt", "0.1", "--out", str(tmp_path / "r.h5")], "channels", "--mapping")
+    (tmp_path / "few.toml").write_text('[channels]\nT_air = "T_Luft"')
+    refused(["import", str(src), "--mapping", str(tmp_path / "few.toml"), "--dt", "0.1", "--out",
+             str(tmp_path / "r.h5")], "channel engine_speed", "required")
+    refused(["import", str(src), "--mapping", str(tmp_path / "few.toml"), "--dt", "1e-9", "--out",
+             str(tmp_path / "r.h5")], "--dt", "rows")
+    (tmp_path / "bad.mf4").write_bytes(b"not an MDF file at all" * 10)
+    refused(["import", str(tmp_path / "bad.mf4"), "--dt", "0.1", "--out", str(tmp_path / "r.h5")], "file", "MDF")
+
+
+def test_the_grid_rules_hold_interpolate_and_never_bridge_a_gap():
+    stamps = np.array([0.0, 1.0, 2.0, 3.0, 10.0, 11.0])
+    values = np.array([0.0, 1.0, np.nan, 3.0, 10.0, 11.0])
+    grid = np.arange(-1.0, 15.0, 0.5)
+    inter, hold = resample(stamps, values, grid, "interpolate"), resample(stamps, values, grid, "hold")
+    at = dict(zip(grid, inter))
+    assert at[0.5] == 0.5 and at[10.5] == 10.5 and at[3.0] == 3.0
+    assert all(np.isnan(at[g]) for g in (-1.0, 1.5, 2.5, 3.5, 6.0, 9.5, 11.5))   # before, beside NaN, a gap, after
+    held = dict(zip(grid, hold))
+    assert held[0.5] == 0.0 and np.isnan(held[2.5]) and held[5.5] == 3.0 and np.isnan(held[6.5]) and held[14.0] == 11
