@@ -55,6 +55,12 @@ def _controller_back(bench: Any, f: Fault) -> None:
     bench.can.silence(f.target or "drive", False)
 
 
+def _controller_frozen(on: bool):
+    def apply(bench: Any, f: Fault) -> None:
+        bench.can.freeze_alive(f.target or "drive", on)
+    return apply
+
+
 def _controller_fault(bench: Any, f: Fault) -> None:
     bench.can.set_fault(f.target or "load", int(f.value) or 1)
 
@@ -150,6 +156,9 @@ KINDS: dict[str, FaultKind] = {
     "controller_silent": FaultKind(_controller_silent, "a controller stops sending (heartbeat lost)",
                                    _target("drive")),
     "controller_back": FaultKind(_controller_back, "a silent controller sends again", _target("drive")),
+    "controller_frozen": FaultKind(_controller_frozen(True), "a controller's task hangs: its alive counters stop, its "
+                                   "last values repeat", _target("drive")),
+    "controller_unfrozen": FaultKind(_controller_frozen(False), "a hung controller counts again", _target("drive")),
     "controller_fault": FaultKind(_controller_fault, "a controller reports a fault code", {
         "value": Option("fault code (default 1)", _number(1, 255, integer=True)), **_target("load")}),
     "controller_fault_cleared": FaultKind(_controller_fault_cleared, "a controller's fault clears", _target("load")),

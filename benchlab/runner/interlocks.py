@@ -12,11 +12,12 @@ interlock never watches a value that has stopped changing.
 
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass, field
 
 from benchlab.runner.devices import BenchStatus
-from protocols.limits import DEFAULT_MAX_AGE_S, BenchLimits
+from protocols.limits import ALARM_RISE_K, ALARM_WINDOW_S, DEFAULT_MAX_AGE_S, BenchLimits
 
 
 @dataclass
@@ -145,6 +146,8 @@ class InterlockSet:
     armed_at: float
     interlocks: tuple[Interlock, ...] = ()
     active: dict[str, Interlock] = field(default_factory=dict)
+    _tripped_at: dict[str, float] = field(default_factory=dict)  # active interlock -> when it tripped
+    _recent: dict[str, collections.deque] = field(default_factory=dict)  # over-temperature -> (t, reading) recent
 
     def __post_init__(self) -> None:
         lim = self.limits
@@ -167,8 +170,27 @@ class InterlockSet:
             detail = lock.tripped(st, eng, now)
             if detail is not None:
                 self.active[lock.name] = lock
+                self._tripped_at[lock.name] = now
                 trips.append(Trip(lock.name, detail, self.limits.action(lock.name)))
         return trips
+
+    def alarm(self, st: BenchStatus, now: float) -> str | None:
+        """An over-temperature active for `alarm_after_s` and still rising (more than ALARM_RISE_K over the last
+        ALARM_WINDOW_S): heat the safe state does not stop. Keeps each active one's recent readings."""
+        for name in [n for n in self._recent if n not in self.active]:
+            del self._recent[name]
+        for lock in self.active.values():
+            if not isinstance(lock, OverTemperature) or not math.isfinite(value := getattr(st, lock.channel)):
+                continue
+            recent = self._recent.setdefault(lock.name, collections.deque())
+            recent.append((now, value))
+            while recent[0][0] < now - ALARM_WINDOW_S:
+                recent.popleft()
+            t_first = self._tripped_at.get(lock.name, now)
+            if now - t_first >= self.limits.alarm_after_s and value - recent[0][1] > ALARM_RISE_K:
+                return (f"{lock.name}: {lock.channel} {value:.1f} degC, still rising {value - recent[0][1]:.1f} K in "
+                        f"{now - recent[0][0]:.0f} s, {now - t_first:.0f} s after the trip")
+        return None
 
     def release(self, st: BenchStatus, eng: Engagements, now: float) -> bool:
         """Drop the active interlocks whose cause has cleared; True once none is left."""
