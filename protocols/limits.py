@@ -23,6 +23,13 @@ ACTIONS = ("hold", "abort")
 # loses a few frames in a row routinely (seconds), the scanner reads every 0.2 s and may time out once (2 s),
 # the status frames come every 10 ms.
 DEFAULT_MAX_AGE_S = {"T_flywheel": 10.0, "T_air": 5.0, "engine_speed": 0.5, "clutch_speed": 0.5, "clutch_torque": 0.5}
+# What the sensors and materials allow a [limits] value to be (checked with `BenchLimits.check_physics`, issue 29)
+MAX_FLYWHEEL_LIMIT_C = 400.0  # a flywheel and its facing beyond this: the friction material is gone
+MAX_AIR_LIMIT_C = 200.0  # the chamber's seals, bearings and cabling
+MIN_TEMPERATURE_LIMIT_C = 30.0  # a limit at room temperature trips before anything runs
+MAX_CLEAR_MARGIN_K = 50.0
+MAX_SLIP_TIME_LIMIT_S = 60.0  # one engagement slipping longer is no launch but a brake test
+MAX_HOLD_S = 3600.0  # resume_after_s and the wait for an interlock to clear
 ALARM_WINDOW_S, ALARM_RISE_K = 10.0, 1.0  # "still rising": up more than 1 K over the last 10 s
 MAX_AGE_LIMIT_S = 60.0  # an age beyond this would leave the bench blind for too long: refused in BENCH.toml
 INTERLOCKS = ("flywheel_over_temperature", "air_over_temperature", "controller_lost",
@@ -96,6 +103,39 @@ class BenchLimits:
                 raise InputError(source, f"{prefix}.{key}", f"a positive number, got {value!r}")
             clean[key] = float(value) if isinstance(default, float) else value
         return cls(**clean)
+
+    def check_physics(self, source: str, setpoint_max: Mapping[str, float], prefix: str = "limits") -> None:
+        """The limits against each other, the DBC's set-point ranges (`setpoint_max`: logical set-point key ->
+        largest value its signal carries) and what the sensors and materials allow; InputError naming the key and
+        the rule (a limit `1e300` would switch its interlock off; idle above the maximum speed commands it)."""
+        from benchlab.errors import InputError
+
+        drive, clutch, load = (setpoint_max[k] for k in ("drive.speed_setpoint", "clutch.torque_setpoint",
+                                                         "load.torque_setpoint"))
+        rules = (
+            ("idle_speed_rpm", self.idle_speed_rpm < self.max_engine_speed_rpm,
+             f"below max_engine_speed_rpm ({self.max_engine_speed_rpm:g})"),
+            ("max_engine_speed_rpm", self.max_engine_speed_rpm <= drive, f"at most the DBC's {drive:g} rpm"),
+            ("max_clutch_torque_nm", self.max_clutch_torque_nm <= clutch, f"at most the DBC's {clutch:g} N*m"),
+            ("max_load_torque_nm", self.max_load_torque_nm <= load, f"at most the DBC's {load:g} N*m"),
+            ("max_flywheel_c", MIN_TEMPERATURE_LIMIT_C <= self.max_flywheel_c <= MAX_FLYWHEEL_LIMIT_C,
+             f"a flywheel limit from {MIN_TEMPERATURE_LIMIT_C:g} to {MAX_FLYWHEEL_LIMIT_C:g} degC (the friction "
+             f"material)"),
+            ("max_air_c", MIN_TEMPERATURE_LIMIT_C <= self.max_air_c <= MAX_AIR_LIMIT_C,
+             f"a chamber air limit from {MIN_TEMPERATURE_LIMIT_C:g} to {MAX_AIR_LIMIT_C:g} degC (seals, bearings)"),
+            ("clear_margin_k", self.clear_margin_k <= MAX_CLEAR_MARGIN_K, f"at most {MAX_CLEAR_MARGIN_K:g} K"),
+            ("max_slip_time_s", self.max_slip_time_s <= MAX_SLIP_TIME_LIMIT_S, f"at most {MAX_SLIP_TIME_LIMIT_S:g} s"),
+            ("max_slip_energy_j", self.max_slip_energy_j <= self.max_clutch_torque_nm * self.max_engine_speed_rpm
+             * RPM * self.max_slip_time_s, "at most max_clutch_torque_nm x max_engine_speed_rpm x max_slip_time_s "
+             f"({self.max_clutch_torque_nm * self.max_engine_speed_rpm * RPM * self.max_slip_time_s:.0f} J)"),
+            ("resume_after_s", self.resume_after_s <= MAX_HOLD_S, f"at most {MAX_HOLD_S:g} s"),
+            ("max_wait_s", self.max_wait_s <= MAX_HOLD_S, f"at most {MAX_HOLD_S:g} s"),
+            ("alarm_after_s", ALARM_WINDOW_S <= self.alarm_after_s <= self.max_wait_s,
+             f"from {ALARM_WINDOW_S:g} s to max_wait_s ({self.max_wait_s:g} s)"),
+        )
+        for key, ok, expected in rules:
+            if not ok:
+                raise InputError(source, f"{prefix}.{key}", f"{expected}, got {getattr(self, key)!r}")
 
     def as_dict(self) -> dict[str, Any]:
         return {f.name: _plain(getattr(self, f.name)) for f in fields(self)}

@@ -256,7 +256,8 @@ REPEAT_EVENT_S = 10.0  # a device error repeating (a port gone, a muted instrume
 
 
 @functools.lru_cache(maxsize=8)
-def _load_dbc(path: str) -> Any:
+def load_dbc(path: str) -> Any:
+    """A CAN database file parsed by cantools, once per path."""
     import cantools
 
     return cantools.database.load_file(path)
@@ -264,7 +265,7 @@ def _load_dbc(path: str) -> Any:
 
 def bench_dbc(config: BenchConfig) -> Any:
     """The bench's CAN database (the configured DBC or drivers/bench.dbc), parsed once per file."""
-    return _load_dbc(config.dbc or str(BENCH_DBC))
+    return load_dbc(config.dbc or str(BENCH_DBC))
 
 
 def status_cycle_s(config: BenchConfig, key: str) -> float:
