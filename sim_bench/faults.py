@@ -73,6 +73,14 @@ def _stuck_clutch(bench: Any, f: Fault) -> None:
     bench.physics.stick_clutch(f.value, f.duration_s)
 
 
+def _node_clock_drift(bench: Any, f: Fault) -> None:
+    bench.node.clock_drift(f.value)
+
+
+def _node_clock_jump(bench: Any, f: Fault) -> None:
+    bench.node.clock_jump(f.value)
+
+
 def _corrupt_node(bench: Any, f: Fault) -> None:
     bench.node.corrupt_next("flip", int(f.value) or 1)
 
@@ -164,6 +172,10 @@ KINDS: dict[str, FaultKind] = {
     "controller_fault_cleared": FaultKind(_controller_fault_cleared, "a controller's fault clears", _target("load")),
     "stuck_clutch": FaultKind(_stuck_clutch, "clutch clamped and output braked, whatever is commanded", {
         "value": Option("N*m the clutch holds", _number(0.0, 1e4), required=True), "duration_s": _DURATION}),
+    "node_clock_drift": FaultKind(_node_clock_drift, "the node's clock runs fast (slow: negative) from now on", {
+        "value": Option("ppm (-5000: 0.5 % slow)", _number(-1e5, 1e5), required=True)}),
+    "node_clock_jump": FaultKind(_node_clock_jump, "the node's clock jumps (no reboot)", {
+        "value": Option("s (negative: back)", _number(-1e4, 1e4), required=True)}),
     "corrupt_node_frames": FaultKind(_corrupt_node, "the next node frames arrive with a flipped bit (CRC errors)", {
         "value": Option("frames (default 1)", _number(1, 1e5, integer=True))}),
     "instrument_error": FaultKind(_instrument_error, "an entry in the scanner's SCPI error queue", {

@@ -112,3 +112,18 @@ def test_every_rehearsal_reaches_the_safe_state_its_fault_asks_for(name, tmp_pat
     assert m["max_T_pressure_plate"] < MAX_CLUTCH_C, m
     alive_errors = [e for e in events if e.kind == "controller_alive_error"]
     assert len(alive_errors) <= 2 + (events[-1].time - events[0].time) / 10  # summarised, not one per frame
+
+
+@pytest.mark.parametrize("fault", ["node_clock_drift@10:value=-5000", "node_clock_drift@10:value=3000",
+                                   "node_clock_jump@100:value=-5", "node_clock_jump@100:value=5"])
+def test_a_node_clock_off_beyond_its_allowance_is_mapped_anew_and_says_so(fault, tmp_path):
+    """A node clock 0.5 % slow (or fast, or jumping) is re-mapped with a `clock_remapped` event: its samples are
+    never placed seconds away from when they were measured, and T_flywheel never goes stale while frames arrive."""
+    code, path = rehearse(tmp_path, "table1", "--duration", "600", "--fault", fault)
+    events = load_events(path)
+    assert code == 0 and "clock_remapped" in {e.kind for e in events}
+    assert not [e for e in events if e.kind == "interlock"], [e.detail for e in events if e.kind == "interlock"]
+    with h5py.File(path, "r") as f:
+        t, seq = f["raw/node/time"][:], f["raw/node/seq"][:].astype(float)
+    true = t[0] + (seq - seq[0]) * 0.05  # the node measures every period_s of bench time (seq counts lost frames too)
+    assert np.max(np.abs(t - true)) <= 0.5 + 0.15, np.max(np.abs(t - true))  # REMAP_S + a slow tick

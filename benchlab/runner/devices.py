@@ -446,6 +446,8 @@ class DriverBench:
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:
                 detail += f", span {ev.span_s:.3f} s, lost {ev.lost_frames} frames"
+            if ev.offset_s is not None:
+                detail += f": node clock beyond its drift allowance, mapped anew (offset {ev.offset_s:.3f} s)"
             if ev.kind == "frame_errors":  # the window's counts, so the run file adds up to the gateway's counters
                 detail += f": crc_errors {ev.crc_errors}, malformed {ev.malformed}, resyncs {ev.resyncs}"
             self.events.append((ev.t_host, ev.kind, detail))
