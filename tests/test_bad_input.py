@@ -334,3 +334,12 @@ def test_bench_file_actions_table_sets_the_reaction_of_its_interlock(tmp_path):
     limits = load_bench_config(bench).limits
     assert limits.action("slip_time") == "abort" and limits.reaction("slip_time").stages == ("open_stop", "stop_hold")
     assert limits.reaction("slip_time").escalate_after_s == 1.5 and limits.action("stale_T_air") == "hold"
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+def test_run_params_file_is_read_and_checked_before_the_protocol_runs(dry_run, tmp_path, capsys):
+    """Issue 29: `--params /nonexistent.json` used to run the whole cool-down sweep (hours on hardware), then exit 2."""
+    out = tmp_path / "r.h5"
+    err = _refused(["run", "cooldown-sweep", "--bench", "sim", "--out", str(out), "--params", str(tmp_path / "no.json")]
+                   + (["--dry-run"] if dry_run else []), "no.json", capsys)
+    assert "not found" in err and not out.exists() and not list(tmp_path.glob("*.lock")) and not list(tmp_path.glob("*.blf"))
