@@ -77,15 +77,15 @@ REHEARSALS = {
          "--fault", "controller_unfrozen@90:target=drive"], "stale_engine_speed", "open_stop", 70.0 + 0.5 + 1.5,
         "complete"),
     "clutch controller hung during an engagement": (
-        ["--duration", "300", "--fault", "controller_frozen@2:target=clutch",
-         "--fault", "controller_unfrozen@20:target=clutch"], "stale_clutch_torque", "stop_hold", 2.0 + 0.5 + 1.5,
+        ["--duration", "300", "--fault", "controller_frozen@3:target=clutch",
+         "--fault", "controller_unfrozen@20:target=clutch"], "stale_clutch_torque", "stop_hold", 3.0 + 0.5 + 1.5,
         "complete"),
     "clutch controller silent during an engagement": (
-        ["--duration", "300", "--fault", "controller_silent@2:target=clutch",
-         "--fault", "controller_back@20:target=clutch"], "controller_lost", "open_idle", 2.0 + 1.5, "complete"),
+        ["--duration", "300", "--fault", "controller_silent@3:target=clutch",
+         "--fault", "controller_back@20:target=clutch"], "controller_lost", "open_idle", 3.0 + 1.5, "complete"),
     "node radio lost during a slip": (
-        ["--duration", "300", "--fault", "radio_silence@2:duration_s=30"], "stale_T_flywheel", "open_idle",
-        2.0 + 10.0 + 1.5, "complete"),
+        ["--duration", "300", "--fault", "radio_silence@3:duration_s=30"], "stale_T_flywheel", "open_idle",
+        3.0 + 10.0 + 1.5, "complete"),
     "flywheel heater the bench cannot switch off": (
         ["--duration", "600", "--fault", "flywheel_heater@20:value=5000"], "flywheel_over_temperature", "open_idle",
         math.inf, "alarm"),
@@ -127,3 +127,20 @@ def test_a_node_clock_off_beyond_its_allowance_is_mapped_anew_and_says_so(fault,
         t, seq = f["raw/node/time"][:], f["raw/node/seq"][:].astype(float)
     true = t[0] + (seq - seq[0]) * 0.05  # the node measures every period_s of bench time (seq counts lost frames too)
     assert np.max(np.abs(t - true)) <= 0.5 + 0.15, np.max(np.abs(t - true))  # REMAP_S + a slow tick
+
+
+@pytest.mark.parametrize("fault, missing", [("controller_silent@0:target=drive", "engine_speed"),
+                                            ("instrument_disconnect@0", "T_air"),
+                                            ("controller_frozen@0:target=load", "clutch_speed")])
+def test_nothing_moves_before_every_interlock_input_is_alive(fault, missing, tmp_path):
+    """The readiness gate: with an input dead from the start, only the safe state is ever commanded (a launch
+    used to be commanded at 1.0 s with the drive silent), and the run ends saying which input never came."""
+    code, path = rehearse(tmp_path, "table1", "--duration", "300", "--fault", fault)
+    events = load_events(path)
+    aborted = [e.detail for e in events if e.kind == "run_aborted"]
+    assert code == 1 and aborted and aborted[0].startswith("not ready:") and missing in aborted[0], aborted
+    assert "inputs_ready" not in {e.kind for e in events} and "cycle_start" not in {e.kind for e in events}
+    with h5py.File(path, "r") as f:
+        sp = f["raw/setpoints"]
+        assert np.all(sp["clutch_open"][:] == 1.0) and np.all(sp["clutch_torque"][:] == 0.0)
+        assert np.all(sp["engine_speed"][:] <= 800.0) and np.all(sp["load_torque"][:] == 0.0)

@@ -136,6 +136,7 @@ class Runner:
         self.bench.safe_state(self._safe)
         self._tick(interlocks=False)  # the first readings; the steps' ticks watch the interlocks
         try:
+            self._await_inputs()
             i = start_step
             while i < len(self.steps):
                 self._stop_if_asked()  # asked before this step began: it commands nothing
@@ -172,6 +173,25 @@ class Runner:
         self.summary.sim_s, self.summary.wall_s = self.clock() - t0, time.perf_counter() - wall0
         self.writer.flush(self.clock())
         return self.summary
+
+    def _await_inputs(self) -> None:
+        """The readiness gate: no set-point that moves anything before every input the interlocks read has had a
+        valid reading since the gate opened (alive now, not merely once) and no controller is lost; Stopped if that
+        takes longer than the longest maximum age."""
+        t0, wait = self.clock(), max(self.limits.max_age_s.values())
+        while True:
+            st, now = self.bench.status, self.clock()
+            missing = [c for c in self.limits.max_age_s if not st.seen.get(c, -math.inf) > t0] + \
+                sorted(st.controllers_bad)
+            if not missing:
+                break
+            if now - t0 > wait:
+                raise Stopped(f"not ready: no valid {', '.join(missing)} within {wait:g} s of the start: nothing "
+                              f"commanded but the safe state", 1)
+            self._tick(interlocks=False)
+            self._stop_if_asked()
+        self.writer.event(self.clock(), "inputs_ready", self.cycle, f"every interlock input fresh after "
+                          f"{self.clock() - t0:.2f} s")
 
     # -- steps ----------------------------------------------------------------------------------------
     def _run_step(self, index: int, step: Step) -> None:
