@@ -369,7 +369,9 @@ class ClutchNodeGateway:
             if self._accept(row, now):
                 keep[i] = True
                 accepted.append((i, self._node_s, self.clock_map))
-                self.clock_map.observe(self._node_s, now)
+        for clock_map in {id(m): m for _, _, m in accepted}.values():  # each map observes its frames of this read
+            node_times = [node_s for _, node_s, m in accepted if m is clock_map]  # together, as `_read_plain` does:
+            observe_into(clock_map.state, min(node_times), max(node_times), now)  # the newest tells a drifting clock
         for i, node_s, clock_map in accepted:  # each with its map as the whole read left it
             t[i] = min(clock_map.to_run(node_s), now)
         rows, t = rows[keep], t[keep]
