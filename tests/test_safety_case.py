@@ -174,3 +174,14 @@ if __name__ == "__main__":
 
     with tempfile.TemporaryDirectory() as tmp:
         print("\n".join(_table_rows(Path(tmp))))
+
+
+def test_a_silent_clutch_actuator_leaves_no_phantom_engagement(tmp_path):
+    """Issue 29: with the actuator silent mid-launch, its held torque and state used to be integrated into an
+    engagement that tripped slip_time and slip_energy on energy never dissipated."""
+    code, path = rehearse(tmp_path, "table1", "--duration", "300", "--fault", "controller_silent@3:target=clutch",
+                          "--fault", "controller_back@20:target=clutch")
+    events = load_events(path)
+    assert code == 0 and not {e.reason for e in events if e.kind == "interlock"} & {"slip_time", "slip_energy"}
+    ends = [e for e in events if e.kind == "engagement_end"]
+    assert ends and ends[0].time <= 3.0 + 0.5 + 1.0  # ends once the actuator's frames are stale (max age + a tick)

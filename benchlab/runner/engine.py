@@ -93,7 +93,7 @@ class Runner:
         self.bench, self.clock, self.steps, self.writer, self.limits = bench, clock, tuple(steps), writer, limits
         self.tick_s, self.fast_tick_s, self.dt = tick_s, fast_tick_s, dt
         self.progress, self.progress_every_s = progress, progress_every_s
-        self.engagements = Engagements()
+        self.engagements = Engagements(limits.max_age_s["clutch_torque"])
         self.interlocks = InterlockSet(limits, armed_at=clock())
         self.summary = RunSummary(len({s.cycle for s in self.steps}))
         self.stop_request: str | None = None

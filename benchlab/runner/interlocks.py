@@ -22,8 +22,13 @@ from protocols.limits import ALARM_RISE_K, ALARM_WINDOW_S, DEFAULT_MAX_AGE_S, Be
 
 @dataclass
 class Engagements:
-    """Slip intervals and friction energy, from the bench's frame-by-frame energy integral (not tick × power)."""
+    """Slip intervals and friction energy, from the bench's frame-by-frame energy integral (not tick × power).
 
+    Only while the clutch actuator's frames are fresh (within `max_age_s`): a silent actuator's held torque and
+    state are no engagement (its energy was never dissipated as far as anyone knows; its stale interlock trips).
+    """
+
+    max_age_s: float = DEFAULT_MAX_AGE_S["clutch_torque"]
     slip_start: float | None = None
     slip_energy: float = 0.0
     total_energy: float = 0.0
@@ -32,12 +37,14 @@ class Engagements:
 
     def update(self, st: BenchStatus, now: float, events: list[tuple[str, str]]) -> None:
         """Engagement starts/ends at this tick, as events."""
+        fresh = now - st.seen.get("clutch_torque", -math.inf) <= self.max_age_s
         energy = st.friction_energy_j - (self._last_energy if self._last_energy is not None else st.friction_energy_j)
+        energy = energy if fresh else 0.0
         self._last_energy = st.friction_energy_j
         self.total_energy += energy
         if self.slip_start is not None:
             self.slip_energy += energy
-        if st.slipping:
+        if st.slipping and fresh:
             if self.slip_start is None:
                 self.slip_start, self.slip_energy = now, energy
                 self.count += 1
