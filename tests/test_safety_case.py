@@ -165,7 +165,7 @@ def _table_rows(workdir: Path) -> list[str]:
         rows.append(f"| {name} | {trips[0].reason if trips else '-'} at {m['t_trip']:.2f} s | "
                     f"{trips[0].detail.rsplit('safe state ', 1)[-1] if trips else '-'} | {m['t_to_safe_s']:.2f} s | "
                     f"{m['energy_after_trip_j'] / 1e3:.1f} kJ | {m['max_T_pressure_plate']:.0f} / "
-                    f"{m['max_T_flywheel']:.0f} / {m['max_T_air']:.0f} | {m['run_max_T_pressure_plate']:.0f} | exit {code}: {end[0][:70] or 'complete'} |")
+                    f"{m['max_T_flywheel']:.0f} / {m['max_T_air']:.0f} | {m['run_max_T_pressure_plate']:.0f} | exit {code}: {end[0] or 'complete'} |")
     return rows
 
 
