@@ -114,3 +114,35 @@ def test_sigterm_during_start_up_ends_the_run_as_ctrl_c_does_with_exit_143(tmp_p
         assert load_attrs(out)["status"] == "aborted"
     else:
         assert proc.stderr.splitlines() == ["benchlab run: terminated"], proc.stderr
+
+
+_COMPACTION_CASE = '''
+import signal, sys
+import benchlab.cli as cli
+from benchlab.acquire.writer import RunWriter
+
+close = RunWriter.close
+
+def close_with_a_signal(self, *args, **kwargs):
+    signal.raise_signal(signal.{name})
+    return close(self, *args, **kwargs)
+
+RunWriter.close = close_with_a_signal
+sys.exit(cli.main(sys.argv[1:]))
+'''
+
+
+@pytest.mark.parametrize("name, code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_signal_during_the_final_compaction_ends_the_run_aborted(tmp_path, name, code):
+    """Issue 29: SIGINT/SIGTERM while the run file was compacted were swallowed (exit 0, status complete)."""
+    (tmp_path / "compaction_case.py").write_text(_COMPACTION_CASE.format(name=name))
+    root = str(Path(benchlab.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), root])}
+    out = tmp_path / "run.h5"
+    proc = subprocess.run([sys.executable, "-m", "compaction_case", "run", "table1", "--bench", "sim", "--duration",
+                           "200", "--out", str(out), "-q"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=WAIT_S)
+    from benchlab.runfile import load_attrs
+
+    assert proc.returncode == code, proc.stderr
+    assert load_attrs(out)["status"] == "aborted" and not list(tmp_path.glob("*.lock"))

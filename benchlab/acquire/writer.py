@@ -380,6 +380,11 @@ class RunWriter:
         self._closing_groups = dict(groups or {})
         self._rebuild(None, compact=True, status=status, attrs=attrs)
 
+    def set_status(self, status: str) -> None:
+        """The closed file's root attribute `status` (a stop that came while it was being compacted ends it so)."""
+        with h5py.File(self.path, "r+") as f:
+            f.attrs["status"] = status
+
     @property
     def rows(self) -> int:
         return self.builder.rows

@@ -97,6 +97,7 @@ class Runner:
         self.interlocks = InterlockSet(limits, armed_at=clock())
         self.summary = RunSummary(len({s.cycle for s in self.steps}))
         self.stop_request: str | None = None
+        self.stop_code = 130  # the exit code of the stop asked for (130 SIGINT, 143 SIGTERM)
         self.cycle = -1
         self._step = 0  # index in `steps` of the last step started: the progress bar shows it after it ends too
         self._in_step = False  # between that step's step_start and step_end
@@ -118,12 +119,12 @@ class Runner:
 
     def request_stop(self, reason: str, code: int = 130) -> None:
         self.stop_request = reason
-        self._stop_code = code
+        self.stop_code = code
 
     def _stop_if_asked(self) -> None:
         """Raise Stopped if a stop was asked for (a signal, the session)."""
         if self.stop_request is not None:
-            raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))
+            raise Stopped(self.stop_request, self.stop_code)
 
     def run(self, start_step: int = 0) -> RunSummary:
         wall0, t0 = time.perf_counter(), self.clock()
