@@ -69,6 +69,10 @@ def _controller_fault_cleared(bench: Any, f: Fault) -> None:
     bench.can.clear_fault(f.target or "load")
 
 
+def _host_stall(bench: Any, f: Fault) -> None:
+    bench.clock.sleep_until(bench.clock() + f.duration_s)  # the PC sends nothing meanwhile; the emulators run on
+
+
 def _stuck_clutch(bench: Any, f: Fault) -> None:
     bench.physics.stick_clutch(f.value, f.duration_s)
 
@@ -170,6 +174,8 @@ KINDS: dict[str, FaultKind] = {
     "controller_fault": FaultKind(_controller_fault, "a controller reports a fault code", {
         "value": Option("fault code (default 1)", _number(1, 255, integer=True)), **_target("load")}),
     "controller_fault_cleared": FaultKind(_controller_fault_cleared, "a controller's fault clears", _target("load")),
+    "host_stall": FaultKind(_host_stall, "the PC stalls: no command, no read for duration_s (the controllers' own "
+                            "command time-out must make them safe)", {"duration_s": _DURATION}),
     "stuck_clutch": FaultKind(_stuck_clutch, "clutch clamped and output braked, whatever is commanded", {
         "value": Option("N*m the clutch holds", _number(0.0, 1e4), required=True), "duration_s": _DURATION}),
     "node_clock_drift": FaultKind(_node_clock_drift, "the node's clock runs fast (slow: negative) from now on", {

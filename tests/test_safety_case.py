@@ -89,6 +89,9 @@ REHEARSALS = {
     "node radio lost during a slip": (
         ["--duration", "300", "--fault", "radio_silence@3:duration_s=30"], "stale_T_flywheel", "open_idle",
         3.0 + 10.0 + 1.5, "complete"),
+    "host stall of 30 s during an engagement": (
+        ["--duration", "300", "--fault", "host_stall@3:duration_s=30"], "controller_lost", "stop_hold", 33.0 + 1.5,
+        "complete"),
     "flywheel heater the bench cannot switch off": (
         ["--duration", "600", "--fault", "flywheel_heater@20:value=5000"], "flywheel_over_temperature", "open_idle",
         math.inf, "alarm"),
@@ -185,3 +188,14 @@ def test_a_silent_clutch_actuator_leaves_no_phantom_engagement(tmp_path):
     assert code == 0 and not {e.reason for e in events if e.kind == "interlock"} & {"slip_time", "slip_energy"}
     ends = [e for e in events if e.kind == "engagement_end"]
     assert ends and ends[0].time <= 3.0 + 0.5 + 1.0  # ends once the actuator's frames are stale (max age + a tick)
+
+
+def test_a_host_stall_leaves_the_clutch_to_the_controllers_own_time_out(tmp_path):
+    """Issue 29: with the PC silent for 30 s mid-launch the clutch slipped 32.65 s; the controllers' command time-out
+    (3 cycles) now opens it and stops the drive at its deadline. Nothing is received meanwhile, so /truth tells: the
+    plate warms 0.43 K over the stall (2.38 K when the time-out never applied the safe set-points)."""
+    code, path = rehearse(tmp_path, "table1", "--duration", "300", "--fault", "host_stall@3:duration_s=30")
+    truth = load_truth(path)
+    t, plate = truth.time.to_numpy(), truth.T_pressure_plate.to_numpy()
+    stall = (t >= 3.0) & (t <= 34.0)
+    assert code == 0 and plate[stall].max() - plate[np.searchsorted(t, 3.0)] <= 1.0
