@@ -378,6 +378,7 @@ class DriverBench:
         self._last_error_t = -math.inf
         self._repeats: dict[str, tuple[float, int]] = {}  # kind -> (time last said, errors since)
         self._next_clock_row = -math.inf
+        self._can_remaps = 0  # the CAN interface clock's re-maps already reported
 
     # -- commands ----------------------------------------------------------------------------------
     def command(self, engine_rpm: float, clutch_torque_nm: float, clutch_open: bool, load_nm: float) -> None:
@@ -504,6 +505,10 @@ class DriverBench:
             else:
                 self.events.append((ev.t, f"controller_{ev.kind}", f"{ev.controller}: {ev.detail}"))
         st.controllers_bad = {**{c: "silent" for c in self.can.silent}, **{c: "fault" for c in self.can.faulted}}
+        if self.can.clock_map.remaps > self._can_remaps:  # the interface's clock drifted beyond its allowance or jumped
+            self.events.append((now, "can_clock_remapped", f"CAN interface clock mapped anew (offset "
+                                                           f"{self.can.clock_map.offset:.3f} s)"))
+            self._can_remaps = self.can.clock_map.remaps
         if self.can.timestamps == "interface" and math.isfinite(self.can.clock_map.offset) and now >= self._next_clock_row:
             self.readings.append(("can_clock", now, (self.can.clock_map.offset,)))
             self._next_clock_row = now + 1.0
