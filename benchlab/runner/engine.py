@@ -117,6 +117,11 @@ class Runner:
         """Index in `steps` of the step under way (the step its events carry), -1 between steps."""
         return self._step if self._in_step else -1
 
+    @property
+    def safe(self) -> SafeState:
+        """The safe state commanded last: what a failure leaves the bench in (a stopped drive is not restarted)."""
+        return self._safe
+
     def request_stop(self, reason: str, code: int = 130) -> None:
         self.stop_request = reason
         self.stop_code = code

@@ -254,7 +254,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             summary = runner.run(resume_state["start"] if resume_state else 0)
         except Exception as exc:  # an unexpected failure: bench safe, file closed as aborted, then report it
             try:
-                bench.safe_state()
+                bench.safe_state(runner.safe)
                 writer.event(clock(), "run_aborted", runner.cycle, f"failure: {type(exc).__name__}: {exc}",
                              step=runner.current_step)
                 writer.close("aborted", groups=_truth_groups(sim, writer, resume_state))
