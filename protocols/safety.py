@@ -26,13 +26,12 @@ class SafeState:
     name: str
     engine: str  # "idle" or "stop"
     load: str  # "zero" or "hold"
-    about: str
 
 
 SAFE_STATES = {s.name: s for s in (
-    SafeState("open_idle", "idle", "zero", "clutch open, drive at idle, load at 0: the clutch cools"),
-    SafeState("open_stop", "stop", "zero", "clutch open, drive to 0 rpm, load at 0"),
-    SafeState("stop_hold", "stop", "hold", "clutch open, drive to 0 rpm, load machine holding the output"),
+    SafeState("open_idle", "idle", "zero"),  # the clutch cools, the drive turning the flywheel's air
+    SafeState("open_stop", "stop", "zero"),
+    SafeState("stop_hold", "stop", "hold"),  # a clutch that does not open: nothing left turning against it
 )}
 SEVERITY = tuple(SAFE_STATES)  # of several safe states asked for at once, the one furthest in this order holds
 OPEN_IDLE = SAFE_STATES["open_idle"]
