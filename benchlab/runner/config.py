@@ -19,7 +19,7 @@ import cantools
 from benchlab.bounds import MAX_TIMEOUT_S
 from benchlab.drivetrain import DrivetrainFacts
 from benchlab.errors import InputError
-from benchlab.runner.devices import BenchConfig, load_dbc
+from benchlab.runner.devices import BenchConfig, load_dbc, status_cycle_s
 from benchlab.values import check_keys, finite_number, positive_number
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS
@@ -179,7 +179,7 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
     check_keys(src, "drivetrain", drive, DrivetrainFacts.__dataclass_fields__)
     drivetrain = DrivetrainFacts(*(_num(drive, key, f"drivetrain.{key}", src, getattr(DrivetrainFacts, key))
                                    for key in DrivetrainFacts.__dataclass_fields__))
-    return BenchConfig(
+    config = BenchConfig(
         instrument_url=_str(inst, "url", "instrument.url", src), node_url=_str(node, "url", "node.url", src),
         can=can_cfg, instrument_channels=channels, instrument_mode=mode,
         instrument_baudrate=int(_num(inst, "baudrate", "instrument.baudrate", src, 115200, True)),
@@ -193,3 +193,19 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         **{key: _num(acq, key, f"acquisition.{key}", src, getattr(BenchConfig, key), maximum=ACQUISITION_MAX[key])
            for key in ACQUISITION_KEYS},
         limits=replace(limits, drivetrain=drivetrain), source=src)
+    _check_ages(config, src)
+    return config
+
+
+def _check_ages(config: BenchConfig, src: str) -> None:
+    """Each `[limits.max_age_s]` longer than its source's own gaps: two of its periods (the DBC's cycle for the CAN
+    channels) and, for T_air, one scanner time-out; a shorter age trips its interlock on a healthy bench."""
+    cycles = {"engine_speed": "drive.speed", "clutch_speed": "load.speed", "clutch_torque": "clutch.torque"}
+    shortest = {"T_air": max(2 * config.instrument_period_s, config.instrument_timeout_s),
+                "T_flywheel": 2 * config.node_period_s,
+                **{channel: 2 * status_cycle_s(config, key) for channel, key in cycles.items()}}
+    for channel, age in config.limits.max_age_s.items():
+        if not age > shortest[channel]:
+            why = "two periods of its source" + (", one scanner time-out" if channel == "T_air" else "")
+            raise InputError(src, f"limits.max_age_s.{channel}", f"more than {shortest[channel]:g} s ({why}), "
+                                                                 f"got {age!r}")
