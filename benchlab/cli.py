@@ -24,7 +24,8 @@ from collections.abc import Sequence
 import benchlab
 import benchlab.commands
 from benchlab.errors import InputError
-from benchlab.interrupts import RedeliverInterrupts, interrupts_answered, interrupts_held
+from benchlab.interrupts import (TERMINATED_EXIT, RedeliverInterrupts, Terminated, interrupts_answered,
+                                 interrupts_held, terminate_as_interrupt)
 from benchlab.outputs import OutputError, is_no_space, no_space
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
@@ -56,16 +57,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _caused_by_interrupt(exc: BaseException) -> bool:
-    """Whether Ctrl-C is behind `exc` (its cause or the exception being handled when it was raised)."""
+def _caused_by_interrupt(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C (or SIGTERM) behind `exc` (its cause or the exception being handled when it was raised), if any."""
     seen: set[int] = set()
     link: BaseException | None = exc
     while link is not None and id(link) not in seen:
         if isinstance(link, KeyboardInterrupt):
-            return True
+            return link
         seen.add(id(link))
         link = link.__cause__ or link.__context__
-    return False
+    return None
 
 
 def configure_logging(verbosity: int) -> None:
@@ -92,11 +93,14 @@ def _stdout_reader_gone() -> bool:
     return True
 
 
-def _interrupted(args: argparse.Namespace | None) -> int:
-    """The one answer to Ctrl-C: later ones are ignored from here on (see interrupts_answered), one line, 130."""
+def _interrupted(args: argparse.Namespace | None, exc: BaseException | None = None) -> int:
+    """The one answer to Ctrl-C (130) or SIGTERM (143): later ones are ignored from here on (see
+    interrupts_answered), one line."""
     interrupts_answered()
-    print(f"benchlab{'' if args is None else ' ' + args.command}: interrupted", file=sys.stderr)
-    return INTERRUPTED_EXIT
+    terminated = isinstance(exc, Terminated)
+    print(f"benchlab{'' if args is None else ' ' + args.command}: {'terminated' if terminated else 'interrupted'}",
+          file=sys.stderr)
+    return TERMINATED_EXIT if terminated else INTERRUPTED_EXIT
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -105,10 +109,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     Having answered a Ctrl-C, main leaves SIGINT ignored: the process is ending (an in-process caller that
     carries on puts its own handler back)."""
     try:
-        with RedeliverInterrupts() as guard:
+        with terminate_as_interrupt(), RedeliverInterrupts() as guard:
             code = _dispatch(argv)
-    except KeyboardInterrupt:  # a Ctrl-C sent again (see benchlab.interrupts) just as the command ended
-        return _interrupted(None)
+    except KeyboardInterrupt as exc:  # a Ctrl-C sent again (see benchlab.interrupts) just as the command ended
+        return _interrupted(None, exc)
     if guard.swallowed and code != INTERRUPTED_EXIT:  # a Ctrl-C still to be sent again, not answered yet
         return _interrupted(None)
     return code
@@ -132,11 +136,11 @@ def _dispatch(argv: Sequence[str] | None) -> int:
     except OutputError as exc:  # a full disk: the file named, no partial output left
         print(f"benchlab {args.command}: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        return _interrupted(args)
+    except KeyboardInterrupt as exc:
+        return _interrupted(args, exc)
     except Exception as exc:  # noqa: BLE001 - the CLI's last line of defence
-        if _caused_by_interrupt(exc):  # Ctrl-C while a class is being created: Python 3.11 wraps it (__set_name__)
-            return _interrupted(args)
+        if (interrupt := _caused_by_interrupt(exc)) is not None:  # Ctrl-C while a class is being created: Python
+            return _interrupted(args, interrupt)  # 3.11 wraps it (__set_name__)
         return _failed(args, exc)
 
 

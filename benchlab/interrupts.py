@@ -6,6 +6,8 @@ a traceback and carry on: a run interrupted during start-up then ran to its end 
 While RedeliverInterrupts is active, such an interrupt is not printed but raised again a moment later,
 when the main thread is back in ordinary code (and again, should it land in a callback once more).
 Once the command has answered a Ctrl-C, `interrupts_answered` makes that answer the process's last word.
+SIGTERM is answered the same way (`terminate_as_interrupt`: `Terminated`, exit 143), never by the default that
+kills the process mid-way (a run's `.lock` left behind).
 """
 
 from __future__ import annotations
@@ -18,6 +20,30 @@ import threading
 from collections.abc import Iterator
 from types import TracebackType
 from typing import Any
+
+
+TERMINATED_EXIT = 128 + signal.SIGTERM
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, answered as Ctrl-C is (the run ends aborted, its files whole, its lock released), exit 143."""
+
+
+def _raise_terminated(signum: int, frame: Any) -> None:
+    raise Terminated
+
+
+@contextlib.contextmanager
+def terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises `Terminated` in the main thread during the block (elsewhere the block runs as it is)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 class RedeliverInterrupts:
@@ -76,13 +102,15 @@ def interrupts_held() -> Iterator[None]:
         yield
         return
     caught: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    previous = {s: signal.signal(s, lambda signum, frame: caught.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
         if caught:
-            raise KeyboardInterrupt
+            raise Terminated if signal.SIGTERM in caught else KeyboardInterrupt
 
 
 def interrupts_answered() -> None:
@@ -96,4 +124,5 @@ def interrupts_answered() -> None:
     """
     if threading.current_thread() is threading.main_thread():  # only the main thread can set handlers
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # before the exec: no Ctrl-C can land in it and record anew
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
     exec("", {})  # noqa: S102 - a constant empty source: see above

@@ -73,6 +73,9 @@ class CanBlock:
     # the number of frames); column j holds logical signal keys[j]
     matrix: np.ndarray
     keys: tuple[str, ...]
+    # per frame: its alive counter was the previous one + 1 (a stopped, repeated or jumping counter is a frame of a
+    # controller not known to be alive: its values are no fresh reading); None: all were
+    alive_ok: np.ndarray | None = None
 
     @property
     def values(self) -> dict[str, np.ndarray]:
@@ -251,10 +254,10 @@ class CanBench:
         """Load machine torque set-point in N·m; enables the load machine."""
         self._set({"load.torque_setpoint": nm, "load.enable": 1})
 
-    def safe_state(self) -> None:
-        """Clutch open with zero torque, load torque 0, drive at idle speed; sent at once."""
-        self._set({"clutch.torque_setpoint": 0.0, "clutch.open_request": 1, "load.torque_setpoint": 0.0,
-                   "drive.speed_setpoint": self.idle_rpm})
+    def safe_state(self, drive_rpm: float | None = None, load_nm: float = 0.0) -> None:
+        """Clutch open with zero torque, load torque `load_nm` (0), drive at `drive_rpm` (idle speed); sent at once."""
+        self._set({"clutch.torque_setpoint": 0.0, "clutch.open_request": 1, "load.torque_setpoint": load_nm,
+                   "drive.speed_setpoint": self.idle_rpm if drive_rpm is None else drive_rpm})
 
     def emergency_stop(self, source: int = sig.ESTOP_SOURCE_PC) -> None:
         """Send the emergency stop now and repeat it every cycle until `release_emergency_stop()`."""
@@ -378,7 +381,7 @@ class CanBench:
                 continue
             table.seen[m] = True
             block = CanBlock(rx.controller, rx.codec.message.name, order[a:b], t[a:b],
-                             np.ascontiguousarray(values[a:b, table.key_slices[m]]), table.keys[m])
+                             np.ascontiguousarray(values[a:b, table.key_slices[m]]), table.keys[m], ~alive_wrong[a:b])
             if rx.controller == "estop":
                 events += self._estop_events(block)
             blocks.append(block)

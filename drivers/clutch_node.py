@@ -119,7 +119,7 @@ class LinkEvent:
     frame sync in it (chunk before the first delimiter, or an over-long run without one).
     """
 
-    kind: Literal["dropout_start", "dropout_end", "node_reset", "frame_errors"]
+    kind: Literal["dropout_start", "dropout_end", "node_reset", "frame_errors", "clock_remapped"]
     t_host: float
     last_seq: int | None
     span_s: float | None = None
@@ -127,6 +127,7 @@ class LinkEvent:
     crc_errors: int = 0
     malformed: int = 0
     resyncs: int = 0
+    offset_s: float | None = None  # clock_remapped: the node clock's new offset to the run clock (s)
 
 
 @dataclass(slots=True)
@@ -172,6 +173,7 @@ class ClutchNodeGateway:
         self._last_ms = 0
         self._last_host = clock()
         self.clock_map = ClockMap()  # the node's clock → run clock (anew after a node reboot)
+        self._remaps = 0  # the map's re-maps already reported
         self._node_s = 0.0  # the node's clock in s, unwrapped, at the newest accepted frame
         self._in_dropout = False
         self._errors: _ErrorWindow | None = None
@@ -200,6 +202,9 @@ class ClutchNodeGateway:
             raise ConnectionLost(f"gateway port: {exc}") from exc
         block = self.feed_block(data) if data else self._block(_NO_ROWS, self.clock())
         self.check_silence()
+        if self.clock_map.remaps > self._remaps:  # the node clock drifted beyond the allowance or jumped: said so
+            self._events.append(LinkEvent("clock_remapped", block.t_host, self._last_seq, offset_s=self.clock_map.offset))
+        self._remaps = self.clock_map.remaps  # a new map after a reboot counts from 0
         return block
 
     def read(self, count: int, timeout_s: float) -> list[NodeSample]:
@@ -364,7 +369,9 @@ class ClutchNodeGateway:
             if self._accept(row, now):
                 keep[i] = True
                 accepted.append((i, self._node_s, self.clock_map))
-                self.clock_map.observe(self._node_s, now)
+        for clock_map in {id(m): m for _, _, m in accepted}.values():  # each map observes its frames of this read
+            node_times = [node_s for _, node_s, m in accepted if m is clock_map]  # together, as `_read_plain` does:
+            observe_into(clock_map.state, min(node_times), max(node_times), now)  # the newest tells a drifting clock
         for i, node_s, clock_map in accepted:  # each with its map as the whole read left it
             t[i] = min(clock_map.to_run(node_s), now)
         rows, t = rows[keep], t[keep]

@@ -15,6 +15,7 @@ from typing import Any
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
 from benchlab.drivetrain import RPM, DrivetrainFacts
 from benchlab.values import check_keys, positive_number
+from protocols.safety import DEFAULT_REACTIONS, Reaction, reaction_of
 from protocols.schedule import CONDITION_CHANNELS, OPERATORS, PHASES, Step, duration_s
 
 ACTIONS = ("hold", "abort")
@@ -22,6 +23,14 @@ ACTIONS = ("hold", "abort")
 # loses a few frames in a row routinely (seconds), the scanner reads every 0.2 s and may time out once (2 s),
 # the status frames come every 10 ms.
 DEFAULT_MAX_AGE_S = {"T_flywheel": 10.0, "T_air": 5.0, "engine_speed": 0.5, "clutch_speed": 0.5, "clutch_torque": 0.5}
+# What the sensors and materials allow a [limits] value to be (checked with `BenchLimits.check_physics`, issue 29)
+MAX_FLYWHEEL_LIMIT_C = 400.0  # a flywheel and its facing beyond this: the friction material is gone
+MAX_AIR_LIMIT_C = 200.0  # the chamber's seals, bearings and cabling
+MIN_TEMPERATURE_LIMIT_C = 30.0  # a limit at room temperature trips before anything runs
+MAX_CLEAR_MARGIN_K = 50.0
+MAX_SLIP_TIME_LIMIT_S = 60.0  # one engagement slipping longer is no launch but a brake test
+MAX_HOLD_S = 3600.0  # resume_after_s and the wait for an interlock to clear
+ALARM_WINDOW_S, ALARM_RISE_K = 10.0, 1.0  # "still rising": up more than 1 K over the last 10 s
 MAX_AGE_LIMIT_S = 60.0  # an age beyond this would leave the bench blind for too long: refused in BENCH.toml
 INTERLOCKS = ("flywheel_over_temperature", "air_over_temperature", "controller_lost",
               *(f"stale_{channel}" for channel in DEFAULT_MAX_AGE_S), "slip_time", "slip_energy")
@@ -44,33 +53,45 @@ class BenchLimits:
     heartbeat: bool = True  # a controller's heartbeat lost (the CAN driver's watchdog) trips an interlock
     on_interlock: str = "hold"  # "hold": safe state, hold until clear + resume_after_s, next cycle; "abort"
     actions: Mapping[str, str] = field(default_factory=dict)  # per interlock name, overriding on_interlock
+    # per interlock name, the safe states to command in order (protocols/safety.py; [limits.actions] tables)
+    reactions: Mapping[str, Reaction] = field(default_factory=lambda: dict(DEFAULT_REACTIONS))
     resume_after_s: float = 30.0
     clear_margin_k: float = 10.0  # an over-temperature clears this far below its limit
+    # an over-temperature still rising (faster than ALARM_RISE_K per ALARM_WINDOW_S) this long after it tripped, the
+    # bench safe, is heat the bench cannot switch off (an external heater): the run aborts with an alarm
+    alarm_after_s: float = 60.0
     max_wait_s: float = 1800.0  # "hold" gives up (abort) after this long
     # the bench's drivetrain (BENCH.toml [drivetrain]), for the launch estimates; not a [limits] key
     drivetrain: DrivetrainFacts = DrivetrainFacts()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "max_age_s", {**DEFAULT_MAX_AGE_S, **self.max_age_s})
+        object.__setattr__(self, "reactions", {**DEFAULT_REACTIONS, **self.reactions})
 
     def action(self, interlock: str) -> str:
-        """What the named interlock does when it trips: "hold" or "abort"."""
+        """What the named interlock does once its safe state holds: "hold" or "abort"."""
         return self.actions.get(interlock, self.on_interlock)
+
+    def reaction(self, interlock: str) -> Reaction:
+        """The safe states the named interlock commands, in order (protocols/safety.py)."""
+        return self.reactions[interlock]
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "<limits>", prefix: str = "limits") -> "BenchLimits":
         """Build from a config table, raising InputError naming the first bad field."""
         from benchlab.errors import InputError
 
-        known = {f.name: f for f in fields(cls) if f.name != "drivetrain"}
+        known = {f.name: f for f in fields(cls) if f.name not in ("drivetrain", "reactions")}
         check_keys(source, prefix, values, known)
         clean: dict[str, Any] = {}
         for key, value in values.items():
             if key == "max_age_s":
                 clean[key] = _table(value, DEFAULT_MAX_AGE_S, source, f"{prefix}.{key}", _age)
                 continue
-            if key == "actions":
-                clean[key] = _table(value, INTERLOCKS, source, f"{prefix}.{key}", _action)
+            if key == "actions":  # per interlock "hold"/"abort", or a table: then, stages, escalate_after_s
+                entries = _table(value, INTERLOCKS, source, f"{prefix}.{key}", _action_entry)
+                clean[key] = {k: v[0] for k, v in entries.items() if v[0] is not None}
+                clean["reactions"] = {k: v[1] for k, v in entries.items() if v[1] is not None}
                 continue
             default = known[key].default
             if isinstance(default, bool):
@@ -83,9 +104,50 @@ class BenchLimits:
             clean[key] = float(value) if isinstance(default, float) else value
         return cls(**clean)
 
+    def check_physics(self, source: str, setpoint_max: Mapping[str, float], prefix: str = "limits") -> None:
+        """The limits against each other, the DBC's set-point ranges (`setpoint_max`: logical set-point key ->
+        largest value its signal carries) and what the sensors and materials allow; InputError naming the key and
+        the rule (a limit `1e300` would switch its interlock off; idle above the maximum speed commands it)."""
+        from benchlab.errors import InputError
+
+        drive, clutch, load = (setpoint_max[k] for k in ("drive.speed_setpoint", "clutch.torque_setpoint",
+                                                         "load.torque_setpoint"))
+        rules = (
+            ("idle_speed_rpm", self.idle_speed_rpm < self.max_engine_speed_rpm,
+             f"below max_engine_speed_rpm ({self.max_engine_speed_rpm:g})"),
+            ("max_engine_speed_rpm", self.max_engine_speed_rpm <= drive, f"at most the DBC's {drive:g} rpm"),
+            ("max_clutch_torque_nm", self.max_clutch_torque_nm <= clutch, f"at most the DBC's {clutch:g} N*m"),
+            ("max_load_torque_nm", self.max_load_torque_nm <= load, f"at most the DBC's {load:g} N*m"),
+            ("max_flywheel_c", MIN_TEMPERATURE_LIMIT_C <= self.max_flywheel_c <= MAX_FLYWHEEL_LIMIT_C,
+             f"a flywheel limit from {MIN_TEMPERATURE_LIMIT_C:g} to {MAX_FLYWHEEL_LIMIT_C:g} degC (the friction "
+             f"material)"),
+            ("max_air_c", MIN_TEMPERATURE_LIMIT_C <= self.max_air_c <= MAX_AIR_LIMIT_C,
+             f"a chamber air limit from {MIN_TEMPERATURE_LIMIT_C:g} to {MAX_AIR_LIMIT_C:g} degC (seals, bearings)"),
+            ("clear_margin_k", self.clear_margin_k <= MAX_CLEAR_MARGIN_K, f"at most {MAX_CLEAR_MARGIN_K:g} K"),
+            ("max_slip_time_s", self.max_slip_time_s <= MAX_SLIP_TIME_LIMIT_S, f"at most {MAX_SLIP_TIME_LIMIT_S:g} s"),
+            ("max_slip_energy_j", self.max_slip_energy_j <= self.max_clutch_torque_nm * self.max_engine_speed_rpm
+             * RPM * self.max_slip_time_s, "at most max_clutch_torque_nm x max_engine_speed_rpm x max_slip_time_s "
+             f"({self.max_clutch_torque_nm * self.max_engine_speed_rpm * RPM * self.max_slip_time_s:.0f} J)"),
+            ("resume_after_s", self.resume_after_s <= MAX_HOLD_S, f"at most {MAX_HOLD_S:g} s"),
+            ("max_wait_s", self.max_wait_s <= MAX_HOLD_S, f"at most {MAX_HOLD_S:g} s"),
+            ("alarm_after_s", ALARM_WINDOW_S <= self.alarm_after_s <= self.max_wait_s,
+             f"from {ALARM_WINDOW_S:g} s to max_wait_s ({self.max_wait_s:g} s)"),
+        )
+        for key, ok, expected in rules:
+            if not ok:
+                raise InputError(source, f"{prefix}.{key}", f"{expected}, got {getattr(self, key)!r}")
+
     def as_dict(self) -> dict[str, Any]:
-        return {f.name: (dict(v) if isinstance(v := getattr(self, f.name), Mapping)
-                         else dict(v.__dict__) if isinstance(v, DrivetrainFacts) else v) for f in fields(self)}
+        return {f.name: _plain(getattr(self, f.name)) for f in fields(self)}
+
+
+def _plain(value: Any) -> Any:
+    """A limits field as JSON-ready data (tables as dicts, a Reaction or the drivetrain as its fields)."""
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, Reaction):
+        return value.as_dict()
+    return dict(value.__dict__) if isinstance(value, DrivetrainFacts) else value
 
 
 def _table(value: Any, keys: Any, source: str, name: str, check: Any) -> dict[str, Any]:
@@ -113,6 +175,14 @@ def _action(value: Any, source: str, name: str) -> str:
     if value not in ACTIONS:
         raise InputError(source, name, f"one of {', '.join(ACTIONS)}, got {value!r}")
     return value
+
+
+def _action_entry(value: Any, source: str, name: str) -> tuple[str | None, Reaction | None]:
+    """One `[limits.actions]` entry: "hold"/"abort", or a table with `then` and the reaction's keys."""
+    if isinstance(value, Mapping):
+        then = value.get("then")
+        return (None if then is None else _action(then, source, f"{name}.then")), reaction_of(value, source, name)
+    return _action(value, source, name), None
 
 
 def launch_estimate(step: Step, limits: BenchLimits) -> tuple[float, float, bool]:

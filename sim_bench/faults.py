@@ -55,6 +55,12 @@ def _controller_back(bench: Any, f: Fault) -> None:
     bench.can.silence(f.target or "drive", False)
 
 
+def _controller_frozen(on: bool):
+    def apply(bench: Any, f: Fault) -> None:
+        bench.can.freeze_alive(f.target or "drive", on)
+    return apply
+
+
 def _controller_fault(bench: Any, f: Fault) -> None:
     bench.can.set_fault(f.target or "load", int(f.value) or 1)
 
@@ -63,8 +69,20 @@ def _controller_fault_cleared(bench: Any, f: Fault) -> None:
     bench.can.clear_fault(f.target or "load")
 
 
+def _host_stall(bench: Any, f: Fault) -> None:
+    bench.clock.sleep_until(bench.clock() + f.duration_s)  # the PC sends nothing meanwhile; the emulators run on
+
+
 def _stuck_clutch(bench: Any, f: Fault) -> None:
     bench.physics.stick_clutch(f.value, f.duration_s)
+
+
+def _node_clock_drift(bench: Any, f: Fault) -> None:
+    bench.node.clock_drift(f.value)
+
+
+def _node_clock_jump(bench: Any, f: Fault) -> None:
+    bench.node.clock_jump(f.value)
 
 
 def _corrupt_node(bench: Any, f: Fault) -> None:
@@ -150,11 +168,20 @@ KINDS: dict[str, FaultKind] = {
     "controller_silent": FaultKind(_controller_silent, "a controller stops sending (heartbeat lost)",
                                    _target("drive")),
     "controller_back": FaultKind(_controller_back, "a silent controller sends again", _target("drive")),
+    "controller_frozen": FaultKind(_controller_frozen(True), "a controller's task hangs: its alive counters stop, its "
+                                   "last values repeat", _target("drive")),
+    "controller_unfrozen": FaultKind(_controller_frozen(False), "a hung controller counts again", _target("drive")),
     "controller_fault": FaultKind(_controller_fault, "a controller reports a fault code", {
         "value": Option("fault code (default 1)", _number(1, 255, integer=True)), **_target("load")}),
     "controller_fault_cleared": FaultKind(_controller_fault_cleared, "a controller's fault clears", _target("load")),
+    "host_stall": FaultKind(_host_stall, "the PC stalls: no command, no read for duration_s (the controllers' own "
+                            "command time-out must make them safe)", {"duration_s": _DURATION}),
     "stuck_clutch": FaultKind(_stuck_clutch, "clutch clamped and output braked, whatever is commanded", {
         "value": Option("N*m the clutch holds", _number(0.0, 1e4), required=True), "duration_s": _DURATION}),
+    "node_clock_drift": FaultKind(_node_clock_drift, "the node's clock runs fast (slow: negative) from now on", {
+        "value": Option("ppm (-5000: 0.5 % slow)", _number(-1e5, 1e5), required=True)}),
+    "node_clock_jump": FaultKind(_node_clock_jump, "the node's clock jumps (no reboot)", {
+        "value": Option("s (negative: back)", _number(-1e4, 1e4), required=True)}),
     "corrupt_node_frames": FaultKind(_corrupt_node, "the next node frames arrive with a flipped bit (CRC errors)", {
         "value": Option("frames (default 1)", _number(1, 1e5, integer=True))}),
     "instrument_error": FaultKind(_instrument_error, "an entry in the scanner's SCPI error queue", {

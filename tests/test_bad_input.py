@@ -290,3 +290,59 @@ def test_an_integer_beyond_a_float_in_a_user_file_is_bad_input_not_a_crash(where
         path.write_text(edited)
         with pytest.raises(InputError):
             load_clutch(path)
+
+
+@pytest.mark.parametrize("section, line, field, says", [
+    ("limits", "idle_speed_rpm = 5000.0", "limits.idle_speed_rpm", "below max_engine_speed_rpm (3000)"),
+    ("limits", "max_flywheel_c = 1e300", "limits.max_flywheel_c", "from 30 to 400 degC"),
+    ("limits", "max_flywheel_c = 450.0", "limits.max_flywheel_c", "from 30 to 400 degC"),
+    ("limits", "max_air_c = 20.0", "limits.max_air_c", "from 30 to 200 degC"),
+    ("limits", "max_clutch_torque_nm = 700.0", "limits.max_clutch_torque_nm", "the DBC's 600 N*m"),
+    ("limits", "max_load_torque_nm = 5000.0", "limits.max_load_torque_nm", "the DBC's 3000 N*m"),
+    ("limits", "max_engine_speed_rpm = 20000.0", "limits.max_engine_speed_rpm", "the DBC's 16000 rpm"),
+    ("limits", "max_slip_time_s = 1e6", "limits.max_slip_time_s", "at most 60 s"),
+    ("limits", "max_slip_energy_j = 1e12", "limits.max_slip_energy_j", "at most max_clutch_torque_nm"),
+    ("limits", "max_wait_s = 1e9", "limits.max_wait_s", "at most 3600 s"),
+    ("limits", "resume_after_s = 1e9", "limits.resume_after_s", "at most 3600 s"),
+    ("limits", "clear_margin_k = 500.0", "limits.clear_margin_k", "at most 50 K"),
+    ("acquisition", "flush_every_s = 1e9", "acquisition.flush_every_s", "at most 1"),
+    ("limits.max_age_s", "T_air = 1.0", "limits.max_age_s.T_air", "more than 2 s"),
+    ("limits.max_age_s", "engine_speed = 0.015", "limits.max_age_s.engine_speed", "more than 0.02 s"),
+    ("limits.max_age_s", "T_flywheel = 0.05", "limits.max_age_s.T_flywheel", "more than 0.1 s"),
+    ("acquisition", "tick_s = 5.0", "acquisition.tick_s", "at most 0.5"),
+    ("limits.actions", "slip_time = { stages = [\"open_idle\"] }", "limits.actions.slip_time.stages", "ending in stop_hold"),
+    ("limits.actions", "slip_time = { stages = [\"brake\", \"stop_hold\"] }", "limits.actions.slip_time.stages",
+     "distinct safe states"),
+    ("limits.actions", "slip_time = { escalate_after_s = 600 }", "limits.actions.slip_time.escalate_after_s",
+     "at most 10"),
+])
+def test_bench_file_limits_against_physics_and_each_other_are_refused_at_dry_run(section, line, field, says,
+                                                                                 tmp_path, capsys):
+    """Issue 29: BENCH.toml's limits are checked against each other, the DBC and what sensors and materials allow,
+    at --dry-run, before anything opens (a limit of 1e300 would switch its interlock off)."""
+    key = line.split(" = ")[0]
+    lines = [text for text in EXAMPLE_BENCH.read_text().splitlines() if not text.startswith(f"{key} = ")]
+    at = lines.index(next(text for text in lines if text.startswith(f"[{section}]"))) + 1
+    bench = tmp_path / "bench.toml"
+    bench.write_text("\n".join(lines[:at] + [line] + lines[at:]) + "\n")
+    err = _refused(["run", "table1", "--bench", str(bench), "--dry-run"], field, capsys)
+    assert str(bench) in err and says in err, err
+
+
+def test_bench_file_actions_table_sets_the_reaction_of_its_interlock(tmp_path):
+    bench = tmp_path / "bench.toml"
+    bench.write_text(EXAMPLE_BENCH.read_text().replace(
+        'stale_T_air = "hold"', 'stale_T_air = "hold"\nslip_time = { then = "abort", stages = ["open_stop", '
+                                '"stop_hold"], escalate_after_s = 1.5 }'))
+    limits = load_bench_config(bench).limits
+    assert limits.action("slip_time") == "abort" and limits.reaction("slip_time").stages == ("open_stop", "stop_hold")
+    assert limits.reaction("slip_time").escalate_after_s == 1.5 and limits.action("stale_T_air") == "hold"
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+def test_run_params_file_is_read_and_checked_before_the_protocol_runs(dry_run, tmp_path, capsys):
+    """Issue 29: `--params /nonexistent.json` used to run the whole cool-down sweep (hours on hardware), then exit 2."""
+    out = tmp_path / "r.h5"
+    err = _refused(["run", "cooldown-sweep", "--bench", "sim", "--out", str(out), "--params", str(tmp_path / "no.json")]
+                   + (["--dry-run"] if dry_run else []), "no.json", capsys)
+    assert "not found" in err and not out.exists() and not list(tmp_path.glob("*.lock")) and not list(tmp_path.glob("*.blf"))

@@ -76,3 +76,73 @@ def test_ctrl_c_at_an_awkward_moment_is_exit_130_and_one_line(tmp_path, moment):
                           capture_output=True, text=True, timeout=WAIT_S)
     assert proc.returncode == 130, proc.stderr  # not -2: Python ending itself by SIGINT after main answered
     assert proc.stderr.splitlines() == ["benchlab run: interrupted"], proc.stderr
+
+
+#: SIGTERM sent while `benchlab run` starts up: while it plans (before the run's own handlers) and while it opens
+#: the bench (the runner does not exist yet).
+_SIGTERM_CASE = '''
+import signal, sys
+import benchlab.cli as cli
+import benchlab.runner.session as session
+
+def sending_sigterm(original):
+    def wrapped(*args, **kwargs):
+        signal.raise_signal(signal.SIGTERM)
+        return original(*args, **kwargs)
+    return wrapped
+
+session.{target} = sending_sigterm(session.{target})
+sys.exit(cli.main(sys.argv[1:]))
+'''
+
+
+@pytest.mark.parametrize("target", ["plan", "open_bench"])
+def test_sigterm_during_start_up_ends_the_run_as_ctrl_c_does_with_exit_143(tmp_path, target):
+    """Issue 29: SIGTERM during start-up used to kill the process by the signal and leave the run's `.lock`."""
+    (tmp_path / "sigterm_case.py").write_text(_SIGTERM_CASE.format(target=target))
+    root = str(Path(benchlab.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), root])}
+    out = tmp_path / "run.h5"
+    proc = subprocess.run([sys.executable, "-m", "sigterm_case", "run", "table1", "--bench", "sim", "--cycles", "1",
+                           "--out", str(out), "-q"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=WAIT_S)
+    assert proc.returncode == 143, proc.stderr
+    assert not list(tmp_path.glob("*.lock")), list(tmp_path.iterdir())
+    if out.exists():  # stopped once the run file was made: it says so
+        from benchlab.runfile import load_attrs
+
+        assert load_attrs(out)["status"] == "aborted"
+    else:
+        assert proc.stderr.splitlines() == ["benchlab run: terminated"], proc.stderr
+
+
+_COMPACTION_CASE = '''
+import signal, sys
+import benchlab.cli as cli
+from benchlab.acquire.writer import RunWriter
+
+close = RunWriter.close
+
+def close_with_a_signal(self, *args, **kwargs):
+    signal.raise_signal(signal.{name})
+    return close(self, *args, **kwargs)
+
+RunWriter.close = close_with_a_signal
+sys.exit(cli.main(sys.argv[1:]))
+'''
+
+
+@pytest.mark.parametrize("name, code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_signal_during_the_final_compaction_ends_the_run_aborted(tmp_path, name, code):
+    """Issue 29: SIGINT/SIGTERM while the run file was compacted were swallowed (exit 0, status complete)."""
+    (tmp_path / "compaction_case.py").write_text(_COMPACTION_CASE.format(name=name))
+    root = str(Path(benchlab.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), root])}
+    out = tmp_path / "run.h5"
+    proc = subprocess.run([sys.executable, "-m", "compaction_case", "run", "table1", "--bench", "sim", "--duration",
+                           "200", "--out", str(out), "-q"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=WAIT_S)
+    from benchlab.runfile import load_attrs
+
+    assert proc.returncode == code, proc.stderr
+    assert load_attrs(out)["status"] == "aborted" and not list(tmp_path.glob("*.lock"))

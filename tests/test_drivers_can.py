@@ -17,6 +17,7 @@ from drivers.can_frames import frames_from_messages, messages_from_frames
 from drivers.can_log import log_frames
 from drivers.errors import CanBusError, CanConfigError, CanLogError
 from sim_bench.emulators import CanBenchEmulator, ManualClock, SimCanBus
+from sim_bench.emulators.drivetrain import FirstOrderDrivetrain
 
 DB = cantools.database.load_file(str(sig.BENCH_DBC))
 _chan = itertools.count()
@@ -456,6 +457,45 @@ def test_command_timeout_fault(loop) -> None:
     assert emu.state("drive") == (sig.STATE_FAULT, sig.FAULT_COMMAND_TIMEOUT)
     step(clock, emu, bench, 0.1)
     assert emu.state("drive") == (sig.STATE_RUNNING, 0)
+
+
+class _RecordingDrivetrain(FirstOrderDrivetrain):
+    """The default physics, recording the time each drive set-point took effect (the emulator's last advance)."""
+
+    def __init__(self, t0: float) -> None:
+        super().__init__(t0=t0)
+        self.drive: list[tuple[float, float]] = []
+
+    def set_drive_speed(self, rpm: float) -> None:
+        super().set_drive_speed(rpm)
+        self.drive.append((self.t, rpm))
+
+
+def test_command_timeout_applies_the_safe_setpoints_at_the_deadline() -> None:
+    """Issue 29: a controller that times out holds its safe set-points from the very instant it reports the fault."""
+    name, clock = f"deadline{next(_chan)}", ManualClock()
+    pc, ctrl = SimCanBus(name, clock=clock), SimCanBus(name, clock=clock)
+    physics = _RecordingDrivetrain(clock())
+    emu, bench = CanBenchEmulator(ctrl, physics, clock=clock), CanBench(pc, clock=clock, timestamps="run")
+    bench.set_drive_speed(1000)
+    bench.set_clutch_torque(60)
+    bench.set_load_torque(200)
+    step(clock, emu, bench, 0.5)
+    assert physics.speed_sp == 1000 and not physics.open_request
+    t_stop = clock()
+    for _ in range(60):  # the PC stops sending (a host stall); the emulator alone runs on
+        clock.advance(0.01)
+        emu.poll()
+    low, high = t_stop - 0.2, clock()  # the deadline, from the state the controller reports
+    assert emu.state("drive", low)[0] == sig.STATE_RUNNING and emu.state("drive", high)[0] == sig.STATE_FAULT
+    for _ in range(60):
+        mid = (low + high) / 2
+        low, high = (low, mid) if emu.state("drive", mid)[0] == sig.STATE_FAULT else (mid, high)
+    t_safe, rpm = physics.drive[-1]
+    assert rpm == 0.0 and t_safe == pytest.approx(high, abs=1e-9)  # at the boundary, not merely some time past it
+    assert physics.open_request and physics.clutch_sp == 0.0 and physics.load_sp == 0.0
+    pc.shutdown()
+    ctrl.shutdown()
 
 
 def test_emergency_stop_and_safe_state(loop) -> None:

@@ -396,6 +396,11 @@ class RunWriter:
         except OutputError:
             raise self._aborted_for_space() from None
 
+    def set_status(self, status: str) -> None:
+        """The closed file's root attribute `status` (a stop that came while it was being compacted ends it so)."""
+        with h5py.File(self.path, "r+") as f:
+            f.attrs["status"] = status
+
     @property
     def rows(self) -> int:
         return self.builder.rows

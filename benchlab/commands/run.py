@@ -84,6 +84,10 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     if args.bench != "sim" and not Path(args.bench).is_file():
         found = "a directory" if Path(args.bench).is_dir() else "not found"
         raise InputError(args.bench, "--bench", f"'sim' or an existing BENCH.toml ({found})")
+    if args.params is not None and args.params != "sim-truth":  # read and checked before the protocol runs (hours
+        from benchlab.commands.cooldown import load_analysis_params  # on hardware), not after it
+
+        load_analysis_params(args.params, out)
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.runner.session import RunRequest, execute
     bench = args.bench

@@ -19,15 +19,18 @@ import cantools
 from benchlab.bounds import MAX_TIMEOUT_S
 from benchlab.drivetrain import DrivetrainFacts
 from benchlab.errors import InputError
-from benchlab.runner.devices import BenchConfig
+from benchlab.runner.devices import BenchConfig, load_dbc, status_cycle_s
 from benchlab.values import check_keys, finite_number, positive_number
 from drivers import cvd
-from drivers.can_signals import BENCH_SIGNALS
+from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS
 from protocols.limits import BenchLimits
 
 ALIGNED_TEMPERATURES = ("T_air", "T_housing", "T_ambient", "T_engine")
 _SECTIONS = ("instrument", "node", "can", "drivetrain", "acquisition", "limits")
 ACQUISITION_KEYS = ("dt", "tick_s", "fast_tick_s", "flush_every_s")  # [acquisition]; defaults: BenchConfig's
+# their largest values: the run file loses at most 1 s on a crash (docs/runfile.md), the interlocks are polled at
+# least twice a second, a launch's slip at least every 0.1 s
+ACQUISITION_MAX = {"dt": 0.1, "tick_s": 0.5, "fast_tick_s": 0.1, "flush_every_s": 1.0}
 # The keys of [instrument] and [node]; [can] is python-can's (passed to can.Bus) and takes any key.
 INSTRUMENT_KEYS = ("url", "channels", "mode", "calibration", "baudrate", "timeout_s", "period_s")
 NODE_KEYS = ("url", "calibration", "baudrate", "period_s")
@@ -85,8 +88,9 @@ def _is_file(path: Path) -> bool:
         return False
 
 
-def _check_dbc(dbc_path: Path, src: str) -> None:
-    """The DBC loads with cantools and defines every message and signal the CAN driver uses (BENCH_SIGNALS)."""
+def _check_dbc(dbc_path: Path, src: str) -> Any:
+    """The DBC loads with cantools and defines every message and signal the CAN driver uses (BENCH_SIGNALS);
+    the database."""
     try:
         db = cantools.database.load_file(str(dbc_path))
     except (cantools.database.Error, ValueError, OSError, UnicodeDecodeError) as exc:
@@ -97,6 +101,18 @@ def _check_dbc(dbc_path: Path, src: str) -> None:
         if signal not in names.get(message, ()):
             raise InputError(src, "can.dbc", f"a DBC defining {message}.{signal} like drivers/bench.dbc "
                                              f"({dbc_path} has no such {'signal' if message in names else 'message'})")
+    return db
+
+
+def _setpoint_max(db: Any) -> dict[str, float]:
+    """Per set-point key the largest value its DBC signal carries (its maximum, else what its bits hold)."""
+    out = {}
+    for key in ("drive.speed_setpoint", "clutch.torque_setpoint", "load.torque_setpoint"):
+        message, name = BENCH_SIGNALS[key]
+        signal = db.get_message_by_name(message).get_signal_by_name(name)
+        bits_max = ((1 << (signal.length - signal.is_signed)) - 1) * signal.scale + signal.offset
+        out[key] = float(signal.maximum if signal.maximum is not None else bits_max)
+    return out
 
 
 def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
@@ -151,16 +167,19 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         dbc_path = Path(path).parent / _str(can_t, "dbc", "can.dbc", src)
         if not _is_file(dbc_path):
             raise InputError(src, "can.dbc", f"an existing DBC file ({dbc_path} not found)")
-        _check_dbc(dbc_path, src)
+        db = _check_dbc(dbc_path, src)
         dbc = str(dbc_path)
+    else:
+        db = load_dbc(str(BENCH_DBC))
     drive = _table(doc, "drivetrain", src, required=False)
     acq = _table(doc, "acquisition", src, required=False)
     check_keys(src, "acquisition", acq, ACQUISITION_KEYS)
     limits = BenchLimits.from_mapping(_table(doc, "limits", src, required=False), src)
+    limits.check_physics(src, _setpoint_max(db))
     check_keys(src, "drivetrain", drive, DrivetrainFacts.__dataclass_fields__)
     drivetrain = DrivetrainFacts(*(_num(drive, key, f"drivetrain.{key}", src, getattr(DrivetrainFacts, key))
                                    for key in DrivetrainFacts.__dataclass_fields__))
-    return BenchConfig(
+    config = BenchConfig(
         instrument_url=_str(inst, "url", "instrument.url", src), node_url=_str(node, "url", "node.url", src),
         can=can_cfg, instrument_channels=channels, instrument_mode=mode,
         instrument_baudrate=int(_num(inst, "baudrate", "instrument.baudrate", src, 115200, True)),
@@ -171,5 +190,22 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         node_period_s=_num(node, "period_s", "node.period_s", src, 0.05),
         node_calibration=(node_coefs[0], node_coefs[1]), dbc=dbc,
         drivetrain=drivetrain,
-        **{key: _num(acq, key, f"acquisition.{key}", src, getattr(BenchConfig, key)) for key in ACQUISITION_KEYS},
+        **{key: _num(acq, key, f"acquisition.{key}", src, getattr(BenchConfig, key), maximum=ACQUISITION_MAX[key])
+           for key in ACQUISITION_KEYS},
         limits=replace(limits, drivetrain=drivetrain), source=src)
+    _check_ages(config, src)
+    return config
+
+
+def _check_ages(config: BenchConfig, src: str) -> None:
+    """Each `[limits.max_age_s]` longer than its source's own gaps: two of its periods (the DBC's cycle for the CAN
+    channels) and, for T_air, one scanner time-out; a shorter age trips its interlock on a healthy bench."""
+    cycles = {"engine_speed": "drive.speed", "clutch_speed": "load.speed", "clutch_torque": "clutch.torque"}
+    shortest = {"T_air": max(2 * config.instrument_period_s, config.instrument_timeout_s),
+                "T_flywheel": 2 * config.node_period_s,
+                **{channel: 2 * status_cycle_s(config, key) for channel, key in cycles.items()}}
+    for channel, age in config.limits.max_age_s.items():
+        if not age > shortest[channel]:
+            why = "two periods of its source" + (", one scanner time-out" if channel == "T_air" else "")
+            raise InputError(src, f"limits.max_age_s.{channel}", f"more than {shortest[channel]:g} s ({why}), "
+                                                                 f"got {age!r}")

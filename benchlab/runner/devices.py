@@ -31,6 +31,7 @@ from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_S
 from drivers.clutch_node import SENSOR_STATUSES
 from drivers.errors import CanLogError, ConnectionLost, DriverError
 from protocols.limits import BenchLimits
+from protocols.safety import OPEN_IDLE, SafeState
 
 if TYPE_CHECKING:
     from drivers.can_bench import CanBlock
@@ -118,12 +119,14 @@ class BenchStatus:
     def take_status(self, blocks: "Sequence[CanBlock]", gear_ratio: float) -> None:
         """The status blocks of one CAN receive (at most one per controller), their frames taken in the order received:
         the energy up to each frame at the power held before it (a frame older than the newest adds none), the values
-        held after each, the newest values, and when each status channel was last valid (`mark_seen`)."""
+        held after each, the newest values, and when each status channel was last valid (`mark_seen`): a frame whose
+        alive counter stopped, repeated or jumped is not valid (a hung controller's frozen frames go stale)."""
         held = np.array([self.engine_speed, self.clutch_speed, self.clutch_torque, float(self.clamp_state),
                          self.friction_power, self.t_frame, 0.0] + [math.nan] * len(_STATUS_HELD))
         parts = [_NO_STATUS_BLOCK] * len(_STATUS_BLOCK_ORDER)
         for b in blocks:
-            parts[_STATUS_BLOCK_ORDER[b.controller]] = (b.index, b.t, b.matrix, _held_columns(b.keys))
+            alive = np.ones(len(b.t), dtype=np.bool_) if b.alive_ok is None else b.alive_ok
+            parts[_STATUS_BLOCK_ORDER[b.controller]] = (b.index, b.t, b.matrix, _held_columns(b.keys), alive)
         _take_status_frames(*parts[0], *parts[1], *parts[2], held, gear_ratio)
         engine, clutch, torque, clamp, self.friction_power, self.t_frame, energy, *seen = held.tolist()
         self.engine_speed, self.clutch_speed, self.clutch_torque, self.clamp_state = engine, clutch, torque, int(clamp)
@@ -161,7 +164,8 @@ _STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_lo
 _STATUS_HELD = ("drive.speed", "load.speed", "clutch.torque", "clutch.clamp_state")  # what BenchStatus holds
 _SEEN_CHANNELS = ("engine_speed", "clutch_speed", "clutch_torque")  # the stale-reading channel of each held value
 _STATUS_BLOCK_ORDER = {"drive": 0, "clutch": 1, "load": 2}  # the kernel's argument group of each status message
-_NO_STATUS_BLOCK = (np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros((0, 1)), np.full(len(_STATUS_HELD), -1))
+_NO_STATUS_BLOCK = (np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros((0, 1)), np.full(len(_STATUS_HELD), -1),
+                    np.zeros(0, dtype=np.bool_))
 _friction_power = njit(cache=True, nogil=True)(friction_power)  # the one formula, compiled for the kernels below
 
 
@@ -173,12 +177,14 @@ def _held_columns(keys: tuple[str, ...]) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def _take_status_frames(index0: np.ndarray, t0: np.ndarray, values0: np.ndarray, columns0: np.ndarray,
-                        index1: np.ndarray, t1: np.ndarray, values1: np.ndarray, columns1: np.ndarray,
-                        index2: np.ndarray, t2: np.ndarray, values2: np.ndarray, columns2: np.ndarray,
+                        alive0: np.ndarray, index1: np.ndarray, t1: np.ndarray, values1: np.ndarray,
+                        columns1: np.ndarray, alive1: np.ndarray, index2: np.ndarray, t2: np.ndarray,
+                        values2: np.ndarray, columns2: np.ndarray, alive2: np.ndarray,
                         held: np.ndarray, gear_ratio: float) -> None:  # pragma: no cover - compiled
     """Three status blocks' frames merged by arrival position and taken one by one. `held` (in/out): the four held
     values (_STATUS_HELD; clutch speed = load speed × gear ratio), friction power, newest frame time (NaN: none),
-    then out: the energy added, and per held value its newest valid frame time (NaN: none)."""
+    then out: the energy added, and per held value its newest valid frame time (NaN: none; a frame whose alive
+    counter was wrong, `alive*` False, is not valid)."""
     n = index0.shape[0] + index1.shape[0] + index2.shape[0]
     at = np.zeros(3, dtype=np.int64)
     for _ in range(n):
@@ -186,15 +192,15 @@ def _take_status_frames(index0: np.ndarray, t0: np.ndarray, values0: np.ndarray,
         for k, index in enumerate((index0, index1, index2)):
             if at[k] < index.shape[0] and (b < 0 or index[at[k]] < best):
                 b, best = k, index[at[k]]
-        t, values, columns = (t0, values0, columns0) if b == 0 else (t1, values1, columns1) if b == 1 \
-            else (t2, values2, columns2)
+        t, values, columns, alive = (t0, values0, columns0, alive0) if b == 0 else \
+            (t1, values1, columns1, alive1) if b == 1 else (t2, values2, columns2, alive2)
         i = at[b]
         at[b] += 1
         for j in range(4):
             if columns[j] >= 0:
                 value = values[i, columns[j]]
                 held[j] = value * gear_ratio if j == 1 else value
-                if np.isfinite(value) and not held[7 + j] >= t[i]:
+                if np.isfinite(value) and alive[i] and not held[7 + j] >= t[i]:
                     held[7 + j] = t[i]
         if t[i] > held[5]:
             held[6] += held[4] * (t[i] - held[5])
@@ -253,7 +259,8 @@ REPEAT_EVENT_S = 10.0  # a device error repeating (a port gone, a muted instrume
 
 
 @functools.lru_cache(maxsize=8)
-def _load_dbc(path: str) -> Any:
+def load_dbc(path: str) -> Any:
+    """A CAN database file parsed by cantools, once per path."""
     import cantools
 
     return cantools.database.load_file(path)
@@ -261,7 +268,7 @@ def _load_dbc(path: str) -> Any:
 
 def bench_dbc(config: BenchConfig) -> Any:
     """The bench's CAN database (the configured DBC or drivers/bench.dbc), parsed once per file."""
-    return _load_dbc(config.dbc or str(BENCH_DBC))
+    return load_dbc(config.dbc or str(BENCH_DBC))
 
 
 def status_cycle_s(config: BenchConfig, key: str) -> float:
@@ -374,6 +381,7 @@ class DriverBench:
         self._last_error_t = -math.inf
         self._repeats: dict[str, tuple[float, int]] = {}  # kind -> (time last said, errors since)
         self._next_clock_row = -math.inf
+        self._can_remaps = 0  # the CAN interface clock's re-maps already reported
 
     # -- commands ----------------------------------------------------------------------------------
     def command(self, engine_rpm: float, clutch_torque_nm: float, clutch_open: bool, load_nm: float) -> None:
@@ -386,10 +394,15 @@ class DriverBench:
         self.can.set_load_torque(load_nm)
         self._record_setpoints((engine_rpm, 0.0 if clutch_open else clutch_torque_nm, float(clutch_open), load_nm))
 
-    def safe_state(self) -> None:
-        """Clutch open at zero torque, load torque zero, engine to idle."""
-        self.can.safe_state()
-        self._record_setpoints((self.config.limits.idle_speed_rpm, 0.0, 1.0, 0.0))
+    def safe_state(self, state: SafeState = OPEN_IDLE) -> None:
+        """The clutch open at zero torque, the drive and the load as `state` says (protocols/safety.py): the drive
+        at idle or 0 rpm, the load at 0 or holding the torque it was last commanded (within the limits)."""
+        limits = self.config.limits
+        drive = limits.idle_speed_rpm if state.engine == "idle" else 0.0
+        held = self._setpoints[3] if self._setpoints is not None else 0.0
+        load = max(-limits.max_load_torque_nm, min(held, limits.max_load_torque_nm)) if state.load == "hold" else 0.0
+        self.can.safe_state(drive, load)
+        self._record_setpoints((drive, 0.0, 1.0, load))
 
     def _record_setpoints(self, values: tuple[float, ...]) -> None:
         if values != self._setpoints:
@@ -437,6 +450,8 @@ class DriverBench:
             detail = f"last seq {ev.last_seq}"
             if ev.span_s is not None:
                 detail += f", span {ev.span_s:.3f} s, lost {ev.lost_frames} frames"
+            if ev.offset_s is not None:
+                detail += f": node clock beyond its drift allowance, mapped anew (offset {ev.offset_s:.3f} s)"
             if ev.kind == "frame_errors":  # the window's counts, so the run file adds up to the gateway's counters
                 detail += f": crc_errors {ev.crc_errors}, malformed {ev.malformed}, resyncs {ev.resyncs}"
             self.events.append((ev.t_host, ev.kind, detail))
@@ -488,8 +503,15 @@ class DriverBench:
         if status:
             st.take_status(status, self.config.drivetrain.gear_ratio)
         for ev in self.can.pop_events():
-            self.events.append((ev.t, f"controller_{ev.kind}", f"{ev.controller}: {ev.detail}"))
+            if ev.kind == "alive_error":  # a hung controller repeats one every frame: summarised (its values go stale)
+                self._event(ev.t, "controller_alive_error", f"{ev.controller}: {ev.detail}")
+            else:
+                self.events.append((ev.t, f"controller_{ev.kind}", f"{ev.controller}: {ev.detail}"))
         st.controllers_bad = {**{c: "silent" for c in self.can.silent}, **{c: "fault" for c in self.can.faulted}}
+        if self.can.clock_map.remaps > self._can_remaps:  # the interface's clock drifted beyond its allowance or jumped
+            self.events.append((now, "can_clock_remapped", f"CAN interface clock mapped anew (offset "
+                                                           f"{self.can.clock_map.offset:.3f} s)"))
+            self._can_remaps = self.can.clock_map.remaps
         if self.can.timestamps == "interface" and math.isfinite(self.can.clock_map.offset) and now >= self._next_clock_row:
             self.readings.append(("can_clock", now, (self.can.clock_map.offset,)))
             self._next_clock_row = now + 1.0

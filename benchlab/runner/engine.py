@@ -26,6 +26,7 @@ from benchlab.runner.clock import Clock
 from benchlab.runner.devices import BenchStatus
 from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
+from protocols.safety import FRICTION_POWER_SEEN_W, OPEN_IDLE, SafeState, strongest
 from protocols.schedule import Condition, Step, setpoints
 
 STATE_FIELDS = ("cycle", "next_step", "resumes", "energy_j", "held")  # held: 1 while an interlock holds the bench
@@ -38,7 +39,7 @@ class Bench(Protocol):
     gateway: Any
 
     def command(self, engine_rpm: float, clutch_torque_nm: float, clutch_open: bool, load_nm: float) -> None: ...
-    def safe_state(self) -> None: ...
+    def safe_state(self, state: SafeState = OPEN_IDLE) -> None: ...
     def poll(self) -> tuple[list, list]: ...
 
 
@@ -92,10 +93,11 @@ class Runner:
         self.bench, self.clock, self.steps, self.writer, self.limits = bench, clock, tuple(steps), writer, limits
         self.tick_s, self.fast_tick_s, self.dt = tick_s, fast_tick_s, dt
         self.progress, self.progress_every_s = progress, progress_every_s
-        self.engagements = Engagements()
+        self.engagements = Engagements(limits.max_age_s["clutch_torque"])
         self.interlocks = InterlockSet(limits, armed_at=clock())
         self.summary = RunSummary(len({s.cycle for s in self.steps}))
         self.stop_request: str | None = None
+        self.stop_code = 130  # the exit code of the stop asked for (130 SIGINT, 143 SIGTERM)
         self.cycle = -1
         self._step = 0  # index in `steps` of the last step started: the progress bar shows it after it ends too
         self._in_step = False  # between that step's step_start and step_end
@@ -106,6 +108,8 @@ class Runner:
         self._t_step_start = clock()
         self._history: collections.deque[tuple[float, float]] = collections.deque()
         self._commanded = False
+        self._safe = OPEN_IDLE  # the safe state commanded last (kept when the run stops)
+        self._stages: dict[str, tuple[int, float]] = {}  # active interlock -> (its reaction's stage, when commanded)
 
     # -- public ---------------------------------------------------------------------------------------
     @property
@@ -113,14 +117,19 @@ class Runner:
         """Index in `steps` of the step under way (the step its events carry), -1 between steps."""
         return self._step if self._in_step else -1
 
+    @property
+    def safe(self) -> SafeState:
+        """The safe state commanded last: what a failure leaves the bench in (a stopped drive is not restarted)."""
+        return self._safe
+
     def request_stop(self, reason: str, code: int = 130) -> None:
         self.stop_request = reason
-        self._stop_code = code
+        self.stop_code = code
 
     def _stop_if_asked(self) -> None:
         """Raise Stopped if a stop was asked for (a signal, the session)."""
         if self.stop_request is not None:
-            raise Stopped(self.stop_request, getattr(self, "_stop_code", 130))
+            raise Stopped(self.stop_request, self.stop_code)
 
     def run(self, start_step: int = 0) -> RunSummary:
         wall0, t0 = time.perf_counter(), self.clock()
@@ -130,9 +139,10 @@ class Runner:
         energy0 = self.summary.energy_j
         self.summary.cycles_done = len({s.cycle for s in self.steps[:start_step]})
         self.writer.state["held"] = 0.0
-        self.bench.safe_state()
+        self.bench.safe_state(self._safe)
         self._tick(interlocks=False)  # the first readings; the steps' ticks watch the interlocks
         try:
+            self._await_inputs()
             i = start_step
             while i < len(self.steps):
                 self._stop_if_asked()  # asked before this step began: it commands nothing
@@ -150,12 +160,12 @@ class Runner:
                                       step=self.current_step)
                     self.summary.events["cycle_skipped"] += 1
                     self._in_step = False
-            self.bench.safe_state()
+            self.bench.safe_state(self._safe)
             self._tick(interlocks=False)  # already safe: nothing left to interlock
             self.writer.event(self.clock(), "run_complete", self.cycle)
             self.progress.advance(self._planned_before[-1] - self._reported)
         except Stopped as stop:
-            self.bench.safe_state()
+            self.bench.safe_state(self._safe)  # the safe state that held (a stopped drive is not restarted)
             self.writer.event(self.clock(), "run_aborted", self.cycle, stop.reason, step=self.current_step)
             self._tick(interlocks=False)
             self.summary.status, self.summary.reason = "aborted", stop.reason
@@ -169,6 +179,25 @@ class Runner:
         self.summary.sim_s, self.summary.wall_s = self.clock() - t0, time.perf_counter() - wall0
         self.writer.flush(self.clock())
         return self.summary
+
+    def _await_inputs(self) -> None:
+        """The readiness gate: no set-point that moves anything before every input the interlocks read has had a
+        valid reading since the gate opened (alive now, not merely once) and no controller is lost; Stopped if that
+        takes longer than the longest maximum age."""
+        t0, wait = self.clock(), max(self.limits.max_age_s.values())
+        while True:
+            st, now = self.bench.status, self.clock()
+            missing = [c for c in self.limits.max_age_s if not st.seen.get(c, -math.inf) > t0] + \
+                sorted(st.controllers_bad)
+            if not missing:
+                break
+            if now - t0 > wait:
+                raise Stopped(f"not ready: no valid {', '.join(missing)} within {wait:g} s of the start: nothing "
+                              f"commanded but the safe state", 1)
+            self._tick(interlocks=False)
+            self._stop_if_asked()
+        self.writer.event(self.clock(), "inputs_ready", self.cycle, f"every interlock input fresh after "
+                          f"{self.clock() - t0:.2f} s")
 
     # -- steps ----------------------------------------------------------------------------------------
     def _run_step(self, index: int, step: Step) -> None:
@@ -299,15 +328,61 @@ class Runner:
                 self._hold(trips)
 
     def _trip(self, trips: list[Trip], now: float) -> None:
-        """Safe state at once, an `interlock` event per trip; abort if any of them says so."""
-        self.bench.safe_state()
+        """The trips' first safe states at once (with those already held, the strongest), an `interlock` event per
+        trip; abort if any of them says so (the safe state holds: a stuck clutch escalates first, `_settle`)."""
         for trip in trips:
-            self.writer.event(now, "interlock", self.cycle, f"{trip.name}: {trip.detail} ({trip.action})",
-                              step=self.current_step, reason=trip.name)
+            self._stages[trip.name] = (0, now)
+        self._command_safe()
+        for trip in trips:
+            self.writer.event(now, "interlock", self.cycle, f"{trip.name}: {trip.detail} ({trip.action}); safe "
+                              f"state {self._safe.name}", step=self.current_step, reason=trip.name)
             self.summary.events[f"interlock {trip.name}"] += 1
         aborting = [t.name for t in trips if t.action == "abort"]
         if aborting:
+            self._settle()
             raise Stopped(f"interlock {', '.join(aborting)}", 1)
+
+    def _command_safe(self) -> None:
+        """Command the strongest of the active interlocks' current safe states (never a weaker one than held)."""
+        names = [self.limits.reaction(n).stages[k] for n, (k, _) in self._stages.items()] + [self._safe.name]
+        self._safe = strongest(names)
+        self.bench.safe_state(self._safe)
+
+    def _friction_power_seen(self, now: float) -> bool:
+        """Friction power measured from fresh clutch frames (a silent actuator's held torque is no measurement)."""
+        st = self.bench.status
+        fresh = now - st.seen.get("clutch_torque", -math.inf) <= self.limits.max_age_s["clutch_torque"]
+        return fresh and st.friction_power > FRICTION_POWER_SEEN_W
+
+    def _escalate(self, now: float) -> bool:
+        """Friction power still measured `escalate_after_s` after a safe state: the next stage of each reaction
+        waiting that long (an event each); past the last, abort with an alarm. True once any reaction escalated."""
+        if self._friction_power_seen(now):
+            moved = []
+            for name, (k, t) in self._stages.items():
+                reaction = self.limits.reaction(name)
+                if now - t < reaction.escalate_after_s:
+                    continue
+                if k + 1 == len(reaction.stages):
+                    raise Stopped(f"alarm: {name}: friction power {self.bench.status.friction_power / 1e3:.1f} kW "
+                                  f"still measured {now - t:.1f} s after {reaction.stages[k]}", 1)
+                self._stages[name] = (k + 1, now)
+                moved.append((name, f"{name}: friction power {self.bench.status.friction_power / 1e3:.1f} kW "
+                                    f"{now - t:.1f} s after {reaction.stages[k]} -> {reaction.stages[k + 1]}"))
+            if moved:
+                self._command_safe()
+                for name, detail in moved:
+                    self.writer.event(now, "safe_state_escalated", self.cycle, detail, step=self.current_step,
+                                      reason=name)
+                    self.summary.events["safe_state_escalated"] += 1
+        return any(k > 0 for k, _ in self._stages.values())
+
+    def _settle(self) -> None:
+        """Before an abort: hold the safe state while friction power is measured, escalating (`_escalate`), so the
+        run ends with the clutch no longer slipping or with an alarm."""
+        while self._friction_power_seen(self.clock()):
+            self._tick(interlocks=False)
+            self._escalate(self.clock())
 
     def _hold(self, trips: list[Trip]) -> None:
         """Safe state until every active interlock has cleared for `resume_after_s`, then the next cycle."""
@@ -322,6 +397,12 @@ class Runner:
             more = self.interlocks.check(st, self.engagements, now)
             if more:
                 self._trip(more, now)
+            alarm = self.interlocks.alarm(st, now)
+            if alarm is not None:
+                raise Stopped(f"alarm: heat the bench cannot switch off ({self._safe.name} held): {alarm}", 1)
+            if self._escalate(now) and not self._friction_power_seen(now):
+                raise Stopped(f"{', '.join(self.interlocks.active) or 'interlock'}: the clutch did not open when "
+                              f"commanded; stopped in {self._safe.name}", 1)
             if self.interlocks.release(st, self.engagements, now) and not st.slipping:
                 t_clear = now if t_clear is None else t_clear
                 if now - t_clear >= self.limits.resume_after_s:
@@ -332,6 +413,7 @@ class Runner:
                 names = ", ".join(self.interlocks.active)
                 raise Stopped(f"interlock {names} did not clear within {self.limits.max_wait_s:g} s", 1)
         self.writer.state["held"] = 0.0
+        self._safe, self._stages = OPEN_IDLE, {}
         self.writer.event(self.clock(), "interlock_cleared", self.cycle, ", ".join(t.name for t in trips),
                           step=self.current_step)
         raise _SkipCycle()

@@ -12,17 +12,23 @@ interlock never watches a value that has stopped changing.
 
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass, field
 
 from benchlab.runner.devices import BenchStatus
-from protocols.limits import DEFAULT_MAX_AGE_S, BenchLimits
+from protocols.limits import ALARM_RISE_K, ALARM_WINDOW_S, DEFAULT_MAX_AGE_S, BenchLimits
 
 
 @dataclass
 class Engagements:
-    """Slip intervals and friction energy, from the bench's frame-by-frame energy integral (not tick × power)."""
+    """Slip intervals and friction energy, from the bench's frame-by-frame energy integral (not tick × power).
 
+    Only while the clutch actuator's frames are fresh (within `max_age_s`): a silent actuator's held torque and
+    state are no engagement (its energy was never dissipated as far as anyone knows; its stale interlock trips).
+    """
+
+    max_age_s: float = DEFAULT_MAX_AGE_S["clutch_torque"]
     slip_start: float | None = None
     slip_energy: float = 0.0
     total_energy: float = 0.0
@@ -31,12 +37,14 @@ class Engagements:
 
     def update(self, st: BenchStatus, now: float, events: list[tuple[str, str]]) -> None:
         """Engagement starts/ends at this tick, as events."""
+        fresh = now - st.seen.get("clutch_torque", -math.inf) <= self.max_age_s
         energy = st.friction_energy_j - (self._last_energy if self._last_energy is not None else st.friction_energy_j)
+        energy = energy if fresh else 0.0
         self._last_energy = st.friction_energy_j
         self.total_energy += energy
         if self.slip_start is not None:
             self.slip_energy += energy
-        if st.slipping:
+        if st.slipping and fresh:
             if self.slip_start is None:
                 self.slip_start, self.slip_energy = now, energy
                 self.count += 1
@@ -145,6 +153,8 @@ class InterlockSet:
     armed_at: float
     interlocks: tuple[Interlock, ...] = ()
     active: dict[str, Interlock] = field(default_factory=dict)
+    _tripped_at: dict[str, float] = field(default_factory=dict)  # active interlock -> when it tripped
+    _recent: dict[str, collections.deque] = field(default_factory=dict)  # over-temperature -> (t, reading) recent
 
     def __post_init__(self) -> None:
         lim = self.limits
@@ -167,8 +177,27 @@ class InterlockSet:
             detail = lock.tripped(st, eng, now)
             if detail is not None:
                 self.active[lock.name] = lock
+                self._tripped_at[lock.name] = now
                 trips.append(Trip(lock.name, detail, self.limits.action(lock.name)))
         return trips
+
+    def alarm(self, st: BenchStatus, now: float) -> str | None:
+        """An over-temperature active for `alarm_after_s` and still rising (more than ALARM_RISE_K over the last
+        ALARM_WINDOW_S): heat the safe state does not stop. Keeps each active one's recent readings."""
+        for name in [n for n in self._recent if n not in self.active]:
+            del self._recent[name]
+        for lock in self.active.values():
+            if not isinstance(lock, OverTemperature) or not math.isfinite(value := getattr(st, lock.channel)):
+                continue
+            recent = self._recent.setdefault(lock.name, collections.deque())
+            recent.append((now, value))
+            while recent[0][0] < now - ALARM_WINDOW_S:
+                recent.popleft()
+            t_first = self._tripped_at.get(lock.name, now)
+            if now - t_first >= self.limits.alarm_after_s and value - recent[0][1] > ALARM_RISE_K:
+                return (f"{lock.name}: {lock.channel} {value:.1f} degC, still rising {value - recent[0][1]:.1f} K in "
+                        f"{now - recent[0][0]:.0f} s, {now - t_first:.0f} s after the trip")
+        return None
 
     def release(self, st: BenchStatus, eng: Engagements, now: float) -> bool:
         """Drop the active interlocks whose cause has cleared; True once none is left."""

@@ -254,7 +254,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             summary = runner.run(resume_state["start"] if resume_state else 0)
         except Exception as exc:  # an unexpected failure: bench safe, file closed as aborted, then report it
             try:
-                bench.safe_state()
+                bench.safe_state(runner.safe)
                 writer.event(clock(), "run_aborted", runner.cycle, f"failure: {type(exc).__name__}: {exc}",
                              step=runner.current_step)
                 writer.close("aborted", groups=_truth_groups(sim, writer, resume_state))
@@ -263,6 +263,10 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
         finally:
             task.close()
         writer.close(summary.status, groups=_truth_groups(sim, writer, resume_state))
+        if runner.stop_request is not None and summary.status == "complete":  # a signal after the last step or
+            writer.set_status("aborted")  # during the compaction: the run ends as it would have a moment earlier
+            summary.status, summary.reason = "aborted", runner.stop_request
+            summary.exit_code = runner.stop_code  # type: ignore[attr-defined]
     finally:
         _restore_signals(previous)
         bench.close()

@@ -247,7 +247,7 @@ class CanBenchEmulator:
     def _emit_until(self, t_end: float, inclusive: bool) -> None:
         """Send the frames due in [self._t, t_end) (or up to t_end inclusive), cut where a controller times out."""
         while not math.isnan(cut := self._emit_segment(t_end, inclusive)):
-            self._apply(cut + 1e-9)
+            self._apply(cut)  # timed out from the deadline on: the safe set-points hold from there
 
     def _emit_segment(self, t_end: float, inclusive: bool) -> float:
         """Frames due in [self._t, t_end] with the controllers' states and set-points as they are now, up to and
@@ -269,8 +269,10 @@ class CanBenchEmulator:
 
 @njit(cache=True, nogil=True)
 def _is_timed_out(t: float, last_cmd: float, enabled: bool, timeout: float) -> bool:  # pragma: no cover - compiled
-    """Whether an enabled controller whose last command came at `last_cmd` (NaN: none) has timed out at `t`."""
-    return enabled and not math.isnan(last_cmd) and t > last_cmd + timeout + 1e-9
+    """Whether an enabled controller whose last command came at `last_cmd` (NaN: none) has timed out at `t`: from
+    the deadline `last_cmd + timeout` on, the instant `_first_deadline` cuts at included (it applies the safe
+    set-points there)."""
+    return enabled and not math.isnan(last_cmd) and t >= last_cmd + timeout
 
 
 @njit(cache=True, nogil=True)

@@ -39,6 +39,7 @@ class ClutchNodeEmulator:
         self.frames_sent = 0
         self.frames_suppressed = 0
         self._next_t = clock()
+        self._rate = 1.0  # node clock s per s of clock time (a crystal off by some ppm)
         self._boot(self._next_t)
         self._silent_until = -math.inf
         self._off_until = -math.inf
@@ -82,6 +83,16 @@ class ClutchNodeEmulator:
         """The node reboots now: seq 0, node clock 0, NODE_RESET on the first frame."""
         self._boot(self.clock())
 
+    def clock_drift(self, ppm: float) -> None:
+        """From now on the node's clock runs `ppm` parts per million fast (negative: slow)."""
+        self._clock_anchor = (self.clock(), self._node_time(self.clock()))
+        self._rate = 1.0 + ppm * 1e-6
+
+    def clock_jump(self, seconds: float) -> None:
+        """The node's clock jumps by `seconds` now (forward or back; seq goes on: no reboot)."""
+        now = self.clock()
+        self._clock_anchor = (now, self._node_time(now) + seconds)
+
     def corrupt_next(self, how: Damage = "flip", count: int = 1) -> None:
         """Damage the next `count` frames: flip one bit, cut off the tail, or replace bytes with garbage."""
         self._damage += [how] * count
@@ -93,6 +104,12 @@ class ClutchNodeEmulator:
     # -- internals -------------------------------------------------------------------------------------
     def _boot(self, t: float) -> None:
         self._t_boot, self._seq, self._reset_flag = t, 0, node_frame.NODE_RESET
+        self._clock_anchor = (t, t)  # (clock time, node time on the clock's scale) the node clock runs from
+
+    def _node_time(self, times: "float | np.ndarray") -> "float | np.ndarray":
+        """The node clock at clock times `times`, on the clock's scale (its ms field counts from `_t_boot`)."""
+        t0, node0 = self._clock_anchor
+        return node0 + (times - t0) * self._rate
 
     def _emit(self, times: np.ndarray) -> bytes:
         """The frames measured at `times`: those in a radio silence are lost, the next ones damaged on request (onto
@@ -100,7 +117,8 @@ class ClutchNodeEmulator:
         inputs = self.provider.node_inputs_at(times)
         n = len(times)
         ohm, link = np.asarray(inputs.resistances_ohm, dtype=float), self._link_rows(inputs, n)
-        args = (times, ohm, link, self._t_boot, self._seq, self._reset_flag, self.short_ohm, self.low_supply_mv)
+        args = (self._node_time(times), ohm, link, self._t_boot, self._seq, self._reset_flag, self.short_ohm,
+                self.low_supply_mv)
         self._seq = (self._seq + n) & 0xFFFF
         self._reset_flag = 0
         if times[0] >= self._silent_until and not self._damage:  # the usual read: every frame sent intact
