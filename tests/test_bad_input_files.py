@@ -70,7 +70,7 @@ def _nested(depth: int) -> str:
     return "[" * depth + "]" * depth
 
 
-@pytest.mark.parametrize("case", ["params", "params value", "model", "clutch"])
+@pytest.mark.parametrize("case", ["params", "params value", "model", "clutch", "bench"])
 def test_a_document_nested_too_deeply_is_refused(case, foreign_run, params_file, tmp_path, refused):
     doc = tmp_path / ("doc.json" if case.startswith("params") else "doc.toml")
     if case == "params":
@@ -83,7 +83,8 @@ def test_a_document_nested_too_deeply_is_refused(case, foreign_run, params_file,
             "params value": ["simulate", str(foreign_run), "--params", str(doc), "--out", str(tmp_path / "s.h5")],
             "model": ["simulate", str(foreign_run), "--params", str(params_file), "--model", str(doc), "--out",
                       str(tmp_path / "s.h5")],
-            "clutch": ["wear", str(foreign_run), "--params", str(params_file), "--clutch", str(doc)]}[case]
+            "clutch": ["wear", str(foreign_run), "--params", str(params_file), "--clutch", str(doc)],
+            "bench": ["run", "table1", "--bench", str(doc), "--out", str(tmp_path / "r.h5"), "--dry-run"]}[case]
     refused(argv, str(doc), "file", "nested too deeply")
 
 

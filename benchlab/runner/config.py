@@ -18,7 +18,7 @@ import cantools
 
 from benchlab.bounds import MAX_TIMEOUT_S
 from benchlab.drivetrain import DrivetrainFacts
-from benchlab.errors import InputError
+from benchlab.errors import InputError, read_document
 from benchlab.runner.devices import BenchConfig, load_dbc, status_cycle_s
 from benchlab.values import check_keys, finite_number, positive_number
 from drivers import cvd
@@ -118,12 +118,7 @@ def _setpoint_max(db: Any) -> dict[str, float]:
 def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
     """Read and check BENCH.toml; InputError naming the first bad field."""
     src = str(path)
-    try:
-        doc = tomllib.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise InputError(src, "file", "an existing bench file (not found)") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(src, "file", f"TOML ({exc})") from None
+    doc = read_document(path, "bench file", tomllib.loads, (tomllib.TOMLDecodeError,), "TOML")
     check_keys(src, "", doc, _SECTIONS)
     inst = _table(doc, "instrument", src)
     check_keys(src, "instrument", inst, INSTRUMENT_KEYS)
