@@ -24,7 +24,7 @@ from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import FitResult, fit, fit_multistart
 from benchlab.identify.residuals import run_residuals
 from benchlab.identify.spec import ModelSpec, ParamSpec
-from benchlab.identify.uncertainty import Uncertainty, estimate_uncertainty, power_noise
+from benchlab.identify.uncertainty import METHOD, Uncertainty, estimate_uncertainty, power_noise
 from benchlab.model.catalog import model_spec
 from benchlab.model.definition import ModelDefinition
 from benchlab.params import ModelParams, check_params
@@ -52,6 +52,8 @@ class Identification:
         names = [k for k in self.params if k in u.standard_errors]
         index = [u.names.index(k) for k in names]
         return {"uncertainty": {k: u.standard_errors[k] for k in names},
+                "uncertainty_method": dict(METHOD),
+                "uncertainty_bandwidths": {"values": u.bandwidths, "unit": "fitting steps"},
                 "uncertainty_sources": {source: {k: v[k] for k in names} for source, v in u.sources.items()},
                 "correlation": {"names": names,
                                 "matrix": np.round(u.correlation[np.ix_(index, index)], 4).tolist()},

@@ -36,6 +36,14 @@ RELATIVE_SE_LIMIT = 0.5
 INPUT_NOISE_DRAWS = 200
 MIN_NOISE_SAMPLES = 8  # slipping samples a fitting step needs for its own noise estimate (else the run's)
 MAD_TO_SIGMA = 1.4826
+#: How the parameter file's standard errors were made (its "uncertainty_method"): named methods, not inflation.
+METHOD = {"name": "HAC sandwich (Newey-West) with Monte Carlo input noise",
+          "covariance": "sandwich A^-1 (S_res + S_in) A^-1, A = J^T J with columns scaled to unit norm",
+          "residuals": "Newey-West (Bartlett kernel) long-run covariance of the per-step scores J_t^T r_t per run",
+          "bandwidth": "Andrews (1991) AR(1) plug-in rule, per run, in fitting steps (uncertainty_bandwidths)",
+          "input_noise": "friction-power noise per fitting step from the run's own record, pushed through the "
+                         "fitted network by Monte Carlo",
+          "interval": "estimate +- 1.96 standard errors: 95 %, normal"}
 
 
 @dataclass(frozen=True)
