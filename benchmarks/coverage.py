@@ -7,7 +7,9 @@ Per seed and source (the simulated bench through the drivers, `benchlab.runner.s
 plant batch-simulated, `sim_bench.virtual_run.run_schedule`), a Table 1 run of each clutch model's own plant
 (the paper's nonlinear clutch; the linear one, a1 = a2 = 0) is identified with that model. Per parameter: the
 share of runs whose interval (estimate ± 1.96 SE) holds the truth, the spread of the estimates over the median
-SE (near 1 when the SEs are honest), and the bias in % and in median SEs. Each fit's record is appended to
+SE (near 1 when the SEs are honest), and the bias in % and in median SEs. Residual tests: the share of runs
+that pass every channel with the true structure, and the share in which the linear model fails the nonlinear
+plant. Each fit's record is appended to
 `--records` (JSON lines), so the figures can be recomputed without fitting again (`--from-records`).
 
 Trends: batches of `--batch` runs drawn from the identical plants' fits (random orders, 2000 draws) give the
@@ -29,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from benchlab.batch import trends
-from benchlab.identify.api import identify
+from benchlab.identify.api import Identification, identify
 from benchlab.params import paper_params
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
@@ -55,14 +57,37 @@ def simulated_run(source: str, model: str, seed: int, minutes: float, params: di
         return load_run(path)
 
 
+def residual_verdicts(result: Identification) -> dict:
+    """Per measured channel of the one run: white, input-correlated, structure (K)."""
+    tests = next(iter(result.residuals.values()))
+    return {c: {"white": t["white"], "input_correlated": t["input_correlated"], "structure_K": t["structure_K"]}
+            for c, t in tests.items()}
+
+
 def record(source: str, model: str, seed: int, run: pd.DataFrame, truth: dict, starts: int) -> dict:
-    """One fit: estimates, reported SEs, their method, and the truth."""
+    """One fit: estimates, reported SEs, their method, the truth, the residual verdicts; on the nonlinear plant
+    also the linear model's verdicts (model-structure error the tests must catch)."""
     result = identify([run], model, starts=starts, seed=0)
     se = result.uncertainty.standard_errors
     names = [k for k in result.params if k in se and "@" not in k]
+    wrong = residual_verdicts(identify([run], "linear", starts=starts, seed=0)) if model == "nonlinear" else None
     return {"source": source, "model": model, "seed": seed, "truth": {k: truth[k] for k in names},
             "estimate": {k: result.params[k] for k in names}, "se": {k: se[k] for k in names},
-            "method": result.summary()["uncertainty_method"]["name"]}
+            "method": result.summary()["uncertainty_method"]["name"], "residuals": residual_verdicts(result),
+            "wrong_model_residuals": wrong}
+
+
+def residual_rates(records: list[dict]) -> pd.DataFrame:
+    """Per source and model: share of runs whose residual tests pass every channel on the true structure, and
+    share in which the linear model on the nonlinear plant fails at least one."""
+    rows = []
+    for (source, model), group in pd.DataFrame(records).groupby(["source", "model"]):
+        passed = [all(t["white"] and not t["input_correlated"] for t in r.values()) for r in group["residuals"]]
+        wrong = [r for r in group["wrong_model_residuals"] if isinstance(r, dict)]
+        caught = [not all(t["white"] and not t["input_correlated"] for t in r.values()) for r in wrong]
+        rows.append({"source": source, "model": model, "runs": len(passed), "true_structure_pass_pct":
+                     100 * np.mean(passed), "linear_on_nonlinear_fail_pct": 100 * np.mean(caught) if caught else np.nan})
+    return pd.DataFrame(rows)
 
 
 def coverage_table(records: list[dict]) -> pd.DataFrame:
@@ -141,6 +166,8 @@ def main() -> int:
     table = coverage_table(records)
     pd.set_option("display.width", 160)
     print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    if all("residuals" in r for r in records):
+        print("\nresidual tests:\n" + residual_rates(records).to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     methods = sorted({r["method"] for r in records})
     print(f"\ninterval methods in these records: {methods}")
     low = table[table["coverage_pct"] < 100 * MIN_COVERAGE]

@@ -22,7 +22,7 @@ otherwise biases the slow parameters far beyond any error bar.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -41,8 +41,8 @@ METHOD = {"name": "HAC sandwich (Newey-West) with Monte Carlo input noise",
           "covariance": "sandwich A^-1 (S_res + S_in) A^-1, A = J^T J with columns scaled to unit norm",
           "residuals": "Newey-West (Bartlett kernel) long-run covariance of the per-step scores J_t^T r_t per run",
           "bandwidth": "Andrews (1991) AR(1) plug-in rule, per run, in fitting steps (uncertainty_bandwidths)",
-          "input_noise": "friction-power noise per fitting step from the run's own record, pushed through the "
-                         "fitted network by Monte Carlo",
+          "input_noise": "noise of the friction power (full-rate record) and of the boundary temperatures (step "
+                         "means' differences) per fitting step, pushed through the fitted network by Monte Carlo",
           "interval": "estimate +- 1.96 standard errors: 95 %, normal"}
 
 
@@ -125,23 +125,38 @@ def long_run_covariance(scores: np.ndarray, bandwidth: int) -> np.ndarray:
     return windows.T @ windows / bandwidth
 
 
-def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise: Sequence[np.ndarray],
+def temperature_input_noise(data: FitData) -> dict[str, np.ndarray]:
+    """Noise (K) per fitting step of each measured temperature the model reads but does not fit (boundaries such
+    as T_ambient, T_engine): from the step means' first differences (robust), the temperature being slow."""
+    out = {}
+    for channel, values in data.channels.items():
+        d = np.diff(values)
+        d = d[np.isfinite(d)]
+        if data.units.get(channel) == "degC" and channel not in data.targets and d.size:
+            sigma = MAD_TO_SIGMA * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
+            out[channel] = np.full(len(values), sigma)
+    return out
+
+
+def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise: Sequence[Mapping[str, np.ndarray]],
                            draws: int = INPUT_NOISE_DRAWS, seed: int = 0) -> np.ndarray:
-    """Covariance of the score Jᵀe caused by friction-power noise of the given level per step (Monte Carlo)."""
+    """Covariance of the score Jᵀe caused by input noise of the given level per step and channel (Monte Carlo)."""
     rng = np.random.default_rng(seed)
     p = result.jacobian.shape[1]
     cov, offset = np.zeros((p, p)), 0
     network, params = result.spec.network, result.params
-    for data, sigma, index in zip(datasets, noise, residual_index(datasets)):
+    for data, sigmas, index in zip(datasets, noise, residual_index(datasets)):
         jac = result.jacobian[offset: offset + len(index)]
         offset += len(index)
-        if not np.any(sigma > 0):
+        sigmas = {c: sigma for c, sigma in sigmas.items() if c in data.channels and np.any(sigma > 0)}
+        if not sigmas:
             continue
         use = [data.mask & np.isfinite(target) for target in data.targets.values()]
         base = simulate_outputs(network, params, data)
         for _ in range(draws):
             channels = dict(data.channels)
-            channels["friction_power"] = channels["friction_power"] + sigma * rng.standard_normal(len(sigma))
+            for c, sigma in sigmas.items():
+                channels[c] = channels[c] + sigma * rng.standard_normal(len(sigma))
             sim = simulate_outputs(network, params, replace(data, channels=channels))
             error = np.concatenate([sim[c][u] - base[c][u] for c, u in zip(data.targets, use)])
             score = jac.T @ error
@@ -178,11 +193,11 @@ def identifiability_warnings(names: Sequence[str], values: Sequence[float], erro
     return warnings
 
 
-def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: Sequence[np.ndarray],
+def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: Sequence[Mapping[str, np.ndarray]],
                          model_names: Sequence[str] | None = None) -> Uncertainty:
     """Sandwich covariance (autocorrelated residuals + friction-power noise); warn about what the data cannot tell.
 
-    `noise`: per run, the friction-power noise per fitting step (`power_noise`). `model_names`: the free
+    `noise`: per run, each noisy input's noise per fitting step (`power_noise`, `temperature_input_noise`). `model_names`: the free
     parameters the warnings speak of (default all; initial states are better left out).
     """
     J = result.jacobian

@@ -99,12 +99,15 @@ def cooldown_table(cooldowns: Sequence[CooldownResult], models: Sequence[tuple[s
 
 
 def residual_table(res: Residuals) -> str:
-    """Identify's residual tests: share of autocorrelations outside the 99 % bound, strongest input correlations."""
+    """Identify's residual tests: share of autocorrelations outside the 99 % bound, the verdict on window means
+    (Ljung–Box p, structure in K against its threshold), strongest input correlations."""
     inputs = list(res.inputs)
-    header = ["channel", "samples", "ACF outside ±2.58/√N, lags 1–50 (%)", "white"] + [f"corr. with `{k}`" for k in inputs]
+    header = ["channel", "samples", "ACF outside ±2.58/√N, lags 1–50 (%)", "Ljung–Box p (window means)",
+              "structure (K)", "white"] + [f"corr. with `{k}`" for k in inputs]
     cells = []
     for c, t in res.tests.items():
-        row = [channel_cell(c), str(t["samples"]), number(t["whiteness_outside_pct"], 1),
+        row = [channel_cell(c), str(t["samples"]), number(t["whiteness_outside_pct"], 1), number(t["ljung_box_p"], 3),
+               f"{number(t['structure_K'], 3)} (limit {number(t['effect_threshold_K'], 2)})",
                "yes" if t["white"] else "no"]
         cells.append(row + [number(t["input_correlation"][k], 2) for k in inputs])
     return table(header, cells)
