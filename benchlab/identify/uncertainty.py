@@ -11,10 +11,11 @@ neither holds, and the plain (JᵀJ)⁻¹s² was 3–100× too small against the
 
 So the covariance is the sandwich A⁻¹ (S_res + S_in) A⁻¹ with A = JᵀJ, where S_res is the Newey–West
 (Bartlett) long-run covariance of the per-step scores Jₜᵀrₜ of each run, bandwidth by Andrews' AR(1)
-rule, and S_in the covariance of the score Jᵀe that the friction-power noise e causes: its level at each
-fitting step is estimated from the run's own full-rate record (`power_noise`) and pushed through the
-fitted network by Monte Carlo (the temperatures respond linearly to a heat input, so this is exact up
-to sampling). A is inverted with its columns scaled to unit norm: in physical units its entries span
+rule, and S_in the covariance of the score Jᵀe that the input noise e causes: the friction power's level at
+each fitting step estimated from the run's own full-rate record (`power_noise`), the boundary temperatures'
+(T_ambient, T_engine) from their step means (`temperature_input_noise`), pushed through the fitted network by
+Monte Carlo (the temperatures respond linearly to these inputs, so this is exact up to sampling). The parameter
+file names the method (`METHOD`, its key "uncertainty_method"); benchmarks/coverage.py measures its coverage. A is inverted with its columns scaled to unit norm: in physical units its entries span
 sixteen decades and a plain pseudo-inverse truncates the weakest direction (C_T's error came out up
 to 14× too small). Initial states are fitted per run (api.py) rather than taken from one noisy reading, which
 otherwise biases the slow parameters far beyond any error bar.
@@ -195,7 +196,7 @@ def identifiability_warnings(names: Sequence[str], values: Sequence[float], erro
 
 def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: Sequence[Mapping[str, np.ndarray]],
                          model_names: Sequence[str] | None = None) -> Uncertainty:
-    """Sandwich covariance (autocorrelated residuals + friction-power noise); warn about what the data cannot tell.
+    """Sandwich covariance (autocorrelated residuals + input noise); warn about what the data cannot tell.
 
     `noise`: per run, each noisy input's noise per fitting step (`power_noise`, `temperature_input_noise`). `model_names`: the free
     parameters the warnings speak of (default all; initial states are better left out).
