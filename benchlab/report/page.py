@@ -146,8 +146,9 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
     parts += [
         f"## Residual analysis – {res.label} model on `{res.run}`",
         f"Residual = {RESIDUAL_LABEL} at the identification step of {res.step_s:g} s, the model started from the "
-        "run's measured temperatures (`benchlab identify`'s "
-        "residual tests: a white residual has at most 5 % of its autocorrelations outside ±2.58/√N).",
+        "temperatures that fit the run best with its parameters held (`benchlab identify`'s residual tests: a channel "
+        "is not white when its 60 s means are autocorrelated or hold more than the white noise's share, at 1 %, and "
+        "their structure exceeds the effect threshold in kelvin; docs/report.md).",
         f"![Residuals]({figures.residuals.name})",
         residual_table(res),
     ]
