@@ -283,3 +283,9 @@ def test_targets_are_placed_at_their_readings_mean_age():
     inner = slice(1, len(data) - 1)
     assert np.max(np.abs(data.targets["T_air"][inner] - truth[::100][: len(data)][inner])) < 5e-4  # half a sample of rounding
     assert np.max(np.abs(np.mean(held.reshape(-1, 100), axis=1) - truth[50::100])) > 0.004  # unshifted: 0.0049 K
+
+
+def test_quantisation_plateaus_of_a_slow_signal_are_not_holds():
+    t = np.arange(20000) * 0.01
+    slow = np.round((30.0 + 0.5 * np.sin(t / 40.0)) / 0.1) * 0.1  # a 0.1 K sensor on a slow swing: long, uneven runs
+    assert hold_samples(slow) == 1

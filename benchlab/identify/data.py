@@ -18,7 +18,8 @@ so a grid value is on average half a reading period old: 25 ms for the node, 0.2
 0.5 s. The temperatures rise and fall through every engagement, and that age biased the capacities by up to
 1.7 standard errors (C_P, C_A on the drivers' runs, benchmarks/coverage.py). Each target's window is therefore
 centred on the block start plus its readings' mean age, (hold − 1)/2 samples, the hold measured from the data
-itself (`hold_samples`: runs of repeated values; 1, no shift, for a channel that changes every sample).
+itself (`hold_samples`: the common length of runs of repeated values; 1, no shift, for a channel that changes
+every sample or whose runs are quantisation plateaus of varying length).
 """
 
 from __future__ import annotations
@@ -116,10 +117,15 @@ def _centred_mean(values: np.ndarray, block: int, n_blocks: int) -> np.ndarray:
 
 
 def hold_samples(values: np.ndarray) -> int:
-    """Grid samples one reading is held for: the median length of runs of equal consecutive measured values."""
+    """Grid samples one reading is held for: the length most runs of equal consecutive measured values share (a
+    sensor read at a fixed period); 1 where no length holds half of them (a slow signal's quantisation plateaus
+    vary in length and are not holds)."""
     valid = values[np.isfinite(values)]
     lengths = np.diff(np.flatnonzero(np.diff(valid) != 0))
-    return int(np.median(lengths)) if lengths.size else 1
+    if not lengths.size:
+        return 1
+    common = int(np.median(lengths))
+    return common if np.mean(lengths == common) >= 0.5 else 1
 
 
 def _aged(values: np.ndarray) -> np.ndarray:
