@@ -123,8 +123,8 @@ def residual_tests(residual: np.ndarray, inputs: dict[str, np.ndarray], step_s: 
         "autocorrelation": {int(k): float(acf[k]) for k in lags if k <= max_lag},
         "whiteness_outside_pct": float(100 * np.mean(np.abs(acf[1:]) > bound)),
         "decimation_s": window * step_s,
-        "ljung_box_p": p,
-        "excess_p": excess_p,
+        "ljung_box_p": p if np.isfinite(p) else None,  # None: too few windows for a test (JSON has no NaN)
+        "excess_p": excess_p if np.isfinite(excess_p) else None,
         "structure_K": structure,
         "effect_threshold_K": EFFECT_THRESHOLD_K,
         "alpha": ALPHA,
