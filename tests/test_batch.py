@@ -270,6 +270,36 @@ def test_trend_slope_and_its_standard_error_recover_a_known_drift():
     assert trends.trend_table(scattered, ["R0"]).iloc[0]["slope_se_per_run"] == pytest.approx(expected_se, rel=0.35)
 
 
+def test_trend_flags_identical_runs_at_its_stated_rate_when_they_scatter_beyond_their_standard_errors():
+    # Ten runs of one unchanged clutch whose values scatter twice as much as their standard errors say (the
+    # start temperatures and sensor draws one fit's SE does not see): a test on the SEs alone cries ageing.
+    rng = np.random.default_rng(7)
+    x, draws = np.arange(10.0), 2000
+    se = np.full(10, 0.002) * rng.uniform(0.7, 1.3, 10)
+    p = np.array([trends.line_fit(x, 0.15 + rng.normal(0.0, 2 * se), se).p_value for _ in range(draws)])
+    rate = np.mean(p < trends.FALSE_ALARM_RATE)
+    assert rate <= trends.FALSE_ALARM_RATE + 3 * np.sqrt(trends.FALSE_ALARM_RATE / draws)
+    naive = np.mean([abs(trends.line_fit(x, 0.15 + rng.normal(0.0, 2 * se), se).slope)
+                     / np.sqrt(1 / np.sum((x - np.average(x, weights=se ** -2)) ** 2 / se ** 2)) > 2.576
+                     for _ in range(500)])
+    assert naive > 10 * trends.FALSE_ALARM_RATE  # what the standard errors alone would have flagged
+
+
+def test_trend_flags_a_drifting_r0_and_nothing_else_on_a_run_index_axis_for_runs_minutes_apart():
+    rng = np.random.default_rng(3)
+    n = 12
+    created = [f"2026-03-01T10:{2 * i:02d}:00+00:00" for i in range(n)]  # runs minutes apart
+    rows = {"index": np.arange(n), "status": "ok", "created": created}
+    for name, value in (("R0", 0.15), ("C_P", 1800.0), ("a2", 0.45)):
+        drift = 1 + 0.03 * np.arange(n) if name == "R0" else np.ones(n)
+        rows[name] = value * drift * (1 + rng.normal(0.0, 0.006, n))
+        rows[name + "_se"] = np.full(n, value * 0.003)
+    summary = trends.trend_table(pd.DataFrame(rows), ["R0", "C_P", "a2"]).set_index("column")
+    assert summary["axis"].iloc[0] == "run index" and "slope_per_run" in summary
+    assert list(summary.index[summary["drifting"]]) == ["R0"]
+    assert (summary["false_alarm_rate"] == trends.FALSE_ALARM_RATE).all()
+
+
 @pytest.mark.parametrize("kind", ["csv", "parquet"])
 def test_table_round_trip_keeps_counts_integer_and_failed_rows(kind, tmp_path, monkeypatch):
     if kind == "parquet":

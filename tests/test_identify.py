@@ -15,7 +15,7 @@ import pytest
 from benchlab.cli import main
 from benchlab.clutch import convection_resistance
 from benchlab.identify.api import identify
-from benchlab.identify.data import prepare
+from benchlab.identify.data import hold_samples, prepare
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import residual_index
 from benchlab.identify.uncertainty import (CORRELATION_LIMIT, identifiability_warnings, long_run_covariance,
@@ -265,3 +265,27 @@ def test_cli_bad_input_exits_2_with_one_line(run_files, tmp_path, capsys, case):
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert not (tmp_path / "P.json").exists()
+
+
+def test_targets_are_placed_at_their_readings_mean_age():
+    """Air warming at 0.02 K/s read every 0.5 s and held on a 10 ms grid: a grid value is 0.245 s old on average,
+    0.0049 K behind; the targets at the block starts are the true ramp, not the held one (data.prepare)."""
+    dt, n = 0.01, 6000
+    t = np.arange(n) * dt
+    truth = 30.0 + 0.02 * t
+    held = np.repeat(truth[::50], 50)
+    run = pd.DataFrame({"time": t, "engine_speed": 1000.0, "clutch_speed": 1000.0, "clutch_torque": 0.0,
+                        "clutch_state": 1.0, "friction_power": 0.0, "T_flywheel": held, "T_air": held,
+                        "T_housing": held, "T_ambient": 22.0})
+    run.attrs["dt"] = dt
+    data = prepare(run, 1.0)
+    assert hold_samples(held) == 50 and hold_samples(truth) == 1
+    inner = slice(1, len(data) - 1)
+    assert np.max(np.abs(data.targets["T_air"][inner] - truth[::100][: len(data)][inner])) < 5e-4  # half a sample of rounding
+    assert np.max(np.abs(np.mean(held.reshape(-1, 100), axis=1) - truth[50::100])) > 0.004  # unshifted: 0.0049 K
+
+
+def test_quantisation_plateaus_of_a_slow_signal_are_not_holds():
+    t = np.arange(20000) * 0.01
+    slow = np.round((30.0 + 0.5 * np.sin(t / 40.0)) / 0.1) * 0.1  # a 0.1 K sensor on a slow swing: long, uneven runs
+    assert hold_samples(slow) == 1

@@ -1,8 +1,13 @@
 """Trends across a batch: each parameter (or figure) against run index or time, with its standard error.
 
 The drift of R0, C_P or the heat split over a clutch's life shows as a slope: a straight line fitted to
-the values weighted by their standard errors, its slope's standard error scaled up by the reduced
-chi-square where the runs scatter more than their standard errors say (never down).
+the values weighted by their standard errors. Whether the slope is a drift is judged against the scatter of
+the runs about the line (the weighted fit's own residual variance, Student's t with n − 2 degrees of
+freedom), not against the runs' standard errors alone: runs of one unchanged clutch scatter by more than one
+fit's standard error says (start temperatures, operating points, sensor draws), and a test on the standard
+errors alone read that scatter as ageing. A column is flagged as drifting only at a batch-wide false-alarm
+rate of FALSE_ALARM_RATE (Bonferroni over the columns tested); benchmarks/coverage.py measures the rate on
+identical simulated clutches.
 """
 
 from __future__ import annotations
@@ -14,8 +19,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from matplotlib.ticker import MaxNLocator
+from scipy import stats
+
 from benchlab.batch.tasks import OK, SE_SUFFIX
 from benchlab.report.plotting import new_figure, save
+
+#: Probability that a batch of one unchanged clutch flags any column (two-sided, Bonferroni over the columns).
+FALSE_ALARM_RATE = 0.01
+#: Runs spanning less than this are placed by run index: "per day" for runs minutes apart means nothing.
+MIN_DAYS_AXIS = 1.0
 
 #: Per kind of batch, the columns whose trend matters, in this order, where the table has them.
 SERIES = {"identify": ("R0", "C_P", "C_F", "C_A", "C_T", "R_AT", "R_Feng", "R_Tamb", "a1", "b1", "a2", "b2",
@@ -34,12 +47,14 @@ class Axis:
 
 
 def axis(table: pd.DataFrame) -> Axis:
-    """Days since the first run where every finished row has a creation time, else the run index."""
+    """Days since the first run where every finished row has a creation time and they span at least
+    MIN_DAYS_AXIS, else the run index."""
     ok = table[table["status"] == OK]
     created = pd.to_datetime(ok["created"], utc=True, errors="coerce") if "created" in ok else None
     if created is not None and len(ok) and created.notna().all():
-        first = created.min()
-        return Axis((created - first).dt.total_seconds() / 86400.0, f"days since {first:%Y-%m-%d %H:%M} UTC", "day")
+        days = (created - created.min()).dt.total_seconds() / 86400.0
+        if days.max() >= MIN_DAYS_AXIS:
+            return Axis(days, f"days since {created.min():%Y-%m-%d %H:%M} UTC", "day")
     return Axis(ok["index"].astype(float), "run index", "run")
 
 
@@ -55,21 +70,39 @@ def points(table: pd.DataFrame, at: Axis, column: str) -> tuple[np.ndarray, np.n
     return at.x.to_numpy(float)[keep], y[keep], None if se is None else se[keep]
 
 
-def line_fit(x: np.ndarray, y: np.ndarray, se: np.ndarray | None) -> tuple[float, float, float]:
-    """Slope, its standard error and intercept of y against x, weighted by 1/se² where standard errors are given.
+@dataclass(frozen=True)
+class SlopeTest:
+    """A weighted line's slope, its standard error from the runs' scatter, intercept, degrees of freedom and the
+    two-sided p-value of "no drift"."""
 
-    NaN where fewer than two distinct x; with two points and no standard errors the slope's error is NaN.
+    slope: float
+    slope_se: float
+    intercept: float
+    dof: int
+    p_value: float
+
+
+def line_fit(x: np.ndarray, y: np.ndarray, se: np.ndarray | None) -> SlopeTest:
+    """Slope of y against x weighted by 1/se² (equal weights without standard errors), tested against the
+    scatter about the line: the slope's error is scaled by the reduced chi-square (up or down), t with n − 2 dof.
+
+    NaN where fewer than three points or fewer than two distinct x.
     """
-    if len(x) < 2 or np.ptp(x) == 0:
-        return np.nan, np.nan, np.nan
+    if len(x) < 3 or np.ptp(x) == 0:
+        return SlopeTest(np.nan, np.nan, np.nan, max(len(x) - 2, 0), np.nan)
     weights = 1.0 / se if se is not None else np.ones_like(y)
     (slope, intercept), cov = np.polyfit(x, y, 1, w=weights, cov="unscaled")
-    reduced_chi2 = np.sum((weights * (y - slope * x - intercept)) ** 2) / (len(x) - 2) if len(x) > 2 else np.nan
-    if se is None:
-        scale = reduced_chi2
-    else:
-        scale = 1.0 if not np.isfinite(reduced_chi2) else max(1.0, reduced_chi2)
-    return float(slope), float(np.sqrt(cov[0, 0] * scale)), float(intercept)
+    dof = len(x) - 2
+    reduced_chi2 = np.sum((weights * (y - slope * x - intercept)) ** 2) / dof
+    slope_se = float(np.sqrt(cov[0, 0] * reduced_chi2))
+    p = float(2 * stats.t.sf(abs(slope) / slope_se, dof)) if slope_se > 0 else np.nan
+    return SlopeTest(float(slope), slope_se, float(intercept), dof, p)
+
+
+def drifting(p_values: Sequence[float], rate: float = FALSE_ALARM_RATE) -> list[bool]:
+    """Which columns drift at a batch-wide false-alarm `rate`: p below rate / (columns tested) (Bonferroni)."""
+    tested = sum(1 for p in p_values if np.isfinite(p))
+    return [bool(np.isfinite(p) and p < rate / tested) for p in p_values]
 
 
 def series(table: pd.DataFrame, kind: str) -> list[str]:
@@ -79,19 +112,24 @@ def series(table: pd.DataFrame, kind: str) -> list[str]:
 
 
 def trend_table(table: pd.DataFrame, columns: Sequence[str]) -> pd.DataFrame:
-    """Per column: points, first and last value, slope per axis unit with its standard error, and the change
-    of the fitted line over the batch in % of its start."""
+    """Per column: points, first and last value, slope per axis unit with its standard error (runs' scatter),
+    the change of the fitted line over the batch in % of its start, the p-value of "no drift" and whether the
+    column is flagged as drifting (`drifting`)."""
     at = axis(table)
     rows = []
     for column in columns:
         x, y, se = points(table, at, column)
-        slope, slope_se, intercept = line_fit(x, y, se)
-        start = intercept + slope * x.min() if len(x) else np.nan
+        fit = line_fit(x, y, se)
+        start = fit.intercept + fit.slope * x.min() if len(x) else np.nan
         rows.append({"column": column, "points": len(y), "first": y[0] if len(y) else np.nan,
-                     "last": y[-1] if len(y) else np.nan, "axis": at.label, f"slope_per_{at.unit}": slope,
-                     f"slope_se_per_{at.unit}": slope_se, "slope_over_se": slope / slope_se,
-                     "change_pct": 100.0 * slope * np.ptp(x) / abs(start) if len(x) and start else np.nan})
-    return pd.DataFrame(rows)
+                     "last": y[-1] if len(y) else np.nan, "axis": at.label, f"slope_per_{at.unit}": fit.slope,
+                     f"slope_se_per_{at.unit}": fit.slope_se, "slope_over_se": fit.slope / fit.slope_se,
+                     "change_pct": 100.0 * fit.slope * np.ptp(x) / abs(start) if len(x) and start else np.nan,
+                     "p_value": fit.p_value})
+    out = pd.DataFrame(rows)
+    out["drifting"] = drifting(out["p_value"].tolist()) if len(out) else []
+    out["false_alarm_rate"] = FALSE_ALARM_RATE
+    return out
 
 
 def plot(table: pd.DataFrame, columns: Sequence[str], path: Path, title: str) -> Path:
@@ -105,10 +143,10 @@ def plot(table: pd.DataFrame, columns: Sequence[str], path: Path, title: str) ->
     for ax, column in zip(axes.flat, columns):
         x, y, se = points(table, at, column)
         ax.errorbar(x, y, yerr=se, fmt="o", ms=3, capsize=2, color="tab:blue")
-        slope, slope_se, intercept = line_fit(x, y, se)
-        if np.isfinite(slope):
-            ax.plot(x, intercept + slope * x, "-", color="tab:red", lw=1,
-                    label=f"slope {slope:.3g} ± {slope_se:.2g} per {at.unit}")
+        fit = line_fit(x, y, se)
+        if np.isfinite(fit.slope):
+            ax.plot(x, fit.intercept + fit.slope * x, "-", color="tab:red", lw=1,
+                    label=f"slope {fit.slope:.3g} ± {fit.slope_se:.2g} per {at.unit}, p = {fit.p_value:.2g}")
             ax.legend(fontsize=7, loc="best")
         ax.set_ylabel(column)
         ax.grid(alpha=0.3)
@@ -116,4 +154,6 @@ def plot(table: pd.DataFrame, columns: Sequence[str], path: Path, title: str) ->
         ax.set_visible(False)
     for ax in axes[-1]:
         ax.set_xlabel(at.label)
+        if at.unit == "run":
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     return save(fig, path)

@@ -71,8 +71,15 @@ def run(args: argparse.Namespace) -> int:
         for channel, tests in channels.items():
             signal, corr = max(tests["input_correlation"].items(), key=lambda item: abs(item[1]), default=("-", 0.0))
             print(f"  residuals  {path} {channel}: {'white' if tests['white'] else 'not white'} "
-                  f"({tests['whiteness_outside_pct']:.0f} % of lags outside), lag-1 autocorrelation "
+                  f"({tests['decimation_s']:.0f} s means: Ljung-Box p {_p_value(tests['ljung_box_p'])}, structure "
+                  f"{tests['structure_K']:.3f} K, limit {tests['effect_threshold_K']:.2f} K; "
+                  f"{tests['whiteness_outside_pct']:.0f} % of 1-step lags outside), lag-1 autocorrelation "
                   f"{tests['autocorrelation'][1]:+.2f}, strongest input correlation {signal} {corr:+.2f}")
     for warning in result.uncertainty.warnings:
         print(f"  warning: {warning}")
     return 0
+
+
+def _p_value(p: float | None) -> str:
+    """A p-value to three decimals, or "—" where there were too few samples for the test."""
+    return "—" if p is None else f"{p:.3f}"

@@ -108,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
 
         from benchlab.model.runs import load_runs
         from benchlab.observer.batch import STD_SUFFIX, WEAR_UNITS, estimated_wear, observe
+        from benchlab.observer.consistency import WINDOW_S
         from benchlab.observer.noise import tune_noise, with_overrides
         from benchlab.runfile import load_truth, write_results
         from benchlab.wear.clutchfile import default_clutch, load_clutch
@@ -143,7 +144,8 @@ def run(args: argparse.Namespace) -> int:
         "sensors": json.dumps(list(result.model.sensors)),
         "reinit": json.dumps([[r.channel, r.time_s] for r in args.reinit]), "adapt": json.dumps(result.model.adapted),
         "initial_offset_K": float(args.initial_offset), "noise": json.dumps(noise.as_dict()),
-        "observability": json.dumps(seen.as_dict())})
+        "observability": json.dumps(seen.as_dict()),
+        "consistency": json.dumps([c.as_dict() for c in result.consistency])})
     print(f"{args.out}: {len(measured)} samples, {params.model} model, sensors "
           f"{', '.join(result.model.sensors) or 'none (open loop)'}, noise from {noise.origin}")
     observable = [s for s in seen.states if seen.observable[s]]
@@ -151,6 +153,14 @@ def run(args: argparse.Namespace) -> int:
           f"observable: {', '.join(observable) or 'none'}")
     for line in seen.warnings():
         print(f"warning: {line}")
+    for c in result.consistency:
+        verdict = "consistent" if c.consistent else "NOT consistent"
+        print(f"innovations {c.sensor}: mean NIS {c.mean_nis:.2f} (1 when the spread is right), {c.outside_pct:.0f} % "
+              f"of {c.windows} windows of {WINDOW_S:.0f} s outside the 99 % chi-square bound: {verdict}")
+    wrong = [c.sensor for c in result.consistency if not c.consistent]
+    if wrong:
+        print(f"warning: the ±2σ band is not to be trusted: the innovations of {', '.join(wrong)} exceed the "
+              f"filter's stated spread (the model or its noise is wrong; unmeasured states' bands are too narrow)")
     time = measured["time"].to_numpy()
     for name, unit in units.items():
         value, spread = result.estimate[name].to_numpy(), result.estimate[name + STD_SUFFIX].to_numpy()

@@ -22,9 +22,10 @@ from benchlab.identify.data import FitData, prepare
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import FitResult, fit, fit_multistart
-from benchlab.identify.residuals import run_residuals
+from benchlab.identify.residuals import residual_start, run_residuals
 from benchlab.identify.spec import ModelSpec, ParamSpec
-from benchlab.identify.uncertainty import Uncertainty, estimate_uncertainty, power_noise
+from benchlab.identify.uncertainty import (METHOD, Uncertainty, estimate_uncertainty, power_noise,
+                                          temperature_input_noise)
 from benchlab.model.catalog import model_spec
 from benchlab.model.definition import ModelDefinition
 from benchlab.params import ModelParams, check_params
@@ -52,6 +53,8 @@ class Identification:
         names = [k for k in self.params if k in u.standard_errors]
         index = [u.names.index(k) for k in names]
         return {"uncertainty": {k: u.standard_errors[k] for k in names},
+                "uncertainty_method": dict(METHOD),
+                "uncertainty_bandwidths": {"values": u.bandwidths, "unit": "fitting steps"},
                 "uncertainty_sources": {source: {k: v[k] for k in names} for source, v in u.sources.items()},
                 "correlation": {"names": names,
                                 "matrix": np.round(u.correlation[np.ix_(index, index)], 4).tolist()},
@@ -103,7 +106,8 @@ def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "non
     result.starts, result.start_costs = search.starts, search.start_costs
     model_names = [p.name for p in spec.free]
     params = check_params(spec.definition, {k: v for k, v in result.params.items() if "@" not in k}, "identify")
-    noise = [power_noise(run, data.block, len(data)) for run, data in zip(runs, datasets)]
+    noise = [{"friction_power": power_noise(run, data.block, len(data)), **temperature_input_noise(data)}
+             for run, data in zip(runs, datasets)]
     uncertainty = estimate_uncertainty(result, datasets, noise, model_names)
     labels = _labels(runs, "run")
     initial = {label: {c: {"value": result.params[f"init_{c}@{data.name}"],
@@ -111,7 +115,8 @@ def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "non
                        for c in initial_channels(spec)} for label, data in zip(labels, datasets)}
     fitting = {label: evaluate(r, params) for label, r in zip(labels, runs)}
     validation = {label: evaluate(r, params) for label, r in zip(_labels(validate, "validation"), validate)}
-    residuals = {label: run_residuals(r, simulate(r, params), params).tests for label, r in zip(labels, runs)}
+    residuals = {label: run_residuals(r, simulate(r, params, initial=residual_start(r, params)), params).tests
+                 for label, r in zip(labels, runs)}
     return Identification(params, result, uncertainty, fitting, validation, residuals, initial)
 
 

@@ -12,6 +12,14 @@ and there the mean of a 1 s window is off by up to 0.2 K: a bias that no paramet
 that spurious extensions then mop up. Flywheel targets whose window holds slipping are skipped
 (about 8 % of samples at a 1 s step); the heat shows in the samples after the slip, where the
 flywheel is smooth again. Measured on a noise-free 1 h run: 0.0088 K of bias at 1 s, 0.0007 K left.
+
+A reading counts on the grid from the time it was measured until the next one (docs/runfile.md, hold rule),
+so a grid value is on average half a reading period old: 25 ms for the node, 0.25 s for a scanner read every
+0.5 s. The temperatures rise and fall through every engagement, and that age biased the capacities by up to
+1.7 standard errors (C_P, C_A on the drivers' runs, benchmarks/coverage.py). Each target's window is therefore
+centred on the block start plus its readings' mean age, (hold − 1)/2 samples, the hold measured from the data
+itself (`hold_samples`: the common length of runs of repeated values; 1, no shift, for a channel that changes
+every sample or whose runs are quantisation plateaus of varying length).
 """
 
 from __future__ import annotations
@@ -108,6 +116,24 @@ def _centred_mean(values: np.ndarray, block: int, n_blocks: int) -> np.ndarray:
     return out
 
 
+def hold_samples(values: np.ndarray) -> int:
+    """Grid samples one reading is held for: the length most runs of equal consecutive measured values share (a
+    sensor read at a fixed period); 1 where no length holds half of them (a slow signal's quantisation plateaus
+    vary in length and are not holds)."""
+    valid = values[np.isfinite(values)]
+    lengths = np.diff(np.flatnonzero(np.diff(valid) != 0))
+    if not lengths.size:
+        return 1
+    common = int(np.median(lengths))
+    return common if np.mean(lengths == common) >= 0.5 else 1
+
+
+def _aged(values: np.ndarray) -> np.ndarray:
+    """The values moved earlier by their readings' mean age, (hold − 1)/2 samples (NaN at the end)."""
+    shift = int(round((hold_samples(values) - 1) / 2))
+    return np.concatenate([values[shift:], np.full(shift, np.nan)]) if shift else values
+
+
 def _slip_windows(friction_power: np.ndarray, block: int, n_blocks: int) -> np.ndarray:
     """True where a target's averaging window holds slipping (or is cut by the run's start)."""
     windows = _centred_windows(np.where(np.isnan(friction_power), 0.0, friction_power), block, n_blocks)
@@ -170,7 +196,7 @@ def prepare(run: pd.DataFrame, step_s: float = FIT_STEP_S, name: str | None = No
     channels = {k: _block_mean(v, block) for k, v in full.items() if np.issubdtype(v.dtype, np.number)}
     units = {k: u for k, u in {**ALIGNED_UNITS, **run.attrs.get("units", {})}.items() if k in channels}
     _quantised(channels, units, network.measured)
-    targets = {c: _centred_mean(values, block, n_blocks) for c, values in raw.items()}
+    targets = {c: _centred_mean(_aged(values), block, n_blocks) for c, values in raw.items()}
     if block > 1 and SLIP_POWER in full:
         kinked = _slip_windows(full[SLIP_POWER], block, n_blocks)
         for c in SLIP_HEATED_CHANNELS:

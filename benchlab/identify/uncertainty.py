@@ -11,10 +11,11 @@ neither holds, and the plain (JᵀJ)⁻¹s² was 3–100× too small against the
 
 So the covariance is the sandwich A⁻¹ (S_res + S_in) A⁻¹ with A = JᵀJ, where S_res is the Newey–West
 (Bartlett) long-run covariance of the per-step scores Jₜᵀrₜ of each run, bandwidth by Andrews' AR(1)
-rule, and S_in the covariance of the score Jᵀe that the friction-power noise e causes: its level at each
-fitting step is estimated from the run's own full-rate record (`power_noise`) and pushed through the
-fitted network by Monte Carlo (the temperatures respond linearly to a heat input, so this is exact up
-to sampling). A is inverted with its columns scaled to unit norm: in physical units its entries span
+rule, and S_in the covariance of the score Jᵀe that the input noise e causes: the friction power's level at
+each fitting step estimated from the run's own full-rate record (`power_noise`), the boundary temperatures'
+(T_ambient, T_engine) from their step means (`temperature_input_noise`), pushed through the fitted network by
+Monte Carlo (the temperatures respond linearly to these inputs, so this is exact up to sampling). The parameter
+file names the method (`METHOD`, its key "uncertainty_method"); benchmarks/coverage.py measures its coverage. A is inverted with its columns scaled to unit norm: in physical units its entries span
 sixteen decades and a plain pseudo-inverse truncates the weakest direction (C_T's error came out up
 to 14× too small). Initial states are fitted per run (api.py) rather than taken from one noisy reading, which
 otherwise biases the slow parameters far beyond any error bar.
@@ -22,7 +23,7 @@ otherwise biases the slow parameters far beyond any error bar.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -36,6 +37,14 @@ RELATIVE_SE_LIMIT = 0.5
 INPUT_NOISE_DRAWS = 200
 MIN_NOISE_SAMPLES = 8  # slipping samples a fitting step needs for its own noise estimate (else the run's)
 MAD_TO_SIGMA = 1.4826
+#: How the parameter file's standard errors were made (its "uncertainty_method"): named methods, not inflation.
+METHOD = {"name": "HAC sandwich (Newey-West) with Monte Carlo input noise",
+          "covariance": "sandwich A^-1 (S_res + S_in) A^-1, A = J^T J with columns scaled to unit norm",
+          "residuals": "Newey-West (Bartlett kernel) long-run covariance of the per-step scores J_t^T r_t per run",
+          "bandwidth": "Andrews (1991) AR(1) plug-in rule, per run, in fitting steps (uncertainty_bandwidths)",
+          "input_noise": "noise of the friction power (full-rate record) and of the boundary temperatures (step "
+                         "means' differences) per fitting step, pushed through the fitted network by Monte Carlo",
+          "interval": "estimate +- 1.96 standard errors: 95 %, normal"}
 
 
 @dataclass(frozen=True)
@@ -117,23 +126,38 @@ def long_run_covariance(scores: np.ndarray, bandwidth: int) -> np.ndarray:
     return windows.T @ windows / bandwidth
 
 
-def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise: Sequence[np.ndarray],
+def temperature_input_noise(data: FitData) -> dict[str, np.ndarray]:
+    """Noise (K) per fitting step of each measured temperature the model reads but does not fit (boundaries such
+    as T_ambient, T_engine): from the step means' first differences (robust), the temperature being slow."""
+    out = {}
+    for channel, values in data.channels.items():
+        d = np.diff(values)
+        d = d[np.isfinite(d)]
+        if data.units.get(channel) == "degC" and channel not in data.targets and d.size:
+            sigma = MAD_TO_SIGMA * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
+            out[channel] = np.full(len(values), sigma)
+    return out
+
+
+def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise: Sequence[Mapping[str, np.ndarray]],
                            draws: int = INPUT_NOISE_DRAWS, seed: int = 0) -> np.ndarray:
-    """Covariance of the score Jᵀe caused by friction-power noise of the given level per step (Monte Carlo)."""
+    """Covariance of the score Jᵀe caused by input noise of the given level per step and channel (Monte Carlo)."""
     rng = np.random.default_rng(seed)
     p = result.jacobian.shape[1]
     cov, offset = np.zeros((p, p)), 0
     network, params = result.spec.network, result.params
-    for data, sigma, index in zip(datasets, noise, residual_index(datasets)):
+    for data, sigmas, index in zip(datasets, noise, residual_index(datasets)):
         jac = result.jacobian[offset: offset + len(index)]
         offset += len(index)
-        if not np.any(sigma > 0):
+        sigmas = {c: sigma for c, sigma in sigmas.items() if c in data.channels and np.any(sigma > 0)}
+        if not sigmas:
             continue
         use = [data.mask & np.isfinite(target) for target in data.targets.values()]
         base = simulate_outputs(network, params, data)
         for _ in range(draws):
             channels = dict(data.channels)
-            channels["friction_power"] = channels["friction_power"] + sigma * rng.standard_normal(len(sigma))
+            for c, sigma in sigmas.items():
+                channels[c] = channels[c] + sigma * rng.standard_normal(len(sigma))
             sim = simulate_outputs(network, params, replace(data, channels=channels))
             error = np.concatenate([sim[c][u] - base[c][u] for c, u in zip(data.targets, use)])
             score = jac.T @ error
@@ -170,11 +194,11 @@ def identifiability_warnings(names: Sequence[str], values: Sequence[float], erro
     return warnings
 
 
-def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: Sequence[np.ndarray],
+def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: Sequence[Mapping[str, np.ndarray]],
                          model_names: Sequence[str] | None = None) -> Uncertainty:
-    """Sandwich covariance (autocorrelated residuals + friction-power noise); warn about what the data cannot tell.
+    """Sandwich covariance (autocorrelated residuals + input noise); warn about what the data cannot tell.
 
-    `noise`: per run, the friction-power noise per fitting step (`power_noise`). `model_names`: the free
+    `noise`: per run, each noisy input's noise per fitting step (`power_noise`, `temperature_input_noise`). `model_names`: the free
     parameters the warnings speak of (default all; initial states are better left out).
     """
     J = result.jacobian

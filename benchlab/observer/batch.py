@@ -11,6 +11,7 @@ import pandas as pd
 from benchlab.clutch import clutch_network
 from benchlab.errors import InputError
 from benchlab.network import Params, ThermalNetwork
+from benchlab.observer.consistency import Consistency, innovation_consistency
 from benchlab.observer.kalman import filter_run
 from benchlab.observer.model import ObserverModel, Reset
 from benchlab.observer.noise import NoiseModel, tune_noise
@@ -32,6 +33,7 @@ class Observation:
     observability: Observability
     model: ObserverModel
     initial: np.ndarray  # the filter's starting estimate, degC, per state
+    consistency: tuple[Consistency, ...] = ()  # per sensor: does the spread hold its innovations (NIS)?
 
     @property
     def noise(self) -> NoiseModel:
@@ -104,7 +106,9 @@ def observe(run: pd.DataFrame, params: Params, sensors: Sequence[str], network: 
         columns[name + STD_SUFFIX] = out_std[:, i]
     names = tuple(model.names[s] for s in model.states)
     seen = analyse(disc.op_index, disc.Ad, model.sensor_state, measured, model.sensors, names)
-    return Observation(pd.DataFrame(columns, index=run.index), seen, model, x0)
+    consistency = innovation_consistency(model.sensors, readings, out_z[:, model.sensor_state],
+                                         out_std[:, model.sensor_state], model.sensor_var, dt)
+    return Observation(pd.DataFrame(columns, index=run.index), seen, model, x0, tuple(consistency))
 
 
 #: Units of the wear channels written beside the estimates.

@@ -144,7 +144,8 @@ def _truth_section(params: ModelParams, truth: Mapping[str, float], standard_err
             continue
         true = float(truth[name])
         se = standard_errors.get(name, math.nan)
-        rows.append([f"<code>{html.escape(name)}</code>", _num(value, 5), _num(se, 3), _num(true, 5),
+        rows.append([f"<code>{html.escape(name)}</code>", f"{value:.6g}", f"{se:.2g}" if math.isfinite(se) else "—",
+                     f"{true:.6g}",
                      _num(100 * (value - true) / true if true else math.nan, 2, " %"),
                      _num(abs(value - true) / se if se and se > 0 else math.nan, 1)])
     return _table(("parameter", "identified", "± SE", "plant truth", "error", "error / SE"), rows)

@@ -99,12 +99,15 @@ def cooldown_table(cooldowns: Sequence[CooldownResult], models: Sequence[tuple[s
 
 
 def residual_table(res: Residuals) -> str:
-    """Identify's residual tests: share of autocorrelations outside the 99 % bound, strongest input correlations."""
+    """Identify's residual tests: share of autocorrelations outside the 99 % bound, the verdict on window means
+    (Ljung–Box p, structure in K against its threshold), strongest input correlations."""
     inputs = list(res.inputs)
-    header = ["channel", "samples", "ACF outside ±2.58/√N, lags 1–50 (%)", "white"] + [f"corr. with `{k}`" for k in inputs]
+    header = ["channel", "samples", "ACF outside ±2.58/√N, lags 1–50 (%)", "Ljung–Box p (window means)",
+              "structure (K)", "white"] + [f"corr. with `{k}`" for k in inputs]
     cells = []
     for c, t in res.tests.items():
-        row = [channel_cell(c), str(t["samples"]), number(t["whiteness_outside_pct"], 1),
+        row = [channel_cell(c), str(t["samples"]), number(t["whiteness_outside_pct"], 1), number(t["ljung_box_p"], 3),
+               f"{number(t['structure_K'], 3)} (limit {number(t['effect_threshold_K'], 2)})",
                "yes" if t["white"] else "no"]
         cells.append(row + [number(t["input_correlation"][k], 2) for k in inputs])
     return table(header, cells)
@@ -143,8 +146,9 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
     parts += [
         f"## Residual analysis – {res.label} model on `{res.run}`",
         f"Residual = {RESIDUAL_LABEL} at the identification step of {res.step_s:g} s, the model started from the "
-        "run's measured temperatures (`benchlab identify`'s "
-        "residual tests: a white residual has at most 5 % of its autocorrelations outside ±2.58/√N).",
+        "temperatures that fit the run best with its parameters held (`benchlab identify`'s residual tests: a channel "
+        "is not white when its 60 s means are autocorrelated or hold more than the white noise's share, at 1 %, and "
+        "their structure exceeds the effect threshold in kelvin; docs/report.md).",
         f"![Residuals]({figures.residuals.name})",
         residual_table(res),
     ]

@@ -2,7 +2,7 @@
 residual against engine speed and friction power, with the whiteness and input-correlation tests.
 
 Residuals and tests are identify's own (benchlab.identify.residuals.run_residuals: the model from the run's
-measured start, simulated − measured at identification's step), so the page and `identify` agree.
+start as its early readings give it, simulated − measured at identification's step), so the page and `identify` agree.
 """
 
 from __future__ import annotations
@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchlab.identify.residuals import autocorrelation, run_residuals
+from benchlab.identify.residuals import autocorrelation, residual_start, run_residuals
 from benchlab.metrics import RESIDUAL_LABEL
 from benchlab.params import ModelParams
+from benchlab.simulation import simulate
 from benchlab.report.plotting import colour, new_figure, run_name, save, symbol
 from benchlab.report.scores import Estimate
 
@@ -40,9 +41,9 @@ class Residuals:
 
 
 def residuals(run: pd.DataFrame, est: Estimate, params: ModelParams) -> Residuals:
-    """Residuals of `est` (simulated with `params`) on `run` at the identification step, with identify's residual
-    tests on each channel."""
-    r = run_residuals(run, est.simulated, params)
+    """Residuals of `est`'s model (`params`) on `run` at the identification step, from identify's residual start
+    (benchlab.identify.residuals.residual_start), with identify's residual tests on each channel."""
+    r = run_residuals(run, simulate(run, params, initial=residual_start(run, params)), params)
     return Residuals(est.label, run_name(run), r.step_s, r.time_s, r.residual, r.inputs, r.tests)
 
 
