@@ -194,7 +194,7 @@ def test_identify_and_report_test_the_same_residuals(short_run):
 
 def test_residual_tests_pass_the_true_structure(short_run):
     """The nonlinear model on the nonlinear plant: every channel white, no input correlation beyond the threshold
-    (benchmarks/coverage.py measures the share of seeds; this is one)."""
+    (benchmarks/coverage_study.py measures the share of seeds; this is one)."""
     from benchlab.identify.api import identify
 
     tests = identify([short_run], "nonlinear", starts=1).residuals[short_run.attrs["source"]]

@@ -6,7 +6,7 @@ the runs about the line (the weighted fit's own residual variance, Student's t w
 freedom), not against the runs' standard errors alone: runs of one unchanged clutch scatter by more than one
 fit's standard error says (start temperatures, operating points, sensor draws), and a test on the standard
 errors alone read that scatter as ageing. A column is flagged as drifting only at a batch-wide false-alarm
-rate of FALSE_ALARM_RATE (Bonferroni over the columns tested); benchmarks/coverage.py measures the rate on
+rate of FALSE_ALARM_RATE (Bonferroni over the columns tested); benchmarks/coverage_study.py measures the rate on
 identical simulated clutches.
 """
 

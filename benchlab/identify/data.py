@@ -16,7 +16,7 @@ flywheel is smooth again. Measured on a noise-free 1 h run: 0.0088 K of bias at 
 A reading counts on the grid from the time it was measured until the next one (docs/runfile.md, hold rule),
 so a grid value is on average half a reading period old: 25 ms for the node, 0.25 s for a scanner read every
 0.5 s. The temperatures rise and fall through every engagement, and that age biased the capacities by up to
-1.7 standard errors (C_P, C_A on the drivers' runs, benchmarks/coverage.py). Each target's window is therefore
+1.7 standard errors (C_P, C_A on the drivers' runs, benchmarks/coverage_study.py). Each target's window is therefore
 centred on the block start plus its readings' mean age, (hold − 1)/2 samples, the hold measured from the data
 itself (`hold_samples`: the common length of runs of repeated values; 1, no shift, for a channel that changes
 every sample or whose runs are quantisation plateaus of varying length).

@@ -47,7 +47,7 @@ DECIMATION_S = 60.0
 ALPHA = 0.01
 #: Structure in the residual that counts as model error, K: a fifth of a class A PT1000's tolerance (±0.15 K);
 #: the true structure leaves below 0.001 K on 20-min runs, the linear model on the nonlinear clutch 0.03–0.23 K
-#: (benchmarks/coverage.py).
+#: (benchmarks/coverage_study.py).
 EFFECT_THRESHOLD_K = 0.03
 MIN_WINDOWS = 8  # fewer window means: no decimated test, the verdict rests on the effect size alone
 

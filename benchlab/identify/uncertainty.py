@@ -15,7 +15,7 @@ rule, and S_in the covariance of the score Jᵀe that the input noise e causes: 
 each fitting step estimated from the run's own full-rate record (`power_noise`), the boundary temperatures'
 (T_ambient, T_engine) from their step means (`temperature_input_noise`), pushed through the fitted network by
 Monte Carlo (the temperatures respond linearly to these inputs, so this is exact up to sampling). The parameter
-file names the method (`METHOD`, its key "uncertainty_method"); benchmarks/coverage.py measures its coverage. A is inverted with its columns scaled to unit norm: in physical units its entries span
+file names the method (`METHOD`, its key "uncertainty_method"); benchmarks/coverage_study.py measures its coverage. A is inverted with its columns scaled to unit norm: in physical units its entries span
 sixteen decades and a plain pseudo-inverse truncates the weakest direction (C_T's error came out up
 to 14× too small). Initial states are fitted per run (api.py) rather than taken from one noisy reading, which
 otherwise biases the slow parameters far beyond any error bar.

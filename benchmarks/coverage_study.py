@@ -1,6 +1,6 @@
 """Coverage study: do identify's 95 % intervals hold the simulated plant's truth, and do batch trends stay quiet?
 
-    nice .venv/bin/python benchmarks/coverage.py [--seeds 30] [--minutes 20] [--source virtual|drivers|both]
+    nice .venv/bin/python benchmarks/coverage_study.py [--seeds 30] [--minutes 20] [--source virtual|drivers|both]
         [--records coverage.jsonl] [--drift-runs 12]
 
 Per seed and source (the simulated bench through the drivers, `benchlab.runner.session.execute`; or the same
