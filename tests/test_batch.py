@@ -9,6 +9,7 @@ import multiprocessing
 import os
 import socket
 import sys
+import time
 
 import h5py
 import numpy as np
@@ -23,6 +24,7 @@ from benchlab.batch.cluster import LOOPBACK, connect  # noqa: E402
 from benchlab.cli import main  # noqa: E402
 from benchlab.diagnose import parallel  # noqa: E402
 from benchlab.diagnose.parallel import map_indices  # noqa: E402
+from benchlab.interrupts import terminate_as_interrupt  # noqa: E402
 from benchlab.model.catalog import BUILTIN  # noqa: E402
 from benchlab.params import load_params, paper_params, save_params  # noqa: E402
 from benchlab.runfile import load_run, write_run  # noqa: E402
@@ -77,6 +79,14 @@ def _pid_and_square(i: int) -> tuple[int, int]:
     return os.getpid(), i * i
 
 
+def _busy_square(i: int) -> tuple[int, int]:
+    """A task that keeps its worker busy for 50 ms."""
+    until = time.monotonic() + 0.05
+    while time.monotonic() < until:
+        pass
+    return os.getpid(), i * i
+
+
 def _map_in_worker() -> dict:
     """What map_indices does where it runs: its results and the processes they came from."""
     results = map_indices(_pid_and_square, 4)
@@ -96,6 +106,20 @@ def test_map_indices_in_a_dask_worker_process_runs_serially_and_the_cluster_is_l
     assert seen["squares"] == [0, 1, 4, 9]
     assert seen["pids"] == {seen["pid"]}
     assert seen["malloc_trim"] is None  # dask's 65536 would make every fit's large arrays mmap'ed afresh
+
+
+def test_map_indices_workers_end_quietly_under_the_commands_sigterm_answer(monkeypatch, capfd):
+    """Every command answers SIGTERM by raising in the main thread (benchlab.interrupts); the fork pool's workers must
+    not inherit that answer, or each worker the pool ends at its close prints a Terminated traceback (the main job's
+    diagnose step did, 8 of them)."""
+    monkeypatch.setattr(parallel, "workers", lambda: 2)  # fork even on one core
+    with terminate_as_interrupt():
+        for _ in range(10):  # three tasks on two workers: one waits for work when the pool ends them
+            results = map_indices(_busy_square, 3)
+            assert [sq for _, sq in results] == [0, 1, 4]
+            assert {pid for pid, _ in results} != {os.getpid()}  # forked
+    err = capfd.readouterr().err
+    assert "Terminated" not in err and "Traceback" not in err, err
 
 
 def test_map_indices_in_a_dask_worker_thread_runs_serially_where_it_would_fork_elsewhere(scheduler, monkeypatch):

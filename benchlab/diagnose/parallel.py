@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import sys
 from collections.abc import Callable
 from typing import TypeVar
@@ -23,6 +24,13 @@ _task: Callable[[int], object] | None = None
 
 def _run(index: int) -> object:
     return _task(index)
+
+
+def _worker_start() -> None:
+    """A forked worker dies by SIGTERM, as the pool ends it: the command's own answer to SIGTERM (benchlab.interrupts
+    `terminate_as_interrupt`, inherited through fork) would raise in every worker the pool closes and print its
+    traceback."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def workers() -> int:
@@ -64,7 +72,7 @@ def map_indices(task: Callable[[int], T], count: int, done: Callable[[], None] =
         return results
     _task = task
     try:
-        with multiprocessing.get_context("fork").Pool(n) as pool:
+        with multiprocessing.get_context("fork").Pool(n, initializer=_worker_start) as pool:
             for result in pool.imap(_run, range(count), chunksize=1):
                 results.append(result)
                 done()
