@@ -39,6 +39,7 @@ import scipy.optimize
 
 from benchlab.clutch import clutch_network, convection_resistance
 from benchlab.errors import InputError
+from benchlab.metrics import robust_sigma
 from benchlab.progress import SILENT, Progress, Task
 from benchlab.runfile import (Event, load_analysis, load_attrs, load_events, load_run, load_schedule,
                               write_analysis, write_analysis_file)
@@ -127,8 +128,7 @@ def _noise(values: np.ndarray) -> float:
         return math.nan
     change = np.flatnonzero(np.diff(v) != 0)
     d = np.diff(v[np.append(change, change[-1] + 1)]) if change.size > 5 else np.diff(v)
-    d = d - np.median(d)
-    return float(1.4826 * np.median(np.abs(d)) / math.sqrt(2.0))
+    return robust_sigma(d) / math.sqrt(2.0)
 
 
 def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, t_end: float,

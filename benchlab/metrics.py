@@ -53,12 +53,22 @@ def channel_nrmse_pct(measured: pd.DataFrame, simulated: pd.DataFrame,
     return out
 
 
+#: The median absolute deviation of normal noise times this is its standard deviation.
+MAD_TO_SIGMA = 1.4826
+
+
+def robust_sigma(values: np.ndarray) -> float:
+    """The standard deviation of the noise in `values` (finite ones) from their median absolute deviation: outliers,
+    kinks and steps barely move it."""
+    return float(MAD_TO_SIGMA * np.median(np.abs(values - np.median(values))))
+
+
 def difference_noise(values: np.ndarray) -> tuple[float, int]:
     """The white noise in a smooth measured signal, from its second differences (Gasser, Sroka & Jennen-Steinmetz
     1986): a temperature sampled at seconds barely curves between samples, so v[i-1] - 2 v[i] + v[i+1] is noise of
-    variance 6 sigma^2; the median absolute deviation keeps kinks and steps out. Returns (sigma, differences used)."""
+    variance 6 sigma^2 (robust_sigma keeps kinks and steps out). Returns (sigma, differences used)."""
     d2 = values[2:] - 2.0 * values[1:-1] + values[:-2]
     d2 = d2[np.isfinite(d2)]
     if d2.size < 10:
         return float("nan"), 0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)), int(d2.size)
+    return robust_sigma(d2) / float(np.sqrt(6.0)), int(d2.size)

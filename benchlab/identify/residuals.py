@@ -33,6 +33,7 @@ from scipy import stats
 
 from benchlab.identify.data import prepare
 from benchlab.metrics import residual as model_error
+from benchlab.metrics import robust_sigma
 
 if TYPE_CHECKING:
     from benchlab.model.definition import ModelDefinition
@@ -87,7 +88,7 @@ def white_noise_variance(residual: np.ndarray) -> float:
     median estimate), which a slow structure hardly reaches."""
     d = np.diff(residual)
     d = d[np.isfinite(d)]
-    return float((1.4826 * np.median(np.abs(d - np.median(d)))) ** 2 / 2) if d.size else 0.0
+    return robust_sigma(d) ** 2 / 2 if d.size else 0.0
 
 
 def ljung_box_p(x: np.ndarray, lags: int) -> float:

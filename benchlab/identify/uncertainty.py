@@ -31,12 +31,12 @@ import pandas as pd
 
 from benchlab.identify.data import FitData
 from benchlab.identify.fit import FitResult, residual_index, simulate_outputs
+from benchlab.metrics import MAD_TO_SIGMA, robust_sigma
 
 CORRELATION_LIMIT = 0.95
 RELATIVE_SE_LIMIT = 0.5
 INPUT_NOISE_DRAWS = 200
 MIN_NOISE_SAMPLES = 8  # slipping samples a fitting step needs for its own noise estimate (else the run's)
-MAD_TO_SIGMA = 1.4826
 #: How the parameter file's standard errors were made (its "uncertainty_method"): named methods, not inflation.
 METHOD = {"name": "HAC sandwich (Newey-West) with Monte Carlo input noise",
           "covariance": "sandwich A^-1 (S_res + S_in) A^-1, A = J^T J with columns scaled to unit norm",
@@ -134,7 +134,7 @@ def temperature_input_noise(data: FitData) -> dict[str, np.ndarray]:
         d = np.diff(values)
         d = d[np.isfinite(d)]
         if data.units.get(channel) == "degC" and channel not in data.targets and d.size:
-            sigma = MAD_TO_SIGMA * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
+            sigma = robust_sigma(d) / np.sqrt(2.0)
             out[channel] = np.full(len(values), sigma)
     return out
 
