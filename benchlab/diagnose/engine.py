@@ -489,10 +489,8 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
     alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, named.held),
                                 len(_added(t.spec, current)))
                     for t in _passing(tried) if _explains(t.candidate) != _explains(named.candidate)]
-    finding = _finding(named.candidate, named.spec, named.params, named.cost, named.residuals, current, current_held,
-                       named.held, [a for a in alternatives if a.p_vs_winner >= ALPHA])
-    finding.run_gain_pct = run_gain
-    return finding
+    return _finding(named.candidate, named.spec, named.params, named.cost, named.residuals, current, current_held,
+                    named.held, [a for a in alternatives if a.p_vs_winner >= ALPHA], run_gain)
 
 
 def _passing(tried: Sequence[Tried]) -> list[Tried]:
@@ -540,11 +538,12 @@ def _explains(cand: Candidate) -> tuple:
 
 
 def _finding(cand: Candidate, spec: ModelSpec, params: dict[str, float], cost: float, residuals: np.ndarray,
-             current: FitResult, current_held: HeldOut, held: HeldOut, alternatives: list["Alternative"]) -> Finding:
+             current: FitResult, current_held: HeldOut, held: HeldOut, alternatives: list["Alternative"],
+             run_gain_pct: float | None = None) -> Finding:
     """The finding of an extension fitted to `params` (in-sample cost and residuals) on top of `current`."""
     added = _added(spec, current)
     return Finding(cand, spec, params, added, current_held, held, _block_test(current_held, held),
-                   _bic_delta(current.cost, cost, residuals, len(added)), alternatives)
+                   _bic_delta(current.cost, cost, residuals, len(added)), alternatives, run_gain_pct=run_gain_pct)
 
 
 def global_fit(spec: ModelSpec, warm: dict[str, float], datasets: Sequence[FitData], seed: int) -> FitResult:
@@ -642,13 +641,12 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
                                pool, channels, not_carried)
         if finding is None:
             break
-        run_gain = finding.run_gain_pct
         released = diagnosed_spec(finding.candidate.build(current.spec.definition, channels), datasets)
         parent, current = current, global_fit(released, finding.params, datasets, seed + round_)
         held = _held_out(current.spec, current.params, datasets)
         finding = _finding(finding.candidate, current.spec, current.params, current.cost, current.residuals, parent,
-                           current_held, held, finding.alternatives)
-        finding.at_bound, finding.run_gain_pct = at_bound(current), run_gain
+                           current_held, held, finding.alternatives, finding.run_gain_pct)
+        finding.at_bound = at_bound(current)
         findings.append(finding)
         current_held = held
     findings, current, current_held = _accept(findings, current, current_held, base, base_held, datasets, channels)

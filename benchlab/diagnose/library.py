@@ -453,7 +453,7 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     nodes = list(model.nodes)
     link_nodes = {l.name: tuple(n for n in l.between if n in model.nodes) for l in model.links}
     on_off = [s for s in signals if is_on_off(s, channels)]
-    out = []
+    out, of_temperature = [], []  # laws of the signals, then (after every group's) laws of temperature differences
     for group in link_groups(model):
         where = tuple(dict.fromkeys(n for name in group for n in link_nodes[name]))
         for signal in signals:
@@ -463,19 +463,18 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
                                      f"heat crosses {' and '.join(group)} at a rate that depends on {signal}",
                                      link_law(group, signal, law), nodes=where, inert=_link_inert(group, signal, law),
                                      signals=(signal,)))
-    for group in link_groups(model):
         difference = link_difference(model, group, channels)
-        if difference is None:
-            continue
-        first, second = difference_channels(difference)
-        where = tuple(dict.fromkeys(n for name in group for n in link_nodes[name]))
-        for law in LAWS:
-            out.append(Candidate(_slug(f"dT_{first}_{second}_{law}_{'_'.join(group)}"), first, link_mechanism(group),
-                                 f"{' = '.join(group)} = R * f(|{first} - {second}|), {law}",
-                                 f"heat crosses {' and '.join(group)} at a rate that depends on the temperature "
-                                 f"difference {first} - {second} (natural or mixed convection, a contact that "
-                                 "opens as it heats)", link_law(group, difference, law), nodes=where,
-                                 inert=_link_inert(group, difference, law), signals=(first, second)))
+        if difference is not None:
+            first, second = difference_channels(difference)
+            for law in LAWS:
+                of_temperature.append(Candidate(
+                    _slug(f"dT_{first}_{second}_{law}_{'_'.join(group)}"), first, link_mechanism(group),
+                    f"{' = '.join(group)} = R * f(|{first} - {second}|), {law}",
+                    f"heat crosses {' and '.join(group)} at a rate that depends on the temperature difference "
+                    f"{first} - {second} (natural or mixed convection, a contact that opens as it heats)",
+                    link_law(group, difference, law), nodes=where, inert=_link_inert(group, difference, law),
+                    signals=(first, second)))
+    out += of_temperature
     out += _sources(signals, nodes, channels)
     linked = {frozenset(l.between) for l in model.links}
     for a, b in combinations(nodes, 2):
