@@ -11,12 +11,12 @@ from benchlab import _blas  # noqa: F401 - first: thread variables before numpy 
 from benchlab._lazy import lazy_exports as _lazy_exports
 
 if _typing.TYPE_CHECKING:  # what type checkers see; at run time `__getattr__` imports them on first use
-    from benchlab.params import load_params
+    from benchlab.model.params import load_params
     from benchlab.runfile import load_run
-    from benchlab.simulation import simulate
+    from benchlab.network.simulation import simulate
 
 __all__ = ["load_run", "load_params", "simulate"]
 __version__ = "0.1.0"
 
-__getattr__, __dir__ = _lazy_exports(__name__, {".runfile": ("load_run",), ".params": ("load_params",),
-                                                ".simulation": ("simulate",)})
+__getattr__, __dir__ = _lazy_exports(__name__, {".runfile": ("load_run",), ".model.params": ("load_params",),
+                                                ".network.simulation": ("simulate",)})

@@ -46,7 +46,7 @@ from scipy import stats
 from benchlab.diagnose import diagnose
 from benchlab.diagnose.engine import STEP_S
 from benchlab.identify.data import prepare
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import load_run, load_truth
 from benchlab.runner.session import RunRequest, execute
 from protocols.table1 import table1_schedule

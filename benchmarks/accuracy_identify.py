@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from benchlab.clutch import convection_resistance
+from benchlab.model.clutch import convection_resistance
 from benchlab.identify.api import identify
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.uncertainty import scaled_inverse
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from protocols.table1 import table1_schedule

@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
-import benchlab.solver as solver
+import benchlab.network.solver as solver
 from benchlab.diagnose import diagnose
 from benchlab.diagnose.engine import STEP_S
 from benchlab.identify.data import prepare
 from benchlab.runfile import write_run
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P
 from sim_bench.virtual_run import run_schedule

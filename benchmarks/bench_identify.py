@@ -43,7 +43,7 @@ from scipy.optimize import least_squares  # noqa: E402
 from benchlab.identify.api import identify  # noqa: E402
 from benchlab.identify.evaluate import evaluate  # noqa: E402
 from benchlab.model.catalog import model_spec  # noqa: E402
-from benchlab.params import paper_params  # noqa: E402
+from benchlab.model.params import paper_params  # noqa: E402
 from protocols.table1 import table1_schedule  # noqa: E402
 from sim_bench.plant import ThermalPlant  # noqa: E402
 from sim_bench.virtual_run import run_schedule  # noqa: E402

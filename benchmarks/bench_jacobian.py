@@ -1,4 +1,4 @@
-"""The Jacobian of a fit: its columns computed together (benchlab.solver_sets) against one run per column.
+"""The Jacobian of a fit: its columns computed together (benchlab.network.sets) against one run per column.
 
     .venv/bin/python benchmarks/bench_jacobian.py [--repeats N]
 
@@ -31,7 +31,7 @@ from benchlab.identify.data import prepare  # noqa: E402
 from benchlab.identify.fit import coordinate_bounds, from_coordinates, residual_vector, residual_vectors  # noqa: E402
 from benchlab.identify.fit import fit, to_coordinates  # noqa: E402
 from benchlab.model.catalog import resolve_model  # noqa: E402
-from benchlab.params import paper_params  # noqa: E402
+from benchlab.model.params import paper_params  # noqa: E402
 from benchlab.runfile import ALIGNED_UNITS  # noqa: E402
 from protocols.table1 import table1_schedule  # noqa: E402
 from sim_bench import plant as P  # noqa: E402

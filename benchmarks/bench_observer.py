@@ -25,10 +25,10 @@ import numpy as np
 
 from benchlab.observer.batch import fresh, observe
 from benchlab.observer.online import OnlineObserver
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
-from benchlab.simulation import input_channels
+from benchlab.network.simulation import input_channels
 from benchlab.wear.clutchfile import default_clutch
 from targets import load, print_target, summarise_targets  # benchmarks/targets.py, beside this script
 

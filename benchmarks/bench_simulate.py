@@ -48,11 +48,11 @@ from numba import njit  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 import benchlab  # noqa: E402
-from benchlab import solver  # noqa: E402
-from benchlab.clutch import clutch_network  # noqa: E402
+from benchlab.network import solver  # noqa: E402
+from benchlab.model.clutch import clutch_network  # noqa: E402
 from benchlab.network import Lag, Link, Node, ThermalNetwork, as_samples  # noqa: E402
-from benchlab.params import paper_params  # noqa: E402
-from benchlab.simulation import initial_state, input_channels  # noqa: E402
+from benchlab.model.params import paper_params  # noqa: E402
+from benchlab.network.simulation import initial_state, input_channels  # noqa: E402
 from protocols.table1 import table1_schedule  # noqa: E402
 from sim_bench.plant import ThermalPlant  # noqa: E402
 from sim_bench.virtual_run import drive_schedule, run_schedule  # noqa: E402

@@ -21,8 +21,8 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
-from benchlab.params import paper_params
-from benchlab.simulation import simulate
+from benchlab.model.params import paper_params
+from benchlab.network.simulation import simulate
 from benchlab.wear.clutchfile import default_clutch
 from benchlab.wear.energy import engagement_spans, run_friction_power
 from benchlab.wear.model import wear_history

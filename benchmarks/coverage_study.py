@@ -32,7 +32,7 @@ import pandas as pd
 
 from benchlab.batch import trends
 from benchlab.identify.api import Identification, identify
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from protocols.table1 import table1_schedule

@@ -11,7 +11,7 @@ For each grid point (engine speed ω_e, clutch state S, slip speed Δω = ω_e �
    with a turning shaft (Δω ≠ ω_e) a launch at ω_c = ω_e − Δω, so the shaft coasts at ω_c once opened.
 3. **cool-down** (label "cooldown") at (ω_e, S, Δω) until the flywheel is at or below 60 °C.
 
-Each cool-down gives a convection resistance R_FA = R_PA with its uncertainty (benchlab.cooldown).
+Each cool-down gives a convection resistance R_FA = R_PA with its uncertainty (benchlab.identify.cooldown).
 """
 
 from __future__ import annotations
@@ -71,8 +71,8 @@ def parse_grid(text: str) -> tuple[tuple[float, int, float | None], ...]:
 
 def _cool_estimate_s(rpm: float, state: int, cfg: SweepConfig) -> float:
     """Rough duration of the cool-down from the paper's parameters (for --dry-run estimates only)."""
-    from benchlab.clutch import convection_resistance
-    from benchlab.params import paper_params
+    from benchlab.model.clutch import convection_resistance
+    from benchlab.model.params import paper_params
     import numpy as np
 
     p = paper_params("nonlinear")

@@ -337,7 +337,7 @@ class SimPhysics:
         return {names[s]: out[:, i] for i, s in enumerate(self.plant.state_names)}
 
     def true_convection_resistance(self, engine_rpm: float, clutch_state: int) -> float:
-        from benchlab.clutch import convection_resistance
+        from benchlab.model.clutch import convection_resistance
 
         ch = {"engine_speed": np.array([float(engine_rpm)]), "clutch_state": np.array([float(clutch_state)])}
         return float(np.asarray(convection_resistance(self.truth_params, ch)).ravel()[0])

@@ -13,10 +13,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from benchlab.clutch import clutch_network, convection_resistance
+from benchlab.model.clutch import clutch_network, convection_resistance
 from benchlab.network import Lag, Link, Node, Source, ThermalNetwork
-from benchlab.params import paper_params
-from benchlab.solver import run_network
+from benchlab.model.params import paper_params
+from benchlab.network.solver import run_network
 
 STEFAN_BOLTZMANN = 5.670374419e-8
 KELVIN = 273.15

@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 import pytest
 
-from benchlab.params import paper_params, save_params
+from benchlab.model.params import paper_params, save_params
 from benchlab.runfile import ALIGNED_UNITS, REQUIRED, write_run
 from protocols.table1 import table1_schedule
 from sim_bench.plant import ThermalPlant

@@ -272,7 +272,7 @@ def test_an_integer_beyond_a_float_in_a_user_file_is_bad_input_not_a_crash(where
     import re
 
     from benchlab.errors import InputError
-    from benchlab.params import load_params
+    from benchlab.model.params import load_params
     from benchlab.wear.clutchfile import load_clutch
 
     huge = str(10 ** 400)

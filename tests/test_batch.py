@@ -26,7 +26,7 @@ from benchlab.diagnose import parallel  # noqa: E402
 from benchlab.diagnose.parallel import map_indices  # noqa: E402
 from benchlab.interrupts import terminate_as_interrupt  # noqa: E402
 from benchlab.model.catalog import BUILTIN  # noqa: E402
-from benchlab.params import load_params, paper_params, save_params  # noqa: E402
+from benchlab.model.params import load_params, paper_params, save_params  # noqa: E402
 from benchlab.runfile import load_run, write_run  # noqa: E402
 from benchlab.wear.analysis import analyse_wear  # noqa: E402
 from protocols.table1 import table1_schedule  # noqa: E402

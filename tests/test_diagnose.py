@@ -16,7 +16,7 @@ from benchlab.diagnose.engine import STEP_S
 from benchlab.identify.data import prepare
 from benchlab.identify.fit import fit_multistart
 from benchlab.model.catalog import model_spec
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P
 from sim_bench.virtual_run import run_schedule

@@ -18,7 +18,7 @@ from benchlab.diagnose.evidence import bin_labels, residual_evidence, shift_offs
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors, regime_labels
 from benchlab.diagnose.report import summarise
 from benchlab.identify.fit import simulate_outputs
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import write_run
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P

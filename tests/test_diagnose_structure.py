@@ -23,7 +23,7 @@ from benchlab.identify.data import prepare
 from benchlab.model.catalog import builtin
 from benchlab.model.definition import parse_model
 from benchlab.network import Link, Node
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from protocols.table1 import table1_schedule

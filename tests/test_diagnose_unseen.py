@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from benchlab.cli import main
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import write_run
 from protocols.table1 import table1_schedule
 from sim_bench import unseen as U

@@ -13,18 +13,18 @@ import pandas as pd
 import pytest
 
 from benchlab.cli import main
-from benchlab.clutch import convection_resistance
+from benchlab.model.clutch import convection_resistance
 from benchlab.identify.api import identify
 from benchlab.identify.data import hold_samples, prepare
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import residual_index
 from benchlab.identify.uncertainty import (CORRELATION_LIMIT, identifiability_warnings, long_run_covariance,
                                            power_noise)
-from benchlab.metrics import rmse_k
-from benchlab.params import load_params, paper_params
+from benchlab.identify.metrics import rmse_k
+from benchlab.model.params import load_params, paper_params
 from benchlab.runfile import load_run, write_run
 from benchlab.runner.session import RunRequest, execute
-from benchlab.simulation import simulate
+from benchlab.network.simulation import simulate
 from protocols.table1 import table1_schedule
 from sim_bench.plant import ThermalPlant
 from sim_bench.virtual_run import run_schedule

@@ -21,10 +21,10 @@ from benchlab.model.build import build_network
 from benchlab.model.catalog import BUILTIN, builtin, model_spec
 from benchlab.model.definition import load_model, parse_model, to_toml
 from benchlab.model.expressions import ExpressionError, affine_parts, compile_expression, parse
-from benchlab.params import check_params, load_params, paper_params, save_params
+from benchlab.model.params import check_params, load_params, paper_params, save_params
 from benchlab.runfile import write_run
-from benchlab.simulation import simulate
-from benchlab.solver import run_network
+from benchlab.network.simulation import simulate
+from benchlab.network.solver import run_network
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from python_clutch import python_clutch  # noqa: E402 - eq. (6)-(11) in Python, independent of the model files

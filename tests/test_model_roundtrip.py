@@ -13,7 +13,7 @@ import pytest
 
 from benchlab.cli import main
 from benchlab.model.definition import load_model
-from benchlab.params import load_params, paper_params
+from benchlab.model.params import load_params, paper_params
 from benchlab.runfile import write_run
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P

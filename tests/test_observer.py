@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 import pytest
 
-from benchlab.clutch import clutch_network
+from benchlab.model.clutch import clutch_network
 from benchlab.errors import InputError
 from benchlab.identify.api import identify
 from benchlab.model.catalog import builtin
@@ -24,10 +24,10 @@ from benchlab.network import Link, Node
 from benchlab.observer.batch import estimated_wear, fresh, observe
 from benchlab.observer.model import Reset
 from benchlab.observer.online import OnlineObserver
-from benchlab.params import ModelParams, paper_params
+from benchlab.model.params import ModelParams, paper_params
 from benchlab.runfile import load_run, load_truth
 from benchlab.runner.session import RunRequest, execute
-from benchlab.simulation import input_channels
+from benchlab.network.simulation import input_channels
 from benchlab.wear.clutchfile import default_clutch
 from protocols.validation import ValidationConfig, validation_schedule
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from benchlab.cli import main
-from benchlab.params import paper_params, save_params
+from benchlab.model.params import paper_params, save_params
 from benchlab.runner.session import RunRequest, execute
 from protocols.schedule import Step
 

@@ -7,7 +7,7 @@ import re
 from html.parser import HTMLParser
 
 from benchlab.cli import main
-from benchlab.params import load_params
+from benchlab.model.params import load_params
 from benchlab.runfile import load_run
 
 

@@ -1,4 +1,4 @@
-"""benchlab report: figures and page written, the page's error figures are benchlab.metrics', Fig. 5 tells the
+"""benchlab report: figures and page written, the page's error figures are benchlab.identify.metrics', Fig. 5 tells the
 linear model from the nonlinear one on a validation run, Fig. 3 shows the sweep's cool-downs, bad input exits 2."""
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ import pytest
 
 import benchlab
 from benchlab.cli import main
-from benchlab.clutch import PREDICTED_CHANNELS
-from benchlab.cooldown import CooldownResult, store
-from benchlab.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
-from benchlab.params import paper_params, save_params
+from benchlab.model.clutch import PREDICTED_CHANNELS
+from benchlab.identify.cooldown import CooldownResult, store
+from benchlab.identify.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
+from benchlab.model.params import paper_params, save_params
 from benchlab.report import build, write_report
 from benchlab.report.resistance import resistance
 from benchlab.runfile import write_run
@@ -204,7 +204,7 @@ def test_residual_tests_pass_the_true_structure(short_run):
 
 def test_residuals_are_simulated_minus_measured(short_run):
     from benchlab.identify.residuals import run_residuals
-    from benchlab.metrics import RESIDUAL_LABEL
+    from benchlab.identify.metrics import RESIDUAL_LABEL
 
     warm = dict(paper_params("nonlinear"), C_F=0.7 * paper_params("nonlinear")["C_F"])  # flywheel heats faster
     cool = dict(paper_params("nonlinear"), C_F=1.4 * paper_params("nonlinear")["C_F"])

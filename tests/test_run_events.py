@@ -18,7 +18,7 @@ import h5py
 import numpy as np
 import pytest
 
-from benchlab.cooldown import segments
+from benchlab.identify.cooldown import segments
 from benchlab.errors import InputError
 from benchlab.runfile import event_steps, load_events, load_schedule
 from benchlab.runfile.schema import END_CONDITION, END_SYNCHRONISED, END_TIME

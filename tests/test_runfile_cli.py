@@ -10,7 +10,7 @@ import pytest
 
 import benchlab
 from benchlab.cli import main
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import REQUIRED
 
 

@@ -9,8 +9,8 @@ import h5py
 import numpy as np
 import pytest
 
-from benchlab.clutch import convection_resistance
-from benchlab.cooldown import COVERAGE_K, SYSTEMATIC_REL, CooldownResult, analyse, segments, store, stored
+from benchlab.model.clutch import convection_resistance
+from benchlab.identify.cooldown import COVERAGE_K, SYSTEMATIC_REL, CooldownResult, analyse, segments, store, stored
 from benchlab.errors import InputError
 from benchlab.runner.session import RunRequest, execute
 from sim_bench.bench import SimulatedBench

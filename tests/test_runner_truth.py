@@ -15,10 +15,10 @@ import h5py
 import numpy as np
 import pytest
 
-from benchlab.clutch import convection_resistance
+from benchlab.model.clutch import convection_resistance
 from benchlab.identify.api import identify
 from benchlab.identify.evaluate import evaluate
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, can_log_path, execute
 from drivers import can_signals as sig

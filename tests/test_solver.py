@@ -14,9 +14,9 @@ import scipy.linalg
 from scipy.integrate import solve_ivp
 
 import benchlab
-from benchlab.clutch import clutch_network, convection_resistance
-from benchlab.params import paper_params
-from benchlab.solver import Discretised, _propagate, _propagate4, _zoh
+from benchlab.model.clutch import clutch_network, convection_resistance
+from benchlab.model.params import paper_params
+from benchlab.network.solver import Discretised, _propagate, _propagate4, _zoh
 
 
 def _reference(run: pd.DataFrame, params, x0: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
-"""The solver's shortcuts for fits change no number. With the memo of a fit's run (benchlab.solver_memo) every
+"""The solver's shortcuts for fits change no number. With the memo of a fit's run (benchlab.network.memo) every
 discretisation and every residual equals the one computed from scratch, bit for bit, as parameters move one at a time
-and all at once; so do the parameter sets of a Jacobian computed together (benchlab.solver_sets), and a fit takes the
+and all at once; so do the parameter sets of a Jacobian computed together (benchlab.network.sets), and a fit takes the
 very steps it takes with scipy's own forward differences."""
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from benchlab.identify.data import prepare
 from benchlab.identify.fit import KEY_RESOLUTION, fit, residual_vector, residual_vectors
 from benchlab.network import Boundary, Link, Node, Source, ThermalNetwork
 from benchlab.model.catalog import resolve_model
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.runfile import ALIGNED_UNITS
-from benchlab.solver import discretise, run_network
-from benchlab.solver_sets import run_network_sets
-from benchlab.solver_memo import LawMemo
+from benchlab.network.solver import discretise, run_network
+from benchlab.network.sets import run_network_sets
+from benchlab.network.memo import LawMemo
 from protocols.table1 import table1_schedule
 from sim_bench import plant as P
 from sim_bench.virtual_run import run_schedule

@@ -12,7 +12,7 @@ from benchlab.errors import InputError
 from benchlab.model.catalog import builtin
 from benchlab.model.definition import parse_model
 from benchlab.observer.noise import check_positive, residual_rms
-from benchlab.params import paper_params
+from benchlab.model.params import paper_params
 from benchlab.report.resistance import standard_errors
 from benchlab.values import check_keys
 from benchlab.wear.clutchfile import DEFAULT_DOC, clutch_from_doc

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from benchlab.errors import InputError
-from benchlab.params import load_params, paper_params
+from benchlab.model.params import load_params, paper_params
 from benchlab.wear import WearState, analyse_wear, default_clutch
 from benchlab.wear.compare import temperature_sensitivity
 from benchlab.drivetrain import RPM

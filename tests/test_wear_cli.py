@@ -13,7 +13,7 @@ import pytest
 
 from benchlab.cli import main
 from benchlab.errors import InputError
-from benchlab.params import paper_params, save_params
+from benchlab.model.params import paper_params, save_params
 from benchlab.runfile import write_run
 from benchlab.wear.clutchfile import DEFAULT_DOC, default_clutch, load_clutch
 from protocols.table1 import table1_schedule

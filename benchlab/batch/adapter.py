@@ -22,7 +22,7 @@ from benchlab.model.catalog import resolve_model
 from benchlab.model.definition import ModelDefinition
 from benchlab.model.runs import load_runs
 from benchlab.outputs import write_text
-from benchlab.params import ModelParams, load_params, save_params
+from benchlab.model.params import ModelParams, load_params, save_params
 from benchlab.runfile import load_attrs
 from benchlab.values import json_ready
 from benchlab.wear.analysis import analyse_wear

@@ -46,7 +46,7 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
             raise InputError(run, "sim_truth", "a run of the simulated bench for --params sim-truth")
         return dict(json.loads(truth)["params"])
     from benchlab.model.catalog import builtin
-    from benchlab.params import load_params
+    from benchlab.model.params import load_params
 
     params = dict(load_params(spec))
     missing = [name for name in builtin("linear").parameters if name != "R0" and name not in params]
@@ -58,7 +58,7 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
-        from benchlab.cooldown import analyse, fit_eq11, store, table_lines
+        from benchlab.identify.cooldown import analyse, fit_eq11, store, table_lines
         from benchlab.progress import for_terminal
         from benchlab.runfile import load_run
 

@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.identify.api import identify, parse_fixed
         from benchlab.model.catalog import model_spec, resolve_model
         from benchlab.model.runs import load_runs
-        from benchlab.params import save_params
+        from benchlab.model.params import save_params
     check_output(args.out, "--out", args.force, inputs=[*args.runs, *args.validate])
     try:
         fixed = parse_fixed(args.fix)

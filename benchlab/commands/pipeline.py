@@ -90,7 +90,7 @@ def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.identify.api import identify
-        from benchlab.params import load_params, save_params
+        from benchlab.model.params import load_params, save_params
         from benchlab.report import write_report
         from benchlab.report.index import cooldown_scores, write_index
         from benchlab.report.resistance import standard_errors

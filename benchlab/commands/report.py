@@ -39,7 +39,7 @@ def sweep_file(path: str) -> None:
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.model.runs import check_run, load_runs
-        from benchlab.params import load_params
+        from benchlab.model.params import load_params
         from benchlab.report import write_report
 
     out = check_output_dir(args.out, "--out", args.force)

@@ -25,10 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
-        from benchlab.metrics import nrmse_pct, rmse_k
+        from benchlab.identify.metrics import nrmse_pct, rmse_k
         from benchlab.model.runs import load_runs
         from benchlab.runfile import write_simulated
-        from benchlab.simulation import simulate
+        from benchlab.network.simulation import simulate
     check_output(args.out, "--out", args.force, inputs=[args.run, args.params], run_file=True)
     params = load_model_params(args.params, args.model)
     measured = load_runs([args.run], params.definition, params, args.params)[0]

@@ -43,7 +43,7 @@ from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import (FitResult, coordinate_bounds, fit, fit_multistart, from_coordinates, residual_vector,
                                    simulate_outputs, to_coordinates)
 from benchlab.identify.spec import ModelSpec
-from benchlab.metrics import difference_noise, nrmse_pct, residual
+from benchlab.identify.metrics import difference_noise, nrmse_pct, residual
 from benchlab.model.build import build_spec
 from benchlab.model.catalog import resolve_model
 from benchlab.model.definition import ModelDefinition
@@ -94,7 +94,7 @@ class HeldOut:
     params: list[dict[str, float]]  # per fold
 
     def residuals(self) -> list[dict[str, np.ndarray]]:
-        """Simulated − measured (benchlab.metrics.residual) per run and channel; NaN where no valid target."""
+        """Simulated − measured (benchlab.identify.metrics.residual) per run and channel; NaN where no valid target."""
         return [{c: residual(pred[c], d.targets[c]) for c in pred} for d, pred in zip(self.datasets, self.predictions)]
 
     @cached_property

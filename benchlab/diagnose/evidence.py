@@ -29,7 +29,7 @@ from benchlab.diagnose.regimes import time_since_slip
 from benchlab.identify.data import FitData
 from benchlab.identify.fit import KEY_RESOLUTION, initial_state
 from benchlab.identify.spec import ModelSpec
-from benchlab.solver import run_network
+from benchlab.network.solver import run_network
 
 BINS = 10
 SHIFTS = 999  # p-values from 1/1000 up; the FFT gives every shift, so more cost nothing

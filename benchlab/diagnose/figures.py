@@ -11,7 +11,7 @@ import numpy as np
 
 from benchlab.diagnose.engine import ALPHA, Diagnosis, HeldOut
 from benchlab.diagnose.evidence import FORMS, binned_means, residual_forms, run_signal, signal_unit
-from benchlab.metrics import RESIDUAL_LABEL
+from benchlab.identify.metrics import RESIDUAL_LABEL
 from benchlab.report.plotting import colour, label, new_figure, save, symbol
 from benchlab.units import display
 

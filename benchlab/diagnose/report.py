@@ -12,7 +12,7 @@ from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, CROSS_VALIDATED, FOLD
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.library import telling_apart
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
-from benchlab.metrics import RESIDUAL_LABEL
+from benchlab.identify.metrics import RESIDUAL_LABEL
 from benchlab.model.definition import ModelDefinition
 
 

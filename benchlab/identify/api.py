@@ -28,9 +28,9 @@ from benchlab.identify.uncertainty import (METHOD, Uncertainty, estimate_uncerta
                                           temperature_input_noise)
 from benchlab.model.catalog import model_spec
 from benchlab.model.definition import ModelDefinition
-from benchlab.params import ModelParams, check_params
+from benchlab.model.params import ModelParams, check_params
 from benchlab.progress import SILENT, Progress
-from benchlab.simulation import simulate
+from benchlab.network.simulation import simulate
 
 INITIAL_STATE_RANGE_K = 20.0
 

@@ -34,8 +34,8 @@ import pandas as pd
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.network import ThermalNetwork
 from benchlab.runfile import ALIGNED_UNITS
-from benchlab.simulation import input_channels
-from benchlab.solver_memo import LawMemo
+from benchlab.network.simulation import input_channels
+from benchlab.network.memo import LawMemo
 
 #: Operating-point quantum per unit of a channel: speeds to 0.5 rpm, temperatures read by laws to 0.1 K.
 QUANTUM = {"rpm": 0.5, "degC": 0.1}
@@ -185,7 +185,7 @@ def prepare(run: pd.DataFrame, step_s: float = FIT_STEP_S, name: str | None = No
     `network`: the model whose measured outputs are the targets (default: the paper's clutch).
     """
     if network is None:
-        from benchlab.clutch import clutch_network
+        from benchlab.model.clutch import clutch_network
 
         network = clutch_network()
     dt = float(run.attrs["dt"])

@@ -6,9 +6,9 @@ from collections.abc import Mapping
 
 import pandas as pd
 
-from benchlab.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
+from benchlab.identify.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
 from benchlab.network import ThermalNetwork
-from benchlab.simulation import model_network, simulate
+from benchlab.network.simulation import model_network, simulate
 
 
 def evaluate(run: pd.DataFrame, params: Mapping[str, float], network: ThermalNetwork | None = None) -> dict:

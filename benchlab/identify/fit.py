@@ -18,8 +18,8 @@ from benchlab.identify.data import FitData
 from benchlab.identify.spec import ModelSpec
 from benchlab.network import ThermalNetwork
 from benchlab.progress import Task
-from benchlab.solver import run_network
-from benchlab.solver_sets import run_network_sets
+from benchlab.network.solver import run_network
+from benchlab.network.sets import run_network_sets
 
 KEY_RESOLUTION = 1e-12  # operating points are already exact repeats after prepare(); keep them apart exactly
 
@@ -97,7 +97,7 @@ def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datase
 def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_sets: Sequence[Mapping[str, float]],
                      datasets: Sequence[FitData]) -> list[np.ndarray]:
     """`residual_vector` of each parameter set, bit for bit, computed together: the sets of a forward-difference
-    Jacobian, each near `base` (benchlab.solver_sets)."""
+    Jacobian, each near `base` (benchlab.network.sets)."""
     parts: list[list[np.ndarray]] = [[] for _ in param_sets]
     for data in datasets if param_sets else ():
         x0s = np.array([initial_state(network, data, params) for params in param_sets])

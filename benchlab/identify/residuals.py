@@ -3,7 +3,7 @@
 One home for `identify` and `report`: `run_residuals` takes the model as `benchlab.simulate` runs it, every state
 started at `residual_start` (the start temperatures that fit the run best with the model's parameters held, as
 a toolbox's `resid` estimates initial conditions), compares it with identification's targets at its step and
-applies `residual_tests`. Residuals are simulated − measured (benchlab.metrics.residual). From one reading
+applies `residual_tests`. Residuals are simulated − measured (benchlab.identify.metrics.residual). From one reading
 (contract §2's default start) the reading's noise, 0.03–0.08 K, stays in the slow flywheel and housing for the
 whole run: on the true structure it left 0.02–0.08 K of structure (seeds 1 and 3: 0.045 and 0.056 K in
 T_flywheel, none with the fitted start), which no model term could remove.
@@ -32,12 +32,12 @@ import pandas as pd
 from scipy import stats
 
 from benchlab.identify.data import prepare
-from benchlab.metrics import residual as model_error
-from benchlab.metrics import robust_sigma
+from benchlab.identify.metrics import residual as model_error
+from benchlab.identify.metrics import robust_sigma
 
 if TYPE_CHECKING:
     from benchlab.model.definition import ModelDefinition
-    from benchlab.params import ModelParams
+    from benchlab.model.params import ModelParams
 
 #: Inputs the residuals are correlated with: the clutch's, where a run has them.
 RESIDUAL_INPUTS = ("friction_power", "engine_speed", "clutch_state")

@@ -31,7 +31,7 @@ import pandas as pd
 
 from benchlab.identify.data import FitData
 from benchlab.identify.fit import FitResult, residual_index, simulate_outputs
-from benchlab.metrics import MAD_TO_SIGMA, robust_sigma
+from benchlab.identify.metrics import MAD_TO_SIGMA, robust_sigma
 
 CORRELATION_LIMIT = 0.95
 RELATIVE_SE_LIMIT = 0.5

@@ -20,7 +20,7 @@ NO_TEMPERATURES: dict[str, float] = {}
 
 def _law(compiled: Callable, reads: frozenset[str]) -> Callable[[Params, Channels], "float | np.ndarray"]:
     """A law of params and channels; `reads`: the parameters it reads (its value changes with nothing else on one
-    run's channels, which lets a fit's solver memo keep it: benchlab.solver_memo)."""
+    run's channels, which lets a fit's solver memo keep it: benchlab.network.memo)."""
     def law(params: Params, channels: Channels) -> "float | np.ndarray":
         return compiled(params, channels, NO_TEMPERATURES)
     law.reads = tuple(sorted(reads))
@@ -39,7 +39,7 @@ def _first_present(channels: tuple[str, ...]) -> Callable[[Channels], np.ndarray
             if name in values and not np.all(np.isnan(values[name])):
                 return values[name]
         return values[channels[-1]]
-    temperature.reads = ()  # no parameter: one value per run's channels (benchlab.solver_memo)
+    temperature.reads = ()  # no parameter: one value per run's channels (benchlab.network.memo)
     return temperature
 
 

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from benchlab.model.names import MODEL_HELP
 
 if TYPE_CHECKING:
-    from benchlab.params import ModelParams
+    from benchlab.model.params import ModelParams
 
 
 def add_model_option(parser: argparse.ArgumentParser) -> None:
@@ -21,6 +21,6 @@ def load_model_params(params: str, model: str | None) -> ModelParams:
     """The parameter file, for `--model` where it is given (its parameters must be in the file); imported here so
     that the parser's `add_model_option` costs no numpy."""
     from benchlab.model.catalog import resolve_model
-    from benchlab.params import load_params
+    from benchlab.model.params import load_params
 
     return load_params(params, resolve_model(model) if model else None)

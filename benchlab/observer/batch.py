@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from benchlab.clutch import clutch_network
+from benchlab.model.clutch import clutch_network
 from benchlab.errors import InputError
 from benchlab.network import Params, ThermalNetwork
 from benchlab.observer.consistency import Consistency, innovation_consistency
@@ -16,7 +16,7 @@ from benchlab.observer.kalman import filter_run
 from benchlab.observer.model import ObserverModel, Reset
 from benchlab.observer.noise import NoiseModel, tune_noise
 from benchlab.observer.observability import Observability, analyse
-from benchlab.simulation import initial_state, input_channels
+from benchlab.network.simulation import initial_state, input_channels
 from benchlab.wear.clutchfile import ClutchSpec
 from benchlab.wear.model import wear_history
 from benchlab.wear.thermal import heat_split

@@ -15,7 +15,7 @@ from benchlab.errors import InputError
 from benchlab.network import (Channels, ParamChannelFunction, Params, Source, ThermalNetwork, as_samples, sample_matrix,
                               state_channels)
 from benchlab.observer.noise import ADAPT_DRIFT, ADAPT_INITIAL, NoiseModel
-from benchlab.solver import Discretised, conductance_matrices, discretise
+from benchlab.network.solver import Discretised, conductance_matrices, discretise
 
 
 def _no_heat(params: Params, channels: Channels) -> float:

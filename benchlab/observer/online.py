@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from benchlab.clutch import clutch_network
+from benchlab.model.clutch import clutch_network
 from benchlab.errors import InputError
 from benchlab.network import Params, ThermalNetwork
 from benchlab.observer.kalman import filter_step, reinitialise

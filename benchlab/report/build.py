@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchlab.cooldown import CooldownResult, analyse, stored
+from benchlab.identify.cooldown import CooldownResult, analyse, stored
 from benchlab.errors import InputError
 from benchlab.outputs import write_text
-from benchlab.params import ModelParams
+from benchlab.model.params import ModelParams
 from benchlab.progress import SILENT, Progress
 from benchlab.report.page import Figures, render
 from benchlab.report.residuals import plot_residuals, residuals
@@ -37,7 +37,7 @@ def model_labels(params: ModelParams, compare: ModelParams | None) -> list[tuple
 def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams,
                     progress: Progress = SILENT) -> tuple[list[CooldownResult], str]:
     """Every cool-down of a cooldown-sweep run and where the page says they come from: the run file's /analysis
-    as `benchlab cooldown` stored it, else fitted here by benchlab.cooldown with the other parameters of `params`."""
+    as `benchlab cooldown` stored it, else fitted here by benchlab.identify.cooldown with the other parameters of `params`."""
     analysed = stored(sweep)
     if analysed is not None and analysed.results:
         source = analysed.params_source or "a parameter file not named in the run"

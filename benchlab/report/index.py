@@ -18,9 +18,9 @@ from typing import Any
 
 import pandas as pd
 
-from benchlab.metrics import nrmse_pct, rmse_k
+from benchlab.identify.metrics import nrmse_pct, rmse_k
 from benchlab.outputs import write_text
-from benchlab.params import ModelParams
+from benchlab.model.params import ModelParams
 from benchlab.report.page import number
 from benchlab.report.scores import estimate
 from benchlab.runfile import event_steps, load_attrs, load_events, load_schedule

@@ -11,9 +11,9 @@ import numpy as np
 import pandas as pd
 
 import benchlab
-from benchlab.cooldown import COVERAGE_K, CooldownResult
-from benchlab.metrics import RESIDUAL_LABEL
-from benchlab.params import ModelParams
+from benchlab.identify.cooldown import COVERAGE_K, CooldownResult
+from benchlab.identify.metrics import RESIDUAL_LABEL
+from benchlab.model.params import ModelParams
 from benchlab.report.plotting import run_name
 from benchlab.report.resistance import resistance, standard_errors
 from benchlab.report.residuals import Residuals

@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 
 from benchlab.identify.residuals import autocorrelation, residual_start, run_residuals
-from benchlab.metrics import RESIDUAL_LABEL
-from benchlab.params import ModelParams
-from benchlab.simulation import simulate
+from benchlab.identify.metrics import RESIDUAL_LABEL
+from benchlab.model.params import ModelParams
+from benchlab.network.simulation import simulate
 from benchlab.report.plotting import colour, new_figure, run_name, save, symbol
 from benchlab.report.scores import Estimate
 

@@ -1,5 +1,5 @@
 """Fig. 3 of the paper: convection resistance R_FA = R_PA (eq. 11) against engine speed for both clutch states,
-with the per-cool-down estimates of a cooldown-sweep run (benchlab.cooldown) where one is given."""
+with the per-cool-down estimates of a cooldown-sweep run (benchlab.identify.cooldown) where one is given."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from benchlab.clutch import convection_resistance
-from benchlab.cooldown import COVERAGE_K, CooldownResult
-from benchlab.params import ModelParams
+from benchlab.model.clutch import convection_resistance
+from benchlab.identify.cooldown import COVERAGE_K, CooldownResult
+from benchlab.model.params import ModelParams
 from benchlab.report.plotting import MODEL_STYLES, new_figure, save
 from benchlab.values import finite_number
 

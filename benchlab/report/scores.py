@@ -1,4 +1,4 @@
-"""Each model on each run: its simulation and error figures (contract section 5, by benchlab.metrics)."""
+"""Each model on each run: its simulation and error figures (contract section 5, by benchlab.identify.metrics)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from benchlab.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
+from benchlab.identify.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
 from benchlab.network import Params
-from benchlab.simulation import model_network, simulate
+from benchlab.network.simulation import model_network, simulate
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 
-from benchlab.metrics import RESIDUAL_LABEL
-from benchlab.metrics import residual as model_error
+from benchlab.identify.metrics import RESIDUAL_LABEL
+from benchlab.identify.metrics import residual as model_error
 from benchlab.report.plotting import MODEL_STYLES, colour, label, minutes, new_figure, run_name, save, stride, symbol
 from benchlab.report.scores import Estimate
 

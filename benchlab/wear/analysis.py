@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from benchlab.params import ModelParams
+from benchlab.model.params import ModelParams
 from benchlab.wear.clutchfile import ClutchSpec, default_clutch
 from benchlab.wear.defaults import DEFAULT_HORIZON, DEFAULT_PATHS
 from benchlab.wear.energy import (DEFAULT_GAP_S, engagement_spans, engagement_table, friction_energy,

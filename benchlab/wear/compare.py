@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from benchlab.params import ModelParams
+from benchlab.model.params import ModelParams
 from benchlab.wear.clutchfile import ClutchSpec, default_clutch
 from benchlab.wear.energy import run_friction_power
 from benchlab.wear.model import wear_history

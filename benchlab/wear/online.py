@@ -12,8 +12,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from benchlab.params import ModelParams
-from benchlab.solver import discretise
+from benchlab.model.params import ModelParams
+from benchlab.network.solver import discretise
 from benchlab.wear.clutchfile import ClutchSpec
 from benchlab.wear.thermal import split_network
 

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import pandas as pd
 
-from benchlab.clutch import DEFAULT_MODEL
+from benchlab.model.clutch import DEFAULT_MODEL
 from benchlab.errors import InputError
 from benchlab.model.build import build_network
 from benchlab.model.catalog import builtin
 from benchlab.model.definition import ModelDefinition, parse_model
 from benchlab.network import ThermalNetwork
-from benchlab.params import ModelParams
-from benchlab.simulation import simulate
+from benchlab.model.params import ModelParams
+from benchlab.network.simulation import simulate
 from benchlab.values import finite_number
 
 DEFAULT_SPLIT = 0.5

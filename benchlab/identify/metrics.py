@@ -12,7 +12,7 @@ from typing import TypeVar
 import numpy as np
 import pandas as pd
 
-from benchlab.clutch import PREDICTED_CHANNELS
+from benchlab.model.clutch import PREDICTED_CHANNELS
 
 #: How a residual axis or table is labelled, everywhere: the sign convention of `residual`.
 RESIDUAL_LABEL = "simulated − measured"

@@ -4,7 +4,7 @@ Each set differs from `base` in a few parameters (a finite difference moves one)
 parameter are evaluated again; the base's operating points are kept where the moved laws group the samples as the
 base's did (checked; a set that regroups them is discretised on its own); the matrices of all sets are discretised in
 one compiled call and every trajectory is propagated in another. Each set's states are bit for bit what
-`benchlab.solver.run_network` gives for it: the same functions compute the same numbers, and only the Python around
+`benchlab.network.solver.run_network` gives for it: the same functions compute the same numbers, and only the Python around
 them runs once per Jacobian instead of once per column (a diagnosis spends most of its time in those columns).
 """
 
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from benchlab.network import Channels, Params, ThermalNetwork, as_samples, sample_matrix
-from benchlab.solver import (_coefficient, _coefficient_terms, _coefficients, _conductance, _conductances, _per_point,
+from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
+from benchlab.network.solver import (_coefficient, _coefficient_terms, _coefficients, _conductance, _conductances, _per_point,
                              _propagate, _propagate4, _quantised, _system_matrices, _zoh, discretise, propagate)
-from benchlab.solver_memo import LawMemo, NoMemo
+from benchlab.network.memo import LawMemo, NoMemo
 
 
 @dataclass
@@ -49,7 +49,7 @@ class _Base:
 
 
 def _laws(network: ThermalNetwork, channels: Channels) -> list[_Law]:
-    """The laws `benchlab.solver.discretise` evaluates for the matrices, in its order."""
+    """The laws `benchlab.network.solver.discretise` evaluates for the matrices, in its order."""
     laws = [_Law(id(link.resistance), _reads(link.resistance), True,
                  lambda p, link=link: _conductance(link, p, channels)) for link in network.links]
     laws += [_Law(id(law), _reads(law), False, lambda p, src=src, node=node, law=law: _coefficient(src, node, law, p,

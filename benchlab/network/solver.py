@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from benchlab.network import Channels, Link, Params, Source, ThermalNetwork, as_samples, sample_matrix
-from benchlab.solver_memo import NO_MEMO, LawMemo, float_bits, parameter_bits
+from benchlab.network.structure import Channels, Link, Params, Source, ThermalNetwork, as_samples, sample_matrix
+from benchlab.network.memo import NO_MEMO, LawMemo, float_bits, parameter_bits
 
 DEFAULT_RESOLUTION = 1e-6
 
@@ -379,7 +379,7 @@ def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: 
                resolution: float = DEFAULT_RESOLUTION, memo: LawMemo | None = None) -> Discretised:
     """Evaluate the network's laws on the channels and discretise every distinct operating point.
 
-    `memo` (benchlab.solver_memo): what earlier calls on these channels computed, reused where this call repeats
+    `memo` (benchlab.network.memo): what earlier calls on these channels computed, reused where this call repeats
     it (a fit's finite differences); the result is the same either way.
     """
     memo = memo if memo is not None and memo.holds(channels) else NO_MEMO

@@ -37,15 +37,15 @@ import numpy as np
 import pandas as pd
 import scipy.optimize
 
-from benchlab.clutch import clutch_network, convection_resistance
+from benchlab.model.clutch import clutch_network, convection_resistance
 from benchlab.errors import InputError
-from benchlab.metrics import robust_sigma
+from benchlab.identify.metrics import robust_sigma
 from benchlab.progress import SILENT, Progress, Task
 from benchlab.runfile import (Event, load_analysis, load_attrs, load_events, load_run, load_schedule,
                               write_analysis, write_analysis_file)
 from benchlab.runfile.schema import END_CONDITION
-from benchlab.simulation import initial_state, input_channels
-from benchlab.solver import run_network
+from benchlab.network.simulation import initial_state, input_channels
+from benchlab.network.solver import run_network
 from protocols.schedule import Step
 
 COVERAGE_K = 2.0

@@ -1,4 +1,4 @@
-"""What `benchlab.solver.discretise` computed on one run's channels, kept to be reused where a call repeats it.
+"""What `benchlab.network.solver.discretise` computed on one run's channels, kept to be reused where a call repeats it.
 
 A fit's finite differences move one parameter at a time: the laws that do not read it, the operating points
 when no varying law changed, the matrices when neither those nor a capacity or time constant changed, and the
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
 
-from benchlab.network import Channels, Params, ThermalNetwork
+from benchlab.network.structure import Channels, Params, ThermalNetwork
 
 MAX_LAWS = 256  # cached law values per memo before it starts over (a diagnosis builds hundreds of candidates)
 MAX_NETWORKS = 32  # networks whose last stages are kept

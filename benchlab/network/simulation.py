@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 
 from benchlab.errors import InputError
-from benchlab.network import Params, ThermalNetwork
-from benchlab.solver import run_network
+from benchlab.network.structure import Params, ThermalNetwork
+from benchlab.network.solver import run_network
 
 
 def _held(values: np.ndarray) -> np.ndarray:
@@ -41,7 +41,7 @@ def model_network(params: Params, network: ThermalNetwork | None = None) -> Ther
         return network
     if hasattr(params, "network"):
         return params.network
-    from benchlab.clutch import clutch_network
+    from benchlab.model.clutch import clutch_network
 
     return clutch_network()
 
