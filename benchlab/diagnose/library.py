@@ -81,6 +81,9 @@ class Candidate:
     exact: bool = True
     #: every signal the extension reads (a product of two reads both; `signal` names the first)
     signals: tuple[str, ...] = ()
+    #: parameters the extension fits once per run group instead of once for all runs (per_group_candidates): the
+    #: model stays as it is, the runs disagree
+    splits: tuple[str, ...] = ()
 
     @property
     def reads(self) -> tuple[str, ...]:
@@ -747,10 +750,34 @@ def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, s
     return [c for c in found if all(_available(s, channels) for s in c.reads)]
 
 
+PER_GROUP = "per_run"  # the mechanism of a parameter the runs disagree on
+
+
+def per_group_candidates(model: ModelDefinition, names: "list[str]", group_by: str = "run") -> list[Candidate]:
+    """With several runs (or run groups, `--group-by`): for each parameter in `names`, "the runs need different
+    values of it" (the bench, the day or the specimen differ). It adds no physics: the model is unchanged and the
+    parameter is fitted once per group, judged like any other extension by what it gains on held-out blocks of the
+    same runs. Its nodes are those whose laws read it (the capacity's node, a link's two ends, a source's node)."""
+    out = []
+    for name in names:
+        nodes = [n for n, capacity in model.nodes.items() if capacity == name]
+        nodes += [n for link in model.links if name in link.resistance.names for n in link.between]
+        nodes += [s.node for s in model.sources if name in s.heat.names]
+        out.append(Candidate(f"{PER_GROUP}_{name}", None, PER_GROUP, f"{name}@<{group_by}>",
+                             f"the runs disagree on {name}: fitted once per {group_by}, the model otherwise unchanged",
+                             lambda model, channels: model, nodes=tuple(n for n in dict.fromkeys(nodes)
+                                                                         if n in model.nodes),
+                             splits=(name,)))
+    return out
+
+
 def telling_apart(model: ModelDefinition, first: Candidate, second: Candidate) -> str:
     """The measurement that would tell two candidate extensions apart: a sensor on a node either changes that the
     model does not measure (both change its heat balance differently); else runs in which their signals vary
     independently; else longer runs (more blocks for the test between them)."""
+    if first.splits or second.splits:
+        return ("runs of each group with the other's conditions: the same bench, day and specimen as the other "
+                "runs, where the parameter's difference would vanish and the other explanation's would not")
     measured = set(model.outputs.values())
     channel_of = {node: channel for channel, node in {**model.simulated, **model.outputs}.items()}
     unmeasured = sorted(n for n in set(first.nodes) | set(second.nodes) if n in model.nodes and n not in measured)
