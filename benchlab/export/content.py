@@ -18,7 +18,8 @@ import numpy as np
 
 from benchlab.errors import InputError
 from benchlab.export.enums import value_texts
-from benchlab.runfile import ALIGNED_MEANING, StoredGroup, load_attrs, load_run, load_streams
+from benchlab.runfile import StoredGroup, load_attrs, load_run, load_streams
+from benchlab.runfile.schema import aligned_description
 
 
 @dataclass(frozen=True)
@@ -85,12 +86,8 @@ def read_content(path: "str | os.PathLike[str]") -> RunContent:
 
 
 def _aligned_comment(name: str, source: dict | None, description: str | None) -> str:
-    parts = [description] if description is not None else []
-    parts += [ALIGNED_MEANING[name]] if name in ALIGNED_MEANING else []
-    if source:
-        scale = f" × {source['scale']:g}" if source.get("scale", 1.0) != 1.0 else ""
-        parts.append(f"from {source['stream']}.{source['column']}{scale}, held on the grid")
-    return "; ".join(parts)
+    """The stored description; for a file written before /aligned carried one, made as the writer makes it."""
+    return description if description is not None else aligned_description(name, source)
 
 
 def _in_time_order(group: StoredGroup, texts: dict[str, dict[int, str]]) -> tuple[ChannelGroup, int]:
