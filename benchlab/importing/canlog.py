@@ -130,8 +130,9 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
                "frames of ids the DBC does not know": int((usable & ~is_known).sum()),
                "unreadable end of file": broken}
     codecs = compile_codecs(db)
-    stamps = frames["timestamp"]
-    unix = bool(np.nanmin(stamps) > UNIX_TIME_S)
+    first = float(np.nanmin(frames["timestamp"]))
+    unix = first > UNIX_TIME_S  # the log's start is known: its stamps from then on
+    stamps = frames["timestamp"] - first if unix else frames["timestamp"]
     decoded: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
     short = 0
     for key, message in known.items():
@@ -151,7 +152,7 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
         channels.append(_channel(path, entry, message, signal, time, values[signal.name]))
         streams[channels[-1].stream] = {"source_file": path.name, "bus": "CAN", "message": message.name,
                                         "frame_id": int(message.frame_id), "node": ", ".join(message.senders)}
-    start = datetime.fromtimestamp(0, timezone.utc) if unix else None
+    start = datetime.fromtimestamp(first, timezone.utc) if unix else None
     return Input(path, channels, start, {}, streams, skipped)
 
 
