@@ -32,6 +32,15 @@ def bench_run(tmp_path_factory):
     return path
 
 
+def _values(mdf, name):
+    """A channel's stored numbers (enums before their texts) with its invalid samples as NaN, and the signal."""
+    sig = mdf.get(name, ignore_invalidation_bits=True, raw=True)
+    values = sig.samples.astype(np.float64)
+    if sig.invalidation_bits is not None:
+        values[np.asarray(sig.invalidation_bits, dtype=bool)] = np.nan
+    return values, sig
+
+
 def _one_line_exit_2(argv, capsys, *words):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
@@ -54,8 +63,8 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
             streams = list(f["raw"])
             assert acq == ["/aligned", *(f"/raw/{s}" for s in streams), "/events"]
             for name, ds in f["aligned"].items():
-                sig = mdf.get(name)
-                np.testing.assert_array_equal(sig.samples, ds[()])
+                values, sig = _values(mdf, name)
+                np.testing.assert_array_equal(values, ds[()])
                 np.testing.assert_array_equal(sig.timestamps, f["aligned/time"][()])
                 assert sig.unit == ds.attrs["units"]
             assert "ϑ_F" in mdf.get("T_flywheel").comment and "node.T_flywheel_1" in mdf.get("T_flywheel_1").comment
@@ -65,8 +74,8 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
                 for column, ds in group.items():
                     if column == "time":
                         continue
-                    sig = mdf.get(f"{stream}.{column}", raw=True)  # the stored numbers (enums: before the texts)
-                    np.testing.assert_array_equal(sig.samples, ds[()][order])
+                    values, sig = _values(mdf, f"{stream}.{column}")  # enums: the numbers before the texts
+                    np.testing.assert_array_equal(values, ds[()][order])
                     np.testing.assert_array_equal(sig.timestamps, group["time"][()][order])
                     assert sig.unit == ds.attrs["units"]
             kinds = mdf.get("events.kind")
@@ -87,6 +96,15 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
         assert "run_complete" in {k.decode() for k in kinds.samples}
         assert {"synchronised", "time"} & {r.decode() for r in reasons}  # the launch's and the steps' ends
         assert 'name="schema">benchlab-run/1<' in mdf.header.comment
+        # not measured: an invalidation bit (the flywheel node's first readings come after the grid's first rows);
+        # enums and counters as integers; CAN channels name their message and sending node
+        temperature = mdf.get("T_flywheel", ignore_invalidation_bits=True)
+        assert temperature.invalidation_bits is not None and temperature.invalidation_bits.any()
+        assert len(mdf.get("T_flywheel").samples) == (~np.asarray(temperature.invalidation_bits)).sum()
+        for name in ("can_clutch.clamp_state", "can_drive.fault_code", "node.seq", "clutch_state"):
+            assert mdf.get(name, raw=True).samples.dtype.kind in "iu", name
+        clamp = mdf.get("can_clutch.clamp_state")
+        assert clamp.source.name == "ClutchActuator" and "ClutchActuator_Status" in clamp.source.path
     finally:
         mdf.close()
 
@@ -108,7 +126,7 @@ def test_mf4_of_a_crashed_run_stops_at_its_progress_record(tmp_path):
     assert main(["export", str(run), "--to", str(out)]) == 0
     mdf = MDF(out)
     try:
-        assert len(mdf.get("engine_speed").samples) == progress["aligned_rows"]
+        assert len(mdf.get("engine_speed", ignore_invalidation_bits=True).samples) == progress["aligned_rows"]
         speed = mdf.get("bench.engine_speed")
         assert len(speed.samples) == progress["rows/bench"] == 150 and np.isfinite(speed.timestamps).all()
         assert list(mdf.get("events.kind").samples) == [b"cycle_start"]
@@ -189,10 +207,10 @@ def test_mf4_of_a_simulate_output_puts_model_beside_measurement(run_file, params
         assert [g.channel_group.acq_name for g in mdf.groups] == ["/aligned", "/simulated"]
         with h5py.File(sim, "r") as f:
             for name in ("T_flywheel", "T_pressure_plate"):
-                model = mdf.get(f"simulated.{name}")
-                np.testing.assert_array_equal(model.samples, f["simulated"][name][()])
-                assert model.unit == "degC"
-            np.testing.assert_array_equal(mdf.get("T_flywheel").samples, f["aligned/T_flywheel"][()])
+                model, sig = _values(mdf, f"simulated.{name}")
+                np.testing.assert_array_equal(model, f["simulated"][name][()])
+                assert sig.unit == "degC"
+            np.testing.assert_array_equal(_values(mdf, "T_flywheel")[0], f["aligned/T_flywheel"][()])
     finally:
         mdf.close()
 
