@@ -224,3 +224,27 @@ def test_mf4_of_a_bench_run_goes_back_into_a_run_file_with_its_enums_as_numbers(
     assert run.attrs["units"]["clamp_state"] == "1" and {0.0, 1.0} <= set(run["clamp_state"].dropna())
     rows = min(len(run), len(source))
     np.testing.assert_array_equal(run["T_air"].to_numpy()[:rows], source["T_air"].to_numpy()[:rows])
+
+
+def test_mf4_of_some_channels_a_time_range_on_one_raster(bench_run, tmp_path, capsys):
+    out = tmp_path / "part.mf4"
+    assert main(["export", str(bench_run), "--to", str(out), "--channels", "T_air,engine_speed",
+                 "--channels", "can_clutch.clamp_state", "--start", "2", "--stop", "8", "--raster", "0.1"]) == 0
+    run = load_run(bench_run)
+    mdf = MDF(out)
+    try:
+        names = {ch.name for group in mdf.groups for ch in group.channels}
+        assert names == {"time", "T_air", "engine_speed", "can_clutch.time", "can_clutch.clamp_state"}
+        speed, _ = _values(mdf, "engine_speed")
+        clamp = mdf.get("can_clutch.clamp_state", raw=True)
+        np.testing.assert_allclose(clamp.timestamps, np.arange(2.0, 8.0 + 1e-9, 0.1), atol=1e-9)
+        assert clamp.samples.dtype.kind in "iu" and {0, 1} <= set(clamp.samples.tolist())  # held: no 0.5
+        grid = run["time"].to_numpy()
+        np.testing.assert_allclose(speed, np.interp(np.arange(2.0, 8.0 + 1e-9, 0.1), grid, run["engine_speed"]),
+                                   atol=1e-6)
+    finally:
+        mdf.close()
+    _one_line_exit_2(["export", str(bench_run), "--to", str(tmp_path / "x.mf4"), "--channels", "T_nothing"],
+                     capsys, "--channels", "T_nothing")
+    _one_line_exit_2(["export", str(bench_run), "--to", str(tmp_path / "x.mf4"), "--start", "5", "--stop", "1"],
+                     capsys, "--start")
