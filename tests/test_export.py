@@ -68,6 +68,8 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
                 np.testing.assert_array_equal(sig.timestamps, f["aligned/time"][()])
                 assert sig.unit == ds.attrs["units"]
             assert "ϑ_F" in mdf.get("T_flywheel").comment and "node.T_flywheel_1" in mdf.get("T_flywheel_1").comment
+            for name, ds in f["aligned"].items():  # one home: the run file's own descriptions are what MDF shows
+                assert name == "time" or ds.attrs["description"] == mdf.get(name).comment != "", name
             for stream in streams:
                 group = f["raw"][stream]
                 order = np.argsort(group["time"][()], kind="stable")
