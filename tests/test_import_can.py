@@ -124,12 +124,14 @@ def test_a_run_rebuilt_from_its_blf_log_and_its_temperatures_identifies_to_the_s
         assert abs(fits[1]["params"][name] - value) <= fits[0]["uncertainty"][name], name
 
 
-def test_an_asc_log_from_python_cans_writer_imports_with_a_mapping(tmp_path, short_run):
-    """A vendor-style mapping names DBC signals (MESSAGE.SIGNAL or SIGNAL) for contract channels; an ASC log is
-    relative time, so it starts where the CSV's clock does."""
+@pytest.mark.parametrize("suffix", [".asc", ".trc", ".log", ".mf4"])
+def test_a_log_from_python_cans_writers_imports_with_a_mapping(suffix, tmp_path, short_run):
+    """A vendor-style mapping names DBC signals (MESSAGE.SIGNAL or SIGNAL) for contract channels; each of
+    python-can's log formats (an ASC log in relative time, an MF4 of bus logging, ...) starts where the CSV's
+    clock does."""
     part = short_run.iloc[:1000]
     frames = _status_frames(part)
-    asc, csv, mapping, out = tmp_path / "bus.asc", tmp_path / "t.csv", tmp_path / "map.toml", tmp_path / "r.h5"
+    asc, csv, mapping, out = tmp_path / f"bus{suffix}", tmp_path / "t.csv", tmp_path / "map.toml", tmp_path / "r.h5"
     with can.Logger(str(asc)) as writer:
         log_frames(writer, frames)
     part[["time", *TEMPERATURES, "friction_power", "clutch_state"]].to_csv(csv, index=False)

@@ -86,6 +86,16 @@ def test_a_recorders_mdf_with_a_mapping_becomes_a_run_file_identify_accepts(tmp_
     with h5py.File(out) as f:
         attrs = dict(f.attrs)
         units = {k: f["aligned"][k].attrs["units"] for k in f["aligned"]}
+        # each source channel raw at its own rate, as the file held it (units, the invalid sample NaN)
+        raw = {name: {k: g[k][()] for k in g} for name, g in f["raw"].items()}
+        assert set(raw) == {"messung.CAN1 100 Hz", "messung.node 20 Hz", "messung.scanner 2 Hz"}
+        assert f["raw/messung.scanner 2 Hz/T_Gehaeuse"].attrs["units"] == "K"
+        assert "T_Luft" in f["aligned/T_air"].attrs["description"]
+    assert [len(raw[g]["time"]) for g in sorted(raw)] == [60000, 12000, 1200]
+    np.testing.assert_allclose(raw["messung.CAN1 100 Hz"]["time"][:2], [0.004, 0.014])
+    assert np.flatnonzero(np.isnan(raw["messung.scanner 2 Hz"]["T_Luft"])).tolist() == [INVALID]
+    np.testing.assert_allclose(raw["messung.node 20 Hz"]["T_Gehaeuse"],
+                               recorder_part["T_housing"].to_numpy()[::5] + 273.15)
     assert units == {**{k: "degC" for k in ("T_air", "T_ambient", "T_flywheel", "T_housing")}, "time": "s",
                      "engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": "N*m", "load_torque": "N*m",
                      "clutch_state": "1", "friction_power": "W"}
