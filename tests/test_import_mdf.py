@@ -94,8 +94,9 @@ def test_a_recorders_mdf_with_a_mapping_becomes_a_run_file_identify_accepts(tmp_
     assert [len(raw[g]["time"]) for g in sorted(raw)] == [60000, 12000, 1200]
     np.testing.assert_allclose(raw["messung.CAN1 100 Hz"]["time"][:2], [0.004, 0.014])
     assert np.flatnonzero(np.isnan(raw["messung.scanner 2 Hz"]["T_Luft"])).tolist() == [INVALID]
-    np.testing.assert_allclose(raw["messung.node 20 Hz"]["T_Gehaeuse"],
-                               recorder_part["T_housing"].to_numpy()[::5] + 273.15)
+    np.testing.assert_allclose(raw["messung.scanner 2 Hz"]["T_Gehaeuse"],
+                               recorder_part["T_housing"].to_numpy()[::50] + 273.15)
+    assert set(raw["messung.node 20 Hz"]) == {"time", "T_Schwungrad"}  # the channels picked, not the group's all
     assert units == {**{k: "degC" for k in ("T_air", "T_ambient", "T_flywheel", "T_housing")}, "time": "s",
                      "engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": "N*m", "load_torque": "N*m",
                      "clutch_state": "1", "friction_power": "W"}
