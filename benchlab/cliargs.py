@@ -30,6 +30,19 @@ def positive_float(what: str, maximum: float) -> Callable[[str], float]:
     return parse
 
 
+def signed_float(what: str, maximum: float) -> Callable[[str], float]:
+    """A finite number in [-maximum, maximum]; `what` says what it is, e.g. "a run time in s"."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and abs(value) <= maximum):
+            raise argparse.ArgumentTypeError(f"{what}: a number within ±{maximum:g}, got {text!r}")
+        return value
+    return parse
+
+
 def count(what: str, maximum: int | None, minimum: int = 1) -> Callable[[str], int]:
     """An integer in [minimum, maximum] (no upper bound for None); `what` says what it counts, e.g. "cycles"."""
     expected = f"an integer in [{minimum}, {maximum}]" if maximum is not None else f"an integer >= {minimum}"

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 from benchlab import cliargs
 from benchlab.bounds import MAX_RUN_DURATION_S
@@ -20,8 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="file to write: .mf4 (MDF 4.10), .csv or .parquet (needs the [export] extra)")
     parser.add_argument("--channels", action="extend", nargs="+", type=_names, metavar="NAME[,NAME…]",
                         help="only these channels (their export names: T_air, can_drive.speed, events.kind, ...)")
-    parser.add_argument("--start", type=_seconds, metavar="S", help="from this run time on (s)")
-    parser.add_argument("--stop", type=_seconds, metavar="S", help="up to this run time (s)")
+    run_time = cliargs.signed_float("a run time in s", MAX_RUN_DURATION_S)
+    parser.add_argument("--start", type=run_time, metavar="S", help="from this run time on (s)")
+    parser.add_argument("--stop", type=run_time, metavar="S", help="up to this run time (s)")
     parser.add_argument("--raster", type=cliargs.positive_float("a raster in s", MAX_RUN_DURATION_S), metavar="S",
                         help="every channel group on one raster of S seconds (states and counters held, the rest "
                              "interpolated; a gap stays empty)")
@@ -32,17 +32,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _names(text: str) -> list[str]:
     """`T_air,T_flywheel` -> the channel names."""
     return [name.strip() for name in text.split(",") if name.strip()]
-
-
-def _seconds(text: str) -> float:
-    """A run time in s within the longest run."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and abs(value) <= MAX_RUN_DURATION_S):
-        raise argparse.ArgumentTypeError(f"a run time in s within ±{MAX_RUN_DURATION_S:g}, got {text!r}")
-    return value
 
 
 def run(args: argparse.Namespace) -> int:

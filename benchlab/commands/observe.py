@@ -50,15 +50,6 @@ def _reset(text: str) -> Reset:
     return Reset(channel.strip(), value)
 
 
-def _offset(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and abs(value) <= MAX_OFFSET_K):
-        raise argparse.ArgumentTypeError(f"a temperature offset in K within ±{MAX_OFFSET_K:g}, got {text!r}")
-    return value
-
 
 def _sensor_noise(text: str) -> tuple[str, float]:
     channel, _, value = text.partition("=")
@@ -84,7 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--adapt", action="append", default=[], metavar="LINK",
                         help="correct the resistance law of this link online (e.g. R_PA: eq. 11, shared with R_FA); "
                              "an extended Kalman filter; repeatable")
-    parser.add_argument("--initial-offset", type=_offset, default=0.0, metavar="K",
+    parser.add_argument("--initial-offset", type=cliargs.signed_float("a temperature offset in K", MAX_OFFSET_K), default=0.0, metavar="K",
                         help="start every estimate K away from where simulate starts it (the start is then known to "
                              "within |K| at best)")
     parser.add_argument("--initial-std", type=cliargs.positive_float("an initial spread in K", MAX_OFFSET_K),
