@@ -1,6 +1,8 @@
-"""`benchlab import DATA.csv|DATA.mf4 --out RUN.h5 [--dt S] [--mapping MAP.toml] [--unit NAME=UNIT …]
-[--model FILE.toml|linear|nonlinear]`: a CSV or an MDF file becomes a run file (contract sections 1 and 6). An MDF
-file is read by benchlab.importing.mdf (channels by name or mapping, onto the grid --dt); the CSV reader is here.
+"""`benchlab import DATA… --out RUN.h5 [--dt S] [--mapping MAP.toml] [--dbc FILE.dbc] [--offset FILE=S]
+[--unit NAME=UNIT …] [--model FILE.toml|linear|nonlinear]`: a CSV, an MDF file or a CAN log, or several of them
+merged on one clock, becomes a run file (contract sections 1 and 6). MDF files are read by benchlab.importing.mdf,
+CAN logs by benchlab.importing.canlog (channels by name or mapping), merged onto the grid --dt with their raw
+streams by benchlab.importing.sources; the CSV reader is here.
 
 Columns with the contract's /aligned names are in the contract's units unless their unit is given, in any spelling
 of any unit of that dimension (`°C`, `K`, `Nm`, `1/min`, …: converted by benchlab.units); any other column needs
