@@ -12,6 +12,7 @@ from asammdf import MDF
 
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from benchlab.cli import main
+from benchlab.importing.mdf import numbers
 from benchlab.runfile import ALIGNED_UNITS, REQUIRED, load_run, read_progress
 from benchlab.runner.session import RunRequest, execute
 from protocols.schedule import Step
@@ -34,10 +35,7 @@ def bench_run(tmp_path_factory):
 
 def _values(mdf, name):
     """A channel's stored numbers (enums before their texts) with its invalid samples as NaN, and the signal."""
-    sig = mdf.get(name, ignore_invalidation_bits=True, raw=True)
-    values = sig.samples.astype(np.float64)
-    if sig.invalidation_bits is not None:
-        values[np.asarray(sig.invalidation_bits, dtype=bool)] = np.nan
+    sig, values = numbers(mdf, name=name)
     return values, sig
 
 

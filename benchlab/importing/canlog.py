@@ -119,8 +119,9 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
     named = {m.channel for m in mapped}
     bench = [e for e in bench_entries(gear_ratio) if e.channel not in named]
     entries = [(e, hit) for e in mapped if (hit := _signal(path, db, e)) is not None]
-    if all(_signal(path, db, e) is not None for e in bench):
-        entries += [(e, _signal(path, db, e)) for e in bench]
+    bench_hits = [(e, _signal(path, db, e)) for e in bench]
+    if all(hit is not None for _, hit in bench_hits):  # the bench's DBC (or one holding its signals)
+        entries += bench_hits
     flags = frames["flags"]
     usable = (flags & (ERROR | REMOTE)) == 0
     ids = frames["arbitration_id"].astype(np.int64) | np.where(flags & EXTENDED, 1 << 31, 0)
@@ -133,17 +134,18 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
     first = float(np.nanmin(frames["timestamp"]))
     unix = first > UNIX_TIME_S  # the log's start is known: its stamps from then on
     stamps = frames["timestamp"] - first if unix else frames["timestamp"]
+    wanted = {message.name for _, (message, _) in entries}
     decoded: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
-    short = 0
+    skipped["frames shorter than their message"] = skipped["frames that do not decode"] = 0
     for key, message in known.items():
         rows = np.flatnonzero(usable & (ids == key))
         whole = frames["length"][rows] >= message.length
-        short += int((~whole).sum())
-        rows = rows[whole]
-        if len(rows):
-            decoded[message.name] = (stamps[rows],
-                                     codecs[message.name].decode_array(frames["data"][rows, :message.length]))
-    skipped["frames shorter than their message"] = short
+        skipped["frames shorter than their message"] += int((~whole).sum())
+        if message.name in wanted and whole.any():
+            rows = rows[whole]
+            values, ok = _decode(codecs[message.name], frames["data"][rows])
+            skipped["frames that do not decode"] += int((~ok).sum())
+            decoded[message.name] = (stamps[rows][ok], {k: v[ok] for k, v in values.items()})
     channels, streams = [], {}
     for entry, (message, signal) in entries:
         if message.name not in decoded:
@@ -154,6 +156,16 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
                                         "frame_id": int(message.frame_id), "node": ", ".join(message.senders)}
     start = datetime.fromtimestamp(first, timezone.utc) if unix else None
     return Input(path, channels, start, {}, streams, skipped)
+
+
+def _decode(codec: Any, data: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Frames' data bytes (n, 64) decoded by a compiled codec (drivers/can_codec.py): signal -> values, and which
+    rows decoded (a multiplexed message's row cantools refuses does not)."""
+    table = codec.table
+    payload = np.zeros((len(data), table.payload_bytes), dtype=np.uint8)  # the message's bytes, zeros after
+    payload[:, :codec.length] = data[:, :codec.length]
+    values, ok = table.decode(np.zeros(len(data), dtype=np.intp), payload)
+    return {key: values[:, j] for j, key in enumerate(codec.columns) if key is not None}, ok
 
 
 def _channel(path: Path, entry: Mapped, message: Any, signal: Any, time: np.ndarray,

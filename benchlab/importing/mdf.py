@@ -34,6 +34,21 @@ def _open(path: Path) -> Any:
         raise InputError(path, "file", f"an MDF file asammdf reads ({type(exc).__name__}: {exc})") from None
 
 
+def numbers(mdf: Any, **where: Any) -> tuple[Any, np.ndarray | None]:
+    """A channel (asammdf's `get` arguments: name, or group and index) as a run file stores it: its Signal, and its
+    samples as float64 with NaN where the invalidation bit is set (an enum: the numbers behind its texts); None for
+    samples that are not 1-D numbers."""
+    sig = mdf.get(**where, ignore_invalidation_bits=True)  # every sample, with its bit
+    if sig.samples.dtype.kind in "SUO":  # an enum shown as its value table's texts: the numbers behind them
+        sig = mdf.get(**where, ignore_invalidation_bits=True, raw=True)
+    if sig.samples.dtype.kind not in "iufb" or sig.samples.ndim != 1:
+        return sig, None
+    values = sig.samples.astype(np.float64)
+    if sig.invalidation_bits is not None:
+        values[np.asarray(sig.invalidation_bits, dtype=bool)] = np.nan
+    return sig, values
+
+
 def _location(path: Path, mdf: Any, entry: Mapped) -> tuple[int, int] | None:
     """(group, index) of the entry's source channel, None where the file has none; InputError where ambiguous."""
     found = [(g, i) for g, i in mdf.channels_db.get(entry.source, ()) if entry.group in (None, g)]
@@ -53,15 +68,10 @@ def _stream(path: Path, mdf: Any, group: int) -> str:
 def _channel(path: Path, mdf: Any, entry: Mapped, group: int, index: int) -> SourceChannel:
     """One source channel: time stamps, values in the run file's unit (invalid samples NaN), that unit, the rule,
     and its samples as the file held them."""
-    sig = mdf.get(group=group, index=index, ignore_invalidation_bits=True)  # every sample, with its bit
-    if sig.samples.dtype.kind in "SUO":  # an enum shown as its value table's texts: the numbers behind them
-        sig = mdf.get(group=group, index=index, ignore_invalidation_bits=True, raw=True)
+    sig, raw = numbers(mdf, group=group, index=index)
     field = f"channel {entry.channel} ← {entry.source}"
-    if sig.samples.dtype.kind not in "iufb" or sig.samples.ndim != 1:
+    if raw is None:
         raise InputError(path, field, f"a numeric channel, got samples of type {sig.samples.dtype}")
-    raw = sig.samples.astype(np.float64)
-    if sig.invalidation_bits is not None:
-        raw[np.asarray(sig.invalidation_bits, dtype=bool)] = np.nan
     unit = entry.unit if entry.unit is not None else str(sig.unit or "")
     if not unit and entry.channel not in ALIGNED_UNITS:
         raise InputError(path, field, "a unit (the MDF file gives none): unit in the mapping file, \"1\" for a number")
