@@ -163,3 +163,19 @@ def test_bad_can_inputs_are_one_line(tmp_path, logged, refused):
             "channel T_air ← NoSuchSignal")
     (tmp_path / "empty.blf").write_bytes(b"LOGG" + bytes(200))
     refused(["import", str(tmp_path / "empty.blf"), "--dt", "0.01", "--out", out], "empty.blf")
+
+
+def test_a_blf_log_corrupt_part_way_keeps_the_frames_before(tmp_path, logged, capsys):
+    blf, csv = logged
+    data = bytearray(blf.read_bytes())
+    data[len(data) // 2:len(data) // 2 + 100] = b"x" * 100  # inside a compressed container
+    bad, out = tmp_path / "bad.blf", tmp_path / "r.h5"
+    bad.write_bytes(bytes(data))
+    assert main(["import", str(bad), str(csv), "--dt", "0.01", "--offset", f"{csv.name}={-LOGGER_AHEAD_S}",
+                 "--out", str(out)]) == 0
+    assert "unreadable rest of the file: 1 skipped" in capsys.readouterr().out
+    run = benchlab.load_run(out)
+    speed = run["engine_speed"].to_numpy()
+    last = int(np.flatnonzero(np.isfinite(speed))[-1])
+    assert 0.2 * len(run) < last < 0.8 * len(run) and np.isnan(speed[last + 1:]).all()  # never bridged or made up
+    assert np.isfinite(run["T_air"].to_numpy()[-100:]).all()  # the logger's readings go on

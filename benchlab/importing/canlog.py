@@ -129,7 +129,7 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
     is_known = np.isin(ids, list(known))
     skipped = {"error or remote frames": int((~usable).sum()),
                "frames of ids the DBC does not know": int((usable & ~is_known).sum()),
-               "unreadable end of file": broken}
+               "unreadable rest of the file": broken}
     codecs = compile_codecs(db)
     first = float(np.nanmin(frames["timestamp"]))
     unix = first > UNIX_TIME_S  # the log's start is known: its stamps from then on
