@@ -20,6 +20,8 @@ from drivers.can_frames import ERROR, join, make_frames
 from drivers.can_log import log_frames
 from drivers.can_signals import BENCH_DBC, CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING, STATE_RUNNING
 
+from identified import assert_same_parameters  # tests/identified.py
+
 START = datetime(2026, 3, 2, 7, 45, 12, tzinfo=timezone.utc)
 #: The temperature logger's clock reads this much ahead of the CAN log's (it was started that long before).
 LOGGER_AHEAD_S = 3.0
@@ -115,13 +117,7 @@ def test_a_run_rebuilt_from_its_blf_log_and_its_temperatures_identifies_to_the_s
     energy = [np.nansum(r["friction_power"].to_numpy()) * 0.01 for r in (run, short_run)]
     assert energy[0] == pytest.approx(energy[1], rel=0.02)
 
-    fits = []
-    for path in (run_file, out):
-        params = tmp_path / f"{path.stem}.json"
-        assert main(["identify", str(path), "--model", "linear", "--out", str(params), "-q"]) == 0
-        fits.append(json.loads(params.read_text()))
-    for name, value in fits[0]["params"].items():
-        assert abs(fits[1]["params"][name] - value) <= fits[0]["uncertainty"][name], name
+    assert_same_parameters(tmp_path, run_file, out)
 
 
 @pytest.mark.parametrize("suffix", [".asc", ".trc", ".log", ".mf4"])

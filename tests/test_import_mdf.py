@@ -4,7 +4,7 @@ mapping file, onto one grid; and a run exported to MF4 and imported back identif
 from __future__ import annotations
 
 import json
-from datetime import datetime, timedelta, timezone
+from datetime import datetime, timezone
 
 import h5py
 import numpy as np
@@ -13,6 +13,8 @@ import pytest
 import benchlab
 from benchlab.cli import main
 from benchlab.importing.grid import resample
+
+from identified import assert_same_parameters  # tests/identified.py
 
 START = datetime(2026, 3, 2, 7, 45, 12, tzinfo=timezone.utc)
 MAPPING = """
@@ -128,13 +130,7 @@ def test_a_run_exported_to_mf4_and_imported_back_identifies_to_the_same_paramete
     mf4, back = tmp_path / "run.mf4", tmp_path / "back.h5"
     assert main(["export", str(run_file), "--to", str(mf4)]) == 0
     assert main(["import", str(mf4), "--dt", "0.01", "--out", str(back)]) == 0
-    fits = []
-    for path in (run_file, back):
-        out = tmp_path / f"{path.stem}.json"
-        assert main(["identify", str(path), "--model", "linear", "--out", str(out), "-q"]) == 0
-        fits.append(json.loads(out.read_text()))
-    for name, value in fits[0]["params"].items():
-        assert abs(fits[1]["params"][name] - value) <= fits[0]["uncertainty"][name], name
+    assert_same_parameters(tmp_path, run_file, back)
 
 
 @pytest.mark.parametrize("mapping, field", [
