@@ -37,7 +37,7 @@ from numba import njit
 
 from benchlab.outputs import OutputError, is_no_space, no_space
 from benchlab.runfile.read import complete_events, read_progress, text
-from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA
+from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA, aligned_description
 
 _EPS = 1e-9
 #: The running file's `status` as HDF5 stores a variable-length string: a global heap object (its size as 8 bytes,
@@ -575,6 +575,9 @@ class RunWriter:
             self._write_group(f, "aligned", {"time": "s", **self.layout.aligned_units},
                               capacity, data, compact, "aligned")
             f["aligned"].attrs["dt"] = float(self.layout.dt)
+            sources = describe_layout(self.layout)["aligned"]
+            for name, ds in f["aligned"].items():
+                ds.attrs["description"] = aligned_description(name, sources.get(name))
             raw = f.create_group("raw")
             for s in self.layout.streams:
                 self._write_group(raw, s.name, {"time": "s", **dict(s.columns)}, capacity, data, compact,

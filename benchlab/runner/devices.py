@@ -158,6 +158,11 @@ _CAN_KEYS = {stream: tuple(key for _, key, _ in cols) for stream, cols in _CAN_S
 #: The DBC signal (logical key of drivers.can_signals.BENCH_SIGNALS) each raw CAN column holds, by (stream, column):
 #: what `benchlab export` gives the DBC's value tables from.
 CAN_COLUMN_SIGNALS = {(stream, column): key for stream, cols in _CAN_STREAMS.items() for column, key, _ in cols}
+#: The /aligned channels taken from the CAN status streams: (channel, stream, column, times the gear ratio);
+#: `_clamp_state` is the actuator's (derive_aligned makes clutch_state and friction_power of it).
+CAN_ALIGNED = (("engine_speed", "can_drive", "speed", False), ("clutch_speed", "can_load", "speed", True),
+               ("clutch_torque", "can_clutch", "torque", False), ("_clamp_state", "can_clutch", "clamp_state", False),
+               ("load_torque", "can_load", "torque", False))
 _STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_load"}
 
 
@@ -298,12 +303,9 @@ def bench_layout(config: BenchConfig) -> Layout:
         streams.append(StreamSpec("can_clock", (("offset", "s"),), 1.0, math.inf))
     streams.append(StreamSpec("setpoints", (("engine_speed", "rpm"), ("clutch_torque", "N*m"), ("clutch_open", "1"),
                                             ("load_torque", "N*m")), 5.0, math.inf))
-    sources = [AlignedSource("engine_speed", "can_drive", "speed"),
-               AlignedSource("clutch_speed", "can_load", "speed", config.drivetrain.gear_ratio),
-               AlignedSource("clutch_torque", "can_clutch", "torque"),
-               AlignedSource("_clamp_state", "can_clutch", "clamp_state"),
-               AlignedSource("load_torque", "can_load", "torque"),
-               AlignedSource("T_flywheel_1", "node", "T_flywheel_1"),
+    sources = [AlignedSource(channel, stream, column, config.drivetrain.gear_ratio if geared else 1.0)
+               for channel, stream, column, geared in CAN_ALIGNED]
+    sources += [AlignedSource("T_flywheel_1", "node", "T_flywheel_1"),
                AlignedSource("T_flywheel_2", "node", "T_flywheel_2")]
     for name in config.instrument_channels.values():
         sources.append(AlignedSource(name, "instrument", name))
