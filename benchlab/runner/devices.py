@@ -341,15 +341,14 @@ class DriverBench:
     """The drivers of a bench (real or simulated) behind `command`/`safe_state`/`poll`."""
 
     def __init__(self, config: BenchConfig, clock: Callable[[], float], *, bus: Any = None,
-                 service: Callable[[], None] | None = None, can_log: "str | os.PathLike[str] | None" = None) -> None:
-        import can as _can
-
+                 service: Callable[[], None] | None = None, can_log: "str | os.PathLike[str] | None" = None,
+                 companion: Any = None) -> None:
+        from benchlab.runner import opening
         from drivers import can_bench, clutch_node
         from drivers.can_bench import CanBench
-        from drivers.clutch_node import ClutchNodeGateway
-        from drivers.pt1000 import Pt1000Scanner
 
         self.config, self.clock, self.service = config, clock, service
+        self.companion = companion  # closed with the bench: the simulated devices of a partly simulated bench
         self.layout = bench_layout(config)
         # every kernel the loop calls compiled (or loaded from numba's cache) before a device is opened or commanded:
         # a first-call compile inside the loop stops polling and interlocks for seconds
@@ -360,21 +359,34 @@ class DriverBench:
         self.events: list[BenchEvent] = []
         self.readings: list[Reading] = []
         channels = sorted(config.instrument_channels)
-        self.scanner = Pt1000Scanner.open(config.instrument_url, channels, mode=config.instrument_mode,
-                                          baudrate=config.instrument_baudrate, timeout=config.instrument_timeout_s,
-                                          coefficients=dict(config.instrument_calibration), clock=clock)
-        self.idn = self.scanner.identify()
-        self.scanner.reset()
-        self.gateway = ClutchNodeGateway.open(config.node_url, baudrate=config.node_baudrate,
-                                              period_s=config.node_period_s, clock=clock,
-                                              coefficients=config.node_calibration)
-        kwargs: dict[str, Any] = {"clock": clock, "idle_rpm": config.limits.idle_speed_rpm,
-                                  "timestamps": config.can_timestamps}
-        if config.dbc:
-            kwargs["dbc"] = config.dbc
-        if can_log is not None:
-            kwargs["log"] = open_can_log(can_log, config)
-        self.can = CanBench(bus if bus is not None else _can.Bus(**dict(config.can)), **kwargs)
+        opened: list[Callable[[], Any]] = []  # closers of the devices open so far: a later failure closes them
+        try:
+            self.scanner, self.idn = opening.open_scanner(
+                config.instrument_url, channels, source=config.source, mode=config.instrument_mode,
+                baudrate=config.instrument_baudrate, timeout=config.instrument_timeout_s,
+                coefficients=dict(config.instrument_calibration), clock=clock)
+            opened.append(self.scanner.close)
+            self.gateway = opening.open_gateway(config.node_url, source=config.source,
+                                                baudrate=config.node_baudrate, period_s=config.node_period_s,
+                                                clock=clock, coefficients=config.node_calibration)
+            opened.append(self.gateway.close)
+            kwargs: dict[str, Any] = {"clock": clock, "idle_rpm": config.limits.idle_speed_rpm,
+                                      "timestamps": config.can_timestamps}
+            if config.dbc:
+                kwargs["dbc"] = config.dbc
+            if bus is None:
+                bus = opening.open_can_bus(config.can, source=config.source)
+                opened.append(bus.shutdown)
+            if can_log is not None:
+                kwargs["log"] = open_can_log(can_log, config)
+            self.can = CanBench(bus, **kwargs)
+        except BaseException:
+            for closer in reversed(opened):
+                try:
+                    closer()
+                except Exception:  # noqa: BLE001 - closing what half opened is best effort
+                    pass
+            raise
         self._names = [config.instrument_channels[c] for c in self.scanner.channels]
         self._next_scan = clock()
         self._setpoints: tuple[float, ...] | None = None
@@ -537,7 +549,10 @@ class DriverBench:
         self._repeats[kind] = (now, 0)
 
     def close(self) -> None:
-        for closer in (self.scanner.close, self.gateway.close, self.can.close):
+        closers = [self.scanner.close, self.gateway.close, self.can.close]
+        if self.companion is not None:
+            closers.append(self.companion.close)
+        for closer in closers:
             try:
                 closer()
             except Exception:  # noqa: BLE001 - closing is best effort
