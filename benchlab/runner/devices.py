@@ -12,6 +12,7 @@ shared clock's time before the drivers read).
 from __future__ import annotations
 
 import functools
+import logging
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -36,6 +37,7 @@ from protocols.safety import OPEN_IDLE, SafeState
 if TYPE_CHECKING:
     from drivers.can_bench import CanBlock
 
+log = logging.getLogger(__name__)
 STATUS_CODES = {"ok": 0.0, "open": 1.0, "short": 2.0, "range": 3.0, "fault": 4.0}
 _NODE_STATUS_CODES = np.array([STATUS_CODES[s] for s in SENSOR_STATUSES])  # NodeBlock.status → stored code
 
@@ -442,6 +444,8 @@ class DriverBench:
         self._poll_can(now)
         readings, events = self.readings, self.events
         self.readings, self.events = [], []
+        for t, kind, detail in events:  # device errors, node resyncs and drop-outs, clock re-maps, controller faults
+            log.info("%.3f s %s: %s", t, kind, detail)
         return readings, events
 
     def _poll_node(self, now: float) -> None:
@@ -526,6 +530,7 @@ class DriverBench:
             self._can_remaps = self.can.clock_map.remaps
         if self.can.timestamps == "interface" and math.isfinite(self.can.clock_map.offset) and now >= self._next_clock_row:
             self.readings.append(("can_clock", now, (self.can.clock_map.offset,)))
+            log.debug("%.3f s CAN interface clock: run time = interface time %+.6f s", now, self.can.clock_map.offset)
             self._next_clock_row = now + 1.0
 
     def _error(self, now: float, kind: str, detail: str, reconnect: Callable[[], None] | None) -> None:

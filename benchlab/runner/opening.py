@@ -20,7 +20,7 @@ from drivers.errors import DeviceTimeout, DriverError, InstrumentError
 log = logging.getLogger(__name__)
 
 #: python-can interfaces whose search for channels is cheap and local (no vendor library, no network).
-CHEAP_CAN_INTERFACES = ("socketcan", "virtual")
+CHEAP_CAN_INTERFACES = ("socketcan",)  # python-can's `virtual` would only invent a channel name
 _ERRNO_WORDS = {
     errno.ENOENT: "no such device or file",
     errno.EACCES: "permission denied (on Linux, is the user in the dialout group?)",
@@ -70,7 +70,10 @@ def reason(exc: BaseException) -> str:
 
 
 def _first_line(text: object) -> str:
-    return " ".join((str(text).strip().splitlines() or [""])[0].split())
+    """A library's message as one sentence: its first line, up to its first full stop, without the stop."""
+    line = " ".join((str(text).strip().splitlines() or [""])[0].split())
+    sentence = line.split(". ", 1)[0]
+    return sentence[:-1] if sentence.endswith(".") else sentence
 
 
 def serial_ports() -> str:
@@ -92,8 +95,7 @@ def visa_resources(backend: str) -> str:
     from drivers.visa_port import DEFAULT_BACKEND, resource_manager
 
     if backend == DEFAULT_BACKEND:
-        return "pyvisa-py does not search for instruments without broadcasting on the LAN: give the instrument's " \
-               "address (TCPIP0::HOST::inst0::INSTR, TCPIP0::HOST::5025::SOCKET) or a serial port; " + serial_ports()
+        return "VISA resources not searched (pyvisa-py would broadcast on the LAN); " + serial_ports()
     try:
         found = resource_manager(backend).list_resources()
     except Exception as exc:  # noqa: BLE001 - a listing that fails is said, never raised
@@ -173,7 +175,7 @@ def open_can_bus(config: Mapping[str, Any], *, source: str, key: str = "[can]") 
         return can_channels()
 
     if interface not in can.interfaces.VALID_INTERFACES or interface == "udp_multicast":
-        raise DeviceOpenError(source, f"{key} interface", repr(interface),
+        raise DeviceOpenError(source, f"{key} interface" if key.startswith("[") else key, repr(interface),
                               "not a python-can interface" if interface != "udp_multicast" else
                               "udp_multicast leaves the machine, not allowed", exists())
     bus = _opened(lambda: can.Bus(**dict(config)), source, key, tried, exists)
