@@ -81,10 +81,11 @@ def configure_logging(verbosity: int) -> None:
 
 def _log_file(args: argparse.Namespace) -> Path | None:
     """The file `--log` asks for: FILE, or the run file's name with .log; None without --log."""
-    if args.log is None:
+    log = getattr(args, "log", None)
+    if log is None:
         return None
-    if args.log:
-        return Path(args.log)
+    if log:
+        return Path(log)
     run_file = getattr(args, "out", None) or getattr(args, "resume", None)
     if not run_file:
         raise InputError("command line", "--log", "a FILE (this command writes no run file to put it beside)")
