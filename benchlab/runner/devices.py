@@ -436,11 +436,11 @@ class DriverBench:
         now = self.clock()
         self.status.t = now
         self._poll_node(now)
+        if self.scanner.scanning:  # collected first, so that the next scan due starts in the same poll: an
+            self._poll_instrument(now)  # instrument whose replies take a tick (LAN, USB) still scans every period
         if not self.scanner.scanning and now >= self._next_scan - 1e-9:
             self._next_scan = max(self._next_scan + self.config.instrument_period_s, now + 1e-9)
             self._poll_instrument(now, start=True)
-        elif self.scanner.scanning:
-            self._poll_instrument(now)
         self._poll_can(now)
         readings, events = self.readings, self.events
         self.readings, self.events = [], []
