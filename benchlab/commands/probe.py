@@ -104,12 +104,12 @@ def _probe_bench(args: argparse.Namespace) -> list[dict[str, Any]]:
     with interrupts_held():
         from benchlab.runner.clock import RealClock
         from benchlab.runner.config import load_bench_config
-        from benchlab.runner.opening import DeviceOpenError, is_simulated
+        from benchlab.runner.opening import DeviceOpenError, has_simulated_devices
 
     config = load_bench_config(args.bench)
     src = config.source
     devices = service = None
-    if any(is_simulated(u) for u in (config.instrument_url, config.node_url, config.can.get("url"))):
+    if has_simulated_devices(config):
         with interrupts_held():
             from sim_bench.mixed import SimulatedDevices
 

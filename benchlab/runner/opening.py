@@ -12,10 +12,13 @@ from __future__ import annotations
 import errno
 import logging
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from benchlab.errors import InputError
 from drivers.errors import DeviceTimeout, DriverError, InstrumentError
+
+if TYPE_CHECKING:
+    from benchlab.runner.devices import BenchConfig
 
 log = logging.getLogger(__name__)
 
@@ -195,7 +198,6 @@ def is_simulated(url: object) -> bool:
     return isinstance(url, str) and url.startswith("sim://")
 
 
-def sim_name(url: str) -> str:
-    """NAME of `sim://NAME`."""
-    return url[len("sim://"):].rstrip("/")
-
+def has_simulated_devices(config: "BenchConfig") -> bool:
+    """Whether any device of a BENCH.toml is `sim://NAME` (then sim_bench.mixed serves them, on one plant)."""
+    return any(is_simulated(u) for u in (config.instrument_url, config.node_url, config.can.get("url")))

@@ -167,8 +167,7 @@ def open_bench(bench_choice: BenchChoice, config: BenchConfig, can_log: Path, t0
         sim, config = spec.open(config, seed, t0, initial_c)
     clock: Clock = sim.clock if sim is not None else RealClock(t0)
     devices = None
-    if sim is None and any(opening.is_simulated(u) for u in (config.instrument_url, config.node_url,
-                                                             config.can.get("url"))):
+    if sim is None and opening.has_simulated_devices(config):
         from sim_bench.mixed import SimulatedDevices  # BENCH.toml's sim:// devices: one plant behind them
 
         devices = SimulatedDevices(config, clock, seed, t0, initial_c)
