@@ -19,7 +19,6 @@ import pkgutil
 import select
 import sys
 from collections.abc import Sequence
-
 from pathlib import Path
 
 import benchlab
