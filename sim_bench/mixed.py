@@ -3,8 +3,10 @@
 `[instrument] url = "sim://NAME"` and `[node] url = "sim://NAME"` reach the scanning DMM and the node of one
 `SimBench` (registered under NAME), `[can] url = "sim://NAME"` its emulated controllers; every simulated device is
 driven by that bench's plant and runs on the run's clock (real time: the hardware beside it sets the pace). With
-the CAN bus on hardware the plant sees no set-points (its drivetrain stays at rest) and its sensors read the
-temperatures of a bench at rest.
+the CAN bus on hardware, the frames on it are copied to the emulated controllers through a second handle on the
+same bus (python-can `virtual`, socketcan and most interfaces allow one), so the plant's drivetrain follows the
+commands the PC sends and the simulated sensors see the heat of the launches; where no second handle opens, the
+plant stays at rest.
 """
 
 from __future__ import annotations
@@ -48,18 +50,41 @@ class SimulatedDevices:
                 self.names.append(name)
         self.bus: Any = None
         self.config = config
+        self._mirror: Any = None  # hardware CAN: a second handle on it, whose frames the emulated controllers take
         if "can" in urls:  # the drivers on the emulated controllers' in-process bus, stamped on the run clock
             self.bus = self.sim.driver_bus
             self.config = replace(config, can={"url": urls["can"], "channel": self.sim.name + "-can"},
                                   can_timestamps="run")
+        else:
+            self._mirror = _second_handle(config.can)
         log.info("simulated devices on one plant: %s", ", ".join(f"{k} {u}" for k, u in urls.items()))
 
     def service(self) -> None:
-        """Before the drivers poll: the emulators run up to now (SimBench.service)."""
+        """Before the drivers poll: the frames on a hardware bus copied to the emulated controllers (on the run
+        clock), the emulators run up to now (SimBench.service), their answers dropped (the hardware answers)."""
+        if self._mirror is not None:
+            while (msg := self._mirror.recv(0)) is not None:
+                msg.timestamp = 0.0  # taken now, on the run clock
+                self.sim.driver_bus.send(msg)
         self.sim.service()
+        if self._mirror is not None:
+            self.sim.driver_bus.recv_frames()
 
     def close(self) -> None:
         for name in self.names:
             registry.unregister(name)
+        if self._mirror is not None:
+            self._mirror.shutdown()
         self.sim.close()
+
+
+def _second_handle(can_config: Mapping[str, Any]) -> Any:
+    """A second python-can handle on the hardware bus, or None (logged) where the interface allows none."""
+    import can
+
+    try:
+        return can.Bus(**dict(can_config))
+    except Exception as exc:  # noqa: BLE001 - the drivers' own open says what is wrong with the bus
+        log.info("no second handle on the CAN bus (%s): the simulated plant stays at rest", exc)
+        return None
 

@@ -172,7 +172,8 @@ def test_probe_can_talks_to_emulated_controllers(capsys) -> None:
 
 def test_mixed_bench_runs_with_can_on_python_can_virtual(tmp_path, capsys) -> None:
     """Simulated scanner and node on one plant, the CAN bus python-can's virtual one with controllers on it (the
-    hardware's stand-in, its own drivetrain on the wall clock): a short run on real time."""
+    hardware's stand-in, its own drivetrain on the wall clock): a short run on real time, the plant following the
+    commands on the bus (the simulated node sees the launch's heat)."""
     from protocols.schedule import Step
 
     bench = _bench(tmp_path, "sim://mixed-dmm", "sim://mixed-node", 'interface = "virtual"\nchannel = "mixed-rig"')
@@ -191,4 +192,7 @@ def test_mixed_bench_runs_with_can_on_python_can_virtual(tmp_path, capsys) -> No
     with h5py.File(out, "r") as f:
         assert f.attrs["bench"] == str(bench)
         assert np.nanmax(f["aligned/engine_speed"][:]) > 900.0  # the controllers on the virtual bus followed the steps
-        assert f["aligned/T_flywheel_1"][-1] == pytest.approx(22.0, abs=1.5)  # the simulated node measured
+        flywheel = f["aligned/T_flywheel"][:]
+        flywheel = flywheel[np.isfinite(flywheel)]
+        rise = flywheel.max() - flywheel[0]
+    assert rise > 0.2, rise  # the plant's launch (sensor noise: 0.05 K)
