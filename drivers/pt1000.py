@@ -241,9 +241,8 @@ class Pt1000Scanner:
     def _line(self, command: str, deadline: float) -> Generator[None, None, bytes]:
         """The next reply line, taking only the bytes already there; yields while it is incomplete."""
         while True:
-            try:
-                waiting = self.port.in_waiting
-                if waiting:
+            try:  # everything already there: pyserial's socket:// says 1 byte waiting whenever any is
+                while b"\n" not in self._rx and (waiting := self.port.in_waiting):
                     self._rx += self.port.read(waiting)
             except (serial.SerialException, OSError) as exc:
                 raise ConnectionLost(f"{command}: {exc}") from exc

@@ -60,6 +60,26 @@ def test_scanner_through_visa_socket_speaks_the_serial_dialogue(scpi_server) -> 
     assert scpi_server.endpoint.commands[0] == "*IDN?" and "READ?" in scpi_server.endpoint.commands
 
 
+@pytest.mark.parametrize("transport", ["visa", "socket"])
+def test_a_reply_already_there_is_taken_in_one_collect(transport, scpi_server) -> None:
+    """The loop collects once per tick: a reply waiting is taken whole (pyserial's socket:// says one byte is
+    waiting whenever any is: the reply took a tick per byte, a scan seconds)."""
+    url = scpi_server.resource if transport == "visa" else f"socket://127.0.0.1:{scpi_server.port}"
+    scanner = Pt1000Scanner.open(url, [101, 102, 103], timeout=5.0)
+    try:
+        scanner.identify()
+        scanner.reset()
+        scanner.start_scan()
+        collects, readings = 0, None
+        while readings is None and collects < 10:
+            time.sleep(0.1)  # a tick: READ?'s reply, then SYST:ERR?'s, is there by the next one (or the one after)
+            readings = scanner.collect()
+            collects += 1
+        assert readings is not None and collects <= 4  # 2 where the machine keeps up; one byte a tick: 100
+    finally:
+        scanner.close()
+
+
 def test_a_lost_visa_instrument_is_connection_lost_then_reconnects() -> None:
     server = ScpiSocketServer(ScpiInstrumentEmulator())
     scanner = Pt1000Scanner.open(server.resource, [101], timeout=0.3)
