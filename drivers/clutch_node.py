@@ -196,10 +196,12 @@ class ClutchNodeGateway:
         """`poll`, the samples as one block of columns."""
         if self.port is None:
             raise DriverConfigError("poll() needs a port; use feed() on a gateway without one")
-        try:  # everything already there (pyserial's socket:// says 1 byte waiting whenever any is), bounded
-            received = bytearray()
-            while len(received) < MAX_POLL_BYTES and (waiting := self.port.in_waiting):
+        try:  # everything already there: pyserial's socket:// says 1 byte waiting whenever any is, so a port that
+            received = bytearray()  # says 1 is asked again (bounded); one that counts is read once a poll
+            waiting = self.port.in_waiting
+            while waiting:
                 received += self.port.read(waiting)
+                waiting = self.port.in_waiting if waiting == 1 and len(received) < MAX_POLL_BYTES else 0
         except (serial.SerialException, OSError) as exc:
             raise ConnectionLost(f"gateway port: {exc}") from exc
         data = bytes(received)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from sim_bench.bench import SimBench, SimBenchConfig
 from sim_bench.emulators import registry
+from sim_bench.emulators.sim_can_bus import SimCanBus
 
 if TYPE_CHECKING:
     from benchlab.runner.devices import BenchConfig
@@ -52,7 +53,8 @@ class SimulatedDevices:
         self.config = config
         self._mirror: Any = None  # hardware CAN: a second handle on it, whose frames the emulated controllers take
         if "can" in urls:  # the drivers on the emulated controllers' in-process bus, stamped on the run clock
-            self.bus = self.sim.driver_bus
+            self.sim.driver_bus.shutdown()  # replaced by one that runs the controllers up to each receive
+            self.bus = _ControllersSendUntilRead(self.sim.name + "-can", clock=clock, before=self.sim.can.poll)
             self.config = replace(config, can={"url": urls["can"], "channel": self.sim.name + "-can"},
                                   can_timestamps="run")
         else:
@@ -76,6 +78,21 @@ class SimulatedDevices:
         if self._mirror is not None:
             self._mirror.shutdown()
         self.sim.close()
+
+
+class _ControllersSendUntilRead(SimCanBus):
+    """The drivers' end of the emulated controllers' bus: each receive first lets the controllers send what fell
+    due up to that moment. On the real clock the time between a poll's emulation and the drivers' receive (the
+    other devices' polls, a stall of a loaded machine) would otherwise read as a silent controller; hardware
+    controllers keep sending while the PC is busy."""
+
+    def __init__(self, channel: str, *, clock: Callable[[], float], before: Callable[[], None]) -> None:
+        super().__init__(channel, clock=clock)
+        self._before = before
+
+    def recv_frames(self) -> Any:
+        self._before()
+        return super().recv_frames()
 
 
 def _second_handle(can_config: Mapping[str, Any]) -> Any:

@@ -125,22 +125,24 @@ def test_vv_shows_the_scpi_dialogue(scpi_server, capsys) -> None:
 
 def test_table1_runs_with_a_visa_socket_scanner(scpi_server, tmp_path, monkeypatch, capsys) -> None:
     """A Table 1 run end to end: the scanner a VISA TCPIP SOCKET instrument on loopback, node and controllers
-    simulated (one plant), on the real clock run 4 times faster (every device answers on loopback or in process;
-    faster, a 5 ms thread switch outlasts the controllers' 50 ms silence limit), its log kept beside the run
-    file. Seed 17 draws a 40 s cycle that can synchronise (65 N·m × 15 > 100 N·m)."""
+    simulated (one plant), on the real clock run twice as fast (every device answers on loopback or in process;
+    at 4x a loaded machine's stalls outlast the controllers' command time-out and silence limits), its log kept
+    beside the run file. Seed 17 draws a 40 s cycle that can synchronise (65 N·m × 15 > 100 N·m); an interlock
+    aborts the run (a failure ends the test at once, not after the 1800 s a hold may last)."""
     bench = _bench(tmp_path, scpi_server.resource, "sim://visa-node", 'url = "sim://visa-can"')
-    monkeypatch.setattr(session, "RealClock", functools.partial(runner_clock.RealClock, speed=4.0))
+    bench.write_text(bench.read_text() + '\n[limits]\non_interlock = "abort"\n')
+    monkeypatch.setattr(session, "RealClock", functools.partial(runner_clock.RealClock, speed=2.0))
     out = tmp_path / "run.h5"
     assert main(["run", "table1", "--bench", str(bench), "--cycles", "1", "--seed", "17", "--out", str(out),
                  "-q", "--log"]) == 0
     assert "run complete" in capsys.readouterr().out
     with h5py.File(out, "r") as f:
         assert f.attrs["status"] == "complete" and "DAQ970A" in f.attrs["idn"]
-        t_air = f["aligned/T_air"][:]
-        measured = t_air[np.argmax(np.isfinite(t_air)):]  # from the first scan on (the clock starts at the open)
-        # scans throughout, held on the grid (at 4x a 25 ms stall of a loaded machine is a 0.1 s gap: not all rows)
-        assert len(measured) > 3000 and np.isfinite(measured).mean() > 0.9
-        assert np.nanmedian(t_air) == pytest.approx(40.0, abs=0.01)  # the socket instrument's 40 °C
+        scans = f["raw/instrument/time"][:]  # run time of each scan, every 0.2 s period
+        duration = len(f["aligned/time"]) * 0.01
+        # scans throughout the run (a loaded machine's stalls of a second, 2 s of run time, may cost a few)
+        assert len(scans) > 0.5 * duration / 0.2 and scans[-1] > duration - 5.0
+        assert np.nanmedian(f["aligned/T_air"][:]) == pytest.approx(40.0, abs=0.01)  # the socket instrument's
         flywheel = f["aligned/T_flywheel"][:]
         flywheel = flywheel[np.isfinite(flywheel)]
         assert flywheel.max() - flywheel[0] > 0.5  # the simulated node sees the launch heat the flywheel
