@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import json
+import logging
 import os
 import struct
 from collections.abc import Callable, Mapping, Sequence
@@ -38,6 +39,8 @@ from numba import njit
 from benchlab.outputs import OutputError, is_no_space, no_space
 from benchlab.runfile.read import complete_events, read_progress, text
 from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA, aligned_description
+
+log = logging.getLogger(__name__)
 
 _EPS = 1e-9
 #: The running file's `status` as HDF5 stores a variable-length string: a global heap object (its size as 8 bytes,
@@ -378,6 +381,8 @@ class RunWriter:
             os.fsync(self._fd)
         self._last_flush_t = now
         self.flushes += 1
+        log.debug("flush %d: %.3f s, %d grid rows, %d events in the file", self.flushes, now, self.builder.rows,
+                  self._event_rows)
 
     def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None,
               groups: Mapping[str, Mapping[str, tuple[np.ndarray, str]]] | None = None) -> None:
