@@ -25,7 +25,7 @@
 Cases run one after another (diagnose itself uses every core). --quick: every other magnitude from the
 strongest down, one seed, 4 + 2 batch and 1 + 1 driver false-finding runs. --only NAME ...: only these
 ladders (their names as printed; `unseen` for all of sim_bench.unseen's) and, with `false_findings`, the
-false-finding study. Full run about an hour on 2 cores (unseen ladders 33 min, false findings 13 min, the ladders
+false-finding study. Full run about an hour on 2 cores (unseen ladders 33 min, false findings 18 min for 40 runs, the ladders
 of sim_bench.plant 11 min).
 """
 
