@@ -289,3 +289,16 @@ def test_quantisation_plateaus_of_a_slow_signal_are_not_holds():
     t = np.arange(20000) * 0.01
     slow = np.round((30.0 + 0.5 * np.sin(t / 40.0)) / 0.1) * 0.1  # a 0.1 K sensor on a slow swing: long, uneven runs
     assert hold_samples(slow) == 1
+
+
+def test_temperatures_that_start_late_identify_like_the_whole_run():
+    """A logger that started 3 s after the run (an imported file): the flywheel's first reading comes after the first
+    launch heated it, so t = 0 is fitted, not taken from it (before: C_P 414 and C_A 6121 J/K against 1800 and 2000)."""
+    run = run_schedule(table1_schedule(5, duration_s=1800), ThermalPlant(paper_params("linear"), []), seed=5)
+    late = run.copy()
+    late.attrs = dict(run.attrs)
+    late.loc[: int(3 / run.attrs["dt"]), [c for c in run.columns if c.startswith("T_")]] = np.nan
+    truth = paper_params("linear")
+    found = identify([late], "linear", starts=3).params
+    for name in ("C_P", "C_F", "C_A", "C_T", "R0"):
+        assert found[name] == pytest.approx(truth[name], rel=0.05), name
