@@ -36,6 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the bench's noise")
     parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
                         default=3600.0, help="planned Table 1 duration in s")
+    parser.add_argument("--plant", choices=("reference", "paper"), default="reference",
+                        help="the simulated clutch: the reference plant (default, docs/plant.md) or the paper's network")
     parser.add_argument("--force", action="store_true", help="--out may hold files already (an earlier job's): "
                                                              "replace the ones the job writes")
 
@@ -45,15 +47,16 @@ def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
           f"flywheel up to {run['T_flywheel'].max():.1f} degC")
 
 
-def _bench_run(label: str, path: Path, protocol: str, seed: int, progress: Progress, **options: float) -> pd.DataFrame:
+def _bench_run(label: str, path: Path, protocol: str, seed: int, plant: str, progress: Progress,
+               **options: float) -> pd.DataFrame:
     """One protocol on the simulated bench through the runner and the real drivers; the run as loaded back."""
     with interrupts_held():  # the runner and the simulator (see benchlab.cli)
         from benchlab.runfile import load_run
         from benchlab.runner.session import RunRequest, execute
         from sim_bench.bench import SimulatedBench
-        from sim_bench.plant import ThermalPlant
+        from sim_bench.reference_plant import plant_named
 
-    code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, bench=SimulatedBench(ThermalPlant()),
+    code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, bench=SimulatedBench(plant_named(plant)),
                                        install_signals=False, progress=progress, **options))
     if code != 0 or summary is None or summary.status != "complete":
         raise RuntimeError(f"{label} run {path} ended {summary.status if summary else 'without a summary'} "
@@ -102,8 +105,8 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(exist_ok=True)
     for stale in [out / "table1.h5", out / "validation.h5", *out.glob("table1*.blf"), *out.glob("validation*.blf")]:
         stale.unlink(missing_ok=True)  # the job writes its runs anew each time
-    fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, progress, duration_s=args.duration)
-    validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, progress,
+    fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, args.plant, progress, duration_s=args.duration)
+    validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, args.plant, progress,
                             cycles=VALIDATION_CYCLES)
     figures = {}
     for model in ("linear", "nonlinear"):

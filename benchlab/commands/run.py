@@ -34,6 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
     parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
                         "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`)")
+    parser.add_argument("--plant", choices=("reference", "paper"), default="reference",
+                        help="--bench sim: the simulated clutch, the reference plant (default, docs/plant.md) or the "
+                             "paper's network")
     parser.add_argument("--fault", type=cliargs.fault, action="append", default=[], metavar=SPEC,
                         help="simulated bench only, repeatable: inject a fault at SECONDS of run time to rehearse "
                         f"what the bench does (recorded in the run file's sim_faults); kinds(keys): {kinds_help()}")
@@ -91,11 +94,14 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.runner.session import RunRequest, execute
     bench = args.bench
-    if args.fault:  # --bench sim (checked above): the simulated bench with the faults to rehearse
+    if args.plant != "reference" and args.bench != "sim":
+        raise InputError("command line", "--plant", "--bench sim (a hardware bench has its own clutch)")
+    if args.fault or args.plant != "reference":  # --bench sim (checked above): its plant, the faults to rehearse
         with interrupts_held():
             from sim_bench.bench import SimulatedBench
+            from sim_bench.reference_plant import plant_named
 
-        bench = SimulatedBench(faults=tuple(args.fault))
+        bench = SimulatedBench(plant_named(args.plant), faults=tuple(args.fault))
     request = RunRequest(protocol=args.protocol or "", out=out, bench=bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
                          progress=for_terminal(args.quiet))
