@@ -103,7 +103,7 @@ def main() -> int:
         stats = pstats.Stats(prof)
         total = sum(v[2] for v in stats.stats.values())
         groups = {"emulators (sim_bench/emulators)": "sim_bench/emulators", "drivers": "/drivers/",
-                  "physics (sim_bench/bench, plant, solver)": ("sim_bench/bench", "sim_bench/plant", "benchlab/network/",
+                  "physics (sim_bench/bench, plants, solver)": ("sim_bench/bench", "sim_bench/plant", "sim_bench/reference_plant", "benchlab/network/",
                                                               "drivetrain.py"),
                   "acquisition (benchlab/acquire)": "benchlab/acquire", "runner + devices": "benchlab/runner"}
         print("  self time by layer (600 s profile):")

@@ -83,15 +83,15 @@ def reference_params() -> dict[str, float]:
         "R_plate_cover": 1.5, "R_cover_bulk": 0.8, "R_bell_gearbox": 0.15,
         # convecting areas (m²): to the chamber air, and the housing's outside
         "A_bulk": 0.08, "A_plate": 0.03, "A_cover": 0.09, "A_bell_in": 0.15, "A_bell_out": 0.30,
-        "A_gearbox_out": 0.70, "A_disc_rim": 0.002,
+        "A_gearbox_out": 0.70,
         "vent_l_per_s_per_krpm": 0.5, "vent_leak_l_per_s": 0.1,
         # radiation: effective emissivity × area (m²) to the housing, and of the housing to the room
         "eA_bulk": 0.18 * 0.08, "eA_plate": 0.18 * 0.03, "eA_cover": 0.136 * 0.09,
         "eA_bell_out": 0.3 * 0.30, "eA_gearbox_out": 0.3 * 0.70,
         # sensors: PT1000 in a bore behind the friction face
         "tau_sensor_inner": 3.0, "tau_sensor_outer": 4.0,
-        # friction: μ(ϑ) = μ_cal (1 + dmu (ϑ - ϑ_cal)), controllers calibrated at ϑ_cal
-        "mu_cal": 0.30, "mu_slope_per_k": -1.0e-3, "mu_cal_c": 40.0,
+        # friction: μ(ϑ)/μ(ϑ_cal) = 1 + mu_slope (ϑ - ϑ_cal), the controllers calibrated at ϑ_cal
+        "mu_slope_per_k": -1.0e-3, "mu_cal_c": 40.0,
     }
 
 
@@ -105,7 +105,8 @@ def _binned(r: np.ndarray) -> np.ndarray:
 
 def rotating_h(rpm: np.ndarray) -> np.ndarray:
     """Mean heat-transfer coefficient (W/m²K) of a disc of radius R_OUT rotating at `rpm` in air: Cobb & Saunders,
-    laminar Nu = 0.36 Re^0.5, turbulent Nu = 0.015 Re^0.8, the larger of the two (Re = ω r²/ν)."""
+    laminar Nu = 0.36 Re^0.5, turbulent Nu = 0.015 Re^0.8, the larger of the two (Re = ω r²/ν): bolts, cover windows
+    and spring fingers trip the boundary layer, so the turbulent law holds from well below the smooth disc's Re 2.4e5."""
     re = np.abs(rpm) * math.pi / 30.0 * R_OUT ** 2 / AIR["nu"]
     nu = np.maximum(0.36 * np.sqrt(re), 0.015 * re ** 0.8)
     return nu * AIR["k"] / R_OUT
