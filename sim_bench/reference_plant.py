@@ -90,6 +90,7 @@ def reference_params() -> dict[str, float]:
         "eA_bell_out": 0.3 * 0.30, "eA_gearbox_out": 0.3 * 0.70,
         # sensors: PT1000 in a bore behind the friction face
         "tau_sensor_inner": 3.0, "tau_sensor_outer": 4.0,
+        "tau_sensor_air": 20.0,  # the wired PT1000 in the housing's opening: a sheathed probe in moving air
         # friction: μ(ϑ)/μ(ϑ_cal) = 1 + mu_slope (ϑ - ϑ_cal), the controllers calibrated at ϑ_cal
         "mu_slope_per_k": -1.0e-3, "mu_cal_c": 40.0,
     }
@@ -181,8 +182,8 @@ def _engine(ch: Mapping[str, np.ndarray]) -> np.ndarray:
 
 #: state -> the channel its truth is recorded as (/truth); the sensors' lags read T_flywheel_1 and _2
 CHANNEL_NAMES = {"P": "T_pressure_plate", "F": "T_flywheel", "Fi": "T_flywheel_inner", "B": "T_flywheel_bulk",
-                 "K": "T_crankshaft", "L": "T_clutch_disc", "D": "T_cover", "A": "T_air", "T": "T_housing",
-                 "G": "T_gearbox", "S1": "T_flywheel_1", "S2": "T_flywheel_2"}
+                 "K": "T_crankshaft", "L": "T_clutch_disc", "D": "T_cover", "A": "T_chamber_air", "T": "T_housing",
+                 "G": "T_gearbox", "S1": "T_flywheel_1", "S2": "T_flywheel_2", "SA": "T_air"}
 
 
 def reference_network() -> ThermalNetwork:
@@ -220,10 +221,10 @@ def reference_network() -> ThermalNetwork:
              "L": 1 - METAL_SHARE}
     sources = tuple(Source(node, lambda q, ch, f=f: f * ch["friction_power"], f"friction heat {node}")
                     for node, f in share.items())
-    lags = (Lag("S1", "Fi", "tau_sensor_inner"), Lag("S2", "F", "tau_sensor_outer"))
-    outputs = {CHANNEL_NAMES[s]: s for s in ("S1", "S2", "A", "T", "P", "F", "Fi", "B", "K", "L", "D", "G")}
+    lags = (Lag("S1", "Fi", "tau_sensor_inner"), Lag("S2", "F", "tau_sensor_outer"), Lag("SA", "A", "tau_sensor_air"))
+    outputs = {CHANNEL_NAMES[s]: s for s in ("S1", "S2", "SA", "T", "P", "F", "Fi", "B", "K", "L", "D", "A", "G")}
     initial = {s: "T_flywheel" for s in ("F", "Fi", "B", "K", "L", "P", "D", "S1", "S2")}
-    initial.update(A="T_air", T="T_housing", G="T_housing")
+    initial.update(A="T_air", SA="T_air", T="T_housing", G="T_housing")
     return ThermalNetwork(nodes, boundaries, links, sources, outputs, lags, initial)
 
 

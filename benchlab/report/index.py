@@ -208,8 +208,8 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
     truth = json.loads(attrs["sim_truth"]) if "sim_truth" in attrs else None
     simulated = attrs.get("bench") == "sim"
     findings = diagnosis.get("findings", [])
-    found = "".join(f"<li><b>{html.escape(f['candidate'])}</b> ({html.escape(f['signal'])} / "
-                    f"{html.escape(f['mechanism'])}): held-out gain {_num(f['gain_pct'], 0, ' %')}, "
+    found = "".join(f"<li><b>{html.escape(f['candidate'])}</b> ({html.escape(str(f['signal']))} / "
+                    f"{html.escape(str(f['mechanism']))}): held-out gain {_num(f['gain_pct'], 0, ' %')}, "
                     f"p = {f.get('p_value', math.nan):.2g}</li>" for f in findings) or "<li>none</li>"
     base, best = diagnosis["baseline"], diagnosis["best"]
     life, health = wear["life"], wear["health"]
