@@ -159,7 +159,7 @@ def _story_sections(story: Mapping[str, Any]) -> list[str]:
              _num(peaks[run][m].max_pct, 1, " %"), str(peaks[run][m].peaks)] for run in peaks for m in models]
     rows.append(["<i>paper</i>", "nonlinear", "—", "—", "up to 5 %", "—"])
     out = ["<h3>Misfit at the heating peaks (the paper: up to 5 %, from the first-order structure)</h3>",
-           _table(("run", "model", "largest |error|", "mean |error|", "largest, % of range", "peaks"), rows)]
+           _table(("run", "model", "largest |error|", "mean |error|", "largest, % of the peak's reading", "peaks"), rows)]
     extra = story["extrapolation"]
     out += ["<h3>Extrapolation: load scenarios the identification run did not have</h3>",
             "<p>The validation run ends with launches outside Table 1 (engine speeds, clutch and load torques it never "
