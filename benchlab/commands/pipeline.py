@@ -169,13 +169,15 @@ def run(args: argparse.Namespace) -> int:
              "plate": _plate(validation, out / "validation.h5", nonlinear, sims["validation"]["nonlinear"])}
     story["verdict"] = verdict(figures["nonlinear"]["fit"]["nrmse_pct"], figures["nonlinear"]["validation"]["nrmse_pct"],
                                story["extrapolation"]["load scenarios not in Table 1"]["nonlinear"],
+                               story["extrapolation"]["Table 1 cycles"]["nonlinear"],
                                max(story["peaks"][k]["nonlinear"].max_pct for k in ("fit", "validation")),
                                story["plate"].rmse_k["observer"] if story["plate"] is not None else float("nan"))
     print(f"verdict   {story['verdict']}")
     for m in models:
         worst = max(story["peaks"][k][m].max_pct for k in ("fit", "validation"))
         print(f"misfit    {m:9s}: peaks up to {worst:.1f} % (paper: 5 %), unseen load scenarios "
-              f"{story['extrapolation']['load scenarios not in Table 1'][m]:.2f} % NRMSE")
+              f"{story['extrapolation']['load scenarios not in Table 1'][m]:.2f} K RMSE (Table 1 cycles "
+              f"{story['extrapolation']['Table 1 cycles'][m]:.2f} K)")
     if story["plate"] is not None:
         plate = story["plate"]
         print(f"plate     against /truth: model RMSE {plate.rmse_k['model']:.2f} K, observer "

@@ -163,10 +163,10 @@ def _story_sections(story: Mapping[str, Any]) -> list[str]:
     extra = story["extrapolation"]
     out += ["<h3>Extrapolation: load scenarios the identification run did not have</h3>",
             "<p>The validation run ends with launches outside Table 1 (engine speeds, clutch and load torques it never "
-            "drew). NRMSE on those samples against the Table 1 cycles of the same run; the paper: the model is only "
+            "drew). RMSE on those samples against the Table 1 cycles of the same run; the paper: the model is only "
             "accurate for load scenarios that are part of the identification data.</p>",
-            _table(["samples"] + [f"NRMSE {m}" for m in models],
-                   [[html.escape(k)] + [_num(v[m], 2, " %") for m in models] for k, v in extra.items()])]
+            _table(["samples"] + [f"RMSE {m}" for m in models],
+                   [[html.escape(k)] + [_num(v[m], 3, " K") for m in models] for k, v in extra.items()])]
     plate = story.get("plate")
     if plate is not None:
         out += ["<h3>The unmeasured pressure plate against the plant's truth (validation run)</h3>",

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from benchlab.identify.metrics import nrmse_pct
+from benchlab.identify.metrics import rmse_k
 from benchlab.runfile import event_steps, load_events, load_schedule
 
 PEAK_WINDOW_S = 30.0  # a launch's flywheel peak: the highest reading from its start to this long after it ends
@@ -71,10 +71,11 @@ def labelled_mask(run: pd.DataFrame, path: "str | os.PathLike[str]", label: str)
 
 
 def scores_on(run: pd.DataFrame, mask: np.ndarray, sims: Mapping[str, pd.DataFrame]) -> dict[str, float]:
-    """Each model's NRMSE (%) on the samples of `mask`."""
+    """Each model's RMSE (K) on the samples of `mask` (in K: a part of a run has a range of its own, which would make
+    NRMSEs of different parts incomparable)."""
     if not mask.any():
         return {label: np.nan for label in sims}
-    return {label: nrmse_pct(run[mask], sim[mask]) for label, sim in sims.items()}
+    return {label: rmse_k(run[mask], sim[mask]) for label, sim in sims.items()}
 
 
 @dataclass(frozen=True)
@@ -102,13 +103,14 @@ def plate_check(run: pd.DataFrame, truth: pd.DataFrame, estimates: Mapping[str, 
     return PlateCheck(rmse, worst, hotter_truth, hotter_model)
 
 
-def verdict(fit_pct: float, validation_pct: float, extrapolation_pct: float, peak_pct: float,
+def verdict(fit_pct: float, validation_pct: float, extrapolation_k: float, known_k: float, peak_pct: float,
             plate_rmse_k: float) -> str:
     """The index page's one line: the nonlinear model's figures against the paper's 2.5 % / < 10 % / 5 %."""
     fits = "matches" if fit_pct <= 2.5 and validation_pct < 10 and peak_pct <= 5 else "misses"
     return (f"The nonlinear model {fits} the paper's figures on this plant: fit {fit_pct:.2f} % (paper 2.5 %), "
             f"validation {validation_pct:.2f} % (paper < 10 %), peaks up to {peak_pct:.1f} % (paper 5 %); "
-            f"on unseen load scenarios {extrapolation_pct:.2f} %; the unmeasured plate is estimated to "
+            f"on unseen load scenarios {extrapolation_k:.2f} K RMS against {known_k:.2f} K on Table 1 cycles of the "
+            f"same run; the unmeasured plate is estimated to "
             f"{plate_rmse_k:.2f} K RMS.")
 
 
