@@ -1,9 +1,12 @@
 """`benchlab pipeline --out DIR`: the whole job on the simulated bench, end to end.
 
-Runs Table 1 on the simulated bench and the validation protocol (long hot cool-downs with the engine
-speed or the clutch state changing, then a few fresh Table 1 cycles), identifies the linear and the
-nonlinear model, writes the report (Fig. 3, 4, 5, residuals: nonlinear against linear, validated on the
-validation run), diagnoses the linear baseline with its page, and estimates wear.
+Runs Table 1 on the simulated bench (the reference clutch by default, docs/plant.md; `--plant paper` the paper's
+network), the validation protocol (long hot cool-downs with the engine speed or the clutch state changing, a few fresh
+Table 1 cycles, then launches outside Table 1) and the Fig. 3 cool-down sweep; identifies the linear and the nonlinear
+model, writes the report (Fig. 3 with the sweep's points, 4, 5, residuals: nonlinear against linear, validated on
+the validation run), scores the misfit at the peaks, the unseen load scenarios and the unmeasured plate against the
+plant's truth (model and observer), diagnoses the nonlinear model with its page, and estimates wear per side; the
+index page opens with a one-line verdict against the paper's figures.
 
 Both runs go through the bench runner (benchlab.runner) and the real drivers talking to the simulated
 bench's devices, as on hardware: every reading at the time it was measured, a raw CAN log (BLF) beside
@@ -27,7 +30,8 @@ if TYPE_CHECKING:
     import pandas as pd
 
 NAME = "pipeline"
-HELP = "run Table 1 and the validation protocol on the simulated bench, identify, report, diagnose, estimate wear"
+HELP = ("run Table 1, the validation protocol and the Fig. 3 sweep on the simulated bench, identify, report, diagnose, "
+        "estimate wear")
 VALIDATION_CYCLES = 3  # Table 1 cycles after the validation protocol's three long cool-downs
 #: load scenarios outside Table 1 (engine rpm, clutch N·m, load N·m, cool-down s), after the validation protocol:
 #: the paper's "extrapolation for unknown load scenarios"
