@@ -59,7 +59,7 @@ def test_a_hot_lining_transmits_less_torque_than_commanded():
     assert torques[140.0] < 0.95 * 60.0  # μ falls 10 % per 100 K
 
 
-def test_run_records_which_plant_and_every_node(tmp_path):
+def test_run_records_which_plant_and_every_node(tmp_path, capsys):
     for plant, nodes in (("reference", set(CHANNEL_NAMES.values())),
                          ("paper", {"T_pressure_plate", "T_flywheel", "T_air", "T_housing"})):
         out = tmp_path / f"{plant}.h5"
@@ -67,3 +67,6 @@ def test_run_records_which_plant_and_every_node(tmp_path):
         with h5py.File(out, "r") as f:
             assert json.loads(f.attrs["sim_truth"])["plant"] == plant
             assert set(f["truth"]) == nodes | {"time"}
+    # a resumed run keeps its plant: another one asked for is refused in one line
+    assert main(["run", "--resume", str(tmp_path / "paper.h5"), "--plant", "reference", "--quiet"]) == 2
+    assert "sim_truth" in capsys.readouterr().err
