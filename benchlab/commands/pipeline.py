@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, args.plant, progress, duration_s=args.duration)
     validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, args.plant, progress,
                             steps=validation_steps(args.seed + 1))
-    _bench_run("sweep", out / "sweep.h5", "cooldown-sweep", args.seed + 2, args.plant, progress, grid=SWEEP_GRID)
+    sweep = _bench_run("sweep", out / "sweep.h5", "cooldown-sweep", args.seed + 2, args.plant, progress, grid=SWEEP_GRID)
     figures = {}
     for model in ("linear", "nonlinear"):
         result = identify([fitting], model, validate=[validation], starts=4, progress=progress)
@@ -198,7 +198,9 @@ def run(args: argparse.Namespace) -> int:
     plot_wear(wear_report, out / "wear.png")
     print(f"wear      {wear['engagements']} engagements, {wear['friction_energy_J'] / 1e6:.2f} MJ -> {out / 'wear.json'}")
     cooldowns = cooldown_scores(validation, out / "validation.h5", [("linear", linear), ("nonlinear", nonlinear)])
-    index = write_index(out, {"Table 1": (out / "table1.h5", fitting), "validation": (out / "validation.h5", validation)},
+    runs_shown = {"Table 1": (out / "table1.h5", fitting), "validation": (out / "validation.h5", validation),
+                  "Fig. 3 sweep": (out / "sweep.h5", sweep)}
+    index = write_index(out, runs_shown,
                         figures, cooldowns, nonlinear, standard_errors(nonlinear), diagnosis, wear, story)
     print(f"page      the whole job -> {index}")
     return 0
