@@ -1,8 +1,9 @@
 """Simulated-bench speed: simulated seconds per wall second, full stack.
 
-    .venv/bin/python benchmarks/bench_sim_bench.py [--duration S] [--seed N] [--quick]
+    .venv/bin/python benchmarks/bench_sim_bench.py [--duration S] [--seed N] [--quick] [--plant reference|paper]
 
-Full stack = `benchlab run table1 --bench sim`: drivetrain + thermal plant (chunked) as providers of the
+Full stack = `benchlab run table1 --bench sim [--plant P]`: drivetrain + thermal plant (chunked; `--plant`: reference
+(default) or paper, docs/plant.md) as providers of the
 emulated DMM (SCPI over a sim:// serial URL), ClutchSensorNode gateway (COBS frames over a sim:// URL)
 and CAN controllers (in-process CAN bus, DBC frames); the real drivers poll them; the runner executes the
 schedule with interlocks; the acquisition writes raw streams, events and the 10 ms /aligned grid into
@@ -36,11 +37,13 @@ import h5py  # noqa: E402
 
 import benchlab.runner.session as session  # noqa: E402
 from benchlab.runner.session import RunRequest, execute  # noqa: E402
+from sim_bench.bench import SimulatedBench  # noqa: E402
+from sim_bench.reference_plant import DEFAULT_PLANT, PLANTS, plant_named  # noqa: E402
 
 TARGET = 500.0
 
 
-def one_run(out: Path, duration: float, seed: int) -> tuple[float, float, float, dict]:
+def one_run(out: Path, duration: float, seed: int, bench: SimulatedBench) -> tuple[float, float, float, dict]:
     opened: list = []  # what the session opens (its drivers' bench, the simulated bench), for the counts below
     real_open = session.open_bench
 
@@ -51,7 +54,8 @@ def one_run(out: Path, duration: float, seed: int) -> tuple[float, float, float,
     session.open_bench = recording
     try:
         wall0, cpu0 = time.perf_counter(), time.process_time()
-        code, summary = execute(RunRequest("table1", out, seed=seed, duration_s=duration, install_signals=False))
+        code, summary = execute(RunRequest("table1", out, seed=seed, duration_s=duration, install_signals=False,
+                                           bench=bench))
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     finally:
         session.open_bench = real_open
@@ -86,24 +90,28 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=7200.0)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--quick", action="store_true", help="1800 s instead of 2 h")
+    ap.add_argument("--plant", choices=sorted(PLANTS), default=DEFAULT_PLANT,
+                    help="the simulated clutch (docs/plant.md): the reference plant (default) or the paper's network")
     args = ap.parse_args()
+    bench = SimulatedBench(plant_named(args.plant))
     duration = 1800.0 if args.quick else args.duration
     with tempfile.TemporaryDirectory() as tmp:
-        execute(RunRequest("table1", Path(tmp) / "warm.h5", cycles=1, install_signals=False))  # imports, numba
-        sim_s, wall, cpu, counts = one_run(Path(tmp) / "run.h5", duration, args.seed)
-        print(f"table1 {duration:.0f} s planned, {sim_s:.0f} s simulated")
+        execute(RunRequest("table1", Path(tmp) / "warm.h5", cycles=1, install_signals=False, bench=bench))  # imports, numba
+        sim_s, wall, cpu, counts = one_run(Path(tmp) / "run.h5", duration, args.seed, bench)
+        print(f"table1 {duration:.0f} s planned, {sim_s:.0f} s simulated, {args.plant} plant")
         print(f"  wall {wall:6.2f} s  -> {sim_s / wall:6.0f}x real time")
         print(f"  cpu  {cpu:6.2f} s  -> {sim_s / cpu:6.0f}x real time per core (other load excluded)")
         for k, v in counts.items():
             print(f"  {k:30s} {v:>10,d}")
         prof = cProfile.Profile()
         prof.enable()
-        execute(RunRequest("table1", Path(tmp) / "prof.h5", seed=args.seed, duration_s=600.0, install_signals=False))
+        execute(RunRequest("table1", Path(tmp) / "prof.h5", seed=args.seed, duration_s=600.0, install_signals=False,
+                           bench=bench))
         prof.disable()
         stats = pstats.Stats(prof)
         total = sum(v[2] for v in stats.stats.values())
         groups = {"emulators (sim_bench/emulators)": "sim_bench/emulators", "drivers": "/drivers/",
-                  "physics (sim_bench/bench, plant, solver)": ("sim_bench/bench", "sim_bench/plant", "benchlab/network/",
+                  "physics (sim_bench/bench, plants, solver)": ("sim_bench/bench", "sim_bench/plant", "sim_bench/reference_plant", "benchlab/network/",
                                                               "drivetrain.py"),
                   "acquisition (benchlab/acquire)": "benchlab/acquire", "runner + devices": "benchlab/runner"}
         print("  self time by layer (600 s profile):")

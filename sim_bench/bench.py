@@ -44,6 +44,7 @@ from sim_bench.emulators.providers import NodeInputs, NodeInputSeries
 from sim_bench.emulators.scpi_instrument import ScpiInstrumentEmulator
 from sim_bench.emulators.sim_can_bus import SimCanBus
 from sim_bench.plant import Effect, ThermalPlant, custom_source
+from sim_bench.reference_plant import reference_plant
 from sim_bench.virtual_run import AmbientConfig, SensorConfig
 
 if TYPE_CHECKING:
@@ -90,10 +91,11 @@ class SimPhysics:
 
     def __init__(self, config: SimBenchConfig, clock: SimClock, plant: ThermalPlant | None = None) -> None:
         self.cfg, self.clock, self.dt = config, clock, config.dt
-        base = plant or ThermalPlant()
+        base = plant or reference_plant()
         # the bench's own plant, plus fault heaters (zero unless a fault is injected)
-        self.plant = ThermalPlant(base.params, tuple(base.effects) + fault_heater_effects())
+        self.plant = base.with_effects(fault_heater_effects())
         self.truth_params = dict(base.params)
+        self.plant_name = base.name
         seed = config.seed
         self.rng_sensor = np.random.default_rng([seed, 1])
         self.rng_dropout = np.random.default_rng([seed, 2])
@@ -147,7 +149,7 @@ class SimPhysics:
         # what the sensors read on this grid: the node's two sensors, then the DMM's channels, one row each: noise
         # per sample (drawn row after row, one call per noise level), resistances in one vectorised call
         sc, rng = self.cfg.sensors, self.rng_sensor
-        noisy = np.stack([temps["T_flywheel"]] * 2 + [cols["T_ambient"] if name == "T_ambient" else temps[name]
+        noisy = np.stack([temps["T_flywheel_1"], temps["T_flywheel_2"]] + [cols["T_ambient"] if name == "T_ambient" else temps[name]
                                                       for name in self.cfg.dmm_channels.values()])
         noisy[:2] += rng.normal(0.0, sc.node_noise_k, (2, n))
         noisy[2:] += rng.normal(0.0, sc.wired_noise_k, (len(noisy) - 2, n))
@@ -182,6 +184,7 @@ class SimPhysics:
 
     def _channels(self, drivetrain: Drivetrain, k0: int, n: int) -> dict[str, np.ndarray]:
         """The plant's channels on grid points k0 .. k0+n-1: `drivetrain` advanced over them, ambient, fault heat."""
+        drivetrain.torque_factor = self.plant.friction_factor()  # μ(ϑ) of the lining now, held over the chunk
         cols = drivetrain.advance(n, self.dt)
         if self.stuck is not None:
             cols["clutch_state"][:] = 1.0
@@ -337,8 +340,11 @@ class SimPhysics:
         return {names[s]: out[:, i] for i, s in enumerate(self.plant.state_names)}
 
     def true_convection_resistance(self, engine_rpm: float, clutch_state: int) -> float:
+        """R_FA = R_PA of eq. (11) at an operating point: the paper plant's own; NaN for a plant without one."""
         from benchlab.model.clutch import convection_resistance
 
+        if self.plant_name != "paper":
+            return math.nan
         ch = {"engine_speed": np.array([float(engine_rpm)]), "clutch_state": np.array([float(clutch_state)])}
         return float(np.asarray(convection_resistance(self.truth_params, ch)).ravel()[0])
 
@@ -435,7 +441,8 @@ class SimBench:
         effects = [e.name for e in self.physics.plant.effects if not e.name.startswith("fault heater")]
         return {"sim_bench": json.dumps(self.cfg.as_dict(), default=str),
                 "sim_faults": json.dumps([asdict(fault) for fault in self.injected]),
-                "sim_truth": json.dumps({"params": dict(self.physics.truth_params), "effects": effects})}
+                "sim_truth": json.dumps({"params": dict(self.physics.truth_params), "effects": effects,
+                                         "plant": self.physics.plant_name})}
 
     def true_states(self, rows: int) -> dict[str, np.ndarray]:
         """The plant's true temperatures (degC) on the run's grid rows up to `rows`, for the run file's /truth: the
@@ -480,7 +487,7 @@ class SimulatedBench:
     the runner never names the simulator's fields and the hardware path never imports the simulator.
     """
 
-    plant: ThermalPlant | None = None  # None: the paper's clutch, nonlinear
+    plant: ThermalPlant | None = None  # None: the reference clutch (sim_bench.reference_plant); the paper's: ThermalPlant()
     faults: Sequence[Fault] = ()  # sim_bench.faults.Fault, applied when the clock passes their at_s
     options: Mapping[str, Any] = field(default_factory=dict)  # SimBenchConfig overrides, e.g. {"dropouts": False}
     limits: BenchLimits = BenchLimits()

@@ -28,6 +28,7 @@ class Drivetrain:
         self.clamped = False
         self.torque_setpoint_nm = 0.0
         self.load_torque_nm = 0.0
+        self.torque_factor = 1.0  # μ(ϑ)/μ_cal: transmitted torque per N·m commanded (the plant's friction law)
 
     @property
     def slipping(self) -> bool:
@@ -44,7 +45,7 @@ class Drivetrain:
         if not self.clamped:
             transmitted = 0.0
         elif self.slipping:
-            transmitted = float(np.sign(self.engine_rpm - self.clutch_rpm)) * self.torque_setpoint_nm
+            transmitted = float(np.sign(self.engine_rpm - self.clutch_rpm)) * self.torque_setpoint_nm * self.torque_factor
         else:
             return reaction, 0.0
         accel = (transmitted - reaction) / self.config.inertia_at_clutch

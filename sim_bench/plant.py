@@ -143,13 +143,21 @@ def custom_source(name: str, node: str, signal: str, mechanism: str,
 
 
 class ThermalPlant:
-    """True temperatures of the bench for given drivetrain channels; keeps its state between calls."""
+    """True temperatures of the bench for given drivetrain channels; keeps its state between calls.
+
+    By default the paper's network (`name` "paper"); `network` gives another one (sim_bench.reference_plant), whose
+    laws read the plant's own temperatures where `reads_states`, and whose `friction` (state name -> degC to the
+    factor μ(ϑ)/μ_cal) scales the torque the clutch transmits for what the controller commands."""
 
     RADIATION_ITERATIONS = 4
+    TOLERANCE_K = 1e-3  # a network that reads states (`reads_states`) stops iterating once no state moves this much
 
-    def __init__(self, params: Mapping[str, float] | None = None, effects: Sequence[Effect] = ()) -> None:
+    def __init__(self, params: Mapping[str, float] | None = None, effects: Sequence[Effect] = (),
+                 network: ThermalNetwork | None = None, reads_states: bool = False,
+                 friction: Callable[[Mapping[str, float]], float] | None = None, name: str = "paper") -> None:
         self.params: dict[str, float] = dict(params or paper_params("nonlinear"))
-        network = clutch_network()
+        self.base_network = network or clutch_network()
+        network = self.base_network
         for effect in effects:
             self.params.update(effect.params)
             network = effect.edit(network, self.params)
@@ -157,7 +165,21 @@ class ThermalPlant:
         self.network = network
         self.effects = tuple(effects)
         self.state: np.ndarray | None = None
-        self._iterative = any(e.reads_states for e in effects)
+        self.reads_states = reads_states
+        self.friction = friction
+        self.name = name
+        self._iterative = reads_states or any(e.reads_states for e in effects)
+
+    def with_effects(self, effects: Sequence[Effect]) -> "ThermalPlant":
+        """The same plant (network, parameters, friction) with `effects` added to its own."""
+        return ThermalPlant(self.params, tuple(self.effects) + tuple(effects), self.base_network, self.reads_states,
+                            self.friction, self.name)
+
+    def friction_factor(self) -> float:
+        """μ(ϑ)/μ_cal at the current state: 1 for a plant without temperature-dependent friction."""
+        if self.friction is None or self.state is None:
+            return 1.0
+        return self.friction(dict(zip(self.state_names, self.state.tolist())))
 
     @property
     def state_names(self) -> list[str]:
@@ -189,7 +211,10 @@ class ThermalPlant:
         channels = dict(channels)
         states = run_network(self.network, self.params, self._with_states(channels, None), dt, self.state)
         for _ in range(self.RADIATION_ITERATIONS if self._iterative else 0):
+            previous = states
             states = run_network(self.network, self.params, self._with_states(channels, states), dt, self.state)
+            if self.reads_states and np.max(np.abs(states - previous)) < self.TOLERANCE_K:
+                break  # the reference plant's laws: converged (the paper's effects keep their fixed count)
         return states
 
     def _with_states(self, channels: dict[str, np.ndarray], states: np.ndarray | None) -> dict[str, np.ndarray]:
@@ -201,5 +226,9 @@ class ThermalPlant:
         return channels
 
     def sensor_temperatures(self, true_states: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """What the sensors see: measured channel name -> true temperature at the sensor."""
-        return {channel: true_states[state] for channel, state in self.network.outputs.items()}
+        """What the sensors see: measured channel name -> true temperature at the sensor; the flywheel node's two
+        PT1000s as T_flywheel_1 and T_flywheel_2 (both the flywheel node where the network has one sensor)."""
+        seen = {channel: true_states[state] for channel, state in self.network.outputs.items()}
+        for sensor in ("T_flywheel_1", "T_flywheel_2"):
+            seen.setdefault(sensor, seen["T_flywheel"])
+        return seen

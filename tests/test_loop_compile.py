@@ -64,7 +64,7 @@ def test_the_real_time_loop_compiles_nothing():
                    "sim_bench.emulators.can_controllers._frames", "sim_bench.emulators.clutch_node._frame_wire",
                    "sim_bench.emulators.sim_can_bus._any_unstamped", "sim_bench.bench._grid_rows",
                    "sim_bench.bench._measured_at", "sim_bench.drivetrain._fill_piece", "benchlab.network.solver._zoh_kernel",
-                   "benchlab.network.solver._propagate4"):
+                   "benchlab.network.solver._propagate"):  # the reference plant's 13 states (the paper's 4: _propagate4)
         assert kernel in primed, f"{kernel} not primed before the loop"
     simulated = [name for _, name, _ in seen if name.startswith(("sim_bench.", "benchlab.network.solver."))]
     assert len(simulated) == len(set(simulated)), f"a simulated bench kernel took two signatures: {sorted(simulated)}"

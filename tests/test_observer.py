@@ -30,6 +30,8 @@ from benchlab.runner.session import RunRequest, execute
 from benchlab.network.simulation import input_channels
 from benchlab.wear.clutchfile import default_clutch
 from protocols.validation import ValidationConfig, validation_schedule
+from sim_bench.bench import SimulatedBench
+from sim_bench.plant import ThermalPlant
 
 PLATE = "T_pressure_plate"
 STATES = [PLATE, "T_flywheel", "T_air", "T_housing"]
@@ -41,7 +43,8 @@ def validation(tmp_path_factory):
     """(run, truth, the plant's parameters) of a shortened validation run."""
     path = tmp_path_factory.mktemp("observer") / "validation.h5"
     steps = validation_schedule(9, ValidationConfig(segment_s=60.0, table1_cycles=3))
-    code, _ = execute(RunRequest("validation", path, seed=9, steps=steps, install_signals=False))
+    code, _ = execute(RunRequest("validation", path, seed=9, steps=steps, install_signals=False,
+                                 bench=SimulatedBench(ThermalPlant())))  # the paper's plant: the model can match it
     assert code == 0
     run = load_run(path)
     with h5py.File(path, "r") as f:
@@ -53,7 +56,8 @@ def validation(tmp_path_factory):
 def identified(tmp_path_factory):
     """Parameters identified from a 20 min Table 1 run through the drivers, with their residual statistics."""
     path = tmp_path_factory.mktemp("observer_fit") / "table1.h5"
-    code, _ = execute(RunRequest("table1", path, seed=3, duration_s=1200, install_signals=False))
+    code, _ = execute(RunRequest("table1", path, seed=3, duration_s=1200, install_signals=False,
+                                 bench=SimulatedBench(ThermalPlant())))
     assert code == 0
     result = identify([load_run(path)], "nonlinear", starts=2)
     return ModelParams(builtin("nonlinear"), result.params, result.summary())

@@ -20,6 +20,8 @@ from benchlab.report import build, write_report
 from benchlab.report.resistance import resistance
 from benchlab.runfile import write_run
 from benchlab.runner.session import RunRequest, execute
+from sim_bench.bench import SimulatedBench
+from sim_bench.plant import ThermalPlant
 
 FIGURES = ("fig4_fit.png", "fig5_validation_1.png", "fig3_resistance.png", "residuals.png")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -27,12 +29,14 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 @pytest.fixture(scope="module")
 def bench(tmp_path_factory, short_run):
-    """A Table 1 run, a validation run, a two-point cooldown sweep and the paper's two parameter files."""
+    """A Table 1 run, a validation run, a two-point cooldown sweep and the paper's two parameter files; the runs on
+    the paper's plant, whose parameters the files hold (the figures are checked against them)."""
     d = tmp_path_factory.mktemp("report")
     write_run(d / "run.h5", short_run, short_run.attrs["dt"], protocol="table1")
     for protocol, name, options in (("validation", "validation.h5", {"seed": 3, "cycles": 0}),
                                     ("cooldown-sweep", "sweep.h5", {"seed": 2, "grid": "800:1,2000:0"})):
-        code, _ = execute(RunRequest(protocol, d / name, install_signals=False, **options))
+        code, _ = execute(RunRequest(protocol, d / name, install_signals=False, bench=SimulatedBench(ThermalPlant()),
+                                     **options))
         assert code == 0
     save_params(d / "linear.json", paper_params("linear"), {"uncertainty": {"R0": 0.004}})
     save_params(d / "nonlinear.json", paper_params("nonlinear"))

@@ -44,7 +44,11 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
         truth = load_attrs(run).get("sim_truth")
         if truth is None:
             raise InputError(run, "sim_truth", "a run of the simulated bench for --params sim-truth")
-        return dict(json.loads(truth)["params"])
+        recorded = json.loads(truth)
+        if recorded.get("plant", "paper") != "paper":
+            raise InputError(run, "sim_truth", "a run of the paper plant (--plant paper) for --params sim-truth: the "
+                                               f"{recorded['plant']} plant has no parameters of the model")
+        return dict(recorded["params"])
     from benchlab.model.catalog import builtin
     from benchlab.model.params import load_params
 

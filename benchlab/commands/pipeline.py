@@ -1,9 +1,12 @@
 """`benchlab pipeline --out DIR`: the whole job on the simulated bench, end to end.
 
-Runs Table 1 on the simulated bench and the validation protocol (long hot cool-downs with the engine
-speed or the clutch state changing, then a few fresh Table 1 cycles), identifies the linear and the
-nonlinear model, writes the report (Fig. 3, 4, 5, residuals: nonlinear against linear, validated on the
-validation run), diagnoses the linear baseline with its page, and estimates wear.
+Runs Table 1 on the simulated bench (the reference clutch by default, docs/plant.md; `--plant paper` the paper's
+network), the validation protocol (long hot cool-downs with the engine speed or the clutch state changing, a few fresh
+Table 1 cycles, then launches outside Table 1) and the Fig. 3 cool-down sweep; identifies the linear and the nonlinear
+model, writes the report (Fig. 3 with the sweep's points, 4, 5, residuals: nonlinear against linear, validated on
+the validation run), scores the misfit at the peaks, the unseen load scenarios and the unmeasured plate against the
+plant's truth (model and observer), diagnoses the nonlinear model with its page, and estimates wear per side; the
+index page opens with a one-line verdict against the paper's figures.
 
 Both runs go through the bench runner (benchlab.runner) and the real drivers talking to the simulated
 bench's devices, as on hardware: every reading at the time it was measured, a raw CAN log (BLF) beside
@@ -27,8 +30,14 @@ if TYPE_CHECKING:
     import pandas as pd
 
 NAME = "pipeline"
-HELP = "run Table 1 and the validation protocol on the simulated bench, identify, report, diagnose, estimate wear"
+HELP = ("run Table 1, the validation protocol and the Fig. 3 sweep on the simulated bench, identify, report, diagnose, "
+        "estimate wear")
 VALIDATION_CYCLES = 3  # Table 1 cycles after the validation protocol's three long cool-downs
+#: load scenarios outside Table 1 (engine rpm, clutch N·m, load N·m, cool-down s), after the validation protocol:
+#: the paper's "extrapolation for unknown load scenarios"
+EXTRAPOLATION = ((2500.0, 80.0, 100.0, 150.0), (800.0, 90.0, 600.0, 150.0), (2500.0, 90.0, 300.0, 150.0))
+EXTRAPOLATION_LABEL = "extrapolation"
+SWEEP_GRID = "1000:1,2500:1,1000:0,2500:0"  # the Fig. 3 points: engine speed and clutch state
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,6 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the bench's noise")
     parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
                         default=3600.0, help="planned Table 1 duration in s")
+    parser.add_argument("--plant", choices=("reference", "paper"), default="reference",
+                        help="the simulated clutch: the reference plant (default, docs/plant.md) or the paper's network")
     parser.add_argument("--force", action="store_true", help="--out may hold files already (an earlier job's): "
                                                              "replace the ones the job writes")
 
@@ -45,15 +56,16 @@ def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
           f"flywheel up to {run['T_flywheel'].max():.1f} degC")
 
 
-def _bench_run(label: str, path: Path, protocol: str, seed: int, progress: Progress, **options: float) -> pd.DataFrame:
+def _bench_run(label: str, path: Path, protocol: str, seed: int, plant: str, progress: Progress,
+               **options: object) -> pd.DataFrame:
     """One protocol on the simulated bench through the runner and the real drivers; the run as loaded back."""
     with interrupts_held():  # the runner and the simulator (see benchlab.cli)
         from benchlab.runfile import load_run
         from benchlab.runner.session import RunRequest, execute
         from sim_bench.bench import SimulatedBench
-        from sim_bench.plant import ThermalPlant
+        from sim_bench.reference_plant import plant_named
 
-    code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, bench=SimulatedBench(ThermalPlant()),
+    code, summary = execute(RunRequest(protocol=protocol, out=path, seed=seed, bench=SimulatedBench(plant_named(plant)),
                                        install_signals=False, progress=progress, **options))
     if code != 0 or summary is None or summary.status != "complete":
         raise RuntimeError(f"{label} run {path} ended {summary.status if summary else 'without a summary'} "
@@ -63,28 +75,59 @@ def _bench_run(label: str, path: Path, protocol: str, seed: int, progress: Progr
     return run
 
 
+def validation_steps(seed: int) -> tuple:
+    """The validation protocol (long cool-downs, Table 1 cycles), then cycles with load scenarios Table 1 lacks."""
+    from protocols.schedule import Step
+    from protocols.validation import validation_schedule
+
+    steps = list(validation_schedule(seed, n_cycles=VALIDATION_CYCLES))
+    cycle = max(s.cycle for s in steps) + 1
+    for i, (rpm, torque, load, cool) in enumerate(EXTRAPOLATION):
+        steps += [Step("launch", 10.0, rpm, torque, load, cycle + i, label=EXTRAPOLATION_LABEL),
+                  Step("drive", cool / 2, rpm, torque, load, cycle + i, label=EXTRAPOLATION_LABEL),
+                  Step("open", cool / 2, rpm, 0.0, load, cycle + i, label=EXTRAPOLATION_LABEL)]
+    return tuple(steps)
+
+
 def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
-    """Diagnose the linear baseline on the fitting run: JSON, page with figures, two labelled lines; the summary."""
+    """Diagnose the nonlinear model on the fitting run: JSON, page with figures, two labelled lines; the summary."""
     with interrupts_held():  # the diagnosis and its page (matplotlib; see benchlab.cli)
         from benchlab.diagnose.engine import diagnose_runs
         from benchlab.diagnose.page import write_page
         from benchlab.diagnose.regimes import worst_regimes
         from benchlab.diagnose.report import summarise
 
-    diagnosis = diagnose_runs([fitting], "linear", progress=progress)
-    summary = summarise(diagnosis, "linear")
+    diagnosis = diagnose_runs([fitting], "nonlinear", progress=progress)
+    summary = summarise(diagnosis, "nonlinear")
     write_text(out / "diagnose.json", json.dumps(summary, indent=2, default=float))
     page = write_page(diagnosis, summary, [fitting], out / "diagnose")
     base, best = summary["baseline"], summary["best"]
     found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, gain {f['gain_pct']:.0f} %)"
                       for f in summary["findings"]) or "none"
-    print(f"diagnose  linear baseline: held-out RMSE {base['rmse_K']:.3f} K -> best {best['model']} "
+    print(f"diagnose  nonlinear baseline: held-out RMSE {base['rmse_K']:.3f} K -> best {best['model']} "
           f"{best['rmse_K']:.3f} K; findings: {found}")
     worst = worst_regimes(summary["regimes"]["baseline"], 1)
     if worst:
         group, label, channel, rmse, _ = worst[0]
         print(f"          worst regime (held-out): {group} = {label}, {channel} {rmse:.3f} K -> {page}")
     return summary
+
+
+def _plate(validation: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame):
+    """The unmeasured plate on the validation run: the model's simulation and the observer's estimate (flywheel, air
+    and housing sensors) against /truth; None where the run has no truth."""
+    with interrupts_held():
+        from benchlab.observer.batch import observe
+        from benchlab.report.showcase import plate_check
+        from benchlab.runfile import load_truth
+
+    truth = load_truth(path)
+    if truth is None:
+        return None
+    observed = observe(validation, nonlinear, ["T_flywheel", "T_air", "T_housing"])
+    estimates = {"model": model["T_pressure_plate"].to_numpy(),
+                 "observer": observed.estimate["T_pressure_plate"].to_numpy()}
+    return plate_check(validation, truth, estimates, model)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -94,17 +137,21 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.report import write_report
         from benchlab.report.index import cooldown_scores, write_index
         from benchlab.report.resistance import standard_errors
+        from benchlab.report.scores import estimate
+        from benchlab.report.showcase import labelled_mask, peak_misfit, scores_on, verdict
         from benchlab.wear import analyse_wear
         from benchlab.wear.plot import plot_wear
 
     progress = for_terminal(args.quiet)
     out = check_output_dir(args.out, "--out", args.force)
     out.mkdir(exist_ok=True)
-    for stale in [out / "table1.h5", out / "validation.h5", *out.glob("table1*.blf"), *out.glob("validation*.blf")]:
+    runs = ("table1", "validation", "sweep")
+    for stale in [*(out / f"{r}.h5" for r in runs), *(p for r in runs for p in out.glob(f"{r}*.blf"))]:
         stale.unlink(missing_ok=True)  # the job writes its runs anew each time
-    fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, progress, duration_s=args.duration)
-    validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, progress,
-                            cycles=VALIDATION_CYCLES)
+    fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, args.plant, progress, duration_s=args.duration)
+    validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, args.plant, progress,
+                            steps=validation_steps(args.seed + 1))
+    sweep = _bench_run("sweep", out / "sweep.h5", "cooldown-sweep", args.seed + 2, args.plant, progress, grid=SWEEP_GRID)
     figures = {}
     for model in ("linear", "nonlinear"):
         result = identify([fitting], model, validate=[validation], starts=4, progress=progress)
@@ -114,9 +161,36 @@ def run(args: argparse.Namespace) -> int:
         print(f"identify  {model:9s}: fit RMSE {fit_fig['rmse_K']:.3f} K ({fit_fig['nrmse_pct']:.2f} %), "
               f"validation RMSE {val_fig['rmse_K']:.3f} K ({val_fig['nrmse_pct']:.2f} %) -> {out / (model + '.json')}")
     nonlinear, linear = load_params(out / "nonlinear.json"), load_params(out / "linear.json")
+    models = {"linear": linear, "nonlinear": nonlinear}
+    sims = {run_label: {m: estimate(r, p, m).simulated for m, p in models.items()}
+            for run_label, r in (("fit", fitting), ("validation", validation))}
+    unseen = labelled_mask(validation, out / "validation.h5", EXTRAPOLATION_LABEL)
+    table1 = labelled_mask(validation, out / "validation.h5", "table1")
+    story = {"peaks": {run_label: {m: peak_misfit(r, sims[run_label][m]) for m in models}
+                       for run_label, r in (("fit", fitting), ("validation", validation))},
+             "extrapolation": {"Table 1 cycles": scores_on(validation, table1, sims["validation"]),
+                               "load scenarios not in Table 1": scores_on(validation, unseen, sims["validation"])},
+             "plate": _plate(validation, out / "validation.h5", nonlinear, sims["validation"]["nonlinear"])}
+    story["verdict"] = verdict(figures["nonlinear"]["fit"]["nrmse_pct"], figures["nonlinear"]["validation"]["nrmse_pct"],
+                               story["extrapolation"]["load scenarios not in Table 1"]["nonlinear"],
+                               story["extrapolation"]["Table 1 cycles"]["nonlinear"],
+                               max(story["peaks"][k]["nonlinear"].max_pct for k in ("fit", "validation")),
+                               story["plate"].rmse_k["observer"] if story["plate"] is not None else float("nan"))
+    print(f"verdict   {story['verdict']}")
+    for m in models:
+        worst = max(story["peaks"][k][m].max_pct for k in ("fit", "validation"))
+        print(f"misfit    {m:9s}: peaks up to {worst:.1f} % (paper: 5 %), unseen load scenarios "
+              f"{story['extrapolation']['load scenarios not in Table 1'][m]:.2f} K RMSE (Table 1 cycles "
+              f"{story['extrapolation']['Table 1 cycles'][m]:.2f} K)")
+    if story["plate"] is not None:
+        plate = story["plate"]
+        print(f"plate     against /truth: model RMSE {plate.rmse_k['model']:.2f} K, observer "
+              f"{plate.rmse_k['observer']:.2f} K; plate hotter than the flywheel while slipping by "
+              f"{plate.hotter_truth_k:.2f} K (truth), {plate.hotter_model_k:.2f} K (model)")
     page = write_report(fitting, nonlinear, out / "report", compare=linear, validation=[validation],
-                        progress=progress)
-    print(f"report    nonlinear against linear, validated on {out / 'validation.h5'} -> {page}")
+                        sweep=out / "sweep.h5", progress=progress)
+    print(f"report    nonlinear against linear, validated on {out / 'validation.h5'}, Fig. 3 measured on "
+          f"{out / 'sweep.h5'} -> {page}")
     diagnosis = _diagnose(fitting, out, progress)
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()
@@ -124,7 +198,9 @@ def run(args: argparse.Namespace) -> int:
     plot_wear(wear_report, out / "wear.png")
     print(f"wear      {wear['engagements']} engagements, {wear['friction_energy_J'] / 1e6:.2f} MJ -> {out / 'wear.json'}")
     cooldowns = cooldown_scores(validation, out / "validation.h5", [("linear", linear), ("nonlinear", nonlinear)])
-    index = write_index(out, {"Table 1": (out / "table1.h5", fitting), "validation": (out / "validation.h5", validation)},
-                        figures, cooldowns, nonlinear, standard_errors(nonlinear), diagnosis, wear)
+    runs_shown = {"Table 1": (out / "table1.h5", fitting), "validation": (out / "validation.h5", validation),
+                  "Fig. 3 sweep": (out / "sweep.h5", sweep)}
+    index = write_index(out, runs_shown,
+                        figures, cooldowns, nonlinear, standard_errors(nonlinear), diagnosis, wear, story)
     print(f"page      the whole job -> {index}")
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -34,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
     parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
                         "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`)")
+    parser.add_argument("--plant", choices=("reference", "paper"),
+                        help="--bench sim: the simulated clutch, the reference plant (default, docs/plant.md) or the "
+                             "paper's network; a resumed run keeps its own")
     parser.add_argument("--fault", type=cliargs.fault, action="append", default=[], metavar=SPEC,
                         help="simulated bench only, repeatable: inject a fault at SECONDS of run time to rehearse "
                         f"what the bench does (recorded in the run file's sim_faults); kinds(keys): {kinds_help()}")
@@ -77,6 +81,21 @@ def run(args: argparse.Namespace) -> int:
             return _run(args, out)
 
 
+def _plant(args: argparse.Namespace, out: Path) -> str:
+    """The simulated bench's plant: --plant, else the reference; a resumed run's own (its `sim_truth`; the paper's
+    in files written before the reference plant), and --plant must agree with it."""
+    if not args.resume or args.bench != "sim" or not out.is_file():
+        return args.plant or "reference"
+    from benchlab.runfile import load_attrs
+
+    truth = load_attrs(out).get("sim_truth")
+    recorded = json.loads(truth).get("plant", "paper") if truth is not None else "reference"
+    if args.plant is not None and args.plant != recorded:
+        raise InputError(out, "sim_truth", f"--plant {recorded} (the run was made on the {recorded} plant), "
+                                           f"got --plant {args.plant}")
+    return recorded
+
+
 def _run(args: argparse.Namespace, out: Path) -> int:
     """Check the rest of the command line, run (or dry-run) the protocol, print the summary."""
     if not args.resume and args.protocol not in NAMES:
@@ -91,11 +110,15 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.runner.session import RunRequest, execute
     bench = args.bench
-    if args.fault:  # --bench sim (checked above): the simulated bench with the faults to rehearse
+    if args.plant is not None and args.bench != "sim":
+        raise InputError("command line", "--plant", "--bench sim (a hardware bench has its own clutch)")
+    plant = _plant(args, out)
+    if args.fault or plant != "reference":  # --bench sim (checked above): its plant, the faults to rehearse
         with interrupts_held():
             from sim_bench.bench import SimulatedBench
+            from sim_bench.reference_plant import plant_named
 
-        bench = SimulatedBench(faults=tuple(args.fault))
+        bench = SimulatedBench(plant_named(plant), faults=tuple(args.fault))
     request = RunRequest(protocol=args.protocol or "", out=out, bench=bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
                          progress=for_terminal(args.quiet))

@@ -228,7 +228,9 @@ def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_
     path = Path(path)
     run = load_run(path)
     sim_truth = load_attrs(path).get("sim_truth")
-    truth = json.loads(sim_truth).get("params") if sim_truth is not None else None
+    recorded = json.loads(sim_truth) if sim_truth is not None else {}
+    # the true R of eq. (11) exists only for the paper's plant (the reference clutch has no such resistance)
+    truth = recorded.get("params") if recorded.get("plant", "paper") == "paper" else None
     found = segments(path)
     with progress.task("cool-downs", len(found), unit="fit") as task:
         return [_fit_cooldown(run, params, sample_s, truth, *segment, task) for segment in found]

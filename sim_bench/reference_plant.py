@@ -1,0 +1,251 @@
+"""The reference clutch: a passenger-car single-plate dry clutch written from geometry and handbook physics.
+
+Not the paper's network: eleven states (two friction-ring annuli and the bulk of the flywheel, crankshaft end, clutch
+disc, pressure plate, cover with diaphragm spring, chamber air, bell housing, gearbox case, two PT1000s with their own
+lag), contact conduction through the lining only while clamped, rotating-disc forced convection from the engine speed
+(the disc: its own speed), natural convection and radiation from the plant's own temperatures, heat into the crankshaft,
+friction heat split by thermal effusivity and by radius, and μ(ϑ) of the lining scaling the torque the clutch
+transmits. Every number and its source: docs/plant.md. It runs on the same network engine (benchlab.network) as the
+paper's plant; the laws that read temperatures are solved by fixed-point iteration (ThermalPlant).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from benchlab.network import Boundary, Lag, Link, Node, Source, ThermalNetwork
+from sim_bench.plant import KELVIN, STEFAN_BOLTZMANN, ThermalPlant
+
+# -- geometry (m) and materials (SI): docs/plant.md gives the source of each -----------------------------------
+R_IN, R_MID, R_OUT = 0.075, 0.095, 0.120  # friction annulus of a 240 mm clutch; sensors at 85 mm and 108 mm
+RING_THICKNESS = 0.012  # flywheel cast iron under the friction face that heats within a launch
+LINING_THICKNESS = 0.0035  # per side
+GAP_OPEN = 0.001  # air gap per side with the clutch open
+CAST_IRON = {"rho": 7200.0, "c": 460.0, "k": 50.0}  # grey iron EN-GJL-250
+STEEL = {"c": 470.0}
+ALUMINIUM = {"c": 900.0}
+LINING = {"rho": 2000.0, "c": 1000.0, "k": 0.5}  # organic (resin-bonded) friction material
+AIR = {"k": 0.028, "nu": 1.8e-5, "rho": 1.1, "c": 1007.0}  # at about 50 degC
+FRICTION_CONTACT_H = 2000.0  # W/m²K, clamped lining on cast iron
+
+
+def _annulus(r1: float, r2: float) -> float:
+    return math.pi * (r2 ** 2 - r1 ** 2)
+
+
+AREA_INNER, AREA_OUTER = _annulus(R_IN, R_MID), _annulus(R_MID, R_OUT)
+AREA_FACE = AREA_INNER + AREA_OUTER
+
+
+def _effusivity(m: Mapping[str, float]) -> float:
+    return math.sqrt(m["k"] * m["rho"] * m["c"])
+
+
+#: share of each interface's friction heat that goes into the metal side (Blok/Charron partition by effusivity)
+METAL_SHARE = _effusivity(CAST_IRON) / (_effusivity(CAST_IRON) + _effusivity(LINING))
+#: share of the flywheel face's heat in the inner annulus: uniform pressure, power density ∝ r (∫ r² dr)
+INNER_SHARE = (R_MID ** 3 - R_IN ** 3) / (R_OUT ** 3 - R_IN ** 3)
+
+
+def _lining_r(area: float) -> float:
+    """Clamped: half the lining stack's conduction plus the contact, over `area` (K/W)."""
+    return LINING_THICKNESS / (LINING["k"] * area) + 1.0 / (FRICTION_CONTACT_H * area)
+
+
+def _gap_r(area: float) -> float:
+    """Open: conduction across the air gap (K/W)."""
+    return GAP_OPEN / (AIR["k"] * area)
+
+
+def reference_params() -> dict[str, float]:
+    """Capacities (J/K), resistances (K/W), areas (m²), emissivity-areas (m²) and the friction law of the reference
+    clutch, derived from the geometry and materials above (docs/plant.md)."""
+    ring_c = CAST_IRON["rho"] * CAST_IRON["c"] * RING_THICKNESS
+    ring_conduction = CAST_IRON["k"] * 2 * math.pi * R_MID * RING_THICKNESS / ((R_OUT - R_IN) / 2)
+    return {
+        # capacities
+        "C_ring_inner": ring_c * AREA_INNER, "C_ring_outer": ring_c * AREA_OUTER,
+        "C_flywheel_bulk": (9.0 - CAST_IRON["rho"] * RING_THICKNESS * AREA_FACE) * CAST_IRON["c"],  # 9 kg flywheel
+        "C_crank": 2.5 * STEEL["c"], "C_disc": LINING["rho"] * 2 * LINING_THICKNESS * AREA_FACE * LINING["c"]
+        + 0.3 * STEEL["c"], "C_plate": 3.2 * CAST_IRON["c"], "C_cover": 1.85 * STEEL["c"],
+        "C_air": 0.006 * AIR["rho"] * AIR["c"], "C_bell": 5.0 * ALUMINIUM["c"],
+        "C_gearbox": 25.0 * ALUMINIUM["c"] + 1.7 * 1900.0,  # case and 2 l of gear oil
+        # conduction
+        "R_ring": 1.0 / ring_conduction,
+        "R_inner_bulk": 0.015 / (CAST_IRON["k"] * AREA_INNER), "R_outer_bulk": 0.015 / (CAST_IRON["k"] * AREA_OUTER),
+        "R_bulk_crank": 1.0 / (3000.0 * 0.0035), "R_crank_engine": 1.0,
+        "R_plate_disc": _lining_r(AREA_FACE), "R_inner_disc": _lining_r(AREA_INNER),
+        "R_outer_disc": _lining_r(AREA_OUTER), "R_plate_disc_open": _gap_r(AREA_FACE),
+        "R_inner_disc_open": _gap_r(AREA_INNER), "R_outer_disc_open": _gap_r(AREA_OUTER),
+        "R_plate_cover": 1.5, "R_cover_bulk": 0.8, "R_bell_gearbox": 0.15,
+        # convecting areas (m²): to the chamber air, and the housing's outside
+        "A_bulk": 0.08, "A_plate": 0.03, "A_cover": 0.09, "A_bell_in": 0.15, "A_bell_out": 0.30,
+        "A_gearbox_out": 0.70,
+        "vent_l_per_s_per_krpm": 0.5, "vent_leak_l_per_s": 0.1,
+        # radiation: effective emissivity × area (m²) to the housing, and of the housing to the room
+        "eA_bulk": 0.18 * 0.08, "eA_plate": 0.18 * 0.03, "eA_cover": 0.136 * 0.09,
+        "eA_bell_out": 0.3 * 0.30, "eA_gearbox_out": 0.3 * 0.70,
+        # sensors: PT1000 in a bore behind the friction face
+        "tau_sensor_inner": 3.0, "tau_sensor_outer": 4.0,
+        "tau_sensor_air": 20.0,  # the wired PT1000 in the housing's opening: a sheathed probe in moving air
+        # friction: μ(ϑ)/μ(ϑ_cal) = 1 + mu_slope (ϑ - ϑ_cal), the controllers calibrated at ϑ_cal
+        "mu_slope_per_k": -1.0e-3, "mu_cal_c": 40.0,
+    }
+
+
+# -- laws ---------------------------------------------------------------------------------------------------------
+_BIN = 0.005  # laws are evaluated to 0.5 % (far below their own uncertainty) so the solver sees few operating points
+
+
+def _binned(r: np.ndarray) -> np.ndarray:
+    return np.exp(np.round(np.log(r) / _BIN) * _BIN)
+
+
+def rotating_h(rpm: np.ndarray) -> np.ndarray:
+    """Mean heat-transfer coefficient (W/m²K) of a disc of radius R_OUT rotating at `rpm` in air: Cobb & Saunders,
+    laminar Nu = 0.36 Re^0.5, turbulent Nu = 0.015 Re^0.8, the larger of the two (Re = ω r²/ν): bolts, cover windows
+    and spring fingers trip the boundary layer, so the turbulent law holds from well below the smooth disc's Re 2.4e5."""
+    re = np.abs(rpm) * math.pi / 30.0 * R_OUT ** 2 / AIR["nu"]
+    nu = np.maximum(0.36 * np.sqrt(re), 0.015 * re ** 0.8)
+    return nu * AIR["k"] / R_OUT
+
+
+def natural_h(difference_k: np.ndarray, length_m: float) -> np.ndarray:
+    """Laminar natural convection of a vertical surface in air, h = 1.42 (ΔT/L)^0.25 (W/m²K), ΔT at least 0.5 K."""
+    return 1.42 * (np.maximum(np.abs(difference_k), 0.5) / length_m) ** 0.25
+
+
+def radiation_h(eps_area: float, hot: np.ndarray, cold: np.ndarray) -> np.ndarray:
+    """Linearised radiation conductance εAσ(T1² + T2²)(T1 + T2) (W/K) between two temperatures (degC)."""
+    t1, t2 = hot + KELVIN, cold + KELVIN
+    return eps_area * STEFAN_BOLTZMANN * (t1 ** 2 + t2 ** 2) * (t1 + t2)
+
+
+def _state(ch: Mapping[str, np.ndarray], node: str) -> np.ndarray:
+    return ch[f"_state_{node}"]
+
+
+def _convection(node: str, area: str, eps_area: str | None = None, length: float = 0.24):
+    """Engine-side part to chamber air: forced (engine speed) + natural (own ΔT) + radiation to the housing wall,
+    as one resistance from the previous iterate's temperatures."""
+    def law(p, ch):
+        h = rotating_h(ch["engine_speed"]) + natural_h(_state(ch, node) - _state(ch, "A"), length)
+        g = h * p[area]
+        if eps_area is not None:  # the chamber air is transparent: radiation goes to the wall, which A follows closely
+            g = g + radiation_h(p[eps_area], _state(ch, node), _state(ch, "T"))
+        return _binned(1.0 / g)
+    return law
+
+
+def _open_face(area: float, speed: str):
+    """A friction face exposed to the chamber air only while the clutch is open."""
+    def law(p, ch):
+        h = rotating_h(ch[speed]) + 3.0  # 3 W/m²K: still-air floor of a face in a 1 mm gap
+        return _binned(np.where(ch["clutch_state"] >= 0.5, 1e6, 1.0 / (h * area)))
+    return law
+
+
+def _clamped(closed: str, open_: str):
+    def law(p, ch):
+        return np.where(ch["clutch_state"] >= 0.5, p[closed], p[open_])
+    return law
+
+
+def _air_housing(p, ch):
+    h = 0.5 * rotating_h(ch["engine_speed"]) + natural_h(_state(ch, "A") - _state(ch, "T"), 0.3)
+    return _binned(1.0 / (h * p["A_bell_in"]))
+
+
+def _ventilation(p, ch):
+    litres = p["vent_leak_l_per_s"] + p["vent_l_per_s_per_krpm"] * np.abs(ch["engine_speed"]) / 1000.0
+    return _binned(1.0 / (litres * 1e-3 * AIR["rho"] * AIR["c"]))
+
+
+def _outside(node: str, area: str, eps_area: str, length: float):
+    def law(p, ch):
+        g = natural_h(_state(ch, node) - ch["T_ambient"], length) * p[area]
+        g = g + radiation_h(p[eps_area], _state(ch, node), ch["T_ambient"])
+        return _binned(1.0 / g)
+    return law
+
+
+def _constant(name: str):
+    return lambda p, ch: p[name]
+
+
+def _engine(ch: Mapping[str, np.ndarray]) -> np.ndarray:
+    return ch["T_engine"] if "T_engine" in ch else ch["T_ambient"]
+
+
+#: state -> the channel its truth is recorded as (/truth); the sensors' lags read T_flywheel_1 and _2
+CHANNEL_NAMES = {"P": "T_pressure_plate", "F": "T_flywheel", "Fi": "T_flywheel_inner", "B": "T_flywheel_bulk",
+                 "K": "T_crankshaft", "L": "T_clutch_disc", "D": "T_cover", "A": "T_chamber_air", "T": "T_housing",
+                 "G": "T_gearbox", "S1": "T_flywheel_1", "S2": "T_flywheel_2", "SA": "T_air"}
+
+
+def reference_network() -> ThermalNetwork:
+    """Nodes, links, heat sources, sensor lags of the reference clutch; F is the outer friction annulus (most of
+    the face's heat), Fi the inner one, B the flywheel's bulk on the crankshaft end K."""
+    nodes = (Node("F", "C_ring_outer"), Node("Fi", "C_ring_inner"), Node("B", "C_flywheel_bulk"),
+             Node("K", "C_crank"), Node("L", "C_disc"), Node("P", "C_plate"), Node("D", "C_cover"),
+             Node("A", "C_air"), Node("T", "C_bell"), Node("G", "C_gearbox"))
+    boundaries = (Boundary("eng", _engine), Boundary("amb", lambda ch: ch["T_ambient"]))
+    links = (
+        Link("F", "Fi", _constant("R_ring"), "ring radial"),
+        Link("F", "B", _constant("R_outer_bulk"), "outer ring to bulk"),
+        Link("Fi", "B", _constant("R_inner_bulk"), "inner ring to bulk"),
+        Link("B", "K", _constant("R_bulk_crank"), "flywheel bolts to crank flange"),
+        Link("K", "eng", _constant("R_crank_engine"), "crankshaft into the engine"),
+        Link("P", "L", _clamped("R_plate_disc", "R_plate_disc_open"), "plate through lining"),
+        Link("F", "L", _clamped("R_outer_disc", "R_outer_disc_open"), "outer ring through lining"),
+        Link("Fi", "L", _clamped("R_inner_disc", "R_inner_disc_open"), "inner ring through lining"),
+        Link("P", "D", _constant("R_plate_cover"), "plate to diaphragm fulcrum and straps"),
+        Link("D", "B", _constant("R_cover_bulk"), "cover bolted to flywheel rim"),
+        Link("B", "A", _convection("B", "A_bulk", "eA_bulk"), "flywheel bulk to air"),
+        Link("P", "A", _convection("P", "A_plate", "eA_plate"), "plate back to air"),
+        Link("D", "A", _convection("D", "A_cover", "eA_cover"), "cover and spring to air"),
+        Link("P", "A", _open_face(AREA_FACE, "engine_speed"), "plate face to air (open)"),
+        Link("F", "A", _open_face(AREA_OUTER, "engine_speed"), "outer face to air (open)"),
+        Link("Fi", "A", _open_face(AREA_INNER, "engine_speed"), "inner face to air (open)"),
+        Link("L", "A", _open_face(2 * AREA_FACE, "clutch_speed"), "disc faces to air (open)"),
+        Link("A", "T", _air_housing, "air to bell housing"),
+        Link("A", "amb", _ventilation, "ventilation"),
+        Link("T", "G", _constant("R_bell_gearbox"), "bell housing to gearbox case"),
+        Link("T", "amb", _outside("T", "A_bell_out", "eA_bell_out", 0.3), "bell housing outside"),
+        Link("G", "amb", _outside("G", "A_gearbox_out", "eA_gearbox_out", 0.4), "gearbox case outside"),
+    )
+    share = {"P": 0.5 * METAL_SHARE, "F": 0.5 * METAL_SHARE * (1 - INNER_SHARE), "Fi": 0.5 * METAL_SHARE * INNER_SHARE,
+             "L": 1 - METAL_SHARE}
+    sources = tuple(Source(node, lambda q, ch, f=f: f * ch["friction_power"], f"friction heat {node}")
+                    for node, f in share.items())
+    lags = (Lag("S1", "Fi", "tau_sensor_inner"), Lag("S2", "F", "tau_sensor_outer"), Lag("SA", "A", "tau_sensor_air"))
+    outputs = {CHANNEL_NAMES[s]: s for s in ("S1", "S2", "SA", "T", "P", "F", "Fi", "B", "K", "L", "D", "A", "G")}
+    initial = {s: "T_flywheel" for s in ("F", "Fi", "B", "K", "L", "P", "D", "S1", "S2")}
+    initial.update(A="T_air", SA="T_air", T="T_housing", G="T_housing")
+    return ThermalNetwork(nodes, boundaries, links, sources, outputs, lags, initial)
+
+
+def friction_factor(params: Mapping[str, float], disc_c: float) -> float:
+    """μ(ϑ_disc)/μ(ϑ_cal): the torque the clutch transmits per newton-metre the controller commands (its actuator
+    is calibrated at ϑ_cal), μ(ϑ) linear in the disc temperature, kept within 0.5 .. 1.2."""
+    return float(np.clip(1.0 + params["mu_slope_per_k"] * (disc_c - params["mu_cal_c"]), 0.5, 1.2))
+
+
+def reference_plant() -> ThermalPlant:
+    """The simulated bench's default plant: the reference clutch, temperatures of its laws solved by iteration."""
+    params = reference_params()
+    return ThermalPlant(params, network=reference_network(), reads_states=True,
+                        friction=lambda state: friction_factor(params, state["L"]), name="reference")
+
+
+#: the plants a simulated bench can be asked for by name (`--plant`): the reference clutch (default), the paper's network
+PLANTS = {"reference": reference_plant, "paper": ThermalPlant}
+DEFAULT_PLANT = "reference"
+
+
+def plant_named(name: str) -> ThermalPlant:
+    """A fresh plant of the given name (one of PLANTS)."""
+    return PLANTS[name]()

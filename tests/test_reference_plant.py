@@ -1,0 +1,72 @@
+"""The reference clutch (sim_bench/reference_plant.py): physically sane, richer than the model, μ(ϑ) on the torque,
+and the simulated bench's default with `--plant paper` keeping the paper's network."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+
+from benchlab.cli import main
+from protocols.schedule import Step
+from protocols.table1 import table1_schedule
+from sim_bench.bench import SimBench, SimBenchConfig
+from sim_bench.reference_plant import CHANNEL_NAMES, reference_plant
+from sim_bench.virtual_run import run_schedule
+
+
+def test_at_rest_at_ambient_it_stays_at_ambient():
+    plant = reference_plant()
+    plant.reset(22.0)
+    n = 600
+    channels = {"engine_speed": np.full(n, 1500.0), "clutch_speed": np.zeros(n), "clutch_torque": np.zeros(n),
+                "clutch_state": np.zeros(n), "friction_power": np.zeros(n), "load_torque": np.zeros(n),
+                "T_ambient": np.full(n, 22.0)}
+    states = plant.advance(channels, 1.0)
+    assert max(float(np.max(np.abs(v - 22.0))) for v in states.values()) < 1e-6
+
+
+def test_launches_heat_the_friction_faces_first_and_the_sensors_lag_them():
+    run = run_schedule(table1_schedule(5, duration_s=600), reference_plant(), seed=5, dt=0.1)
+    truth = run.attrs["true_states"]
+    assert set(truth) == set(reference_plant().state_names)
+    first = int(np.flatnonzero(run["friction_power"].to_numpy() > 0)[0])
+    rise = {s: float(truth[s][first + 20] - truth[s][first]) for s in ("F", "B", "A", "G", "S2")}
+    # the ring under the face warms before the bulk behind it, the bulk before the air, the gearbox last;
+    # the PT1000 (τ = 4 s) trails its ring
+    assert rise["F"] > rise["B"] > 0 and rise["F"] > rise["S2"] > 0 and rise["A"] > rise["G"] >= 0
+    # the plate is never measured, but it heats: hotter than ambient by the end
+    assert truth["P"][-1] > run["T_ambient"].iloc[-1] + 1.0
+
+
+def test_a_hot_lining_transmits_less_torque_than_commanded():
+    steps = (Step("open", 5.0, 2000.0, 0.0, 0.0, 0), Step("launch", 3.0, 2000.0, 60.0, 100.0, 1))
+    torques = {}
+    for lining_c in (40.0, 140.0):
+        sim = SimBench(SimBenchConfig(dropouts=False, initial_c={"F": lining_c, "L": lining_c, "A": 22.0}),
+                       plant=reference_plant())
+        try:
+            physics = sim.physics
+            physics.set_drive_speed(steps[1].engine_speed_rpm)
+            physics.set_clutch(steps[1].clutch_torque_nm, False)
+            physics.set_load_torque(steps[1].load_torque_nm)
+            physics.advance(0.5)
+            torques[lining_c] = float(physics.actuals_at(np.array([0.5])).clutch_torque_nm[0])
+        finally:
+            sim.close()
+    assert abs(torques[40.0] - 60.0) < 1.0  # calibrated at 40 degC
+    assert torques[140.0] < 0.95 * 60.0  # μ falls 10 % per 100 K
+
+
+def test_run_records_which_plant_and_every_node(tmp_path, capsys):
+    for plant, nodes in (("reference", set(CHANNEL_NAMES.values())),
+                         ("paper", {"T_pressure_plate", "T_flywheel", "T_air", "T_housing"})):
+        out = tmp_path / f"{plant}.h5"
+        assert main(["run", "table1", "--cycles", "1", "--out", str(out), "--plant", plant, "--quiet"]) == 0
+        with h5py.File(out, "r") as f:
+            assert json.loads(f.attrs["sim_truth"])["plant"] == plant
+            assert set(f["truth"]) == nodes | {"time"}
+    # a resumed run keeps its plant: another one asked for is refused in one line
+    assert main(["run", "--resume", str(tmp_path / "paper.h5"), "--plant", "reference", "--quiet"]) == 2
+    assert "sim_truth" in capsys.readouterr().err
