@@ -31,6 +31,7 @@ from benchlab.model.params import paper_params
 from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from protocols.table1 import table1_schedule
+from sim_bench.bench import SimulatedBench
 from sim_bench.plant import ThermalPlant
 from sim_bench.virtual_run import run_schedule
 
@@ -61,7 +62,8 @@ def main() -> int:
     rel_error, rel_se, seconds, r_error, v_ratio = [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "validation.h5"
-        execute(RunRequest("validation", path, seed=1000, cycles=5, install_signals=False))
+        execute(RunRequest("validation", path, seed=1000, cycles=5, install_signals=False,
+                           bench=SimulatedBench(ThermalPlant())))  # the paper's plant: its truth is the model
         validation = load_run(path)
     floor = evaluate(validation, truth)["rmse_K"]
     names: list[str] = []

@@ -30,6 +30,8 @@ from benchlab.runfile import load_run
 from benchlab.runner.session import RunRequest, execute
 from benchlab.network.simulation import input_channels
 from benchlab.wear.clutchfile import default_clutch
+from sim_bench.bench import SimulatedBench
+from sim_bench.plant import ThermalPlant
 from targets import load, print_target, summarise_targets  # benchmarks/targets.py, beside this script
 
 BUDGET_US = 10_000.0  # one 10 ms control-unit sample
@@ -83,7 +85,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "table1.h5"
         code, _ = execute(RunRequest("table1", path, seed=args.seed, duration_s=args.minutes * 60,
-                                     install_signals=False))
+                                     install_signals=False, bench=SimulatedBench(ThermalPlant())))  # paper plant
         assert code == 0, code
         run = load_run(path)
     params, clutch, dt = paper_params(), default_clutch(), float(run.attrs["dt"])
