@@ -7,18 +7,34 @@ Drivers and emulators take any `() -> seconds` callable. The runner only ever ca
 
 from __future__ import annotations
 
+import time
+
 from sim_bench.emulators.clock import ManualClock
 
 
 class SimClock(ManualClock):
-    """Simulated time: moves only when told to, so a 2-hour protocol runs in seconds and is deterministic."""
+    """Simulated time: moves only when told to, so a 2-hour protocol runs in seconds and is deterministic.
+
+    With `pace` (a factor), `sleep_until` also waits on the wall clock so simulated time runs at `pace` x real time
+    (`benchlab run --realtime`): the live view, Ctrl-C and the interlocks can be rehearsed at the speed a hardware
+    bench has. The run's data are the same either way; only the wall-clock time it takes changes.
+    """
 
     realtime = False
 
-    def __init__(self, t0: float = 0.0) -> None:
+    def __init__(self, t0: float = 0.0, pace: float | None = None) -> None:
         super().__init__(float(t0))
+        if pace is not None and not pace > 0:
+            raise ValueError(f"pace: a factor > 0, got {pace!r}")
+        self.pace = pace
+        self._origin = (time.monotonic(), float(t0))  # wall and simulated time when pacing started
 
     def sleep_until(self, t: float) -> float:
-        """Jump to `t` (never backwards) and return the new time."""
+        """Jump to `t` (never backwards) and return the new time; paced, first wait until the wall clock is there."""
+        if self.pace is not None:
+            wall0, sim0 = self._origin
+            delay = wall0 + (t - sim0) / self.pace - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
         self.t = max(self.t, float(t))
         return self.t

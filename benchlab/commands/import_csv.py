@@ -25,6 +25,7 @@ from benchlab import cliargs
 from benchlab.bounds import MAX_CSV_COLUMNS, MAX_RUN_DURATION_S
 from benchlab.errors import InputError, read_document
 from benchlab.interrupts import interrupts_held
+from benchlab.provenance import IMPORTED
 from benchlab.model.names import MODEL_HELP
 from benchlab.outputs import check_output
 
@@ -48,8 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
                         help="time step in s of a CSV without a time column (one row per step); an MDF "
                              "file's grid (required for MDF)")
-    parser.add_argument("--unit", action="extend", nargs="+", default=[], metavar="NAME=UNIT",
-                        help="the unit of each column beyond the contract's channels, e.g. --unit IqFbk=A speed=rpm")
+    parser.add_argument("--unit", type=cliargs.name_values, action="extend", default=[], metavar="NAME=UNIT[,...]",
+                        help="the unit of each column beyond the contract's channels, repeatable or separated by "
+                             "commas, e.g. --unit IqFbk=A,speed=rpm")
     parser.add_argument("--model", help=f"{MODEL_HELP}: the CSV must hold the channels it names "
                                         "(default: the clutch channels of contract section 1)")
     parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
@@ -227,6 +229,6 @@ def run(args: argparse.Namespace) -> int:
         frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep,
                                     args.decimal)
         attrs = {"source_file": Path(args.csv).name}
-    write_run(args.out, frame, dt, protocol="imported", units=units, attrs=attrs)
+    write_run(args.out, frame, dt, protocol="imported", units=units, attrs={**attrs, "bench": IMPORTED})
     print(f"{args.out}: {len(frame)} samples at dt={dt:g} s, {len(frame.columns)} channels")
     return 0

@@ -1,4 +1,5 @@
-"""`benchlab pipeline --out DIR`: the whole job on the simulated bench, end to end.
+"""`benchlab pipeline --out DIR`: the whole job on the simulated bench, end to end (always the simulated bench, by
+design: it is the demonstration and the check that everything fits together; each line and page says so).
 
 Runs Table 1 on the simulated bench and the validation protocol (long hot cool-downs with the engine
 speed or the clutch state changing, then a few fresh Table 1 cycles), identifies the linear and the
@@ -22,6 +23,7 @@ from benchlab.bounds import MAX_RUN_DURATION_S
 from benchlab.interrupts import interrupts_held
 from benchlab.outputs import check_output_dir, write_text
 from benchlab.progress import Progress, for_terminal
+from benchlab.provenance import bench_text
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -42,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
     print(f"{label:<9} {path}: {len(run)} samples, {run['time'].iloc[-1] / 3600:.2f} h, "
-          f"flywheel up to {run['T_flywheel'].max():.1f} degC")
+          f"flywheel up to {run['T_flywheel'].max():.1f} degC, on {bench_text(run.attrs.get('bench'))}")
 
 
 def _bench_run(label: str, path: Path, protocol: str, seed: int, progress: Progress, **options: float) -> pd.DataFrame:
@@ -74,7 +76,7 @@ def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
     diagnosis = diagnose_runs([fitting], "linear", progress=progress)
     summary = summarise(diagnosis, "linear")
     write_text(out / "diagnose.json", json.dumps(summary, indent=2, default=float))
-    page = write_page(diagnosis, summary, [fitting], out / "diagnose")
+    page = write_page(diagnosis, summary, [fitting], out / "diagnose").with_suffix(".html")
     base, best = summary["baseline"], summary["best"]
     found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, gain {f['gain_pct']:.0f} %)"
                       for f in summary["findings"]) or "none"
@@ -116,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     nonlinear, linear = load_params(out / "nonlinear.json"), load_params(out / "linear.json")
     page = write_report(fitting, nonlinear, out / "report", compare=linear, validation=[validation],
                         progress=progress)
-    print(f"report    nonlinear against linear, validated on {out / 'validation.h5'} -> {page}")
+    print(f"report    nonlinear against linear, validated on {out / 'validation.h5'} -> {page.with_suffix('.html')}")
     diagnosis = _diagnose(fitting, out, progress)
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()
