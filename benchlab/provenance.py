@@ -9,12 +9,13 @@ SIMULATED = "sim"
 IMPORTED = "imported"
 
 
-def bench_text(bench: "str | None") -> str:
-    """The bench as a reader should see it: simulated, imported, or the hardware bench's configuration file."""
+def bench_text(bench: "str | None", short: bool = False) -> str:
+    """The bench as a reader should see it: simulated, imported, or the hardware bench's configuration file;
+    `short` for a table cell."""
     if bench == SIMULATED:
-        return "the simulated bench (--bench sim: emulated devices, a model plant)"
+        return "simulated (sim)" if short else "the simulated bench (--bench sim: emulated devices, a model plant)"
     if bench == IMPORTED:
-        return "an imported file (benchlab import: the bench that measured it is not recorded)"
+        return "imported" if short else "an imported file (benchlab import: the bench that measured it is not recorded)"
     if not bench:
-        return "an unnamed bench (the run file has no bench attribute)"
-    return f"the hardware bench {bench}"
+        return "not recorded" if short else "an unnamed bench (the run file has no bench attribute)"
+    return f"hardware: {bench}" if short else f"the hardware bench {bench}"

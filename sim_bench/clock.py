@@ -11,6 +11,9 @@ import time
 
 from sim_bench.emulators.clock import ManualClock
 
+#: Paced, how far behind the wall clock simulated time may fall before pacing starts again from now (s).
+MAX_LAG_S = 0.5
+
 
 class SimClock(ManualClock):
     """Simulated time: moves only when told to, so a 2-hour protocol runs in seconds and is deterministic.
@@ -27,14 +30,22 @@ class SimClock(ManualClock):
         if pace is not None and not pace > 0:
             raise ValueError(f"pace: a factor > 0, got {pace!r}")
         self.pace = pace
-        self._origin = (time.monotonic(), float(t0))  # wall and simulated time when pacing started
+        self._origin: tuple[float, float] | None = None  # wall and simulated time pacing counts from
 
     def sleep_until(self, t: float) -> float:
-        """Jump to `t` (never backwards) and return the new time; paced, first wait until the wall clock is there."""
+        """Jump to `t` (never backwards) and return the new time; paced, first wait until the wall clock is there.
+
+        Pacing counts from the first wait; time lost beyond MAX_LAG_S (the bench starting up, a loaded machine) is
+        not made up in a burst, as a hardware bench would not make it up either."""
         if self.pace is not None:
+            now = time.monotonic()
+            if self._origin is None:
+                self._origin = (now, self.t)
             wall0, sim0 = self._origin
-            delay = wall0 + (t - sim0) / self.pace - time.monotonic()
+            delay = wall0 + (t - sim0) / self.pace - now
             if delay > 0:
                 time.sleep(delay)
+            elif delay < -MAX_LAG_S:
+                self._origin = (now, float(t))
         self.t = max(self.t, float(t))
         return self.t

@@ -19,13 +19,14 @@ from benchlab.outputs import write_text
 #: numbers right-aligned, figures no wider than the page.
 STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em;line-height:1.4}"
          "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}"
-         "td:first-child,th:first-child{text-align:left}th{background:#eee}img{max-width:100%}figure{margin:1em 0}"
+         "td:first-child,th:first-child,td.text{text-align:left}th{background:#eee}img{max-width:100%}figure{margin:1em 0}"
          "figcaption{color:#555;font-size:0.9em}code{background:#f4f4f4;padding:0 2px}"
          ".sim{background:#fff4d6;padding:0.6em;border:1px solid #e0c060}.scroll{overflow-x:auto}")
 
 _IMAGE = re.compile(r"^!\[([^\]]*)\]\(([^)\s]+)\)$")
 _TABLE_RULE = re.compile(r"^\|(\s*:?-+:?\s*\|)+$")
 _RAW = ("<details", "</details")
+_NUMBER = re.compile(r"^([-+−]?\d[\d.,]*(e[-+]?\d+)?|—)(\s*[^\s\d]{1,4})?$")
 
 
 def _inline(text: str) -> str:
@@ -40,6 +41,7 @@ def _inline(text: str) -> str:
         piece = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", piece)
         piece = re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"<i>\1</i>", piece)
         piece = re.sub(r"\[([^\]]+)\]\(([^)\s]+)\)", lambda m: f'<a href="{html.escape(m[2])}">{m[1]}</a>', piece)
+        piece = re.sub(r"([ϑωΔ])_([A-Za-z]{1,3})\b", r"\1<sub>\2</sub>", piece)  # ϑ_F as the paper writes it
         out.append(piece)
     return "".join(out)
 
@@ -48,9 +50,14 @@ def _cells(line: str) -> list[str]:
     return [c.strip() for c in line.strip().strip("|").split("|")]
 
 
+def _cell(text: str) -> str:
+    """A table cell: numbers (with a unit or a dash for none) right-aligned, words left."""
+    return f"<td>{_inline(text)}</td>" if _NUMBER.match(text) else f"<td class='text'>{_inline(text)}</td>"
+
+
 def _table(lines: list[str]) -> str:
     head = "".join(f"<th>{_inline(c)}</th>" for c in _cells(lines[0]))
-    body = "".join("<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in _cells(line)) + "</tr>" for line in lines[2:])
+    body = "".join("<tr>" + "".join(_cell(c) for c in _cells(line)) + "</tr>" for line in lines[2:])
     return f"<div class='scroll'><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>"
 
 

@@ -113,7 +113,7 @@ def _run_section(runs: Mapping[str, tuple[Path, pd.DataFrame]], out: Path) -> st
         duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
         attrs = load_attrs(path)
         rows.append([html.escape(label), f'<a href="{html.escape(os.path.relpath(path, out))}">{path.name}</a>',
-                     html.escape(attrs.get("protocol", "")), html.escape(bench_text(attrs.get("bench"))),
+                     html.escape(attrs.get("protocol", "")), html.escape(bench_text(attrs.get("bench"), short=True)),
                      _num(duration / 3600, 2, " h"), str(len(run)),
                      _num(float(run["T_flywheel"].max()), 1, " °C"),
                      _num(float(run["friction_power"].sum()) * float(run.attrs["dt"]) / 1e6, 2, " MJ"),
