@@ -19,7 +19,7 @@ from benchlab.outputs import write_text
 #: numbers right-aligned, figures no wider than the page.
 STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em;line-height:1.4}"
          "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}"
-         "td:first-child,th:first-child,td.text{text-align:left}th{background:#eee}img{max-width:100%}figure{margin:1em 0}"
+         "td:first-child,th:first-child,.text{text-align:left}th{background:#eee}img{max-width:100%}figure{margin:1em 0}"
          "figcaption{color:#555;font-size:0.9em}code{background:#f4f4f4;padding:0 2px}"
          ".sim{background:#fff4d6;padding:0.6em;border:1px solid #e0c060}.scroll{overflow-x:auto}")
 
@@ -50,14 +50,15 @@ def _cells(line: str) -> list[str]:
     return [c.strip() for c in line.strip().strip("|").split("|")]
 
 
-def _cell(text: str) -> str:
-    """A table cell: numbers (with a unit or a dash for none) right-aligned, words left."""
-    return f"<td>{_inline(text)}</td>" if _NUMBER.match(text) else f"<td class='text'>{_inline(text)}</td>"
-
-
 def _table(lines: list[str]) -> str:
-    head = "".join(f"<th>{_inline(c)}</th>" for c in _cells(lines[0]))
-    body = "".join("<tr>" + "".join(_cell(c) for c in _cells(line)) + "</tr>" for line in lines[2:])
+    """A pipe table; a column of numbers (with a unit, or a dash for none) right-aligned, its header too, others
+    left-aligned."""
+    header, rows = _cells(lines[0]), [_cells(line) for line in lines[2:]]
+    numeric = [all(_NUMBER.match(row[i]) for row in rows if i < len(row)) for i in range(len(header))]
+    align = ["" if number else " class='text'" for number in numeric]
+    head = "".join(f"<th{align[i]}>{_inline(c)}</th>" for i, c in enumerate(header))
+    body = "".join("<tr>" + "".join(f"<td{align[i] if i < len(align) else ''}>{_inline(c)}</td>"
+                                    for i, c in enumerate(row)) + "</tr>" for row in rows)
     return f"<div class='scroll'><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>"
 
 
