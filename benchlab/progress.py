@@ -66,7 +66,7 @@ class TerminalProgress(Progress):
     def task(self, what: str, total: float, unit: str = "it") -> Task:
         from tqdm import tqdm
 
-        return _TqdmTask(tqdm(total=round(total), desc=what, unit=unit, file=sys.stderr, leave=True, dynamic_ncols=True,
+        return _TqdmTask(tqdm(total=int(total), desc=what, unit=unit, file=sys.stderr, leave=True, dynamic_ncols=True,
                               mininterval=0.5))
 
 

@@ -9,7 +9,7 @@ import time
 import pytest
 
 from benchlab.cli import build_parser, main
-from benchlab.progress import _TqdmTask
+from benchlab.progress import TerminalProgress
 from benchlab.runner.session import RunRequest, execute
 from protocols.schedule import Step
 from sim_bench.bench import SimulatedBench
@@ -52,18 +52,15 @@ def test_help_shows_defaults(capsys):
     assert "(default: None)" not in text and "(default: False)" not in text
 
 
-def test_progress_counts_whole_units():
-    from tqdm import tqdm
-
+def test_progress_counts_whole_units(monkeypatch):
     stream = io.StringIO()
-    bar = tqdm(total=round(3840.0), file=stream, mininterval=0, ascii=True)
-    task = _TqdmTask(bar)
-    for _ in range(20617):
-        task.advance(0.05)  # the runner's fast ticks
+    monkeypatch.setattr("sys.stderr", stream)
+    task = TerminalProgress().task("table1 on the simulated bench", 3840.0, unit="s")
+    for _ in range(20621):
+        task.advance(0.05)  # the runner's fast ticks: 1031.05 s
     task.close()
-    shown = stream.getvalue()
-    assert "1030/3840" in shown and "." not in shown.split("1030/3840")[0].split("|")[-1]
-    assert bar.n == 1030
+    last = stream.getvalue().replace("\r", "\n").strip().splitlines()[-1]
+    assert "1031/3840" in last and "1031.0" not in last and "3840.0" not in last
 
 
 def test_realtime_paces_the_simulated_bench(tmp_path):
