@@ -6,7 +6,8 @@ while it does (benchlab.interrupts.interrupts_held, as here around the parser). 
 (InputError) is one line on stderr and exit 2; a full disk (benchlab.outputs.OutputError) and any other failure
 are one line and exit 1; Ctrl-C, from the
 moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
-early (`benchlab run table1 --bench sim --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends other tools.
+early (`benchlab run table1 --bench sim --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends
+other tools.
 `-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`.
 """
 

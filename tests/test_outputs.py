@@ -127,7 +127,8 @@ def test_force_replaces_a_regular_file_whole(command, foreign_run, params_file, 
     assert [p.name for p in tmp_path.iterdir() if ".part" in p.name] == []  # no temporary file left beside it
 
 
-@pytest.mark.parametrize("argv", [["run", "--bench", "sim", "--out", "R", "--cycles", "1", "table1"], ["import", "CSV", "--out", "R"]])
+@pytest.mark.parametrize("argv", [["run", "--bench", "sim", "--out", "R", "--cycles", "1", "table1"],
+                                  ["import", "CSV", "--out", "R"]])
 def test_run_writers_replace_a_run_file_only_with_force(argv, foreign_run, run_file, tmp_path, refused):
     (tmp_path / "d.csv").write_text(load_run(run_file).iloc[:100].to_csv(index=False))
     names = {"R": str(foreign_run), "CSV": str(tmp_path / "d.csv")}

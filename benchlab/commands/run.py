@@ -32,7 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cycles", type=cliargs.count("a number of cycles", MAX_CYCLES),
                         help="number of cycles (cooldown-sweep: grid points)")
     parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
-                        help="planned duration in s (table1)")
+                        help="table1: cycles are drawn until the plan lasts at least this many s (launches at "
+                             "their time to synchronise, so the run is at least this long)")
     parser.add_argument("--grid", help="cooldown-sweep grid: RPM:S[:SLIP_RPM],... e.g. 1000:1,1000:0,2000:0:500")
     parser.add_argument("--out", type=cliargs.output_file, help="run file to write (HDF5)")
     parser.add_argument("--dry-run", action="store_true", help="print the schedule, check limits, estimate duration")

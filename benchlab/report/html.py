@@ -19,7 +19,8 @@ from benchlab.outputs import write_text
 #: numbers right-aligned, figures no wider than the page.
 STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em;line-height:1.4}"
          "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}"
-         "td:first-child,th:first-child,.text{text-align:left}th{background:#eee}img{max-width:100%}figure{margin:1em 0}"
+         "td:first-child,th:first-child,.text{text-align:left}th{background:#eee}img{max-width:100%}"
+         "figure{margin:1em 0}"
          "figcaption{color:#555;font-size:0.9em}code{background:#f4f4f4;padding:0 2px}"
          ".sim{background:#fff4d6;padding:0.6em;border:1px solid #e0c060}.scroll{overflow-x:auto}")
 

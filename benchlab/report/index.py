@@ -177,7 +177,8 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
                              "the drivers talked to emulated devices whose plant is the paper's nonlinear clutch model"
                              + (f" (effects added to it: {', '.join(truth.get('effects', [])) or 'none'})" if truth else "")
                              + ". The numbers say how well benchlab recovers a known plant, not how a real clutch "
-                               "behaves." if simulated else f"Measured on {html.escape(bench_text(attrs.get('bench')))}.")
+                               "behaves." if simulated
+                             else f"Measured on {html.escape(bench_text(attrs.get('bench')))}.")
         + "</p>",
         "<h2>1. The runs</h2>", _run_section(runs, out),
         _figure(out, out / "report" / "fig4_fit.png", "Fig. 4: the nonlinear model against the Table 1 run"),
