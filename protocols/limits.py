@@ -217,7 +217,7 @@ def launch_problem(step: Step, limits: BenchLimits) -> str | None:
     if not transmitted >= needed:
         return (f"cannot synchronise: clutch {step.clutch_torque_nm:g} N*m x gear ratio {ratio:g} = {transmitted:g} N*m"
                 f" below load {step.load_torque_nm:g} N*m x margin {LAUNCH_TORQUE_MARGIN:g} = {needed:g} N*m")
-    t_sync, _, synchronises = launch_estimate(step, limits)
+    _, _, synchronises = launch_estimate(step, limits)
     if not synchronises:
         return f"cannot synchronise within its {step.duration_s:g} s maximum slip time"
     return None
