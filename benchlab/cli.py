@@ -15,15 +15,16 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import os
 import pkgutil
 import select
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 import benchlab
 import benchlab.commands
+from benchlab import logs
 from benchlab.errors import InputError
 from benchlab.interrupts import (TERMINATED_EXIT, RedeliverInterrupts, Terminated, interrupts_answered,
                                  interrupts_held, terminate_as_interrupt)
@@ -33,8 +34,6 @@ from benchlab.outputs import OutputError, is_no_space, no_space
 BROKEN_PIPE_EXIT = 141
 #: Exit code after Ctrl-C: 128 + SIGINT, what a shell reports for a tool SIGINT ended.
 INTERRUPTED_EXIT = 130
-_LOG_HANDLER = logging.StreamHandler()
-_LOG_HANDLER.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
 
 
 class _Parser(argparse.ArgumentParser):
@@ -67,6 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
         cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP, formatter_class=_DefaultsShown)
         module.add_arguments(cmd)
         cmd.add_argument("--quiet", "-q", action="store_true", help="no progress bars (there are none on a pipe)")
+        cmd.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                         help="log what benchlab does on stderr (-v: info, -vv: debug, as before the command)")
+        cmd.add_argument("--log", nargs="?", const="", metavar="FILE", help="keep the log (debug) in FILE; without "
+                         "FILE beside the run file (--out/--resume RUN.h5 -> RUN.log)")
         cmd.set_defaults(handler=module.run)
     return parser
 
@@ -84,12 +87,22 @@ def _caused_by_interrupt(exc: BaseException) -> KeyboardInterrupt | None:
 
 
 def configure_logging(verbosity: int) -> None:
-    """benchlab's loggers to stderr at INFO (-v) or DEBUG (-vv); WARNING without -v. Other libraries keep theirs."""
-    logger = logging.getLogger("benchlab")
-    _LOG_HANDLER.stream = sys.stderr  # not setStream: it flushes the old stream, which may be closed by now
-    if _LOG_HANDLER not in logger.handlers:
-        logger.addHandler(_LOG_HANDLER)
-    logger.setLevel({0: logging.WARNING, 1: logging.INFO}.get(verbosity, logging.DEBUG))
+    """The project's loggers to stderr at INFO (-v) or DEBUG (-vv), WARNING without -v; the libraries' warnings
+    only with -v (benchlab.logs)."""
+    logs.configure(verbosity)
+
+
+def _log_file(args: argparse.Namespace) -> Path | None:
+    """The file `--log` asks for: FILE, or the run file's name with .log; None without --log."""
+    log = getattr(args, "log", None)
+    if log is None:
+        return None
+    if log:
+        return Path(log)
+    run_file = getattr(args, "out", None) or getattr(args, "resume", None)
+    if not run_file:
+        raise InputError("command line", "--log", "a FILE (this command writes no run file to put it beside)")
+    return Path(run_file).with_suffix(".log")
 
 
 def _stdout_reader_gone() -> bool:
@@ -139,7 +152,17 @@ def _dispatch(argv: Sequence[str] | None) -> int:
             parser = build_parser()
         args = parser.parse_args(argv)
         configure_logging(args.verbose)
-        code = int(args.handler(args) or 0)
+        log_file = _log_file(args)
+        if log_file is not None:
+            try:
+                logs.keep_in_file(log_file)
+            except OSError as exc:
+                raise InputError(log_file, "--log", f"a file that can be written ({exc.strerror or exc})") from None
+        try:
+            code = int(args.handler(args) or 0)
+        finally:
+            if log_file is not None:
+                logs.stop_file(log_file)
         sys.stdout.flush()  # a reader that has left shows here, not in the interpreter's last flush
         return code
     except BrokenPipeError as exc:

@@ -17,17 +17,27 @@ from drivers import scpi
 from sim_bench import faults
 
 
-def positive_float(what: str, maximum: float) -> Callable[[str], float]:
-    """A finite number in (0, maximum]; `what` says what it is, e.g. "a duration in s"."""
+def _bounded_float(what: str, low: float, maximum: float, expected: str) -> Callable[[str], float]:
+    """A finite number with low < value <= maximum (low exclusive only where it is 0: positive numbers)."""
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             value = math.nan
-        if not (math.isfinite(value) and 0 < value <= maximum):
-            raise argparse.ArgumentTypeError(f"{what}: a number in (0, {maximum:g}], got {text!r}")
+        if not (math.isfinite(value) and (low < value if low == 0 else low <= value) and value <= maximum):
+            raise argparse.ArgumentTypeError(f"{what}: a number {expected}, got {text!r}")
         return value
     return parse
+
+
+def positive_float(what: str, maximum: float) -> Callable[[str], float]:
+    """A finite number in (0, maximum]; `what` says what it is, e.g. "a duration in s"."""
+    return _bounded_float(what, 0.0, maximum, f"in (0, {maximum:g}]")
+
+
+def signed_float(what: str, maximum: float) -> Callable[[str], float]:
+    """A finite number in [-maximum, maximum]; `what` says what it is, e.g. "a run time in s"."""
+    return _bounded_float(what, -maximum, maximum, f"within ±{maximum:g}")
 
 
 def count(what: str, maximum: int | None, minimum: int = 1) -> Callable[[str], int]:

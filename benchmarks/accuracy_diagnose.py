@@ -16,7 +16,7 @@
    tests/test_diagnose.py, written again here (a benchmark does not import from the tests).
    The detection limit of an effect is its weakest magnitude named first in all seeds; stronger
    magnitudes that were not are listed beside it.
-2. False findings. 20 seeds of the correct model (nonlinear truth, nonlinear baseline) and 8 of a
+2. False findings. 28 seeds of the correct model (nonlinear truth, nonlinear baseline) and 8 of a
    linear truth with the linear baseline, simulated in whole arrays (`sim_bench.virtual_run`), plus 2 + 2
    1 h Table 1 runs through the runner, the drivers and the emulated devices (`benchlab.runner.session`,
    as `benchlab run` and `benchlab pipeline` make them): runs with any finding, with a 95 %
@@ -60,7 +60,7 @@ LADDER_SEED = 1001  # seeds 1001, 1002, ... for every cell: not used by any test
 CORRECT_SEED = 1101  # 20 nonlinear runs from here
 LINEAR_SEED = 1201  # 8 linear runs from here
 DRIVER_SEED = 1301  # runs through the drivers: nonlinear from here, linear after them
-CORRECT_RUNS, LINEAR_RUNS, DRIVER_RUNS = 20, 8, 2  # DRIVER_RUNS of each truth
+CORRECT_RUNS, LINEAR_RUNS, DRIVER_RUNS = 28, 8, 2  # DRIVER_RUNS of each truth: 40 correct-model runs in all (issue 31)
 QUICK_RUNS = (4, 2, 1)
 FALSE_FINDINGS = "false_findings"
 CONFIDENCE = 0.95

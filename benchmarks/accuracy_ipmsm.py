@@ -11,6 +11,9 @@ Every step is a `benchlab` command, as a new user would type it:
    1.47 K mean on 6 and 15; the article's hand-tuned network about 2.5 K);
 4. `benchlab diagnose --model` of the model file with the rotor losses removed, on the training profiles at
    a 10 s step (--diag-step), with `--save-model`: it must name a speed-driven heat source into the rotor.
+5. `benchlab diagnose --model` of the model file with the air gap's speed law removed (the rotor's links then
+   carry no speed dependence; R_TY and R_Ra bind on their bounds, as a real model file's do), on six training
+   profiles (SPEED_LAW_PROFILES): the first finding (round 1) must read speed on a link of the rotor (issue 31).
 `--page` writes examples/ipmsm.md and its figures (examples/ipmsm/*.png). Exit code 1 if a target is missed.
 """
 
@@ -47,6 +50,7 @@ UNITS = ["water_outlet=degC", "bearing=degC", "ambient=degC", "rotor=degC", "end
          "outer_yoke=degC", "endcap=degC", "Torque=N*m", "IdRef=A", "IdFbk=A", "IqRef=A", "IqFbk=A", "speed=rpm",
          "Ud=V", "Uq=V", "Pele_PI=W"]
 REMOVED = "rotor loss"  # the piece of physics diagnose must find again
+SPEED_LAW_PROFILES = (0, 1, 2, 4, 9, 11)  # step 5's six training profiles
 BENCHLAB = [sys.executable, "-m", "benchlab.cli"]
 
 
@@ -87,6 +91,19 @@ def without_rotor_losses(work: Path) -> Path:
     doc["parameters"].pop("q_R")
     doc["name"] = "ipmsm-4node-without-rotor-losses"
     path = work / "ipmsm-removed.toml"
+    path.write_text(to_toml(parse_model(doc, path)))
+    return path
+
+
+def without_speed_law(work: Path) -> Path:
+    """examples/ipmsm.toml with the air gap's resistance independent of speed (g_gap removed): step 5's model."""
+    doc = tomllib.loads(MODEL.read_text())
+    for link in doc["links"]:
+        if link["name"] == "air gap":
+            link["resistance"] = "R_RT"
+    doc["parameters"].pop("g_gap")
+    doc["name"] = "ipmsm-4node-without-speed-law"
+    path = work / "ipmsm-no-speed-law.toml"
     path.write_text(to_toml(parse_model(doc, path)))
     return path
 
@@ -142,11 +159,27 @@ def main() -> int:
         print(f"   finding {f['candidate']}: signal {f['signal']}, mechanism {f['mechanism']}, gain {f['gain_pct']:.1f} %")
     found = load_model(args.work / "ipmsm-found.toml")
     print(f"   saved model {found.name}: {len(found.sources)} sources, {len(found.parameters)} parameters")
+
+    speed_runs = [p for k, p in zip([k for k in runs if k not in LEFT_OUT], decimated) if k in SPEED_LAW_PROFILES]
+    out, speed_cpu = benchlab_cli("diagnose", *map(str, speed_runs), "--model", str(without_speed_law(args.work)),
+                                  "--json")
+    speed = json.loads(out)
+    print(f"diagnose without the air gap's speed law, profiles {SPEED_LAW_PROFILES} ({speed_cpu:.0f} s CPU): "
+          f"baseline held-out {speed['baseline']['rmse_K']:.3f} K -> best {speed['best']['rmse_K']:.3f} K; bounds "
+          f"held: {', '.join(speed['method']['baseline_at_bound']) or 'none'}")
+    for f in sorted(speed["findings"], key=lambda f: f["round"]):
+        print(f"   round {f['round']}: {f['candidate']}: signal {f['signal']}, mechanism {f['mechanism']}, "
+              f"gain {f['gain_pct']:.1f} % (drop-one), {f['run_gain_pct']:.1f} % on runs not fitted on")
+    first_round = min(speed["findings"], key=lambda f: f["round"]) if speed["findings"] else None
+    rotor_links = {link.name for link in load_model(MODEL).links if "R" in link.between}
     targets = [
         ("held-out mean RMSE", f"{mean:.2f} K vs reference {REFERENCE_K:.2f} K", mean <= REFERENCE_K),
         ("diagnose finds the removal", f"{first['candidate'] if first else 'nothing'} (signal "
          f"{first['signal'] if first else '-'})", bool(first) and first["mechanism"] == "heat_source"
          and first["signal"] == "speed" and first["candidate"].endswith("_R")),
+        ("diagnose finds the speed law", f"{first_round['candidate'] if first_round else 'nothing'} first",
+         bool(first_round) and first_round["signal"] == "speed" and first_round["mechanism"] in
+         ("convection", "conduction") and any(first_round["candidate"].endswith(f"_{name}") for name in rotor_links)),
     ]
     if args.page:
         write_page(runs, params, rmse, per_profile, result, identify_cpu, diagnose_cpu, args)

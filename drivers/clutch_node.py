@@ -29,6 +29,7 @@ SENSOR_STATUSES: tuple[SensorStatus, ...] = ("ok", "open", "short", "range", "fa
 _OK, _OPEN, _SHORT, _RANGE, _FAULT = range(len(SENSOR_STATUSES))
 _MAX_CHUNK = 4 * node_frame.ENCODED_LEN
 ERROR_WINDOW_S = 1.0
+MAX_POLL_BYTES = 1 << 16  # one poll takes at most this much (0.7 s of the 921,600-baud link): the loop goes on
 CorruptCounter = Literal["crc_errors", "malformed", "resyncs"]
 TABLE_COLUMNS = ("seq", "node_time_s", "temperature_1_c", "temperature_2_c", "resistance_1_ohm", "resistance_2_ohm",
                  "status_1", "status_2", "supply_v", "rssi_dbm", "lqi", "flags")  # NodeBlock.table's; status: index
@@ -195,11 +196,15 @@ class ClutchNodeGateway:
         """`poll`, the samples as one block of columns."""
         if self.port is None:
             raise DriverConfigError("poll() needs a port; use feed() on a gateway without one")
-        try:
+        try:  # everything already there: pyserial's socket:// says 1 byte waiting whenever any is, so a port that
+            received = bytearray()  # says 1 is asked again (bounded); one that counts is read once a poll
             waiting = self.port.in_waiting
-            data = self.port.read(waiting) if waiting else b""
+            while waiting:
+                received += self.port.read(waiting)
+                waiting = self.port.in_waiting if waiting == 1 and len(received) < MAX_POLL_BYTES else 0
         except (serial.SerialException, OSError) as exc:
             raise ConnectionLost(f"gateway port: {exc}") from exc
+        data = bytes(received)
         block = self.feed_block(data) if data else self._block(_NO_ROWS, self.clock())
         self.check_silence()
         if self.clock_map.remaps > self._remaps:  # the node clock drifted beyond the allowance or jumped: said so

@@ -1,4 +1,4 @@
-"""PT1000 scanning DMM (Keysight 34970A/34972A/DAQ970A SCPI dialect) over a pyserial port or URL.
+"""PT1000 scanning DMM (Keysight 34970A/34972A/DAQ970A SCPI dialect) over a pyserial port or URL, or a VISA resource.
 
 Error policy: after every configuration command the SCPI error queue is drained and any entry raises
 InstrumentError (a half-configured instrument must not measure). During acquisition the queue is drained
@@ -10,10 +10,13 @@ become readings with status "open"/"short" and no number; values outside âˆ’200â
 Two ways to scan: `read()` waits for the reply (probe, scripts); `start_scan()` + `collect()` never wait
 (the runner's loop, which must keep CAN frames cyclic and interlocks watched while a silent instrument
 times out on the loop's own clock).
+
+The SCPI dialogue (commands and replies) is logged at DEBUG on logger `drivers.pt1000`.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable, Generator, Mapping, Sequence
@@ -24,7 +27,9 @@ import serial
 
 from drivers import cvd, scpi
 from drivers.errors import ConnectionLost, DeviceTimeout, DriverConfigError, InstrumentError
+from drivers.visa_port import VisaPort, is_visa_resource
 
+log = logging.getLogger(__name__)
 Mode = Literal["fres", "frtd"]
 _MAX_ERRORS_DRAINED = 32
 
@@ -84,11 +89,21 @@ class Pt1000Scanner:
     @classmethod
     def open(cls, url: str, channels: Sequence[int], *, baudrate: int = 115200, timeout: float = 2.0,
              **kwargs: Any) -> "Pt1000Scanner":
-        """Open `url` (device path, socket://host:5025, loop://, sim://...) and wrap it; nothing is sent yet."""
+        """Open `url` and wrap it; nothing is sent yet. `url` is a pyserial URL (device path, socket://host:5025,
+        loop://, sim://...) or a VISA resource string (TCPIP0::10.0.0.5::inst0::INSTR, GPIB0::9::INSTR,
+        TCPIP0::host::5025::SOCKET), opened through PyVISA (drivers/visa_port.py).
+
+        ConnectionLost if it does not open, caused by the transport's own error (pyserial's SerialException,
+        OSError, ValueError for a bad URL or baud rate; ImportError/OSError where a VISA library is missing).
+        """
         try:
-            port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout)
-        except (serial.SerialException, OSError, ValueError) as exc:
+            if is_visa_resource(url):
+                port: SerialPort = VisaPort(url, timeout=timeout)
+            else:
+                port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout)
+        except (serial.SerialException, OSError, ValueError, ImportError) as exc:
             raise ConnectionLost(f"cannot open {url}: {exc}") from exc
+        log.info("scanner %s open (timeout %g s)", url, timeout)
         return cls(port, channels, **kwargs)
 
     def identify(self) -> str:
@@ -226,9 +241,8 @@ class Pt1000Scanner:
     def _line(self, command: str, deadline: float) -> Generator[None, None, bytes]:
         """The next reply line, taking only the bytes already there; yields while it is incomplete."""
         while True:
-            try:
-                waiting = self.port.in_waiting
-                if waiting:
+            try:  # everything already there: pyserial's socket:// says 1 byte waiting whenever any is
+                while b"\n" not in self._rx and (waiting := self.port.in_waiting):
                     self._rx += self.port.read(waiting)
             except (serial.SerialException, OSError) as exc:
                 raise ConnectionLost(f"{command}: {exc}") from exc
@@ -236,6 +250,7 @@ class Pt1000Scanner:
             if end >= 0:
                 line = bytes(self._rx[:end + 1])
                 del self._rx[:end + 1]
+                log.debug("SCPI < %r", line)
                 return line
             if self.clock() > deadline:
                 raise DeviceTimeout(f"{command}: no complete reply within {self.port.timeout} s "
@@ -260,9 +275,11 @@ class Pt1000Scanner:
             raise ConnectionLost(f"{command}: {exc}") from exc
         if not reply.endswith(b"\n"):
             raise DeviceTimeout(f"{command}: no complete reply within {self.port.timeout} s (got {reply[:40]!r})")
+        log.debug("SCPI < %r", reply)
         return reply
 
     def _write(self, command: str) -> None:
+        log.debug("SCPI > %s", command)
         try:
             self.port.write(command.encode("ascii") + b"\n")
         except serial.SerialTimeoutException as exc:

@@ -10,7 +10,7 @@ them names the right cause) and which nodes it touches.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -99,3 +99,21 @@ def gear_mesh_loss(watts_at_reference: float) -> Hidden:
         return net.with_source(Source("T", heat, "gear mesh"))
     effect = Effect("gear_mesh_loss", "clutch_speed", "heat_source", edit, {"mesh_w": watts_at_reference})
     return Hidden(effect, ("clutch_speed", "load_torque"), ("T",))
+
+
+def slip_dependent_split(low_share: float, high_share: float, slip_scale_rpm: float = 800.0) -> Hidden:
+    """The friction heat's split between pressure plate and flywheel shifts with slip speed (the contact pattern and
+    the flash temperatures move with sliding speed): plate share low + (high − low)·tanh(|ω_e − ω_c| / scale), the
+    flywheel the rest. Heat is moved between the two, never made: the sum stays the friction power."""
+    def share(q, ch):
+        slip = np.abs(ch["engine_speed"] - ch["clutch_speed"])
+        return q["share_low"] + (q["share_high"] - q["share_low"]) * np.tanh(slip / slip_scale_rpm)
+
+    def edit(net, p):
+        kept = tuple(s for s in net.sources if s.label not in ("plate share", "flywheel share"))
+        return replace(net, sources=(Source("P", lambda q, ch: share(q, ch) * ch["friction_power"], "plate share"),
+                                     Source("F", lambda q, ch: (1 - share(q, ch)) * ch["friction_power"],
+                                            "flywheel share")) + kept)
+    effect = Effect("slip_dependent_split", "slip_speed", "heat_split", edit,
+                    {"share_low": low_share, "share_high": high_share})
+    return Hidden(effect, ("slip_speed", "engine_speed", "clutch_speed", "friction_power"), ("P", "F"))

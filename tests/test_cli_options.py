@@ -36,7 +36,7 @@ def test_repeatable_options_leave_the_run_file_to_the_positional(argv, flag, tmp
     monkeypatch.chdir(tmp_path)
     args = build_parser().parse_args(argv)
     values = getattr(args, flag)
-    positional = getattr(args, "runs", None) or [getattr(args, "run", None) or getattr(args, "csv", None)]
+    positional = getattr(args, "runs", None) or getattr(args, "inputs", None) or [args.run]
     assert positional == [next(a for a in argv if a in ("RUN.h5", "DATA.csv"))]
     expected = {"validate": ["V.h5", "V2.h5"] if "V2.h5" in argv else ["V.h5"],
                 "fix": ["C_T=13000", "R0=0.1", "a1=0.3"], "unit": ["a=A", "b=rpm", "c=degC"]}[flag]

@@ -97,3 +97,15 @@ def test_paper_convection_and_gear_mesh_loss_from_the_linear_baseline(tmp_path, 
 def test_a_correct_model_gets_no_finding_through_the_command_line(tmp_path, capsys, seed, truth):
     result, _, _ = _diagnose(tmp_path, capsys, [], seed, truth, truth)
     assert result["findings"] == [], _described(result)
+
+
+@pytest.mark.parametrize("low,high,seed", [(0.3, 0.6, 321), (0.55, 0.35, 322)])
+def test_a_split_that_shifts_with_slip_speed_is_named_as_heat_moved_not_made(tmp_path, capsys, low, high, seed):
+    """The plate's share of the friction heat follows tanh of the slip speed (a law no candidate has): the finding
+    must move heat between plate and flywheel (a split), not add sources of opposite sign (issue 31: shares that
+    summed to 1.06)."""
+    result, _, floor = _diagnose(tmp_path, capsys, [U.slip_dependent_split(low, high).effect], seed, "nonlinear",
+                                 "nonlinear")
+    assert result["findings"], f"nothing named; baseline/floor {result['baseline']['rmse_K'] / floor:.2f}"
+    assert result["findings"][0]["mechanism"] == "heat_split", _described(result)
+    assert not [f for f in result["findings"] if f["mechanism"] == "heat_source"], _described(result)

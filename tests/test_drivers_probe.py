@@ -80,6 +80,11 @@ def test_probe_can_passes_the_bitrate_to_the_bus(monkeypatch, capsys) -> None:
     ["probe", "can", "--url", "can0"],
     ["probe", "can", "--url", "nosuchinterface:can0"],
     ["probe", "can", "--url", "udp_multicast:239.0.0.1"],
+    ["probe", "can", "--url", "socketcan:benchlab-none"],  # no such interface (or no CAN in the kernel)
+    ["probe", "can", "--url", "kvaser:0"],  # python-can's backend without its vendor library: NameError inside
+    ["probe", "pt1000", "--url", "TCPIP0::127.0.0.1::1::SOCKET"],  # a VISA socket nobody listens on
+    ["probe", "--bench", "no-such-bench.toml"],
+    ["probe", "pt1000"],  # neither --url nor --bench
 ])
 def test_probe_bad_input_exits_2(argv: list[str], capsys) -> None:
     try:

@@ -12,6 +12,7 @@ from asammdf import MDF
 
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from benchlab.cli import main
+from benchlab.importing.mdf import numbers
 from benchlab.runfile import ALIGNED_UNITS, REQUIRED, load_run, read_progress
 from benchlab.runner.session import RunRequest, execute
 from protocols.schedule import Step
@@ -30,6 +31,12 @@ def bench_run(tmp_path_factory):
     code, _ = execute(RunRequest("custom", path, steps=STEPS, install_signals=False))
     assert code == 0
     return path
+
+
+def _values(mdf, name):
+    """A channel's stored numbers (enums before their texts) with its invalid samples as NaN, and the signal."""
+    sig, values = numbers(mdf, name=name)
+    return values, sig
 
 
 def _one_line_exit_2(argv, capsys, *words):
@@ -54,19 +61,21 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
             streams = list(f["raw"])
             assert acq == ["/aligned", *(f"/raw/{s}" for s in streams), "/events"]
             for name, ds in f["aligned"].items():
-                sig = mdf.get(name)
-                np.testing.assert_array_equal(sig.samples, ds[()])
+                values, sig = _values(mdf, name)
+                np.testing.assert_array_equal(values, ds[()])
                 np.testing.assert_array_equal(sig.timestamps, f["aligned/time"][()])
                 assert sig.unit == ds.attrs["units"]
             assert "ϑ_F" in mdf.get("T_flywheel").comment and "node.T_flywheel_1" in mdf.get("T_flywheel_1").comment
+            for name, ds in f["aligned"].items():  # one home: the run file's own descriptions are what MDF shows
+                assert name == "time" or ds.attrs["description"] == mdf.get(name).comment != "", name
             for stream in streams:
                 group = f["raw"][stream]
                 order = np.argsort(group["time"][()], kind="stable")
                 for column, ds in group.items():
                     if column == "time":
                         continue
-                    sig = mdf.get(f"{stream}.{column}", raw=True)  # the stored numbers (enums: before the texts)
-                    np.testing.assert_array_equal(sig.samples, ds[()][order])
+                    values, sig = _values(mdf, f"{stream}.{column}")  # enums: the numbers before the texts
+                    np.testing.assert_array_equal(values, ds[()][order])
                     np.testing.assert_array_equal(sig.timestamps, group["time"][()][order])
                     assert sig.unit == ds.attrs["units"]
             kinds = mdf.get("events.kind")
@@ -87,6 +96,15 @@ def test_mf4_holds_every_group_at_its_own_time_base_with_units(bench_run, tmp_pa
         assert "run_complete" in {k.decode() for k in kinds.samples}
         assert {"synchronised", "time"} & {r.decode() for r in reasons}  # the launch's and the steps' ends
         assert 'name="schema">benchlab-run/1<' in mdf.header.comment
+        # not measured: an invalidation bit (the flywheel node's first readings come after the grid's first rows);
+        # enums and counters as integers; CAN channels name their message and sending node
+        temperature = mdf.get("T_flywheel", ignore_invalidation_bits=True)
+        assert temperature.invalidation_bits is not None and temperature.invalidation_bits.any()
+        assert len(mdf.get("T_flywheel").samples) == (~np.asarray(temperature.invalidation_bits)).sum()
+        for name in ("can_clutch.clamp_state", "can_drive.fault_code", "node.seq", "clutch_state"):
+            assert mdf.get(name, raw=True).samples.dtype.kind in "iu", name
+        clamp = mdf.get("can_clutch.clamp_state")
+        assert clamp.source.name == "ClutchActuator" and "ClutchActuator_Status" in clamp.source.path
     finally:
         mdf.close()
 
@@ -108,7 +126,7 @@ def test_mf4_of_a_crashed_run_stops_at_its_progress_record(tmp_path):
     assert main(["export", str(run), "--to", str(out)]) == 0
     mdf = MDF(out)
     try:
-        assert len(mdf.get("engine_speed").samples) == progress["aligned_rows"]
+        assert len(mdf.get("engine_speed", ignore_invalidation_bits=True).samples) == progress["aligned_rows"]
         speed = mdf.get("bench.engine_speed")
         assert len(speed.samples) == progress["rows/bench"] == 150 and np.isfinite(speed.timestamps).all()
         assert list(mdf.get("events.kind").samples) == [b"cycle_start"]
@@ -190,10 +208,10 @@ def test_mf4_of_a_simulate_output_puts_model_beside_measurement(run_file, params
         assert [g.channel_group.acq_name for g in mdf.groups] == ["/aligned", "/simulated"]
         with h5py.File(sim, "r") as f:
             for name in ("T_flywheel", "T_pressure_plate"):
-                model = mdf.get(f"simulated.{name}")
-                np.testing.assert_array_equal(model.samples, f["simulated"][name][()])
-                assert model.unit == "degC"
-            np.testing.assert_array_equal(mdf.get("T_flywheel").samples, f["aligned/T_flywheel"][()])
+                model, sig = _values(mdf, f"simulated.{name}")
+                np.testing.assert_array_equal(model, f["simulated"][name][()])
+                assert sig.unit == "degC"
+            np.testing.assert_array_equal(_values(mdf, "T_flywheel")[0], f["aligned/T_flywheel"][()])
     finally:
         mdf.close()
 
@@ -207,3 +225,27 @@ def test_mf4_of_a_bench_run_goes_back_into_a_run_file_with_its_enums_as_numbers(
     assert run.attrs["units"]["clamp_state"] == "1" and {0.0, 1.0} <= set(run["clamp_state"].dropna())
     rows = min(len(run), len(source))
     np.testing.assert_array_equal(run["T_air"].to_numpy()[:rows], source["T_air"].to_numpy()[:rows])
+
+
+def test_mf4_of_some_channels_a_time_range_on_one_raster(bench_run, tmp_path, capsys):
+    out = tmp_path / "part.mf4"
+    assert main(["export", str(bench_run), "--to", str(out), "--channels", "T_air,engine_speed",
+                 "--channels", "can_clutch.clamp_state", "--start", "2", "--stop", "8", "--raster", "0.1"]) == 0
+    run = load_run(bench_run)
+    mdf = MDF(out)
+    try:
+        names = {ch.name for group in mdf.groups for ch in group.channels}
+        assert names == {"time", "T_air", "engine_speed", "can_clutch.time", "can_clutch.clamp_state"}
+        speed, _ = _values(mdf, "engine_speed")
+        clamp = mdf.get("can_clutch.clamp_state", raw=True)
+        np.testing.assert_allclose(clamp.timestamps, np.arange(2.0, 8.0 + 1e-9, 0.1), atol=1e-9)
+        assert clamp.samples.dtype.kind in "iu" and {0, 1} <= set(clamp.samples.tolist())  # held: no 0.5
+        grid = run["time"].to_numpy()
+        np.testing.assert_allclose(speed, np.interp(np.arange(2.0, 8.0 + 1e-9, 0.1), grid, run["engine_speed"]),
+                                   atol=1e-6)
+    finally:
+        mdf.close()
+    _one_line_exit_2(["export", str(bench_run), "--to", str(tmp_path / "x.mf4"), "--channels", "T_nothing"],
+                     capsys, "--channels", "T_nothing")
+    _one_line_exit_2(["export", str(bench_run), "--to", str(tmp_path / "x.mf4"), "--start", "5", "--stop", "1"],
+                     capsys, "--start")

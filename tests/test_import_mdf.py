@@ -4,7 +4,7 @@ mapping file, onto one grid; and a run exported to MF4 and imported back identif
 from __future__ import annotations
 
 import json
-from datetime import datetime, timedelta, timezone
+from datetime import datetime, timezone
 
 import h5py
 import numpy as np
@@ -13,6 +13,8 @@ import pytest
 import benchlab
 from benchlab.cli import main
 from benchlab.importing.grid import resample
+
+from identified import assert_same_parameters  # tests/identified.py
 
 START = datetime(2026, 3, 2, 7, 45, 12, tzinfo=timezone.utc)
 MAPPING = """
@@ -86,6 +88,17 @@ def test_a_recorders_mdf_with_a_mapping_becomes_a_run_file_identify_accepts(tmp_
     with h5py.File(out) as f:
         attrs = dict(f.attrs)
         units = {k: f["aligned"][k].attrs["units"] for k in f["aligned"]}
+        # each source channel raw at its own rate, as the file held it (units, the invalid sample NaN)
+        raw = {name: {k: g[k][()] for k in g} for name, g in f["raw"].items()}
+        assert set(raw) == {"messung.CAN1 100 Hz", "messung.node 20 Hz", "messung.scanner 2 Hz"}
+        assert f["raw/messung.scanner 2 Hz/T_Gehaeuse"].attrs["units"] == "K"
+        assert "T_Luft" in f["aligned/T_air"].attrs["description"]
+    assert [len(raw[g]["time"]) for g in sorted(raw)] == [60000, 12000, 1200]
+    np.testing.assert_allclose(raw["messung.CAN1 100 Hz"]["time"][:2], [0.004, 0.014])
+    assert np.flatnonzero(np.isnan(raw["messung.scanner 2 Hz"]["T_Luft"])).tolist() == [INVALID]
+    np.testing.assert_allclose(raw["messung.scanner 2 Hz"]["T_Gehaeuse"],
+                               recorder_part["T_housing"].to_numpy()[::50] + 273.15)
+    assert set(raw["messung.node 20 Hz"]) == {"time", "T_Schwungrad"}  # the channels picked, not the group's all
     assert units == {**{k: "degC" for k in ("T_air", "T_ambient", "T_flywheel", "T_housing")}, "time": "s",
                      "engine_speed": "rpm", "clutch_speed": "rpm", "clutch_torque": "N*m", "load_torque": "N*m",
                      "clutch_state": "1", "friction_power": "W"}
@@ -117,13 +130,7 @@ def test_a_run_exported_to_mf4_and_imported_back_identifies_to_the_same_paramete
     mf4, back = tmp_path / "run.mf4", tmp_path / "back.h5"
     assert main(["export", str(run_file), "--to", str(mf4)]) == 0
     assert main(["import", str(mf4), "--dt", "0.01", "--out", str(back)]) == 0
-    fits = []
-    for path in (run_file, back):
-        out = tmp_path / f"{path.stem}.json"
-        assert main(["identify", str(path), "--model", "linear", "--out", str(out), "-q"]) == 0
-        fits.append(json.loads(out.read_text()))
-    for name, value in fits[0]["params"].items():
-        assert abs(fits[1]["params"][name] - value) <= fits[0]["uncertainty"][name], name
+    assert_same_parameters(tmp_path, run_file, back)
 
 
 @pytest.mark.parametrize("mapping, field", [

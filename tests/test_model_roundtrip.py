@@ -50,8 +50,9 @@ def test_saved_model_is_the_best_model_with_its_fitted_values_as_starts(saved):
     assert result["best"]["model_file"] == str(d / "best.toml")
     best = result["best"]["params"]
     assert {p.name: p.start for p in model.free_parameters()} == pytest.approx({k: best[k] for k in model.parameters})
-    assert {s.name: s.heat.text for s in model.sources} == {"plate share": "split*friction_power",
-                                                            "flywheel share": "(1 - split)*friction_power"}
+    assert {s.name: s.heat.text for s in model.sources} == {
+        "plate share": "(0.5*friction_power) + (split - 0.5) * friction_power",
+        "flywheel share": "(0.5*friction_power) - (split - 0.5) * friction_power"}
     assert model.parameters["split"].start == pytest.approx(SPLIT, abs=0.03)
 
 

@@ -111,3 +111,34 @@ def test_says_when_the_band_is_not_to_be_trusted(run_file, tmp_path, capsys):
                  "T_flywheel,T_air", "--adapt", "R_PA", "--out", str(tmp_path / "wrong.h5")]) == 0
     text = capsys.readouterr().out
     assert "warning: the ±2σ band is not to be trusted: the innovations of T_flywheel, T_air" in text
+
+
+def test_the_output_is_a_run_file_export_and_watch_take(files, tmp_path):
+    """EST.h5 holds the run's root attributes and /aligned beside /estimated: the estimated pressure-plate
+    temperature opens in asammdf next to the measured flywheel temperature."""
+    from asammdf import MDF
+
+    import benchlab
+    from benchlab.runfile.live import RunFileVersion
+
+    out, mf4 = tmp_path / "est.h5", tmp_path / "est.mf4"
+    assert _observe(files, "--out", str(out)) == 0
+    run, estimate = benchlab.load_run(files / "run.h5"), benchlab.load_run(out)
+    np.testing.assert_array_equal(estimate["T_flywheel"].to_numpy(), run["T_flywheel"].to_numpy())
+    with h5py.File(out) as f, h5py.File(files / "run.h5") as src:
+        assert f.attrs["created_utc"] == src.attrs["created_utc"] and f.attrs["sensors"] == '["T_air"]'
+        plate = f["estimated/T_pressure_plate"][()]
+        assert "estimate" in f["estimated/T_pressure_plate"].attrs["description"]
+    version = RunFileVersion(out)  # what `benchlab watch` reads
+    try:
+        assert "T_flywheel" in version.channels and version.dt == pytest.approx(run.attrs["dt"])
+    finally:
+        version.close()
+    assert main(["export", str(out), "--to", str(mf4)]) == 0
+    mdf = MDF(mf4)
+    try:
+        assert "/estimated" in [g.channel_group.acq_name for g in mdf.groups]
+        np.testing.assert_array_equal(mdf.get("estimated.T_pressure_plate").samples, plate)
+        assert mdf.get("estimated.T_pressure_plate").unit == "degC"
+    finally:
+        mdf.close()

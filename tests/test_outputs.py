@@ -63,12 +63,13 @@ def test_no_command_writes_over_the_run_file_it_reads(command, force, foreign_ru
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_no_command_but_a_run_writer_replaces_another_run_file(command, foreign_run, run_file, params_file, tmp_path,
                                                                 refused):
-    """A run file that is not an input is a measurement too: only run, import and simulate may replace one (--force)."""
+    """A run file that is not an input is a measurement too: only run, import, simulate and observe (whose outputs
+    are run files) may replace one (--force)."""
     target = tmp_path / ("other.csv" if command == "export" else "other.h5")
     target.write_bytes(run_file.read_bytes())
     before = _digest(target)
     argv = _argv(command, foreign_run, params_file, target, tmp_path) + ["--force"]
-    if command == "simulate":  # its job is run files: replaced on --force (and refused without it, below)
+    if command in ("simulate", "observe"):  # their outputs are run files: replaced on --force (refused without it)
         assert main(argv) == 0
         assert load_attrs(target)["source_run"] == str(foreign_run)
         return

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import json
+import logging
 import os
 import struct
 from collections.abc import Callable, Mapping, Sequence
@@ -37,7 +38,9 @@ from numba import njit
 
 from benchlab.outputs import OutputError, is_no_space, no_space
 from benchlab.runfile.read import complete_events, read_progress, text
-from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA
+from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA, aligned_description
+
+log = logging.getLogger(__name__)
 
 _EPS = 1e-9
 #: The running file's `status` as HDF5 stores a variable-length string: a global heap object (its size as 8 bytes,
@@ -378,6 +381,8 @@ class RunWriter:
             os.fsync(self._fd)
         self._last_flush_t = now
         self.flushes += 1
+        log.debug("flush %d: %.3f s, %d grid rows, %d events in the file", self.flushes, now, self.builder.rows,
+                  self._event_rows)
 
     def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None,
               groups: Mapping[str, Mapping[str, tuple[np.ndarray, str]]] | None = None) -> None:
@@ -575,6 +580,9 @@ class RunWriter:
             self._write_group(f, "aligned", {"time": "s", **self.layout.aligned_units},
                               capacity, data, compact, "aligned")
             f["aligned"].attrs["dt"] = float(self.layout.dt)
+            sources = describe_layout(self.layout)["aligned"]
+            for name, ds in f["aligned"].items():
+                ds.attrs["description"] = aligned_description(name, sources.get(name))
             raw = f.create_group("raw")
             for s in self.layout.streams:
                 self._write_group(raw, s.name, {"time": "s", **dict(s.columns)}, capacity, data, compact,

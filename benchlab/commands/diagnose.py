@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 from typing import TYPE_CHECKING
 
 from benchlab import cliargs
@@ -34,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--save-model", metavar="OUT.toml", type=cliargs.output_file,
                         help="write the best model found as a model file, its fitted values as starting values "
                              "(ready for identify --model OUT.toml)")
+    parser.add_argument("--group-by", metavar="ATTR",
+                        help="a run attribute (bench, batch, specimen, ...) whose values group the runs when asking "
+                             "whether the runs disagree on a parameter (default: every run on its own)")
     parser.add_argument("--force", action="store_true", help="replace an existing --save-model file and the files "
                                                              "of an existing --report directory (never a run file)")
 
@@ -63,6 +67,9 @@ def print_report(result: dict) -> None:
               f"{f['extension']}\n  held-out RMSE {f['rmse_before_K']:.3f} -> {f['rmse_after_K']:.3f} K, "
               f"gain {f['gain_pct']:.1f} % (p = {f['p_value']:.2g})"
               + (f", {f['run_gain_pct']:.1f} % on runs it was not fitted on" if f["run_gain_pct"] is not None else ""))
+        for g in f.get("per_group", []):
+            print(f"  {g['parameter']} for {g['group']} (runs {', '.join(map(str, g['runs']))}): {g['value']:.6g} "
+                  f"± {g['standard_error']:.2g} {g['unit']}")
     best, floor = result["best"], result["floor"]
     print(f"best {best['model']}: held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
     print(f"noise floor of the measurements {floor['noise_K']:.4f} K: baseline {floor['baseline_ratio']:.1f}x, "
@@ -87,9 +94,12 @@ def load_diagnosed_runs(paths: list[str], model: ModelDefinition) -> list[pd.Dat
 
 
 def best_model(diagnosis: Diagnosis) -> ModelDefinition:
-    """The best model found, as a model file: the baseline's file with the accepted extensions, fitted values as starts."""
+    """The best model found, as a model file: the baseline's file with the accepted extensions, fitted values as starts
+    (a parameter the runs disagree on starts from the median of its groups' values: a model file has one value)."""
     final = diagnosis.final
-    return final.spec.definition.with_starts(final.params, name=final.spec.name)
+    split = {name: statistics.median([v for k, v in final.params.items() if k.split("@")[0] == name and "@" in k])
+             for name in final.spec.per_group}
+    return final.spec.definition.with_starts({**final.params, **split}, name=final.spec.name)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -103,7 +113,15 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.model.definition import to_toml
     model = resolve_model(args.baseline, "--model")
     runs = load_diagnosed_runs(args.runs, model)
-    diagnosis = diagnose_runs(runs, model, seed=args.seed, progress=for_terminal(args.quiet))
+    if args.group_by:
+        with interrupts_held():
+            from benchlab.runfile import load_attrs
+        for path, frame in zip(args.runs, runs):
+            attrs = load_attrs(path)
+            if args.group_by not in attrs:
+                raise InputError(path, args.group_by, f"a root attribute {args.group_by!r} (--group-by)")
+            frame.attrs[args.group_by] = attrs[args.group_by]
+    diagnosis = diagnose_runs(runs, model, seed=args.seed, progress=for_terminal(args.quiet), group_by=args.group_by)
     result = summarise(diagnosis, model.label)
     if args.save_model:
         write_text(args.save_model, to_toml(best_model(diagnosis)))

@@ -1,6 +1,8 @@
-"""`benchlab import DATA.csv|DATA.mf4 --out RUN.h5 [--dt S] [--mapping MAP.toml] [--unit NAME=UNIT …]
-[--model FILE.toml|linear|nonlinear]`: a CSV or an MDF file becomes a run file (contract sections 1 and 6). An MDF
-file is read by benchlab.importing.mdf (channels by name or mapping, onto the grid --dt); the CSV reader is here.
+"""`benchlab import DATA… --out RUN.h5 [--dt S] [--mapping MAP.toml] [--dbc FILE.dbc] [--offset FILE=S]
+[--unit NAME=UNIT …] [--model FILE.toml|linear|nonlinear]`: a CSV, an MDF file or a CAN log, or several of them
+merged on one clock, becomes a run file (contract sections 1 and 6). MDF files are read by benchlab.importing.mdf,
+CAN logs by benchlab.importing.canlog (channels by name or mapping), merged onto the grid --dt with their raw
+streams by benchlab.importing.sources; the CSV reader is here.
 
 Columns with the contract's /aligned names are in the contract's units unless their unit is given, in any spelling
 of any unit of that dimension (`°C`, `K`, `Nm`, `1/min`, …: converted by benchlab.units); any other column needs
@@ -17,7 +19,9 @@ from __future__ import annotations
 
 import argparse
 import io
+import json
 import re
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -32,23 +36,29 @@ from benchlab.outputs import check_output
 if TYPE_CHECKING:
     import pandas as pd
 
+    from benchlab.importing.sources import Input, Merged
+
 NAME = "import"
 HELP = "convert a CSV or an MDF file (contract channel names, a mapping, any channel with its unit) into a run file"
 SEPARATORS = {",": ",", ";": ";", "tab": "\t"}
-#: What asammdf reads (benchlab.importing.mdf.SUFFIXES, kept here so that `--help` loads no asammdf).
+#: What asammdf reads, and python-can's LogReader (benchlab.importing.canlog.CAN_LOG_SUFFIXES: `.mf4` where it
+#: holds CAN bus logging), kept here so that `--help` loads neither.
 MDF_SUFFIXES = (".mf4", ".mdf", ".dat")
+CAN_SUFFIXES = (".blf", ".asc", ".trc", ".log", ".mf4")
 #: A column title with its unit, `T_flywheel [degC]`.
 TITLE_WITH_UNIT = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\]]*)\]$")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("csv", metavar="DATA", help="CSV file, one column per channel, header = channel names or "
-                                                    "`name [unit]` (optionally a second header line of units); or "
-                                                    "an MDF file (.mf4, .mdf, .dat) with --dt")
+    parser.add_argument("inputs", nargs="+", metavar="DATA",
+                        help="CSV file, one column per channel, header = channel names or `name [unit]` (optionally "
+                             "a second header line of units); an MDF file (.mf4, .mdf, .dat); a CAN log (.blf, .asc, "
+                             ".trc, .log, .mf4 bus logging) with --dbc. Several are merged into one run on one clock "
+                             "(then --dt is the grid)")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="run file to write")
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
-                        help="time step in s of a CSV without a time column (one row per step); an MDF "
-                             "file's grid (required for MDF)")
+                        help="time step in s of a CSV without a time column (one row per step); the grid of an MDF "
+                             "file, a CAN log or several inputs (required for them)")
     parser.add_argument("--unit", type=cliargs.name_values, action="extend", default=[], metavar="NAME=UNIT[,...]",
                         help="the unit of each column beyond the contract's channels, repeatable or separated by "
                              "commas, e.g. --unit IqFbk=A,speed=rpm")
@@ -57,9 +67,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
     parser.add_argument("--decimal", choices=(".", ","),
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
-    parser.add_argument("--mapping", metavar="MAP.toml", help="an MDF file's channels: run-file channel = source "
-                                                              "channel, with group, unit, scale, offset, rule "
-                                                              "(benchlab/importing/mapping.py)")
+    parser.add_argument("--mapping", metavar="MAP.toml", help="an MDF file's channels or a CAN log's signals: "
+                                                              "run-file channel = source channel, with group, unit, "
+                                                              "scale, offset, rule (benchlab/importing/mapping.py)")
+    parser.add_argument("--dbc", metavar="FILE.dbc", help="the CAN database of a CAN log (default: drivers/bench.dbc)")
+    parser.add_argument("--offset", action="append", default=[], metavar="FILE=S",
+                        help="add S seconds to the time stamps of the input FILE (its clock ran S s behind the "
+                             "others'); repeatable")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file (a regular file)")
 
 
@@ -194,23 +208,86 @@ def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, s
     return units
 
 
-def _read_mdf(args: argparse.Namespace, required: tuple[str, ...] | None) -> tuple[pd.DataFrame, dict, dict]:
-    """An MDF file's channels on the grid --dt, with the required ones (default: the clutch channels)."""
+def parse_offsets(items: list[str], inputs: list[str]) -> dict[Path, float]:
+    """`FILE=S` options as {input path: seconds}; FILE is an input as given or its file name."""
+    import math
+
+    offsets = {}
+    for item in items:
+        name, sep, value = (part.strip() for part in item.rpartition("="))
+        try:
+            seconds = float(value)
+        except ValueError:
+            seconds = math.nan
+        match = [Path(i) for i in inputs if name in (i, Path(i).name)]
+        if not sep or len(match) != 1 or not (math.isfinite(seconds) and abs(seconds) <= MAX_RUN_DURATION_S):
+            raise InputError("--offset", item, f"FILE=SECONDS with FILE one of the inputs ({', '.join(inputs)}) and "
+                                               f"|SECONDS| <= {MAX_RUN_DURATION_S:g}")
+        offsets[match[0]] = seconds
+    return offsets
+
+
+def _csv_input(args: argparse.Namespace, path: Path) -> Input:
+    """A CSV among several inputs: every column at its time column's stamps (or one row per --dt)."""
+    import numpy as np
+
+    from benchlab.importing.sources import Input, SourceChannel
+
+    header = read_document(path, "CSV file", str, (), "a CSV table", encoding="utf-8-sig").partition("\n")[0]
+    timed = re.search(r"(^|[,;\t])\s*time\s*(\[|[,;\t]|$)", header) is not None
+    frame, _, units = read_csv(path, None if timed else args.dt, parse_units(args.unit), (), args.sep, args.decimal)
+    time = frame["time"].to_numpy()
+    return Input(path, [SourceChannel(name, time, frame[name].to_numpy(), units[name],
+                                      "hold" if name == "clutch_state" else "interpolate",
+                                      f"{path.name}: column {name}", path.stem, name, frame[name].to_numpy(),
+                                      units[name]) for name in frame.columns if name != "time"],
+                 stream_attrs={path.stem: {"source_file": path.name}})
+
+
+def _read_inputs(args: argparse.Namespace, required: tuple[str, ...] | None) -> Merged:
+    """Every input (MDF, CAN log, CSV) read and merged on the grid --dt, with the required channels (default: the
+    clutch channels)."""
+    from benchlab.drivetrain import DrivetrainFacts
+    from benchlab.importing.canlog import derive_bench_channels, is_can_log, read_can_log
     from benchlab.importing.mapping import read_mapping
     from benchlab.importing.mdf import read_mdf
+    from benchlab.importing.sources import merge
     from benchlab.runfile import REQUIRED
+    from drivers.can_signals import BENCH_DBC
 
-    for flag, given in (("--unit", args.unit), ("--sep", args.sep), ("--decimal", args.decimal)):
-        if given:
-            raise InputError(args.csv, flag, "nothing for an MDF file (units and scales go in --mapping)")
+    where = args.inputs[0] if len(args.inputs) == 1 else "inputs"
+    if not any(Path(i).suffix.lower() not in MDF_SUFFIXES + CAN_SUFFIXES for i in args.inputs):
+        for flag, given in (("--unit", args.unit), ("--sep", args.sep), ("--decimal", args.decimal)):
+            if given:
+                raise InputError(where, flag, "nothing for an MDF file or a CAN log (units and scales go in "
+                                              "--mapping)")
     if args.dt is None:
-        raise InputError(args.csv, "--dt", "the grid step in s for an MDF file's channels, e.g. --dt 0.01")
-    frame, units, attrs = read_mdf(args.csv, read_mapping(args.mapping) if args.mapping else [], args.dt)
+        raise InputError(where, "--dt", "the grid step in s for an MDF file's channels, a CAN log's signals or "
+                                        "several inputs, e.g. --dt 0.01")
+    mapped = read_mapping(args.mapping) if args.mapping else []
+    inputs = []
+    for name in args.inputs:
+        path = Path(name)
+        if path.suffix.lower() in CAN_SUFFIXES and is_can_log(path):
+            inputs.append(read_can_log(path, args.dbc or BENCH_DBC, mapped, DrivetrainFacts().gear_ratio))
+        elif path.suffix.lower() in MDF_SUFFIXES:
+            inputs.append(read_mdf(path, mapped))
+        else:
+            inputs.append(_csv_input(args, path))
+    found = {c.raw_name for i in inputs for c in i.channels} | {c.channel for i in inputs for c in i.channels}
+    for entry in mapped:
+        if entry.source not in found and entry.source.rpartition(".")[2] not in found:
+            raise InputError(where, f"channel {entry.channel} ← {entry.source}", "a channel of the inputs (not "
+                                                                                 "found)")
+    merged = merge(inputs, args.dt, parse_offsets(args.offset, args.inputs))
+    frame = derive_bench_channels(merged.frame)
+    sources = {**{name: {"from": "the clutch actuator's clamp state, as the bench derives it"}
+                  for name in frame.columns if name not in merged.frame.columns}, **merged.sources}
     for name in REQUIRED if required is None else required:
         if name not in frame.columns:
-            raise InputError(args.csv, f"channel {name}", "a required channel: a channel of that name, or one "
-                                                          "mapped to it in --mapping")
-    return frame, units, attrs
+            raise InputError(where, f"channel {name}", "a required channel: a channel of that name, or one mapped "
+                                                       "to it in --mapping")
+    return replace(merged, frame=frame, sources=sources)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -218,17 +295,21 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.model.catalog import resolve_model
         from benchlab.runfile import write_run  # and pandas, for read_csv
     required = tuple(resolve_model(args.model).required_channels()) if args.model else None
-    check_output(args.out, "--out", args.force, inputs=[args.csv], run_file=True)
-    if Path(args.csv).suffix.lower() in MDF_SUFFIXES:
-        frame, units, attrs = _read_mdf(args, required)
-        dt = args.dt
-    else:
-        if args.mapping:
-            raise InputError(args.csv, "--mapping", f"an MDF file ({', '.join(MDF_SUFFIXES)}); a CSV names its "
-                                                    "channels in its header")
-        frame, dt, units = read_csv(Path(args.csv), args.dt, parse_units(args.unit), required, args.sep,
+    check_output(args.out, "--out", args.force, inputs=args.inputs, run_file=True)
+    if len(args.inputs) == 1 and Path(args.inputs[0]).suffix.lower() not in MDF_SUFFIXES + CAN_SUFFIXES:
+        if args.mapping or args.dbc or args.offset:
+            raise InputError(args.inputs[0], "--mapping" if args.mapping else "--dbc" if args.dbc else "--offset",
+                             "an MDF file, a CAN log or several inputs; a CSV names its channels in its header")
+        frame, dt, units = read_csv(Path(args.inputs[0]), args.dt, parse_units(args.unit), required, args.sep,
                                     args.decimal)
-        attrs = {"source_file": Path(args.csv).name}
-    write_run(args.out, frame, dt, protocol="imported", units=units, attrs={**attrs, "bench": IMPORTED})
+        write_run(args.out, frame, dt, protocol="imported", units=units,
+                  attrs={"source_file": Path(args.inputs[0]).name, "bench": IMPORTED})
+    else:
+        merged = _read_inputs(args, required)
+        frame, dt = merged.frame, args.dt
+        write_run(args.out, frame, dt, protocol="imported", units=merged.units, attrs={**merged.attrs, "bench": IMPORTED},
+                  sources=merged.sources, raw=merged.raw)
+        for what, n in json.loads(merged.attrs.get("import_skipped", "{}")).items():
+            print(f"{what}: {n} skipped")
     print(f"{args.out}: {len(frame)} samples at dt={dt:g} s, {len(frame.columns)} channels")
     return 0

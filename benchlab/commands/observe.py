@@ -50,15 +50,6 @@ def _reset(text: str) -> Reset:
     return Reset(channel.strip(), value)
 
 
-def _offset(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and abs(value) <= MAX_OFFSET_K):
-        raise argparse.ArgumentTypeError(f"a temperature offset in K within ±{MAX_OFFSET_K:g}, got {text!r}")
-    return value
-
 
 def _sensor_noise(text: str) -> tuple[str, float]:
     channel, _, value = text.partition("=")
@@ -84,7 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--adapt", action="append", default=[], metavar="LINK",
                         help="correct the resistance law of this link online (e.g. R_PA: eq. 11, shared with R_FA); "
                              "an extended Kalman filter; repeatable")
-    parser.add_argument("--initial-offset", type=_offset, default=0.0, metavar="K",
+    parser.add_argument("--initial-offset", type=cliargs.signed_float("a temperature offset in K", MAX_OFFSET_K), default=0.0, metavar="K",
                         help="start every estimate K away from where simulate starts it (the start is then known to "
                              "within |K| at best)")
     parser.add_argument("--initial-std", type=cliargs.positive_float("an initial spread in K", MAX_OFFSET_K),
@@ -95,7 +86,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensor-noise", type=_sensor_noise, action="append", default=[], metavar="CHANNEL=K",
                         help="reading noise of a sensor (default: its residual RMS); repeatable")
     parser.add_argument("--clutch", help="clutch file (TOML) for the online wear; default: documented assumptions")
-    parser.add_argument("--out", required=True, type=cliargs.output_file, help="output HDF5 file with /estimated")
+    parser.add_argument("--out", required=True, type=cliargs.output_file, help="file to write: the run's root attributes and /aligned plus "
+                                                                          "/estimated (a run file)")
     parser.add_argument("--plot", type=cliargs.output_file, help="figure (PNG): estimates, ±2σ band, measurement, "
                                                                   "truth where the run has it")
     parser.add_argument("--force", action="store_true", help="replace existing --out and --plot files (never a run "
@@ -110,10 +102,10 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.observer.batch import STD_SUFFIX, WEAR_UNITS, estimated_wear, observe
         from benchlab.observer.consistency import WINDOW_S
         from benchlab.observer.noise import tune_noise, with_overrides
-        from benchlab.runfile import load_truth, write_results
+        from benchlab.runfile import load_truth, write_beside_run
         from benchlab.wear.clutchfile import default_clutch, load_clutch
     inputs = [args.run, args.params, *([args.clutch] if args.clutch else [])]
-    check_output(args.out, "--out", args.force, inputs=inputs)
+    check_output(args.out, "--out", args.force, inputs=inputs, run_file=True)
     if args.plot:
         check_output(args.plot, "--plot", args.force, inputs=[*inputs, args.out])
     params = load_model_params(args.params, args.model)
@@ -133,13 +125,14 @@ def run(args: argparse.Namespace) -> int:
              if not name.endswith(STD_SUFFIX)}
     columns = {}
     for name, unit in units.items():
-        columns[name] = (result.estimate[name].to_numpy(), unit)
-        columns[name + STD_SUFFIX] = (result.estimate[name + STD_SUFFIX].to_numpy(), "K/W" if unit == "K/W" else "K")
+        columns[name] = (result.estimate[name].to_numpy(), unit, f"observer estimate of {name}")
+        columns[name + STD_SUFFIX] = (result.estimate[name + STD_SUFFIX].to_numpy(), "K/W" if unit == "K/W" else "K",
+                                      f"standard deviation of the estimate of {name}")
     wear = estimated_wear(measured, result, params, clutch)
     for name, values in (wear or {}).items():
-        columns[name] = (values, WEAR_UNITS[name])
+        columns[name] = (values, WEAR_UNITS[name], "wear at the estimated temperatures, cumulative")
     seen = result.observability
-    write_results(args.out, "estimated", measured["time"].to_numpy(), columns, {
+    write_beside_run(args.out, args.run, "estimated", measured["time"].to_numpy(), columns, {
         "source_run": str(args.run), "params": str(args.params), "model": params.model,
         "sensors": json.dumps(list(result.model.sensors)),
         "reinit": json.dumps([[r.channel, r.time_s] for r in args.reinit]), "adapt": json.dumps(result.model.adapted),

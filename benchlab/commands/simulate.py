@@ -27,14 +27,16 @@ def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.identify.metrics import nrmse_pct, rmse_k
         from benchlab.model.runs import load_runs
-        from benchlab.runfile import write_simulated
+        from benchlab.runfile import write_beside_run
         from benchlab.network.simulation import simulate
     check_output(args.out, "--out", args.force, inputs=[args.run, args.params], run_file=True)
     params = load_model_params(args.params, args.model)
     measured = load_runs([args.run], params.definition, params, args.params)[0]
     simulated = simulate(measured, params)
-    write_simulated(args.out, args.run, simulated,
-                    {"source_run": str(args.run), "params": str(args.params), "model": params.model})
+    write_beside_run(args.out, args.run, "simulated", measured["time"].to_numpy(),
+                     {name: (simulated[name].to_numpy(), "degC", f"model {params.model}: {name} driven by the run's "
+                                                                 "measured inputs") for name in simulated.columns},
+                     {"source_run": str(args.run), "params": str(args.params), "model": params.model})
     scored = [c for c in params.network.measured if c in measured.columns]
     print(f"{args.out}: {len(simulated)} samples, {params.model} model, "
           f"RMSE {rmse_k(measured, simulated, scored):.3f} K, NRMSE {nrmse_pct(measured, simulated, scored):.2f} %")

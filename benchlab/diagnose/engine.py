@@ -28,7 +28,7 @@ combination without it and dropped if it no longer passes; no finding is reporte
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -36,7 +36,7 @@ import pandas as pd
 from scipy import stats
 
 from benchlab._blas import single_threaded_blas
-from benchlab.diagnose.library import Candidate, candidates
+from benchlab.diagnose.library import Candidate, candidates, per_group_candidates
 from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
@@ -78,11 +78,24 @@ BEYOND_FLOOR = 3.0  # a final model this many times the measurements' noise floo
 FITTED_STARTS = ("T_flywheel",)
 
 
-def diagnosed_spec(model: ModelDefinition, datasets: Sequence[FitData]) -> ModelSpec:
-    """What diagnose fits for a model: its parameters plus each run's fitted start of FITTED_STARTS channels."""
-    spec = build_spec(model)
+def diagnosed_spec(model: ModelDefinition, datasets: Sequence[FitData], per_group: tuple[str, ...] = ()) -> ModelSpec:
+    """What diagnose fits for a model: its parameters (those in `per_group` once per run group) plus each run's
+    fitted start of FITTED_STARTS channels."""
+    spec = build_spec(model).split_per_group(per_group, run_groups(datasets))
     starts = [c for c in FITTED_STARTS if c in set(spec.network.initial.values())]
     return with_initial_states(spec, datasets, starts) if starts else spec
+
+
+def run_groups(datasets: Sequence[FitData]) -> tuple[str, ...]:
+    """The runs' groups in order of first appearance (each run its own where no `--group-by` was given)."""
+    return tuple(dict.fromkeys(d.group_label for d in datasets))
+
+
+def extended_spec(parent: ModelSpec, cand: Candidate, channels: dict[str, np.ndarray],
+                  datasets: Sequence[FitData]) -> ModelSpec:
+    """The spec of `parent` extended by `cand`: its model edit, and the parameters split per run group so far plus
+    the candidate's own."""
+    return diagnosed_spec(cand.build(parent.definition, channels), datasets, parent.per_group + cand.splits)
 
 
 @dataclass
@@ -145,6 +158,7 @@ class Finding:
     alternatives: list["Alternative"] = field(default_factory=list)  # not significantly worse than this one
     at_bound: tuple[str, ...] = ()  # parameters of the refit with this extension left on a bound (a failed fit)
     run_gain_pct: float | None = None  # leave-one-run-out gain when it was named (several runs only)
+    round: int = 0  # the greedy round that named it (1: the largest error the baseline had; findings list by gain)
 
     @property
     def gain_pct(self) -> float:
@@ -282,13 +296,16 @@ def pinned(current: FitResult, datasets: Sequence[FitData]) -> FitResult:
     held = {name: current.params[name] for name in at_bound(current) if name in model.parameters}
     if not held:
         return current
-    spec = diagnosed_spec(model.with_fixed(held), datasets)
+    spec = diagnosed_spec(model.with_fixed(held), datasets, current.spec.per_group)
     return fit(spec, datasets, max_nfev=HELD_OUT_NFEV, start={p.name: current.params[p.name] for p in spec.free})
 
 
 def _nested_start(spec: ModelSpec, current: FitResult) -> dict[str, float]:
-    """A candidate's start: the current model's fitted values, the new parameters at their no-effect values."""
-    return {**{p.name: p.initial for p in spec.free}, **{k: current.params[k] for k in current.free_names}}
+    """A candidate's start: the current model's fitted values, the new parameters at their no-effect values (a
+    parameter split per run group at its shared value for every group)."""
+    return {**{p.name: current.params.get(p.name.split("@")[0], p.initial) if p.name.split("@")[0] in spec.per_group
+               else p.initial for p in spec.free},
+            **{k: current.params[k] for k in current.free_names}}
 
 
 def _starts(cand: Candidate, spec: ModelSpec, current: FitResult) -> list[dict[str, float]]:
@@ -353,8 +370,7 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     parameters to absorb it, and the new term pays off only once they are released (a plate share
     of 0.35 screened alone lowered the cost by 0 %, with all parameters free by 40 %).
     """
-    base = current.spec.definition
-    specs = [diagnosed_spec(cand.build(base, channels), datasets) for cand in cands]
+    specs = [extended_spec(current.spec, cand, channels, datasets) for cand in cands]
     scores = _score(specs, cands, current, datasets)
     order = list(np.argsort([cost for cost, _ in scores]))
     structural = [i for i in order if cands[i].structural]
@@ -421,7 +437,8 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
     rule applies over the whole screened list, not over the few that the screen's rough ranking happened to put
     first. With several runs the named one must also carry to runs it was not fitted on (leave-one-run-out RMSE
     MIN_GAIN_PCT below the current model's); one that does not is appended to `not_carried` with that gain and the
-    next is named.
+    next is named. A parameter split per run group is exempt: it says the runs differ, so a run it was not fitted
+    on cannot have its value; its held-out test is on the blocks of each run that its fit did not see.
     Failed fits are appended to `failed`."""
     tried: list[Tried] = []
     seen: set[str] = set()
@@ -462,9 +479,8 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
     simpler = [c for c in pool if c.mechanism == best.candidate.mechanism and c.nodes == best.candidate.nodes
                and set(c.reads) < set(best.candidate.reads) and c.key not in seen]
     if simpler and channels is not None:
-        base = current.spec.definition
         run([(0.0, c, spec, _nested_start(spec, current))
-             for c in simpler for spec in [diagnosed_spec(c.build(base, channels), datasets)]])
+             for c in simpler for spec in [extended_spec(current.spec, c, channels, datasets)]])
     while True:
         named = _named(tried, current)
         unseen = [s for s in scored if s[1].key not in seen
@@ -476,7 +492,7 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
     run_gain = None
     if len(datasets) > 1:
         parent_runs = _held_out_runs(current.spec, current.params, datasets).rmse
-        while named is not None:
+        while named is not None and not named.candidate.splits:
             run_gain = 100.0 * (1.0 - _held_out_runs(named.spec, named.params, datasets).rmse / parent_runs)
             if run_gain >= MIN_GAIN_PCT:
                 break
@@ -534,7 +550,7 @@ def _simplest_equal(best: Tried, passing: Sequence[Tried], current: FitResult) -
 def _explains(cand: Candidate) -> tuple:
     """What a finding tells the user: signal, mechanism and the nodes it acts on; candidates alike in these are
     forms of one explanation, not alternatives to it."""
-    return frozenset(cand.reads), cand.mechanism, frozenset(cand.nodes)
+    return frozenset(cand.reads), cand.mechanism, frozenset(cand.nodes), cand.splits
 
 
 def _finding(cand: Candidate, spec: ModelSpec, params: dict[str, float], cost: float, residuals: np.ndarray,
@@ -560,10 +576,10 @@ def global_fit(spec: ModelSpec, warm: dict[str, float], datasets: Sequence[FitDa
 def _combined(base: ModelSpec, cands: Sequence[Candidate], channels: dict[str, np.ndarray],
               datasets: Sequence[FitData]) -> ModelSpec:
     """The baseline with the given extensions applied in order."""
-    model = base.definition
+    spec = base
     for cand in cands:
-        model = cand.build(model, channels)
-    return diagnosed_spec(model, datasets)
+        spec = extended_spec(spec, cand, channels, datasets)
+    return spec
 
 
 def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], final: FitResult,
@@ -583,7 +599,7 @@ def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], f
 
     return [Finding(f.candidate, final.spec, final.params, f.added, held, final_held, _block_test(held, final_held),
                     _bic_delta(cost, final.cost, final.residuals, len(f.added)), f.alternatives, f.at_bound,
-                    f.run_gain_pct)
+                    f.run_gain_pct, f.round)
             for f, (cost, held) in zip(findings, map_indices(without, len(findings)))]
 
 
@@ -607,12 +623,14 @@ def _accept(findings: list[Finding], current: FitResult, current_held: HeldOut, 
 
 @single_threaded_blas
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", starts: int = 4,
-                  seed: int = 0, progress: Progress = SILENT) -> Diagnosis:
+                  seed: int = 0, progress: Progress = SILENT, group_by: str | None = None) -> Diagnosis:
     """Baseline fit, greedy accepted extensions with a global refit after each, then a drop-one re-check of each
     against the combination.
 
     `baseline`: a built-in name, a model file or a checked model; every extension is an edit of it.
-    `progress` gets a task for the baseline's multistart and one per screening of candidates.
+    `progress` gets a task for the baseline's multistart and one per screening of candidates. `group_by`: the run
+    attribute (`bench`, `batch`, ...) whose values group the runs for "the runs disagree on a parameter"; each run is
+    its own group where it is None. With one group there is no such candidate.
     """
     duration = sum(float(run["time"].iloc[-1] - run["time"].iloc[0]) for run in runs)
     if duration < MIN_DURATION_S:
@@ -620,7 +638,8 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
                          f"got {duration:.0f} s")
     model = baseline if isinstance(baseline, ModelDefinition) else resolve_model(baseline)
     network = build_spec(model).network
-    datasets = [prepare(run, STEP_S, name=str(i), network=network) for i, run in enumerate(runs)]
+    datasets = [replace(prepare(run, STEP_S, name=str(i), network=network),
+                        group=str(run.attrs[group_by]) if group_by else "") for i, run in enumerate(runs)]
     shared = set.intersection(*(set(d.channels) for d in datasets))
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels if k in shared}
     units = {**ALIGNED_UNITS, **runs[0].attrs.get("units", {})}
@@ -628,11 +647,13 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
     library = candidates(model, channels, units)
+    if len(run_groups(datasets)) > 1:
+        library += per_group_candidates(model, [p.name for p in model.free_parameters()], group_by or "run")
     current, current_held, findings, failed, not_carried = base, base_held, [], [], []
     for round_ in range(1, MAX_ROUNDS + 1):
         used = {f.candidate.key for f in findings}
-        remaining = [c for c in library if c.key not in used]
         finding, judged = None, pinned(current, datasets)
+        remaining = [c for c in library if c.key not in used and set(c.splits) <= set(judged.free_names)]
         for physical, what in ((True, "mechanisms"), (False, "learned flows")):
             if finding is None:
                 pool = [c for c in remaining if c.physical == physical]
@@ -641,12 +662,12 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
                                pool, channels, not_carried)
         if finding is None:
             break
-        released = diagnosed_spec(finding.candidate.build(current.spec.definition, channels), datasets)
+        released = extended_spec(current.spec, finding.candidate, channels, datasets)
         parent, current = current, global_fit(released, finding.params, datasets, seed + round_)
         held = _held_out(current.spec, current.params, datasets)
         finding = _finding(finding.candidate, current.spec, current.params, current.cost, current.residuals, parent,
                            current_held, held, finding.alternatives, finding.run_gain_pct)
-        finding.at_bound = at_bound(current)
+        finding.at_bound, finding.round = at_bound(current), round_
         findings.append(finding)
         current_held = held
     findings, current, current_held = _accept(findings, current, current_held, base, base_held, datasets, channels)

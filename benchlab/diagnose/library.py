@@ -81,6 +81,9 @@ class Candidate:
     exact: bool = True
     #: every signal the extension reads (a product of two reads both; `signal` names the first)
     signals: tuple[str, ...] = ()
+    #: parameters the extension fits once per run group instead of once for all runs (per_group_candidates): the
+    #: model stays as it is, the runs disagree
+    splits: tuple[str, ...] = ()
 
     @property
     def reads(self) -> tuple[str, ...]:
@@ -340,17 +343,31 @@ def lag_probes(output: str) -> Callable[[Mapping[str, float]], list[dict[str, fl
     return lambda values: [{lag_time_constant(output): tau} for tau in LAG_PROBES_S]
 
 
-def moved_heat(first: str, second: str) -> Build:
-    """A share d of two sources' total heat moved from the second to the first, from d = 0."""
+def moved_key(first: str, second: str, signal: str | None = None) -> str:
+    """The key of moved_heat between two sources (with the signal its share follows)."""
+    return f"split_{_slug(first)}_{_slug(second)}" + (f"_by_{_slug(signal)}" if signal else "")
+
+
+def moved_heat(first: str, second: str, signal: str | None = None) -> Build:
+    """A share of two sources' total heat moved from the second to the first, from a share of 0: a constant d, or
+    d·(|s|/max)^n that follows a signal (a split that shifts with slip speed). Heat is moved, never made: the pair's
+    sum is unchanged whatever the share."""
+    key = moved_key(first, second, signal)
+
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
-        d = f"d_{_slug(first)}_{_slug(second)}"
+        tag = key.removeprefix("split_")
+        d = f"d_{tag}"
+        share = d if signal is None else f"{d} * {factor_expression(signal, ch, f'n_{tag}')}"
 
         def edit(doc: Doc) -> None:
             a, b = (next(s for s in doc["sources"] if s["name"] == name) for name in (first, second))
             total = f"(({a['heat']}) + ({b['heat']}))"
-            a["heat"], b["heat"] = f"({a['heat']}) + {d} * {total}", f"({b['heat']}) - {d} * {total}"
-            _parameter(doc, d, 0.0, -0.45, 0.45, "1 (share of the pair's heat)", scale=0.1)
-        return revise(model, f"split_{_slug(first)}_{_slug(second)}", edit)
+            a["heat"], b["heat"] = f"({a['heat']}) + {share} * {total}", f"({b['heat']}) - {share} * {total}"
+            _parameter(doc, d, 0.0, -0.45, 0.45, "1 (share of the pair's heat" + (
+                ", at the signal's maximum)" if signal else ")"), scale=0.1)
+            if signal is not None:
+                _parameter(doc, f"n_{tag}", 1.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)")
+        return revise(model, key, edit)
     return build
 
 
@@ -511,10 +528,17 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     for a, b in combinations(model.sources, 2):
         if a.node != b.node:
             signal = next(iter(sorted((a.heat.names | b.heat.names) - set(model.parameters) - set(model.nodes))), None)
-            out.append(Candidate(f"split_{_slug(a.name)}_{_slug(b.name)}", signal, "heat_split",
+            out.append(Candidate(moved_key(a.name, b.name), signal, "heat_split",
                                  f"{a.name} + d*(sum), {b.name} - d*(sum)",
                                  f"the heat of {a.name} and {b.name} is shared otherwise", moved_heat(a.name, b.name),
                                  nodes=(a.node, b.node)))
+            for by in (s for s in signals if not is_on_off(s, channels)):
+                tag = moved_key(a.name, b.name, by).removeprefix("split_")
+                out.append(Candidate(moved_key(a.name, b.name, by), by, "heat_split",
+                                     f"{a.name} + d*(|{by}|/max)^n*(sum), {b.name} - the same",
+                                     f"the share of {a.name} and {b.name} in their heat shifts with {by}",
+                                     moved_heat(a.name, b.name, by), nodes=(a.node, b.node), inert=(f"n_{tag}",),
+                                     signals=(by, signal) if signal and signal != by else (by,)))
     return out
 
 
@@ -617,9 +641,12 @@ def slip_convection(model: ModelDefinition, ch: Channels) -> ModelDefinition:
 
 
 def unequal_split(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+    """The plate's share of the friction power `split` instead of the paper's half, the flywheel the rest: the shares
+    are shifted, not rewritten, so a split found before (one that follows a signal) is kept."""
     def edit(doc: Doc) -> None:
         plate, flywheel = (next(s for s in doc["sources"] if s["name"] == name) for name in SHARES)
-        plate["heat"], flywheel["heat"] = "split*friction_power", "(1 - split)*friction_power"
+        plate["heat"] = f"({plate['heat']}) + (split - 0.5) * friction_power"
+        flywheel["heat"] = f"({flywheel['heat']}) - (split - 0.5) * friction_power"
         _parameter(doc, "split", 0.5, 0.05, 0.95, "1 (plate share of P)", scale=0.5)
     return revise(model, "heat_split", edit)
 
@@ -747,10 +774,34 @@ def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, s
     return [c for c in found if all(_available(s, channels) for s in c.reads)]
 
 
+PER_GROUP = "per_run"  # the mechanism of a parameter the runs disagree on
+
+
+def per_group_candidates(model: ModelDefinition, names: "list[str]", group_by: str = "run") -> list[Candidate]:
+    """With several runs (or run groups, `--group-by`): for each parameter in `names`, "the runs need different
+    values of it" (the bench, the day or the specimen differ). It adds no physics: the model is unchanged and the
+    parameter is fitted once per group, judged like any other extension by what it gains on held-out blocks of the
+    same runs. Its nodes are those whose laws read it (the capacity's node, a link's two ends, a source's node)."""
+    out = []
+    for name in names:
+        nodes = [n for n, capacity in model.nodes.items() if capacity == name]
+        nodes += [n for link in model.links if name in link.resistance.names for n in link.between]
+        nodes += [s.node for s in model.sources if name in s.heat.names]
+        out.append(Candidate(f"{PER_GROUP}_{name}", None, PER_GROUP, f"{name}@<{group_by}>",
+                             f"the runs disagree on {name}: fitted once per {group_by}, the model otherwise unchanged",
+                             lambda model, channels: model, nodes=tuple(n for n in dict.fromkeys(nodes)
+                                                                         if n in model.nodes),
+                             splits=(name,)))
+    return out
+
+
 def telling_apart(model: ModelDefinition, first: Candidate, second: Candidate) -> str:
     """The measurement that would tell two candidate extensions apart: a sensor on a node either changes that the
     model does not measure (both change its heat balance differently); else runs in which their signals vary
     independently; else longer runs (more blocks for the test between them)."""
+    if first.splits or second.splits:
+        return ("runs of each group with the other's conditions: the same bench, day and specimen as the other "
+                "runs, where the parameter's difference would vanish and the other explanation's would not")
     measured = set(model.outputs.values())
     channel_of = {node: channel for channel, node in {**model.simulated, **model.outputs}.items()}
     unmeasured = sorted(n for n in set(first.nodes) | set(second.nodes) if n in model.nodes and n not in measured)

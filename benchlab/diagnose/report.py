@@ -8,23 +8,40 @@ from collections.abc import Sequence
 import pandas as pd
 
 from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT, SCORED_FITS,
-                                     STEP_S, STRUCTURAL_FITS, Diagnosis, Finding, diagnose_runs)
+                                     STEP_S, STRUCTURAL_FITS, Diagnosis, Finding, diagnose_runs, run_groups)
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.library import telling_apart
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
 from benchlab.identify.metrics import RESIDUAL_LABEL
+from benchlab.identify.uncertainty import estimate_uncertainty
 from benchlab.model.definition import ModelDefinition
 
 
 def _unit(f: Finding, name: str) -> str:
     """A parameter's unit as the extended model file gives it (the library writes one for each it adds)."""
-    found = f.spec.definition.parameters.get(name)
+    found = f.spec.definition.parameters.get(name.split("@")[0])
     return found.unit if found is not None else ""
 
 
-def _finding_json(f: Finding, model: ModelDefinition) -> dict:
+def per_group_values(f: Finding, result: Diagnosis) -> list[dict]:
+    """For a finding that splits a parameter per run group: each group's runs (their order on the command line), its
+    value in the final model and the value's standard error (the final fit's sandwich covariance of the residuals,
+    benchlab.identify.uncertainty), so a lab sees how far apart the runs are against how well each is known."""
+    datasets = result.final_held.datasets
+    errors = estimate_uncertainty(result.final, datasets, [{} for _ in datasets]).standard_errors
+    out = []
+    for name in f.candidate.splits:
+        for group in run_groups(datasets):
+            key = f"{name}@{group}"
+            out.append({"parameter": name, "group": group, "value": result.final.params[key],
+                        "standard_error": errors.get(key, float("nan")), "unit": _unit(f, name),
+                        "runs": [i for i, d in enumerate(datasets) if d.group_label == group]})
+    return out
+
+
+def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis) -> dict:
     """Contract §3 keys, then the test figures, the fitted extension, and the alternatives the data cannot rule out
-    with the measurement that would."""
+    with the measurement that would; for runs that disagree, each group's value."""
     c = f.candidate
     out = {"signal": c.signal, "mechanism": c.mechanism, "summary": c.summary, "extension": c.extension,
            "signals": list(c.reads),
@@ -32,13 +49,15 @@ def _finding_json(f: Finding, model: ModelDefinition) -> dict:
            "p_value": f.p_value, "bic_delta": f.bic_delta, "candidate": c.key,
            "params": {name: f.params[name] for name in f.added},
            "units": {name: _unit(f, name) for name in f.added}, "at_bound": list(f.at_bound),
-           "run_gain_pct": f.run_gain_pct,
+           "run_gain_pct": f.run_gain_pct, "round": f.round,
            "ambiguous": bool(f.alternatives),
            "alternatives": [{"candidate": a.candidate.key, "signal": a.candidate.signal,
                              "mechanism": a.candidate.mechanism, "extension": a.candidate.extension,
                              "gain_pct": a.gain_pct, "n_params": a.added, "p_value": a.p_value,
                              "p_vs_finding": a.p_vs_winner,
                              "tell_apart_by": telling_apart(model, c, a.candidate)} for a in f.alternatives]}
+    if c.splits:
+        out["per_group"] = per_group_values(f, result)
     return out
 
 
@@ -78,7 +97,7 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
     return {
         "baseline": {"model": baseline, "rmse_K": result.baseline_held.rmse,
                      "nrmse_pct": result.baseline_held.nrmse_pct},
-        "findings": [_finding_json(f, result.baseline.spec.definition) for f in result.findings],
+        "findings": [_finding_json(f, result.baseline.spec.definition, result) for f in result.findings],
         "best": {"model": final.spec.name, "rmse_K": result.final_held.rmse,
                  "nrmse_pct": result.final_held.nrmse_pct, "params": final.params},
         "floor": floor_json(result),
@@ -99,7 +118,8 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                    "held_out_runs": "with several runs, the named extension must also lower the leave-one-run-out "
                                     f"RMSE by {MIN_GAIN_PCT:g} % (each run predicted by a fit on the others, from its "
                                     "first readings); run_gain_pct is that gain, not_carried the named ones that did "
-                                    "not",
+                                    "not; a parameter split per run group (mechanism per_run) is exempt, as it says "
+                                    "the runs differ: its test is on held-out blocks of each run",
                    "baseline_at_bound": [name for name, _ in result.baseline_at_bound],
                    "baseline_bounds": bounds_json(result),
                    "named": "of the extensions that pass, the simplest other explanation (fewest added parameters, "
@@ -128,7 +148,9 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
     }
 
 
-def diagnose(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", seed: int = 0) -> dict:
-    """Contract JSON: baseline held-out error, findings ordered by gain, best combined model, regimes, evidence."""
-    result = diagnose_runs(runs, baseline, seed=seed)
+def diagnose(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", seed: int = 0,
+             group_by: str | None = None) -> dict:
+    """Contract JSON: baseline held-out error, findings ordered by gain, best combined model, regimes, evidence.
+    `group_by`: the run attribute that groups runs for "the runs disagree on a parameter" (default: every run)."""
+    result = diagnose_runs(runs, baseline, seed=seed, group_by=group_by)
     return summarise(result, result.baseline.spec.name)

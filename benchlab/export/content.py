@@ -17,20 +17,25 @@ from pathlib import Path
 import numpy as np
 
 from benchlab.errors import InputError
-from benchlab.export.enums import value_texts
-from benchlab.runfile import ALIGNED_MEANING, StoredGroup, load_attrs, load_run, load_streams
+from benchlab.export.enums import BusSource, can_sources
+from benchlab.runfile import StoredGroup, load_attrs, load_run, load_streams
+from benchlab.runfile.schema import aligned_description
 
 
 @dataclass(frozen=True)
 class Channel:
-    """One channel: its export name (unique in the export), values, unit, comment and, for an enum, the text of
-    each value (the DBC's value table)."""
+    """One channel: its export name (unique in the export), values, unit, comment and, for a channel from a bus,
+    where it comes from (message, node; for an enum the text of each value: the DBC's value table)."""
 
     name: str
     values: np.ndarray
     unit: str
     comment: str
-    texts: dict[int, str] | None = None
+    bus: BusSource | None = None
+
+    @property
+    def texts(self) -> dict[int, str] | None:
+        return self.bus.texts if self.bus else None
 
 
 @dataclass(frozen=True)
@@ -74,9 +79,9 @@ def read_content(path: "str | os.PathLike[str]") -> RunContent:
     groups = [ChannelGroup("/aligned", "time", run["time"].to_numpy()[:rows], channels,
                            f"uniform grid, dt = {run.attrs['dt']:g} s; NaN = not measured")]
     skipped = 0
-    texts = value_texts(attrs) if any(g.name.startswith("can_") for g in stored.groups) else {}
+    buses = can_sources(attrs) if any(g.name.startswith("can_") for g in stored.groups) else {}
     for group in stored.groups:
-        channel_group, dropped = _in_time_order(group, texts)
+        channel_group, dropped = _in_time_order(group, buses)
         skipped += dropped
         if channel_group.channels:
             groups.append(channel_group)
@@ -85,17 +90,13 @@ def read_content(path: "str | os.PathLike[str]") -> RunContent:
 
 
 def _aligned_comment(name: str, source: dict | None, description: str | None) -> str:
-    parts = [description] if description is not None else []
-    parts += [ALIGNED_MEANING[name]] if name in ALIGNED_MEANING else []
-    if source:
-        scale = f" × {source['scale']:g}" if source.get("scale", 1.0) != 1.0 else ""
-        parts.append(f"from {source['stream']}.{source['column']}{scale}, held on the grid")
-    return "; ".join(parts)
+    """The stored description; for a file written before /aligned carried one, made as the writer makes it."""
+    return description if description is not None else aligned_description(name, source)
 
 
-def _in_time_order(group: StoredGroup, texts: dict[str, dict[int, str]]) -> tuple[ChannelGroup, int]:
-    """A stored group as exported: finite time stamps only, in time order, enums with their `texts`; (group, rows
-    skipped)."""
+def _in_time_order(group: StoredGroup, buses: dict[str, BusSource]) -> tuple[ChannelGroup, int]:
+    """A stored group as exported: finite time stamps only, in time order, a bus's channels with their source
+    (`buses`, or the group's `bus`/`message`/`node` attributes: an imported CAN log's); (group, rows skipped)."""
     time = group.time
     keep = np.isfinite(time)
     if keep.all() and np.all(time[1:] >= time[:-1]):  # as the writer stores them: no copy, no sort
@@ -103,8 +104,11 @@ def _in_time_order(group: StoredGroup, texts: dict[str, dict[int, str]]) -> tupl
     else:
         order = np.flatnonzero(keep)
         order = order[np.argsort(time[order], kind="stable")]
+    attrs_bus = (BusSource(group.attrs["bus"], group.attrs.get("message", ""), group.attrs.get("node", ""))
+                 if "bus" in group.attrs else None)
     channels = tuple(Channel(f"{group.name}.{c.name}", c.values[order], c.unit,
-                             c.description or f"{group.path}/{c.name} as stored", texts.get(f"{group.name}.{c.name}"))
+                             c.description or f"{group.path}/{c.name} as stored",
+                             buses.get(f"{group.name}.{c.name}", attrs_bus))
                      for c in group.columns)
     attrs = ", ".join(f"{k} = {v}" for k, v in group.attrs.items())
     comment = f"{group.path}: own time stamps" + (f"; {attrs}" if attrs else "")

@@ -1,16 +1,27 @@
-"""The DBC's value tables (VAL_) of a run's raw CAN columns: what an export shows as text beside the number
-(`can_clutch.clamp_state` 1 = "Slipping"). The DBC is the one the run used (`bench_config`'s `dbc`, else
-drivers/bench.dbc); a DBC that is no longer where the run found it gives no tables, and the numbers stay."""
+"""What the bench's DBC says about a run's raw CAN columns: the value tables (VAL_) an export shows as text beside
+the number (`can_clutch.clamp_state` 1 = "Slipping"), and where each column comes from on the bus (message and
+sending node: MDF source information). The DBC is the one the run used (`bench_config`'s `dbc`, else
+drivers/bench.dbc); a DBC that is no longer where the run found it gives none of this, and the numbers stay."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 
-def value_texts(attrs: dict[str, str]) -> dict[str, dict[int, str]]:
-    """Export channel name (`can_drive.state`) -> {raw value: text} for every raw CAN column whose DBC signal has a
-    value table."""
+@dataclass(frozen=True)
+class BusSource:
+    """Where a channel comes from on a bus: bus kind, message, sending node(s), and the raw value's texts."""
+
+    bus: str
+    message: str
+    node: str
+    texts: dict[int, str] | None = None
+
+
+def can_sources(attrs: dict[str, str]) -> dict[str, BusSource]:
+    """Export channel name (`can_drive.state`) -> its BusSource for every raw CAN column of the bench's layout."""
     import cantools
 
     from benchlab.runner.devices import CAN_COLUMN_SIGNALS
@@ -25,13 +36,15 @@ def value_texts(attrs: dict[str, str]) -> dict[str, dict[int, str]]:
         db = cantools.database.load_file(str(path))
     except (OSError, cantools.database.UnsupportedDatabaseFormatError):
         return {}
-    texts = {}
+    sources = {}
     for (stream, column), key in CAN_COLUMN_SIGNALS.items():
-        message, signal = BENCH_SIGNALS[key]
+        message_name, signal_name = BENCH_SIGNALS[key]
         try:
-            choices = db.get_message_by_name(message).get_signal_by_name(signal).choices
+            message = db.get_message_by_name(message_name)
+            choices = message.get_signal_by_name(signal_name).choices
         except KeyError:
             continue
-        if choices:
-            texts[f"{stream}.{column}"] = {int(v): str(t) for v, t in choices.items()}
-    return texts
+        texts = {int(v): str(t) for v, t in choices.items()} if choices else None
+        sources[f"{stream}.{column}"] = BusSource("CAN", f"{message.name}.{signal_name}", ", ".join(message.senders),
+                                                  texts)
+    return sources

@@ -3,7 +3,9 @@
 MDF is what automotive bench tools open (asammdf's GUI, CANape, MDF4 Lib): each group of the run file
 (/aligned, /raw/<stream>, /events, /simulated) becomes a channel group named after its HDF5 path, with its
 own time channel (`time`, `can_drive.time`, ...), so a 100 Hz CAN stream and a 2 Hz scanner keep their
-own stamps. NaN stays NaN (not measured). Event kinds and details are UTF-8 string channels, and every event is
+own stamps. A sample not measured (NaN) carries MDF's invalidation bit; enums (the DBC's value tables) and number
+channels of whole numbers (counters, states) are stored as integers; a CAN channel names its message and sending
+node as MDF source information. Event kinds and details are UTF-8 string channels, and every event is
 also an MDF event (`mdf.events`: a marker at its time named by its kind, what asammdf's GUI and CANape show on
 the time axis). The run file's root attributes go into the file header's comment as common properties.
 """
@@ -15,9 +17,11 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
-from benchlab.export.content import ChannelGroup, RunContent
+from benchlab.export.content import Channel, ChannelGroup, RunContent
+from benchlab.export.enums import BusSource
 
 MDF_VERSION = "4.10"
 #: Transposed deflate (MDF 4.10 DZ blocks): a 30 min run's MF4 is 9.2 MB instead of 43.5 MB uncompressed (the
@@ -48,23 +52,56 @@ def _value_to_text(texts: dict[int, str] | None) -> dict[str, Any] | None:
     return conversion
 
 
-def _append(mdf: Any, group: ChannelGroup) -> None:
-    """One channel group. Numbers go as a DataFrame, asammdf's fastest path (no per-signal copies, no temporary
-    compression), each channel's comment then set on its block; text (event kinds) and enums with their value
-    tables need asammdf's Signals."""
-    if any(c.values.dtype.kind == "S" or c.texts for c in group.channels):
-        from asammdf import Signal
+def _samples(channel: Channel) -> tuple[np.ndarray, np.ndarray | None]:
+    """What MDF stores of a channel, and its invalidation bits (None: every sample valid). An enum (a value table)
+    or a number channel (unit "1") whose samples are whole numbers is stored as the smallest integer type that
+    holds them (a counter, a state), a not-measured sample as 0 with its bit set; a float channel keeps NaN under
+    the bit, for readers that ignore the bits."""
+    values = channel.values
+    if values.dtype.kind not in "f":
+        return values, None
+    missing = np.isnan(values)
+    bits = missing if missing.any() else None
+    finite = values[~missing]
+    if (channel.texts or channel.unit == "1") and finite.size and np.all(np.isfinite(finite)) \
+            and np.all(finite == np.round(finite)) and np.abs(finite).max() < 2**31:
+        kind = np.result_type(np.min_scalar_type(int(finite.min())), np.min_scalar_type(int(finite.max())))
+        return np.where(missing, 0, values).astype(kind), bits
+    return values, bits
 
-        mdf.append([Signal(c.values, group.time, unit=c.unit, name=c.name, comment=c.comment, encoding="utf-8"
-                           if c.values.dtype.kind == "S" else None, master_metadata=(group.master, 1),
-                           conversion=_value_to_text(c.texts))
-                    for c in group.channels], acq_name=group.path, comment=group.comment, common_timebase=True)
+
+def _source(bus: BusSource | None) -> Any:
+    """asammdf's source information (MDF SI block) of a channel from a bus: the sending node, bus/message."""
+    if bus is None:
+        return None
+    from asammdf.blocks import v4_constants as v4c
+    from asammdf.blocks.source_utils import Source
+
+    return Source(bus.node, f"{bus.bus}/{bus.message}", f"{bus.bus} message {bus.message}, sent by {bus.node}",
+                  v4c.SOURCE_BUS, v4c.BUS_TYPE_CAN if bus.bus == "CAN" else v4c.BUS_TYPE_OTHER)
+
+
+def _append(mdf: Any, group: ChannelGroup) -> None:
+    """One channel group. Plain float channels without a missing sample go as a DataFrame, asammdf's fastest path
+    (no per-signal copies, no temporary compression), each channel's comment then set on its block; text (event
+    kinds), integers, invalidation bits, value tables and sources need asammdf's Signals."""
+    stored = [_samples(c) for c in group.channels]
+    if all(bits is None and values is c.values and values.dtype.kind == "f" and c.bus is None
+           for c, (values, bits) in zip(group.channels, stored)):
+        frame = pd.DataFrame({c.name: c.values for c in group.channels},
+                             index=pd.Index(group.time, name=group.master))
+        mdf.append(frame, acq_name=group.path, comment=group.comment, units={c.name: c.unit for c in group.channels})
+        comments = {c.name: c.comment for c in group.channels}
+        for block in mdf.groups[-1].channels:
+            block.comment = comments.get(block.name, block.comment)
         return
-    frame = pd.DataFrame({c.name: c.values for c in group.channels}, index=pd.Index(group.time, name=group.master))
-    mdf.append(frame, acq_name=group.path, comment=group.comment, units={c.name: c.unit for c in group.channels})
-    comments = {c.name: c.comment for c in group.channels}
-    for block in mdf.groups[-1].channels:
-        block.comment = comments.get(block.name, block.comment)
+    from asammdf import Signal
+
+    mdf.append([Signal(values, group.time, unit=c.unit, name=c.name, comment=c.comment, encoding="utf-8"
+                       if values.dtype.kind == "S" else None, master_metadata=(group.master, 1),
+                       conversion=_value_to_text(c.texts), invalidation_bits=bits, source=_source(c.bus))
+                for c, (values, bits) in zip(group.channels, stored)],
+               acq_name=group.path, comment=group.comment, common_timebase=True)
 
 
 def _events(group: ChannelGroup) -> list[Any]:

@@ -57,6 +57,9 @@ class FitData:
     block: int
     mask: np.ndarray  # True where the sample counts in the fit
     units: dict[str, str] = field(default_factory=dict)  # channel -> unit, as the run file gives it
+    #: the run's group for parameters fitted per group (`X@<group>`, benchlab.identify.fit.run_values); its name
+    #: where empty (every run its own group)
+    group: str = ""
     #: the solver's memo of these channels, which are never changed after prepare (shared by with_mask's copies)
     memo: LawMemo = field(default_factory=LawMemo, repr=False, compare=False)
 
@@ -88,6 +91,11 @@ class FitData:
     @cached_property
     def _flat(self) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
         return {}
+
+    @property
+    def group_label(self) -> str:
+        """The label of this run's per-group parameters: its group, else its name."""
+        return self.group or self.name
 
     def with_mask(self, mask: np.ndarray) -> "FitData":
         return replace(self, mask=mask)

@@ -71,6 +71,15 @@ def initial_state(network: ThermalNetwork, data: FitData, params: Mapping[str, f
     return np.array([params.get(f"init_{s}", first(network.initial[s])) for s in network.state_names])
 
 
+def run_values(params: Mapping[str, float], data: FitData) -> Mapping[str, float]:
+    """The parameter values one run is simulated with: a parameter fitted per run group (`X@<group>`) overrides X for
+    the runs of that group (`FitData.group_label`); every other parameter is shared by all runs."""
+    suffix = f"@{data.group_label}"
+    own = {name[:-len(suffix)]: value for name, value in params.items()
+           if name.endswith(suffix) and not name.startswith("init_")}
+    return {**params, **own} if own else params
+
+
 def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
     """Model outputs at the fitting step for the measured channels of `data`."""
     states = _states(network, params, data)
@@ -80,7 +89,8 @@ def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data:
 
 def _states(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> np.ndarray:
     """The network's states (samples × states) at the fitting step of `data`."""
-    return run_network(network, params, data.channels, data.dt, initial_state(network, data, params),
+    values = run_values(params, data)
+    return run_network(network, values, data.channels, data.dt, initial_state(network, data, values),
                        KEY_RESOLUTION, data.memo)[:-1]
 
 
@@ -100,8 +110,10 @@ def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_s
     Jacobian, each near `base` (benchlab.network.sets)."""
     parts: list[list[np.ndarray]] = [[] for _ in param_sets]
     for data in datasets if param_sets else ():
-        x0s = np.array([initial_state(network, data, params) for params in param_sets])
-        runs = run_network_sets(network, base, param_sets, data.channels, data.dt, x0s, KEY_RESOLUTION, data.memo)
+        own_sets = [run_values(params, data) for params in param_sets]
+        x0s = np.array([initial_state(network, data, params) for params in own_sets])
+        runs = run_network_sets(network, run_values(base, data), own_sets, data.channels, data.dt, x0s,
+                                KEY_RESOLUTION, data.memo)
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
         for part, states in zip(parts, runs):
             part.append(states[:-1].ravel().take(flat) - targets)

@@ -43,6 +43,7 @@ class ModelSpec:
     free: tuple[ParamSpec, ...]
     fixed: Mapping[str, float] = field(default_factory=dict)
     definition: "ModelDefinition | None" = None
+    per_group: tuple[str, ...] = ()  # parameters fitted once per run group (`X@<group>`, see split_per_group)
 
     def with_fixed(self, values: Mapping[str, float]) -> "ModelSpec":
         """Hold the named parameters at the given values (`--fix C_T=12000`)."""
@@ -52,6 +53,18 @@ class ModelSpec:
     def with_free(self, extra: tuple[ParamSpec, ...]) -> "ModelSpec":
         """The same model with additional free parameters (per-run start temperatures)."""
         return replace(self, free=self.free + extra)
+
+    def split_per_group(self, names: tuple[str, ...], groups: tuple[str, ...]) -> "ModelSpec":
+        """The same model with each free parameter in `names` fitted once per run group (`X@<group>`, same bounds and
+        start; benchlab.identify.fit.run_values applies them): the runs are allowed to disagree on it. X itself stays
+        at its start value, which no run then uses."""
+        split = [p for p in self.free if p.name in names and p.name not in self.per_group]
+        if not split:
+            return self
+        extra = tuple(replace(p, name=f"{p.name}@{g}") for p in split for g in groups)
+        return replace(self, free=tuple(p for p in self.free if p not in split) + extra,
+                       fixed={**self.fixed, **{p.name: p.initial for p in split}},
+                       per_group=self.per_group + tuple(p.name for p in split))
 
     def starting_point(self, values: Mapping[str, float]) -> "ModelSpec":
         """Same spec, starting from the given values where it names them (a warm start)."""

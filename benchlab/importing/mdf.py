@@ -2,26 +2,22 @@
 
 Channels are picked by a mapping file (benchlab.importing.mapping) and, where it names none, by the contract's
 names the MDF holds (what `benchlab export --to X.mf4` writes). Each is read with its own master (time stamps),
-its invalidation bits as NaN, scaled as the mapping says, converted to the contract's unit (benchlab.units) and put
-on the grid `--dt` by its rule (benchlab.importing.grid). The MDF's start time (plus the first sample's offset)
-becomes `created_utc`, its header comment `source_comment`.
+its invalidation bits as NaN, scaled as the mapping says and converted to the contract's unit (benchlab.units);
+benchlab.importing.sources puts it on the grid `--dt` by its rule, from the header's start time, and keeps it as
+the file held it under /raw/<file>.<group>. The header comment becomes `source_comment`.
 """
 
 from __future__ import annotations
 
-import json
 import os
-from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
-from benchlab.bounds import MAX_IMPORT_ROWS, MAX_RUN_DURATION_S
 from benchlab.errors import InputError
-from benchlab.importing.grid import resample
 from benchlab.importing.mapping import Mapped
+from benchlab.importing.sources import Input, SourceChannel
 from benchlab.runfile.schema import ALIGNED_UNITS, unmeasurable_sample
 from benchlab.units import to_stored
 
@@ -38,76 +34,72 @@ def _open(path: Path) -> Any:
         raise InputError(path, "file", f"an MDF file asammdf reads ({type(exc).__name__}: {exc})") from None
 
 
-def _location(path: Path, mdf: Any, entry: Mapped) -> tuple[int, int]:
-    """(group, index) of the entry's source channel; InputError where it is absent or ambiguous."""
-    found = [(g, i) for g, i in mdf.channels_db.get(entry.source, ()) if entry.group in (None, g)]
-    field = f"channel {entry.channel} ← {entry.source}"
-    if not found:
-        where = f" in group {entry.group}" if entry.group is not None else ""
-        raise InputError(path, field, f"a channel of the MDF file{where} (not found)")
-    if len(found) > 1:
-        raise InputError(path, field, f"one channel: groups {sorted({g for g, _ in found})} hold {entry.source!r}, "
-                                      "say which with group in the mapping file")
-    return found[0]
-
-
-def _entries(mdf: Any, mapped: list[Mapped]) -> list[Mapped]:
-    """The mapping's entries, then the contract's channels the MDF holds under their own names."""
-    named = {m.channel for m in mapped}
-    return mapped + [Mapped(name, name) for name in ALIGNED_UNITS
-                     if name != "time" and name not in named and name in mdf.channels_db]
-
-
-def _series(path: Path, mdf: Any, entry: Mapped) -> tuple[np.ndarray, np.ndarray, str, str]:
-    """One source channel: time stamps, values in the run file's unit (invalid samples NaN), that unit, the rule."""
-    group, index = _location(path, mdf, entry)
-    sig = mdf.get(group=group, index=index, ignore_invalidation_bits=True)  # every sample, with its bit
+def numbers(mdf: Any, **where: Any) -> tuple[Any, np.ndarray | None]:
+    """A channel (asammdf's `get` arguments: name, or group and index) as a run file stores it: its Signal, and its
+    samples as float64 with NaN where the invalidation bit is set (an enum: the numbers behind its texts); None for
+    samples that are not 1-D numbers."""
+    sig = mdf.get(**where, ignore_invalidation_bits=True)  # every sample, with its bit
     if sig.samples.dtype.kind in "SUO":  # an enum shown as its value table's texts: the numbers behind them
-        sig = mdf.get(group=group, index=index, ignore_invalidation_bits=True, raw=True)
-    field = f"channel {entry.channel} ← {entry.source}"
+        sig = mdf.get(**where, ignore_invalidation_bits=True, raw=True)
     if sig.samples.dtype.kind not in "iufb" or sig.samples.ndim != 1:
-        raise InputError(path, field, f"a numeric channel, got samples of type {sig.samples.dtype}")
-    values = sig.samples.astype(np.float64) * entry.scale + entry.offset
+        return sig, None
+    values = sig.samples.astype(np.float64)
     if sig.invalidation_bits is not None:
         values[np.asarray(sig.invalidation_bits, dtype=bool)] = np.nan
+    return sig, values
+
+
+def _location(path: Path, mdf: Any, entry: Mapped) -> tuple[int, int] | None:
+    """(group, index) of the entry's source channel, None where the file has none; InputError where ambiguous."""
+    found = [(g, i) for g, i in mdf.channels_db.get(entry.source, ()) if entry.group in (None, g)]
+    if len(found) > 1:
+        raise InputError(path, f"channel {entry.channel} ← {entry.source}", f"one channel: groups "
+                         f"{sorted({g for g, _ in found})} hold {entry.source!r}, say which with group in the "
+                         "mapping file")
+    return found[0] if found else None
+
+
+def _stream(path: Path, mdf: Any, group: int) -> str:
+    """The /raw stream of an MDF channel group: the file's stem and the group's acquisition name (or index)."""
+    name = str(mdf.groups[group].channel_group.acq_name or f"group {group}")
+    return f"{path.stem}.{name}".replace("/", "_").strip(".") or f"{path.stem}.{group}"
+
+
+def _channel(path: Path, mdf: Any, entry: Mapped, group: int, index: int) -> SourceChannel:
+    """One source channel: time stamps, values in the run file's unit (invalid samples NaN), that unit, the rule,
+    and its samples as the file held them."""
+    sig, raw = numbers(mdf, group=group, index=index)
+    field = f"channel {entry.channel} ← {entry.source}"
+    if raw is None:
+        raise InputError(path, field, f"a numeric channel, got samples of type {sig.samples.dtype}")
     unit = entry.unit if entry.unit is not None else str(sig.unit or "")
     if not unit and entry.channel not in ALIGNED_UNITS:
         raise InputError(path, field, "a unit (the MDF file gives none): unit in the mapping file, \"1\" for a number")
-    values, stored = to_stored(path, f"{field} [{unit}]", entry.channel, values, unit)
+    values, stored = to_stored(path, f"{field} [{unit}]", entry.channel, raw * entry.scale + entry.offset, unit)
     if (problem := unmeasurable_sample(entry.channel, stored, values)) is not None:
         raise InputError(path, f"{field}, sample {problem[0]}", f"{problem[1]}, got {problem[2]!r}")
     held = entry.channel == "clutch_state" or sig.samples.dtype.kind in "iub"
-    return np.asarray(sig.timestamps, dtype=np.float64), values, stored, entry.rule or ("hold" if held else
-                                                                                         "interpolate")
+    return SourceChannel(entry.channel, np.asarray(sig.timestamps, dtype=np.float64), values, stored,
+                         entry.rule or ("hold" if held else "interpolate"),
+                         f"{path.name}: {entry.source} (group {group})", _stream(path, mdf, group), entry.source,
+                         raw, unit)
 
 
-def read_mdf(path: "str | os.PathLike[str]", mapped: list[Mapped], dt: float
-             ) -> tuple[pd.DataFrame, dict[str, str], dict[str, str]]:
-    """The MDF's chosen channels on a grid of step `dt` from the earliest sample to the latest: the frame (`time`
-    first, from 0), each channel's stored unit, and the run file's root attributes it carries over."""
+def read_mdf(path: "str | os.PathLike[str]", mapped: list[Mapped]) -> Input:
+    """The MDF's channels the mapping names (those it holds) and the contract's channels it holds by name, each at
+    its own time stamps from the header's start time; its header comment as `source_comment`."""
     path = Path(path)
     mdf = _open(path)
     try:
-        series = {e.channel: (_series(path, mdf, e), e) for e in _entries(mdf, mapped)}
+        named = {m.channel for m in mapped}
+        entries = mapped + [Mapped(name, name) for name in ALIGNED_UNITS
+                            if name != "time" and name not in named and name in mdf.channels_db]
+        channels, streams = [], {}
+        for entry in entries:
+            if (where := _location(path, mdf, entry)) is not None:
+                channels.append(_channel(path, mdf, entry, *where))
+                streams[channels[-1].stream] = {"source_file": path.name, "mdf_group": where[0]}
         start, comment = mdf.header.start_time, str(mdf.header.description or "")
     finally:
         mdf.close()
-    if not series:
-        raise InputError(path, "channels", "channels with the contract's names, or a mapping file (--mapping)")
-    stamps = [s[0] for s, _ in series.values() if np.isfinite(s[0]).any()]
-    t0 = min(float(np.nanmin(t)) for t in stamps) if stamps else 0.0
-    span = max(float(np.nanmax(t)) for t in stamps) - t0 if stamps else 0.0
-    if span > MAX_RUN_DURATION_S:
-        raise InputError(path, "time stamps", f"a run of at most {MAX_RUN_DURATION_S:g} s, got {span:g} s")
-    rows = int(np.floor(span / dt + 1e-9)) + 1
-    if rows > MAX_IMPORT_ROWS:
-        raise InputError(path, "--dt", f"a grid of at most {MAX_IMPORT_ROWS} rows over the file's {span:g} s, "
-                                       f"got {rows} at dt={dt:g} s")
-    time = np.arange(rows) * dt
-    frame = pd.DataFrame({"time": time, **{name: resample(t - t0, v, time, rule)
-                                           for name, ((t, v, _, rule), _) in series.items()}})
-    units = {"time": "s", **{name: s[2] for name, (s, _) in series.items()}}
-    picked = {name: {"source": e.source, "unit": s[2], "rule": s[3]} for name, (s, e) in series.items()}
-    attrs = {"source_file": path.name, "source_comment": comment, "source_channels": json.dumps(picked),
-             "created_utc": (start + timedelta(seconds=t0)).isoformat()}
-    return frame, units, attrs
+    return Input(path, channels, start, {"source_comment": comment} if comment else {}, streams)

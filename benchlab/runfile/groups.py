@@ -1,4 +1,5 @@
-"""A run file's time-stamped groups besides /aligned, as stored: every /raw/<stream>, /events and /simulated,
+"""A run file's time-stamped groups besides /aligned, as stored: every /raw/<stream>, /events, /simulated and
+/estimated,
 cut at the progress record (what lies beyond it in a file still being written is allocated space, not data);
 with the acquisition layout and /aligned's dataset descriptions (what `benchlab export` carries)."""
 
@@ -70,7 +71,7 @@ def _timestamped_groups(f: h5py.File, progress: dict[str, float]) -> list[tuple[
             if isinstance(group, h5py.Group) and "time" in group:
                 rows = progress.get(f"rows/{stream}")
                 out.append((f"/raw/{stream}", None if rows is None else int(rows)))
-    for name, counter in (("events", "event_rows"), ("simulated", None)):
+    for name, counter in (("events", "event_rows"), ("simulated", None), ("estimated", None)):
         if isinstance(f.get(name), h5py.Group) and "time" in f[name]:
             rows = progress.get(counter) if counter else None
             out.append((f"/{name}", None if rows is None else int(rows)))

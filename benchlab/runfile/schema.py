@@ -25,6 +25,21 @@ ALIGNED_MEANING: dict[str, str] = {
     "T_housing": "ϑ_T, transmission housing", "T_ambient": "ϑ_amb, ambient", "T_engine": "ϑ_eng, engine",
     "load_torque": "load machine torque", "T_flywheel_1": "flywheel sensor 1", "T_flywheel_2": "flywheel sensor 2",
 }
+
+
+def aligned_description(name: str, source: "dict | None" = None) -> str:
+    """The `description` an /aligned dataset carries (and an export shows as its comment): what the contract
+    channel is, and where its values came from (`source`: a raw stream's column and scale, as the acquisition
+    layout describes it, or the `from` text of an imported channel)."""
+    parts = [ALIGNED_MEANING[name]] if name in ALIGNED_MEANING else []
+    if source and "stream" in source:
+        scale = f" × {source['scale']:g}" if source.get("scale", 1.0) != 1.0 else ""
+        parts.append(f"from {source['stream']}.{source['column']}{scale}, held on the grid")
+    elif source and "from" in source:
+        parts.append(f"from {source['from']}")
+    return "; ".join(parts)
+
+
 EVENT_KIND_LEN = 32
 EVENT_DETAIL_LEN = 160
 EVENT_REASON_LEN = 32

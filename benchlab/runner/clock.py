@@ -18,19 +18,20 @@ class Clock(Protocol):
 
 
 class RealClock:
-    """Wall-clock time since construction (monotonic), offset by `t0`; `sleep_until` really sleeps."""
+    """Wall-clock time since construction (monotonic), offset by `t0`; `sleep_until` really sleeps. `speed` > 1
+    runs it faster than the wall clock: only for rehearsals whose every device is emulated on this clock."""
 
     realtime = True
 
-    def __init__(self, t0: float = 0.0) -> None:
-        self._origin = time.monotonic() - float(t0)
+    def __init__(self, t0: float = 0.0, speed: float = 1.0) -> None:
+        self._start, self._t0, self.speed = time.monotonic(), float(t0), float(speed)
 
     def __call__(self) -> float:
-        return time.monotonic() - self._origin
+        return self._t0 + (time.monotonic() - self._start) * self.speed
 
     def sleep_until(self, t: float) -> float:
         """Sleep until `t` (returns at once if it has passed) and return the time."""
-        delay = t - self()
+        delay = (t - self()) / self.speed
         if delay > 0:
             time.sleep(delay)
         return self()

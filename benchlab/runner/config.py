@@ -153,9 +153,16 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
         if key not in ("1", "2"):
             raise InputError(src, f"node.calibration.{key}", "1 or 2 (the flywheel sensors)")
     can_t = _table(doc, "can", src)
-    interface = _str(can_t, "interface", "can.interface", src)
-    if interface == "udp_multicast":
-        raise InputError(src, "can.interface", "a CAN interface; udp_multicast leaves the machine, not allowed")
+    if "url" in can_t:  # the simulated plant's emulated controllers instead of a python-can bus
+        url = _str(can_t, "url", "can.url", src)
+        if not url.startswith("sim://") or len(url) == len("sim://"):
+            raise InputError(src, "can.url", f"sim://NAME (the emulated controllers), got {url!r}; hardware is "
+                                              "given by python-can's keys (interface, channel, bitrate)")
+        check_keys(src, "can", can_t, ("url", "dbc"))
+    else:
+        interface = _str(can_t, "interface", "can.interface", src)
+        if interface == "udp_multicast":
+            raise InputError(src, "can.interface", "a CAN interface; udp_multicast leaves the machine, not allowed")
     can_cfg = {k: v for k, v in can_t.items() if k != "dbc"}
     dbc = can_t.get("dbc")
     if dbc is not None:

@@ -12,6 +12,7 @@ shared clock's time before the drivers read).
 from __future__ import annotations
 
 import functools
+import logging
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -36,6 +37,7 @@ from protocols.safety import OPEN_IDLE, SafeState
 if TYPE_CHECKING:
     from drivers.can_bench import CanBlock
 
+log = logging.getLogger(__name__)
 STATUS_CODES = {"ok": 0.0, "open": 1.0, "short": 2.0, "range": 3.0, "fault": 4.0}
 _NODE_STATUS_CODES = np.array([STATUS_CODES[s] for s in SENSOR_STATUSES])  # NodeBlock.status → stored code
 
@@ -158,6 +160,11 @@ _CAN_KEYS = {stream: tuple(key for _, key, _ in cols) for stream, cols in _CAN_S
 #: The DBC signal (logical key of drivers.can_signals.BENCH_SIGNALS) each raw CAN column holds, by (stream, column):
 #: what `benchlab export` gives the DBC's value tables from.
 CAN_COLUMN_SIGNALS = {(stream, column): key for stream, cols in _CAN_STREAMS.items() for column, key, _ in cols}
+#: The /aligned channels taken from the CAN status streams: (channel, stream, column, times the gear ratio);
+#: `_clamp_state` is the actuator's (derive_aligned makes clutch_state and friction_power of it).
+CAN_ALIGNED = (("engine_speed", "can_drive", "speed", False), ("clutch_speed", "can_load", "speed", True),
+               ("clutch_torque", "can_clutch", "torque", False), ("_clamp_state", "can_clutch", "clamp_state", False),
+               ("load_torque", "can_load", "torque", False))
 _STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_load"}
 
 
@@ -298,12 +305,9 @@ def bench_layout(config: BenchConfig) -> Layout:
         streams.append(StreamSpec("can_clock", (("offset", "s"),), 1.0, math.inf))
     streams.append(StreamSpec("setpoints", (("engine_speed", "rpm"), ("clutch_torque", "N*m"), ("clutch_open", "1"),
                                             ("load_torque", "N*m")), 5.0, math.inf))
-    sources = [AlignedSource("engine_speed", "can_drive", "speed"),
-               AlignedSource("clutch_speed", "can_load", "speed", config.drivetrain.gear_ratio),
-               AlignedSource("clutch_torque", "can_clutch", "torque"),
-               AlignedSource("_clamp_state", "can_clutch", "clamp_state"),
-               AlignedSource("load_torque", "can_load", "torque"),
-               AlignedSource("T_flywheel_1", "node", "T_flywheel_1"),
+    sources = [AlignedSource(channel, stream, column, config.drivetrain.gear_ratio if geared else 1.0)
+               for channel, stream, column, geared in CAN_ALIGNED]
+    sources += [AlignedSource("T_flywheel_1", "node", "T_flywheel_1"),
                AlignedSource("T_flywheel_2", "node", "T_flywheel_2")]
     for name in config.instrument_channels.values():
         sources.append(AlignedSource(name, "instrument", name))
@@ -341,15 +345,14 @@ class DriverBench:
     """The drivers of a bench (real or simulated) behind `command`/`safe_state`/`poll`."""
 
     def __init__(self, config: BenchConfig, clock: Callable[[], float], *, bus: Any = None,
-                 service: Callable[[], None] | None = None, can_log: "str | os.PathLike[str] | None" = None) -> None:
-        import can as _can
-
+                 service: Callable[[], None] | None = None, can_log: "str | os.PathLike[str] | None" = None,
+                 companion: Any = None) -> None:
+        from benchlab.runner import opening
         from drivers import can_bench, clutch_node
         from drivers.can_bench import CanBench
-        from drivers.clutch_node import ClutchNodeGateway
-        from drivers.pt1000 import Pt1000Scanner
 
         self.config, self.clock, self.service = config, clock, service
+        self.companion = companion  # closed with the bench: the simulated devices of a partly simulated bench
         self.layout = bench_layout(config)
         # every kernel the loop calls compiled (or loaded from numba's cache) before a device is opened or commanded:
         # a first-call compile inside the loop stops polling and interlocks for seconds
@@ -360,21 +363,34 @@ class DriverBench:
         self.events: list[BenchEvent] = []
         self.readings: list[Reading] = []
         channels = sorted(config.instrument_channels)
-        self.scanner = Pt1000Scanner.open(config.instrument_url, channels, mode=config.instrument_mode,
-                                          baudrate=config.instrument_baudrate, timeout=config.instrument_timeout_s,
-                                          coefficients=dict(config.instrument_calibration), clock=clock)
-        self.idn = self.scanner.identify()
-        self.scanner.reset()
-        self.gateway = ClutchNodeGateway.open(config.node_url, baudrate=config.node_baudrate,
-                                              period_s=config.node_period_s, clock=clock,
-                                              coefficients=config.node_calibration)
-        kwargs: dict[str, Any] = {"clock": clock, "idle_rpm": config.limits.idle_speed_rpm,
-                                  "timestamps": config.can_timestamps}
-        if config.dbc:
-            kwargs["dbc"] = config.dbc
-        if can_log is not None:
-            kwargs["log"] = open_can_log(can_log, config)
-        self.can = CanBench(bus if bus is not None else _can.Bus(**dict(config.can)), **kwargs)
+        opened: list[Callable[[], Any]] = []  # closers of the devices open so far: a later failure closes them
+        try:
+            self.scanner, self.idn = opening.open_scanner(
+                config.instrument_url, channels, source=config.source, mode=config.instrument_mode,
+                baudrate=config.instrument_baudrate, timeout=config.instrument_timeout_s,
+                coefficients=dict(config.instrument_calibration), clock=clock)
+            opened.append(self.scanner.close)
+            self.gateway = opening.open_gateway(config.node_url, source=config.source,
+                                                baudrate=config.node_baudrate, period_s=config.node_period_s,
+                                                clock=clock, coefficients=config.node_calibration)
+            opened.append(self.gateway.close)
+            kwargs: dict[str, Any] = {"clock": clock, "idle_rpm": config.limits.idle_speed_rpm,
+                                      "timestamps": config.can_timestamps}
+            if config.dbc:
+                kwargs["dbc"] = config.dbc
+            if bus is None:
+                bus = opening.open_can_bus(config.can, source=config.source)
+                opened.append(bus.shutdown)
+            if can_log is not None:
+                kwargs["log"] = open_can_log(can_log, config)
+            self.can = CanBench(bus, **kwargs)
+        except BaseException:
+            for closer in reversed(opened):
+                try:
+                    closer()
+                except Exception:  # noqa: BLE001 - closing what half opened is best effort
+                    pass
+            raise
         self._names = [config.instrument_channels[c] for c in self.scanner.channels]
         self._next_scan = clock()
         self._setpoints: tuple[float, ...] | None = None
@@ -422,14 +438,16 @@ class DriverBench:
         now = self.clock()
         self.status.t = now
         self._poll_node(now)
+        if self.scanner.scanning:  # collected first, so that the next scan due starts in the same poll: an
+            self._poll_instrument(now)  # instrument whose replies take a tick (LAN, USB) still scans every period
         if not self.scanner.scanning and now >= self._next_scan - 1e-9:
             self._next_scan = max(self._next_scan + self.config.instrument_period_s, now + 1e-9)
             self._poll_instrument(now, start=True)
-        elif self.scanner.scanning:
-            self._poll_instrument(now)
         self._poll_can(now)
         readings, events = self.readings, self.events
         self.readings, self.events = [], []
+        for t, kind, detail in events:  # device errors, node resyncs and drop-outs, clock re-maps, controller faults
+            log.info("%.3f s %s: %s", t, kind, detail)
         return readings, events
 
     def _poll_node(self, now: float) -> None:
@@ -514,6 +532,7 @@ class DriverBench:
             self._can_remaps = self.can.clock_map.remaps
         if self.can.timestamps == "interface" and math.isfinite(self.can.clock_map.offset) and now >= self._next_clock_row:
             self.readings.append(("can_clock", now, (self.can.clock_map.offset,)))
+            log.debug("%.3f s CAN interface clock: run time = interface time %+.6f s", now, self.can.clock_map.offset)
             self._next_clock_row = now + 1.0
 
     def _error(self, now: float, kind: str, detail: str, reconnect: Callable[[], None] | None) -> None:
@@ -537,7 +556,10 @@ class DriverBench:
         self._repeats[kind] = (now, 0)
 
     def close(self) -> None:
-        for closer in (self.scanner.close, self.gateway.close, self.can.close):
+        closers = [self.scanner.close, self.gateway.close, self.can.close]
+        if self.companion is not None:
+            closers.append(self.companion.close)
+        for closer in closers:
             try:
                 closer()
             except Exception:  # noqa: BLE001 - closing is best effort

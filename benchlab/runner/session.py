@@ -27,6 +27,7 @@ from benchlab.errors import InputError
 from benchlab.provenance import bench_text
 from benchlab.runfile.read import load_stopped_run
 from benchlab.runfile.schema import SCHEDULE_UNITS
+from benchlab.runner import opening
 from benchlab.runner.clock import Clock, RealClock
 from benchlab.runner.devices import BenchConfig, DriverBench
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
@@ -161,25 +162,38 @@ def open_bench(bench_choice: BenchChoice, config: BenchConfig, can_log: Path, t0
     """The drivers on the bench, with its clock: the hardware of BENCH.toml on real time, or the simulated bench
     (its emulators behind the same drivers, opened by the bench itself with `seed`) on simulated time.
 
-    Returns (bench, clock, the simulated bench or None, the config with the simulated devices' addresses).
-    Exit 2 for a CAN log that cannot be made, 1 for devices that cannot be reached.
+    A BENCH.toml's `sim://` devices are emulated by one simulated plant on real time (sim_bench.mixed), closed
+    with the bench. Returns (bench, clock, the simulated bench or None, the config with the simulated devices'
+    addresses). Exit 2 for a CAN log that cannot be made or a device that does not open (the key to fix named).
     """
     sim = None
     spec = simulated(bench_choice)
     if spec is not None:
         sim, config = spec.open(config, seed, t0, initial_c)
     clock: Clock = sim.clock if sim is not None else RealClock(t0)
+    devices = None
+    if sim is None and opening.has_simulated_devices(config):
+        from sim_bench.mixed import SimulatedDevices  # BENCH.toml's sim:// devices: one plant behind them
+
+        devices = SimulatedDevices(config, clock, seed, t0, initial_c)
+        config = devices.config
     try:
         if sim is not None:
             bench = DriverBench(config, clock, bus=sim.driver_bus, service=sim.service, can_log=can_log)
+        elif devices is not None:
+            bench = DriverBench(config, clock, bus=devices.bus, service=devices.service, can_log=can_log,
+                                companion=devices)
         else:
             bench = DriverBench(config, clock, can_log=can_log)
     except Exception as exc:  # noqa: BLE001 - no bench: the simulated one is closed, one line
-        if sim is not None:
-            sim.close()
+        for simulator in (sim, devices):
+            if simulator is not None:
+                simulator.close()
         if isinstance(exc, CanLogError):  # the log's path follows the user's --out: exit 2
             raise InputError(can_log, "CAN log", f"a writable file beside the run file ({exc})") from None
-        raise RuntimeError(f"cannot open the bench: {exc}") from exc  # cannot reach the devices: exit 1
+        if isinstance(exc, InputError):  # a device that did not open: the key to fix named (opening.py), exit 2
+            raise
+        raise RuntimeError(f"cannot open the bench: {exc}") from exc  # anything else: exit 1
     return bench, clock, sim, config
 
 

@@ -1,0 +1,206 @@
+"""A CAN log (`.blf`, `.asc`, `.trc`, `.log`, `.mf4` bus logging: whatever python-can's LogReader reads) decoded
+with a DBC (cantools; drivers/bench.dbc by default) into the channels of a run.
+
+Signals are picked by the mapping file (`source = "DM_Speed"` or `"DriveMotor_Status.DM_Speed"`); for a DBC that
+holds the bench's own signals (drivers/can_signals.py), the contract channels it names none for are taken as
+`benchlab run` takes them (benchlab.runner.devices.bench_layout): engine speed, clutch speed (load speed × the gear
+ratio), clutch and load torque, and the actuator's clamp state, from which `clutch_state` and `friction_power`
+are derived on the grid (derive_bench_channels). Every frame is decoded by the compiled codecs the drivers use
+(drivers/can_codec.py). Error frames, remote frames, frames of ids the DBC does not know and frames shorter than
+their message are counted and skipped; a file that stops being readable part-way keeps the frames before.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from benchlab.errors import InputError
+from benchlab.importing.mapping import Mapped
+from benchlab.importing.sources import Input, SourceChannel
+from benchlab.runfile.schema import ALIGNED_UNITS, unmeasurable_sample
+from benchlab.units import to_stored
+
+log = logging.getLogger(__name__)
+#: What python-can's LogReader reads (`.mf4` only where it holds CAN bus logging: benchlab.importing.mdf else).
+CAN_LOG_SUFFIXES = (".blf", ".asc", ".trc", ".log", ".mf4")
+#: Time stamps beyond this (s) are UNIX time (after 1973): the log says when it was recorded.
+UNIX_TIME_S = 1e8
+#: The internal channel of the actuator's clamp state (0 open, 1 slipping, 2 clamped) on the grid, as the bench's
+#: layout names it (benchlab.runner.devices.CAN_ALIGNED).
+CLAMP_STATE = "_clamp_state"
+
+
+def bench_entries(gear_ratio: float) -> list[Mapped]:
+    """The contract channels `benchlab run` takes from the bench's CAN signals, as mapping entries (DBC names)."""
+    from benchlab.runner.devices import CAN_ALIGNED, CAN_COLUMN_SIGNALS
+    from drivers.can_signals import BENCH_SIGNALS
+
+    entries = []
+    for channel, stream, column, geared in CAN_ALIGNED:
+        message, signal = BENCH_SIGNALS[CAN_COLUMN_SIGNALS[(stream, column)]]
+        entries.append(Mapped(channel, f"{message}.{signal}", scale=gear_ratio if geared else 1.0,
+                              rule="hold" if channel == CLAMP_STATE else None))
+    return entries
+
+
+def is_can_log(path: Path) -> bool:
+    """Whether `path` is read as a CAN log: any of CAN_LOG_SUFFIXES but `.mf4`, and an `.mf4` holding CAN bus
+    logging (asammdf's `CAN_DataFrame` channel; else it is an MDF file of signals)."""
+    if path.suffix.lower() != ".mf4":
+        return path.suffix.lower() in CAN_LOG_SUFFIXES
+    from asammdf import MDF
+
+    try:
+        mdf = MDF(path)
+    except Exception:  # not an MDF file asammdf reads: benchlab.importing.mdf says so in one line
+        return False
+    try:
+        return "CAN_DataFrame" in mdf.channels_db
+    finally:
+        mdf.close()
+
+
+def _frames(path: Path) -> tuple[np.ndarray, int, str | None]:
+    """Every frame of the log as FRAME records, the count of unreadable ends (0 or 1), and why."""
+    import can
+
+    from drivers.can_frames import frames_from_records, record
+
+    try:
+        reader = can.LogReader(path)
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(path, "file", f"a CAN log python-can reads ({type(exc).__name__}: {exc})") from None
+    records, broken = [], None
+    try:
+        with reader:
+            for msg in reader:
+                records.append(record(msg))
+    except Exception as exc:  # a truncated or corrupt container, a line no reader parses: the frames before stay
+        broken = f"{type(exc).__name__}: {exc}"
+    if not records:
+        raise InputError(path, "file", "a CAN log with frames" + (f" ({broken})" if broken else " (it holds none)"))
+    return frames_from_records(records), int(broken is not None), broken
+
+
+def _signal(path: Path, db: Any, entry: Mapped) -> tuple[Any, Any] | None:
+    """(message, signal) of the DBC the entry names, None where the DBC has none; InputError where ambiguous."""
+    message_name, _, signal_name = entry.source.rpartition(".")
+    found = [(m, s) for m in db.messages for s in m.signals
+             if s.name == signal_name and message_name in ("", m.name)]
+    if len(found) > 1:
+        raise InputError(path, f"channel {entry.channel} ← {entry.source}", "one signal: messages "
+                         f"{', '.join(m.name for m, _ in found)} hold it, say which as MESSAGE.SIGNAL")
+    return found[0] if found else None
+
+
+def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", mapped: list[Mapped],
+                 gear_ratio: float) -> Input:
+    """The log's frames decoded with `dbc`: the signals the mapping names and, for the bench's DBC, the bench's
+    contract channels (module docstring), each at its frames' time stamps."""
+    from benchlab.runner.devices import load_dbc
+    from drivers.can_codec import compile_codecs
+    from drivers.can_frames import ERROR, EXTENDED, REMOTE
+
+    path = Path(path)
+    try:
+        db = load_dbc(str(dbc))
+    except Exception as exc:  # cantools raises its own errors, and OSError, for a file it cannot parse
+        raise InputError(dbc, "file", f"a CAN database (DBC) cantools reads ({type(exc).__name__})") from None
+    frames, broken, why = _frames(path)
+    if broken:
+        log.warning("%s: unreadable from frame %d on (%s); the frames before are imported", path, len(frames), why)
+    named = {m.channel for m in mapped}
+    bench = [e for e in bench_entries(gear_ratio) if e.channel not in named]
+    entries = [(e, hit) for e in mapped if (hit := _signal(path, db, e)) is not None]
+    bench_hits = [(e, _signal(path, db, e)) for e in bench]
+    if all(hit is not None for _, hit in bench_hits):  # the bench's DBC (or one holding its signals)
+        entries += bench_hits
+    flags = frames["flags"]
+    usable = (flags & (ERROR | REMOTE)) == 0
+    ids = frames["arbitration_id"].astype(np.int64) | np.where(flags & EXTENDED, 1 << 31, 0)
+    known = {(m.frame_id | (1 << 31 if m.is_extended_frame else 0)): m for m in db.messages}
+    is_known = np.isin(ids, list(known))
+    skipped = {"error or remote frames": int((~usable).sum()),
+               "frames of ids the DBC does not know": int((usable & ~is_known).sum()),
+               "unreadable rest of the file": broken}
+    codecs = compile_codecs(db)
+    first = float(np.nanmin(frames["timestamp"]))
+    unix = first > UNIX_TIME_S  # the log's start is known: its stamps from then on
+    stamps = frames["timestamp"] - first if unix else frames["timestamp"]
+    wanted = {message.name for _, (message, _) in entries}
+    decoded: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+    skipped["frames shorter than their message"] = skipped["frames that do not decode"] = 0
+    for key, message in known.items():
+        rows = np.flatnonzero(usable & (ids == key))
+        whole = frames["length"][rows] >= message.length
+        skipped["frames shorter than their message"] += int((~whole).sum())
+        if message.name in wanted and whole.any():
+            rows = rows[whole]
+            values, ok = _decode(codecs[message.name], frames["data"][rows])
+            skipped["frames that do not decode"] += int((~ok).sum())
+            decoded[message.name] = (stamps[rows][ok], {k: v[ok] for k, v in values.items()})
+    channels, streams = [], {}
+    for entry, (message, signal) in entries:
+        if message.name not in decoded:
+            continue
+        time, values = decoded[message.name]
+        channels.append(_channel(path, entry, message, signal, time, values[signal.name]))
+        streams[channels[-1].stream] = {"source_file": path.name, "bus": "CAN", "message": message.name,
+                                        "frame_id": int(message.frame_id), "node": ", ".join(message.senders)}
+    start = datetime.fromtimestamp(first, timezone.utc) if unix else None
+    return Input(path, channels, start, {}, streams, skipped)
+
+
+def _decode(codec: Any, data: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Frames' data bytes (n, 64) decoded by a compiled codec (drivers/can_codec.py): signal -> values, and which
+    rows decoded (a multiplexed message's row cantools refuses does not)."""
+    table = codec.table
+    payload = np.zeros((len(data), table.payload_bytes), dtype=np.uint8)  # the message's bytes, zeros after
+    payload[:, :codec.length] = data[:, :codec.length]
+    values, ok = table.decode(np.zeros(len(data), dtype=np.intp), payload)
+    return {key: values[:, j] for j, key in enumerate(codec.columns) if key is not None}, ok
+
+
+def _channel(path: Path, entry: Mapped, message: Any, signal: Any, time: np.ndarray,
+             raw: np.ndarray) -> SourceChannel:
+    """One decoded signal as a source channel in the run file's unit."""
+    field = f"channel {entry.channel} ← {message.name}.{signal.name}"
+    unit = entry.unit if entry.unit is not None else str(signal.unit or "")
+    if entry.channel == CLAMP_STATE:
+        values, stored = raw.copy(), "1"
+    else:
+        if not unit and entry.channel not in ALIGNED_UNITS:
+            raise InputError(path, field, "a unit (the DBC gives none): unit in the mapping file, \"1\" for a number")
+        values, stored = to_stored(path, f"{field} [{unit}]", entry.channel, raw * entry.scale + entry.offset,
+                                   unit or ALIGNED_UNITS[entry.channel])
+        if (problem := unmeasurable_sample(entry.channel, stored, values)) is not None:
+            raise InputError(path, f"{field}, frame {problem[0]}", f"{problem[1]}, got {problem[2]!r}")
+    held = entry.channel == "clutch_state" or bool(signal.choices) or signal.length == 1
+    return SourceChannel(entry.channel, time, values, stored, entry.rule or ("hold" if held else "interpolate"),
+                         f"{path.name}: CAN {message.name}.{signal.name}", f"{path.stem}.{message.name}",
+                         signal.name, raw, str(signal.unit or "1"))
+
+
+def derive_bench_channels(frame: pd.DataFrame) -> pd.DataFrame:
+    """`clutch_state` and `friction_power` from the actuator's clamp state on the grid, as the bench derives them
+    (benchlab.runner.devices.derive_aligned); the frame without the internal clamp-state channel."""
+    from benchlab.runner.devices import derive_aligned
+
+    if CLAMP_STATE not in frame.columns:
+        return frame
+    nan = np.full(len(frame), np.nan)
+    derived = derive_aligned({CLAMP_STATE: frame[CLAMP_STATE].to_numpy(), **{
+        name: frame[name].to_numpy() if name in frame.columns else nan
+        for name in ("clutch_torque", "engine_speed", "clutch_speed", "T_flywheel_1", "T_flywheel_2")}})
+    out = frame.drop(columns=CLAMP_STATE)
+    for name in ("clutch_state", "friction_power"):
+        if name not in out.columns:
+            out[name] = derived[name]
+    return out

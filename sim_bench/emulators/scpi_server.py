@@ -1,0 +1,86 @@
+"""A serial endpoint (registry.SerialEndpoint, e.g. ScpiInstrumentEmulator) served on 127.0.0.1 as a raw SCPI socket.
+
+What a LAN instrument offers on port 5025, reachable as the VISA resource `TCPIP0::127.0.0.1::PORT::SOCKET` or the
+pyserial URL `socket://127.0.0.1:PORT`. The dialogue stays the endpoint's (one home: scpi_instrument.py): bytes
+received go to its `write`, what it has to say (`read_available`) goes back. One client at a time, served by a
+thread; loopback only.
+"""
+
+from __future__ import annotations
+
+import logging
+import selectors
+import socket
+import threading
+from types import TracebackType
+
+from sim_bench.emulators.registry import SerialEndpoint
+
+log = logging.getLogger(__name__)
+_POLL_S = 0.002
+
+
+class ScpiSocketServer:
+    """Serves `endpoint` on 127.0.0.1:`port` (0: a free port, see `.port`) until `close()`; a context manager."""
+
+    def __init__(self, endpoint: SerialEndpoint, port: int = 0) -> None:
+        self.endpoint = endpoint
+        self._listener = socket.create_server(("127.0.0.1", port))
+        self.port: int = self._listener.getsockname()[1]
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name=f"scpi-socket-{self.port}", daemon=True)
+        self._thread.start()
+
+    @property
+    def resource(self) -> str:
+        """The VISA resource string of this server."""
+        return f"TCPIP0::127.0.0.1::{self.port}::SOCKET"
+
+    def close(self) -> None:
+        """Stop serving and close the listening socket (a connected client sees the connection end)."""
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self._listener.close()
+
+    def __enter__(self) -> "ScpiSocketServer":
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def _serve(self) -> None:
+        self._listener.settimeout(_POLL_S * 10)
+        while not self._stop.is_set():
+            try:
+                client, peer = self._listener.accept()
+            except (TimeoutError, socket.timeout):
+                continue
+            except OSError:
+                return
+            log.debug("SCPI socket %d: client %s", self.port, peer)
+            with client:
+                self._talk(client)
+
+    def _talk(self, client: socket.socket) -> None:
+        """Bytes in to the endpoint, its replies out, until the client leaves or the server stops."""
+        client.setblocking(False)
+        with selectors.DefaultSelector() as sel:
+            sel.register(client, selectors.EVENT_READ)
+            while not self._stop.is_set():
+                if sel.select(_POLL_S):
+                    try:
+                        data = client.recv(4096)
+                    except (BlockingIOError, InterruptedError):
+                        continue
+                    except OSError:
+                        return
+                    if not data:
+                        return
+                    self.endpoint.write(data)
+                reply = self.endpoint.read_available()
+                if reply:
+                    try:
+                        client.sendall(reply)
+                    except OSError:
+                        return
