@@ -11,6 +11,8 @@ from __future__ import annotations
 #: Longest run: a week unattended. The run file is allocated for the planned duration when the run starts
 #: (about 1.6 GB per day with the simulated bench's streams and the 10 ms grid), so this also bounds the file.
 MAX_RUN_DURATION_S = 7 * 24 * 3600.0
+#: Fastest pace `benchlab run --realtime` asks of the simulated bench: beyond it a tick's own work (ms) sets the pace.
+MAX_REALTIME_FACTOR = 1000.0
 #: Most cycles one run may plan: 10 000 Table 1 cycles (40-130 s each) are 5-15 days, so a run this long is
 #: refused by MAX_RUN_DURATION_S first for all but the shortest cycles.
 MAX_CYCLES = 10_000

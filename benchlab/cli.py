@@ -6,7 +6,8 @@ while it does (benchlab.interrupts.interrupts_held, as here around the parser). 
 (InputError) is one line on stderr and exit 2; a full disk (benchlab.outputs.OutputError) and any other failure
 are one line and exit 1; Ctrl-C, from the
 moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
-early (`benchlab run --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends other tools.
+early (`benchlab run table1 --bench sim --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends
+other tools.
 `-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`.
 """
 
@@ -40,6 +41,19 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {message}\n")
 
 
+class _DefaultsShown(argparse.HelpFormatter):
+    """`--help` names each option's default where it has one worth saying (not None, off or empty) and its own
+    help text does not already."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (default is None or default is False or default == [] or default == argparse.SUPPRESS or "default" in text
+                or not action.option_strings):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="benchlab", description="Dry-clutch test bench: acquire, simulate, identify, diagnose.")
     parser.add_argument("--debug", action="store_true", help="show a traceback on unexpected failures")
@@ -49,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for info in sorted(pkgutil.iter_modules(benchlab.commands.__path__), key=lambda m: m.name):
         module = importlib.import_module(f"benchlab.commands.{info.name}")
-        cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
+        cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP, formatter_class=_DefaultsShown)
         module.add_arguments(cmd)
         cmd.add_argument("--quiet", "-q", action="store_true", help="no progress bars (there are none on a pipe)")
         cmd.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,

@@ -68,6 +68,17 @@ def channel_list(text: str) -> list[int]:
                                          f"channels, got {text!r} ({exc})") from None
 
 
+def name_values(text: str) -> list[str]:
+    """NAME=VALUE items of a repeatable option, several in one value separated by commas (`--fix A=1,B=2`).
+
+    One value per flag keeps a positional argument after the option from being taken for one of its values; each
+    item's NAME=VALUE form is the command's to check (it names the item)."""
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError(f"NAME=VALUE[,NAME=VALUE...], got {text!r}")
+    return items
+
+
 def output_file(text: str) -> str:
     """A file to write in a directory that exists (at parse time; what may be replaced is benchlab.outputs')."""
     path = Path(text)

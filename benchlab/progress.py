@@ -42,11 +42,16 @@ SILENT = Progress()
 
 
 class _TqdmTask(Task):
+    """A bar counting whole units (`1031/3840 s`, never `1031.0500000000002/3840.0`) of work done in any fractions."""
+
     def __init__(self, bar: Any) -> None:
-        self.bar = bar
+        self.bar, self._done = bar, 0.0
 
     def advance(self, amount: float = 1.0) -> None:
-        self.bar.update(amount)
+        self._done += amount
+        whole = int(self._done)
+        if whole != self.bar.n:
+            self.bar.update(whole - self.bar.n)
 
     def note(self, text: str) -> None:
         self.bar.set_postfix_str(text, refresh=False)
@@ -61,7 +66,7 @@ class TerminalProgress(Progress):
     def task(self, what: str, total: float, unit: str = "it") -> Task:
         from tqdm import tqdm
 
-        return _TqdmTask(tqdm(total=total, desc=what, unit=unit, file=sys.stderr, leave=True, dynamic_ncols=True,
+        return _TqdmTask(tqdm(total=int(total), desc=what, unit=unit, file=sys.stderr, leave=True, dynamic_ncols=True,
                               mininterval=0.5))
 
 

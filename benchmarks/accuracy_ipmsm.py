@@ -74,7 +74,7 @@ def import_profiles(data: Path, work: Path) -> dict[int, Path]:
         runs[k] = work / f"id_{k}.h5"
         if not runs[k].exists():
             benchlab_cli("import", str(data / f"id_{k}.csv"), "--out", str(runs[k]), "--dt", "1",
-                         "--model", str(MODEL), "--unit", *UNITS)
+                         "--model", str(MODEL), "--unit", ",".join(UNITS))
     return runs
 
 

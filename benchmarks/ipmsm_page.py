@@ -82,7 +82,7 @@ Everything below is benchlab's command line (`benchmarks/accuracy_ipmsm.py` runs
 ## Import and identify
 
 ```sh
-benchlab import id_K.csv --dt 1 --model examples/ipmsm.toml --unit {' '.join(UNITS[:3])} … --out id_K.h5
+benchlab import id_K.csv --dt 1 --model examples/ipmsm.toml --unit {','.join(UNITS[:3])} … --out id_K.h5
 benchlab identify id_0.h5 … (all but 6, 14, 15) --model examples/ipmsm.toml --step {args.step} --starts {args.starts} --out ipmsm.json
 benchlab simulate id_6.h5 --params ipmsm.json --out sim_6.h5
 ```

@@ -6,10 +6,13 @@ The randomised schedules (numpy) load when built, so NAMES costs nothing (the co
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from protocols.cooldown_sweep import DEFAULT_GRID, SweepConfig, cooldown_sweep_schedule, parse_grid
 from protocols.schedule import Step
+
+if TYPE_CHECKING:
+    from protocols.limits import BenchLimits
 
 NAMES = ("table1", "cooldown-sweep", "validation")
 DEFAULT_TABLE1_DURATION_S = 7200.0
@@ -17,30 +20,48 @@ DEFAULT_TABLE1_DURATION_S = 7200.0
 
 @dataclass(frozen=True)
 class Protocol:
+    """A protocol's schedule for one bench, its options (stored with the run) and the plan's notes (draws left out)."""
+
     name: str
     steps: tuple[Step, ...]
     options: dict[str, Any] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
 
 def build(name: str, seed: int = 1, n_cycles: int | None = None, duration_s: float | None = None,
-          grid: str | None = None) -> Protocol:
-    """The named protocol's schedule; ValueError for an unknown name or bad options."""
+          grid: str | None = None, limits: "BenchLimits | None" = None) -> Protocol:
+    """The named protocol's schedule; ValueError for an unknown name or bad options.
+
+    For a bench (`limits`): Table 1 draws whose launch cannot synchronise on its drivetrain are left out (each named
+    in the notes and the options' "dropped"), and every launch is planned at its time to synchronise."""
     if name == "table1":
-        from protocols.table1 import table1_schedule
+        from protocols.table1 import table1_plan
 
         if n_cycles is None and duration_s is None:
             duration_s = DEFAULT_TABLE1_DURATION_S
-        steps = table1_schedule(seed, n_cycles=n_cycles, duration_s=None if n_cycles is not None else duration_s)
-        return Protocol(name, steps, {"seed": seed, "cycles": n_cycles, "duration_s": duration_s})
+        plan = table1_plan(seed, limits, n_cycles=n_cycles, duration_s=None if n_cycles is not None else duration_s)
+        return _for_bench(Protocol(name, plan.steps, {"seed": seed, "cycles": n_cycles, "duration_s": duration_s},
+                                   plan.dropped), limits)
     if name == "cooldown-sweep":
         points = parse_grid(grid) if grid else DEFAULT_GRID
         if n_cycles is not None:
             points = points[:n_cycles]
-        return Protocol(name, cooldown_sweep_schedule(points, SweepConfig()),
-                        {"grid": [list(p) for p in points], **SweepConfig().__dict__})
+        return _for_bench(Protocol(name, cooldown_sweep_schedule(points, SweepConfig()),
+                                   {"grid": [list(p) for p in points], **SweepConfig().__dict__}), limits)
     if name == "validation":
-        from protocols.validation import ValidationConfig, validation_schedule
+        from protocols.validation import ValidationConfig, validation_plan
 
         cfg = ValidationConfig()
-        return Protocol(name, validation_schedule(seed, cfg, n_cycles), {"seed": seed, **cfg.__dict__})
+        plan = validation_plan(seed, cfg, n_cycles, limits)
+        return _for_bench(Protocol(name, plan.steps, {"seed": seed, **cfg.__dict__}, plan.dropped), limits)
     raise ValueError(f"unknown protocol {name!r}: one of {', '.join(NAMES)}")
+
+
+def _for_bench(protocol: Protocol, limits: "BenchLimits | None") -> Protocol:
+    """The protocol with its launches timed on the bench's drivetrain and its dropped draws in the options."""
+    if limits is None:
+        return protocol
+    from protocols.limits import with_launch_estimates
+
+    options = {**protocol.options, "dropped": list(protocol.notes)} if protocol.notes else protocol.options
+    return Protocol(protocol.name, with_launch_estimates(protocol.steps, limits), options, protocol.notes)

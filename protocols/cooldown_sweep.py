@@ -20,6 +20,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from protocols.estimates import ROOM_C, cool_estimate_s, heat_estimate_s
 from protocols.schedule import Condition, Step
 
 DEFAULT_GRID: tuple[tuple[float, int, float | None], ...] = (
@@ -69,19 +70,6 @@ def parse_grid(text: str) -> tuple[tuple[float, int, float | None], ...]:
     return tuple(points)
 
 
-def _cool_estimate_s(rpm: float, state: int, cfg: SweepConfig) -> float:
-    """Rough duration of the cool-down from the paper's parameters (for --dry-run estimates only)."""
-    from benchlab.model.clutch import convection_resistance
-    from benchlab.model.params import paper_params
-    import numpy as np
-
-    p = paper_params("nonlinear")
-    r = float(convection_resistance(p, {"engine_speed": np.array([rpm]), "clutch_state": np.array([state])})[0])
-    tau = p["C_F"] * r
-    sink = 40.0
-    return float(min(cfg.cool_timeout_s, tau * math.log((cfg.heat_target_c - sink) / (cfg.cool_target_c - sink))))
-
-
 def cooldown_sweep_schedule(grid: Sequence[tuple[float, int, float | None]] = DEFAULT_GRID,
                             config: SweepConfig = SweepConfig()) -> tuple[Step, ...]:
     """The sweep over `grid`; cycle i is grid point i."""
@@ -93,10 +81,12 @@ def cooldown_sweep_schedule(grid: Sequence[tuple[float, int, float | None]] = DE
         slip = rpm if (state == 0 and slip is None) else (0.0 if slip is None else slip)
         shaft = rpm - slip
         point = (("engine_speed", float(rpm)), ("clutch_state", float(state)), ("slip_speed", float(slip)))
+        heat_s = heat_estimate_s(ROOM_C if i == 0 else cfg.cool_target_c, cfg.heat_target_c, cfg.heat_speed_rpm,
+                                 cfg.heat_torque_nm, cfg.pulse_s, cfg.rest_s, cfg.window_s)
         steps.append(Step("heat", cfg.heat_timeout_s, cfg.heat_speed_rpm, cfg.heat_torque_nm, cfg.hold_load_nm, i,
-                          until=(steady,), estimate_s=900.0, pulse_s=cfg.pulse_s, rest_s=cfg.rest_s,
-                          label="heat", point=point))
-        estimate = _cool_estimate_s(rpm, state, cfg)
+                          until=(steady,), estimate_s=round(min(heat_s, cfg.heat_timeout_s), 1), pulse_s=cfg.pulse_s,
+                          rest_s=cfg.rest_s, label="heat", point=point))
+        estimate = round(min(cfg.cool_timeout_s, cool_estimate_s(rpm, state, cfg.heat_target_c, cfg.cool_target_c)), 1)
         if state == 1:
             steps.append(Step("launch", 5.0, rpm, cfg.launch_torque_nm, 0.0, i, label="prepare", point=point))
             steps.append(Step("drive", cfg.cool_timeout_s, rpm, cfg.launch_torque_nm, 0.0, i, until=(cooled,),

@@ -9,7 +9,7 @@ idle) when one is crossed.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
@@ -32,6 +32,11 @@ MAX_SLIP_TIME_LIMIT_S = 60.0  # one engagement slipping longer is no launch but 
 MAX_HOLD_S = 3600.0  # resume_after_s and the wait for an interlock to clear
 ALARM_WINDOW_S, ALARM_RISE_K = 10.0, 1.0  # "still rising": up more than 1 K over the last 10 s
 MAX_AGE_LIMIT_S = 60.0  # an age beyond this would leave the bench blind for too long: refused in BENCH.toml
+# A launch must carry its load with this much torque to spare (clutch torque x gear ratio >= load x margin): the
+# actuator's torque error and the drivetrain's drag eat into a bare 1.0, and a launch that cannot synchronise slips
+# until its slip-time limit (protocols.limits.launch_problem)
+LAUNCH_TORQUE_MARGIN = 1.1
+SYNC_SEEN_S = 0.05  # the runner sees synchronism a few fast ticks after it happens (engine.Runner._run_step)
 INTERLOCKS = ("flywheel_over_temperature", "air_over_temperature", "controller_lost",
               *(f"stale_{channel}" for channel in DEFAULT_MAX_AGE_S), "slip_time", "slip_energy")
 
@@ -202,6 +207,30 @@ def launch_estimate(step: Step, limits: BenchLimits) -> tuple[float, float, bool
     return t, step.clutch_torque_nm * omega * t, False
 
 
+def launch_problem(step: Step, limits: BenchLimits) -> str | None:
+    """Why a launch cannot synchronise (None: it can): the clutch's torque seen at the load (x gear ratio) must
+    exceed the load torque by LAUNCH_TORQUE_MARGIN, and synchronism come within the step's maximum slip time.
+
+    A launch that cannot synchronise slips until `slip_time_limit` and its cycle's drive stays open: no launch."""
+    ratio = limits.drivetrain.gear_ratio
+    transmitted, needed = step.clutch_torque_nm * ratio, abs(step.load_torque_nm) * LAUNCH_TORQUE_MARGIN
+    if not transmitted >= needed:
+        return (f"cannot synchronise: clutch {step.clutch_torque_nm:g} N*m x gear ratio {ratio:g} = {transmitted:g} N*m"
+                f" below load {step.load_torque_nm:g} N*m x margin {LAUNCH_TORQUE_MARGIN:g} = {needed:g} N*m")
+    _, _, synchronises = launch_estimate(step, limits)
+    if not synchronises:
+        return f"cannot synchronise within its {step.duration_s:g} s maximum slip time"
+    return None
+
+
+def with_launch_estimates(steps: Sequence[Step], limits: BenchLimits) -> tuple[Step, ...]:
+    """The schedule with each launch's expected duration (`estimate_s`) its time to synchronise on this drivetrain
+    (launch_estimate, plus the tick the runner takes to see it): what the plan's duration and a run's progress count,
+    instead of the maximum slip time a launch that synchronises never uses."""
+    return tuple(replace(s, estimate_s=round(min(s.duration_s, launch_estimate(s, limits)[0] + SYNC_SEEN_S), 3))
+                 if s.phase == "launch" else s for s in steps)
+
+
 @dataclass(frozen=True)
 class ScheduleProblem:
     """One thing a schedule asks that the bench must not do: its step (None: the whole schedule), the Step field
@@ -254,6 +283,9 @@ def schedule_problems(steps: Sequence[Step], limits: BenchLimits) -> list[Schedu
             if not energy <= limits.max_slip_energy_j:
                 add("clutch_torque_nm", f"slip energy up to {energy / 1e3:.0f} kJ beyond the "
                                         f"{limits.max_slip_energy_j / 1e3:.0f} kJ limit")
+            why = launch_problem(s, limits)
+            if why is not None:
+                add("clutch_torque_nm", f"launch {why}")
         if s.phase == "heat":
             energy = s.clutch_torque_nm * s.engine_speed_rpm * RPM * s.pulse_s
             if not (0 < s.pulse_s <= limits.max_slip_time_s):

@@ -78,8 +78,9 @@ class Step:
 
     @property
     def expected_s(self) -> float:
-        """Expected duration: the estimate of a closed-loop step, else its duration."""
-        return float(self.estimate_s if self.closed_loop and self.estimate_s is not None else self.duration_s)
+        """Expected duration: the step's estimate (a closed-loop step's, a launch's time to synchronise) where it
+        has one, else its duration."""
+        return float(self.estimate_s if self.estimate_s is not None else self.duration_s)
 
 
 PHASES = ("launch", "drive", "open", "heat")
@@ -108,7 +109,8 @@ def setpoints(step: Step, synchronised: bool = True, pulse_on: bool = False) -> 
 
 
 def duration_s(steps: tuple[Step, ...]) -> float:
-    """Planned duration; a launch's duration is its maximum slip time, a closed-loop step's its estimate."""
+    """Planned duration: each step's expected duration (a launch's time to synchronise where the plan estimated it,
+    protocols.limits.with_launch_estimates; else its maximum slip time)."""
     return float(sum(step.expected_s for step in steps))
 
 

@@ -9,9 +9,14 @@ constant convection resistance is wrong. Then `table1_cycles` Table 1 cycles dra
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
+from protocols.estimates import ROOM_C, cooled_to, heat_estimate_s
 from protocols.schedule import Condition, Step
-from protocols.table1 import table1_schedule
+from protocols.table1 import Table1Plan, table1_plan
+
+if TYPE_CHECKING:
+    from protocols.limits import BenchLimits
 
 SEED_OFFSET = 1000
 
@@ -38,17 +43,22 @@ def _profiles(cfg: ValidationConfig) -> list[tuple[str, list[tuple[str, float]]]
     ]
 
 
-def validation_schedule(seed: int, config: ValidationConfig = ValidationConfig(),
-                        n_cycles: int | None = None) -> tuple[Step, ...]:
-    """Long varying cool-downs (cycles 0..2), then Table 1 cycles with another seed (cycles 3..)."""
+def validation_plan(seed: int, config: ValidationConfig = ValidationConfig(), n_cycles: int | None = None,
+                    limits: "BenchLimits | None" = None) -> Table1Plan:
+    """Long varying cool-downs (cycles 0..2), then Table 1 cycles with another seed (cycles 3..), drawn for the
+    bench's `limits` as `table1_plan` draws them (its dropped draws returned with the steps)."""
     cfg = config
     steps: list[Step] = []
     hot = Condition("T_flywheel", ">=", cfg.hot_c)
     profiles = _profiles(cfg)
+    flywheel_c = ROOM_C  # expected at each heat-up's start, for its estimate
     for i, (name, segments) in enumerate(profiles):
+        heat_s = heat_estimate_s(flywheel_c, cfg.hot_c, cfg.heat_speed_rpm, cfg.heat_torque_nm, cfg.pulse_s, cfg.rest_s)
         steps.append(Step("heat", 3600.0, cfg.heat_speed_rpm, cfg.heat_torque_nm, cfg.hold_load_nm, i, until=(hot,),
-                          estimate_s=600.0, pulse_s=cfg.pulse_s, rest_s=cfg.rest_s, label="heat"))
+                          estimate_s=round(min(heat_s, 3600.0), 1), pulse_s=cfg.pulse_s, rest_s=cfg.rest_s,
+                          label="heat"))
         clamped = False
+        flywheel_c = cfg.hot_c
         for phase, rpm in segments:
             if phase == "drive" and not clamped:
                 steps.append(Step("launch", 5.0, rpm, cfg.launch_torque_nm, 0.0, i, label="validation_cooldown"))
@@ -57,9 +67,17 @@ def validation_schedule(seed: int, config: ValidationConfig = ValidationConfig()
             else:
                 steps.append(Step("open", cfg.segment_s, rpm, 0.0, cfg.hold_load_nm, i, label="validation_cooldown"))
             clamped = phase == "drive"
+            flywheel_c = cooled_to(flywheel_c, rpm, int(clamped), cfg.segment_s)
     cycles = cfg.table1_cycles if n_cycles is None else n_cycles
     offset = len(profiles)
-    for s in table1_schedule(seed + SEED_OFFSET, n_cycles=cycles):
+    table1 = table1_plan(seed + SEED_OFFSET, limits, n_cycles=cycles)
+    for s in table1.steps:
         steps.append(Step(s.phase, s.duration_s, s.engine_speed_rpm, s.clutch_torque_nm, s.load_torque_nm,
-                          s.cycle + offset, label="table1"))
-    return tuple(steps)
+                          s.cycle + offset, estimate_s=s.estimate_s, label="table1"))
+    return Table1Plan(tuple(steps), table1.dropped)
+
+
+def validation_schedule(seed: int, config: ValidationConfig = ValidationConfig(),
+                        n_cycles: int | None = None) -> tuple[Step, ...]:
+    """The validation protocol's steps without a bench (every Table 1 draw kept): `validation_plan`'s."""
+    return validation_plan(seed, config, n_cycles).steps

@@ -491,6 +491,7 @@ class SimulatedBench:
     faults: Sequence[Fault] = ()  # sim_bench.faults.Fault, applied when the clock passes their at_s
     options: Mapping[str, Any] = field(default_factory=dict)  # SimBenchConfig overrides, e.g. {"dropouts": False}
     limits: BenchLimits = BenchLimits()
+    realtime: float | None = None  # pace simulated time at this factor x real time (SimClock's pace); None: flat out
     name: ClassVar[str] = "sim"  # the run file's `bench` attribute and the CLI's --bench
 
     def __post_init__(self) -> None:
@@ -511,6 +512,6 @@ class SimulatedBench:
         with their addresses; the caller closes the SimBench."""
         cfg = SimBenchConfig(seed=seed, dt=config.dt, t0=t0, drivetrain=config.drivetrain, initial_c=initial_c,
                              **dict(self.options))
-        sim = SimBench(cfg, plant=self.plant, faults=self.faults)
+        sim = SimBench(cfg, clock=SimClock(t0, pace=self.realtime), plant=self.plant, faults=self.faults)
         return sim, replace(config, instrument_url=sim.urls["instrument"], node_url=sim.urls["node"],
                             can={"interface": "sim", "channel": sim.name + "-can"})

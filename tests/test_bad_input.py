@@ -39,17 +39,20 @@ def _refused(argv: list[str], field: str, capsys: pytest.CaptureFixture[str]) ->
 
 @pytest.mark.parametrize("value", ["inf", "1e12", "-5", "nan", "0", str(MAX_RUN_DURATION_S * 1.001)])
 def test_run_duration_out_of_bounds_is_refused_at_parse_time(value, tmp_path, capsys):
-    _refused(["run", "table1", "--duration", value, "--out", str(tmp_path / "r.h5")], "--duration", capsys)
+    _refused(["run", "table1", "--bench", "sim", "--duration", value, "--out", str(tmp_path / "r.h5")], "--duration",
+             capsys)
     assert not (tmp_path / "r.h5").exists()
 
 
 @pytest.mark.parametrize("value", ["1000000000", "0", "-1", "1.5", str(MAX_CYCLES + 1)])
 def test_run_cycles_out_of_bounds_is_refused(value, tmp_path, capsys):
-    _refused(["run", "table1", "--cycles", value, "--out", str(tmp_path / "r.h5")], "--cycles", capsys)
+    _refused(["run", "table1", "--bench", "sim", "--cycles", value, "--out", str(tmp_path / "r.h5")], "--cycles",
+             capsys)
 
 
 def test_schedule_longer_than_the_longest_run_is_refused_before_anything_moves(tmp_path, capsys):
-    err = _refused(["run", "table1", "--cycles", str(MAX_CYCLES), "--out", str(tmp_path / "r.h5")], "schedule",
+    err = _refused(["run", "table1", "--bench", "sim", "--cycles", str(MAX_CYCLES), "--out", str(tmp_path / "r.h5")],
+                   "schedule",
                    capsys)
     assert "planned duration" in err and not (tmp_path / "r.h5").exists()
 
@@ -70,7 +73,7 @@ def test_probe_reading_count_is_bounded(capsys):
 
 
 @pytest.mark.parametrize("argv,field", [
-    (["run", "table1", "--seed", "-1"], "--seed"),
+    (["run", "table1", "--bench", "sim", "--seed", "-1"], "--seed"),
     (["identify", "RUN", "--starts", "0", "--out", "p.json"], "--starts"),
     (["identify", "RUN", "--seed", "-3", "--out", "p.json"], "--seed"),
     (["pipeline", "--duration", "inf"], "--duration"),
@@ -162,7 +165,7 @@ def test_a_dead_sensor_is_still_a_readable_run_file(foreign_run):
 @pytest.mark.parametrize("command", ["run", "simulate", "identify", "import", "wear"])
 def test_output_file_in_a_missing_directory_is_refused(command, foreign_run, params_file, tmp_path, capsys):
     out = str(tmp_path / "missing" / "out.x")
-    argv = {"run": ["run", "table1", "--cycles", "1", "--out", out],
+    argv = {"run": ["run", "table1", "--bench", "sim", "--cycles", "1", "--out", out],
             "simulate": ["simulate", str(foreign_run), "--params", str(params_file), "--out", out],
             "identify": ["identify", str(foreign_run), "--out", out],
             "import": ["import", str(tmp_path / "d.csv"), "--out", out],

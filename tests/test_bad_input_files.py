@@ -59,7 +59,7 @@ def test_a_directory_where_a_file_is_expected(case, foreign_run, params_file, tm
             "bench": ["run", "table1", "--bench", str(folder), "--cycles", "1", "--out", out],
             "export": ["export", str(folder), "--to", str(tmp_path / "e.csv")],
             "watch": ["watch", str(folder), "--port", "0"],
-            "resume": ["run", "--resume", str(folder)],
+            "resume": ["run", "--resume", str(folder), "--bench", "sim"],
             "compare": ["report", run, "--params", params, "--compare", str(folder), "--out", str(tmp_path / "r")],
             "sweep": ["report", run, "--params", params, "--sweep", str(folder), "--out", str(tmp_path / "r")]}[case]
     refused(argv, str(folder))

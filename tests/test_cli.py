@@ -28,7 +28,7 @@ def test_verbose_logs_benchlab_messages_on_stderr(run_file, tmp_path, capsys):
 
 
 def test_a_reader_that_leaves_early_ends_the_command_quietly():
-    proc = subprocess.Popen([sys.executable, "-m", "benchlab.cli", "run", "table1", "--dry-run"],
+    proc = subprocess.Popen([sys.executable, "-m", "benchlab.cli", "run", "table1", "--bench", "sim", "--dry-run"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     proc.stdout.close()  # `| head -1` gone before the schedule is printed
     err = proc.stderr.read().decode()

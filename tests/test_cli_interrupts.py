@@ -72,7 +72,8 @@ def test_ctrl_c_at_an_awkward_moment_is_exit_130_and_one_line(tmp_path, moment):
     (tmp_path / "ctrl_c_case.py").write_text(_CASE.format(**_MOMENTS[moment]))
     root = str(Path(benchlab.__file__).resolve().parents[1])
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), root])}
-    proc = subprocess.run([sys.executable, "-m", "ctrl_c_case", "run", "table1", "--dry-run"], cwd=tmp_path, env=env,
+    proc = subprocess.run([sys.executable, "-m", "ctrl_c_case", "run", "table1", "--bench", "sim", "--dry-run"],
+                          cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=WAIT_S)
     assert proc.returncode == 130, proc.stderr  # not -2: Python ending itself by SIGINT after main answered
     assert proc.stderr.splitlines() == ["benchlab run: interrupted"], proc.stderr

@@ -147,6 +147,9 @@ def test_cli_report_writes_the_page_and_figures_and_keeps_the_contract(churn, tm
     figures = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", page)
     assert {"regimes.png", "worst_window.png", "evidence.png", "gains.png"} <= set(figures)
     assert any(name.startswith("finding_1_") for name in figures)
+    html_page = (out / "diagnose.html").read_text()  # the same page for a browser, every figure in it
+    assert all(f'<img src="{name}"' in html_page for name in figures) and "<table>" in html_page
+    assert "an unnamed bench (the run file has no bench attribute)" in html_page  # written without a `bench`
     for name in figures:
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "q_clutch_speed_T" in page and "W (at the signal's maximum)" in page

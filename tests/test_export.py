@@ -167,6 +167,7 @@ def test_csv_goes_back_into_a_run_file_with_import(run_file, tmp_path):
     before, after = load_run(run_file), load_run(back)
     for c in before.columns:
         np.testing.assert_allclose(after[c].to_numpy(), before[c].to_numpy(), rtol=1e-15, atol=0)
+    assert after.attrs["bench"] == "imported"  # the file says it came through import, not from a bench run
 
 
 def test_bad_targets_and_inputs_are_one_line_exit_2(run_file, tmp_path, capsys):

@@ -94,7 +94,7 @@ def test_faults_are_for_the_simulated_bench_only(tmp_path, capsys):
                       "--out", str(out)], capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--fault" in err and "--bench sim" in err, err
     assert not out.exists()
-    code, err = _cli(["run", "--resume", str(out), "--fault", "instrument_disconnect@300"], capsys)
+    code, err = _cli(["run", "--resume", str(out), "--bench", "sim", "--fault", "instrument_disconnect@300"], capsys)
     assert code == 2 and "--fault" in err and "new run" in err, err
 
 

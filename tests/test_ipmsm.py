@@ -34,7 +34,7 @@ def imported(tmp_path_factory):
     d = tmp_path_factory.mktemp("ipmsm")
     for k in TRAIN + HELD_OUT:
         assert main(["import", str(DATA / f"id_{k}.csv"), "--out", str(d / f"id_{k}.h5"), "--dt", "1",
-                     "--model", str(MODEL), "--unit", *UNITS]) == 0
+                     "--model", str(MODEL), "--unit", ",".join(UNITS)]) == 0
     return d
 
 

@@ -92,7 +92,7 @@ def test_force_never_replaces_what_is_not_a_regular_file(command, kind, foreign_
     else:
         out.symlink_to(outside / "precious.txt")
     if command == "run":
-        argv = ["run", "table1", "--cycles", "1", "--out", str(out)]
+        argv = ["run", "table1", "--bench", "sim", "--cycles", "1", "--out", str(out)]
     elif command == "import":
         (tmp_path / "d.csv").write_text("time,engine_speed\n0,1\n")
         argv = ["import", str(tmp_path / "d.csv"), "--out", str(out)]
@@ -110,7 +110,7 @@ def test_an_existing_output_is_refused_without_force(command, foreign_run, param
     out = tmp_path / ("old.csv" if command == "export" else "old.out")
     out.write_text("an earlier result")
     if command == "run":
-        argv = ["run", "table1", "--cycles", "1", "--out", str(out)]
+        argv = ["run", "table1", "--bench", "sim", "--cycles", "1", "--out", str(out)]
     elif command == "import":
         argv = ["import", str(tmp_path / "d.csv"), "--out", str(out)]
     else:
@@ -128,7 +128,8 @@ def test_force_replaces_a_regular_file_whole(command, foreign_run, params_file, 
     assert [p.name for p in tmp_path.iterdir() if ".part" in p.name] == []  # no temporary file left beside it
 
 
-@pytest.mark.parametrize("argv", [["run", "--out", "R", "--cycles", "1", "table1"], ["import", "CSV", "--out", "R"]])
+@pytest.mark.parametrize("argv", [["run", "--bench", "sim", "--out", "R", "--cycles", "1", "table1"],
+                                  ["import", "CSV", "--out", "R"]])
 def test_run_writers_replace_a_run_file_only_with_force(argv, foreign_run, run_file, tmp_path, refused):
     (tmp_path / "d.csv").write_text(load_run(run_file).iloc[:100].to_csv(index=False))
     names = {"R": str(foreign_run), "CSV": str(tmp_path / "d.csv")}

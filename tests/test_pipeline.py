@@ -2,18 +2,44 @@
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import io
 import json
+import os
 import re
+import time
 from html.parser import HTMLParser
+from pathlib import Path
 
+import pytest
+
+import headless_chromium
 from benchlab.cli import main
 from benchlab.model.params import load_params
 from benchlab.runfile import load_run
 
 
-def test_pipeline_runs_end_to_end_and_writes_every_product(tmp_path, capsys):
-    assert main(["pipeline", "--out", str(tmp_path), "--duration", "1500"]) == 0
-    printed = capsys.readouterr().out
+@pytest.fixture(scope="module")
+def job(tmp_path_factory) -> tuple[Path, str]:
+    """The main job once for the session (xdist's workers share it: the first one runs it, under a lock): its
+    directory and what it printed."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base  # the session's, shared by its workers
+    out, printed = root / "pipeline-job", root / "pipeline-job.out"
+    with open(root / "pipeline-job.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not printed.exists():
+            text = io.StringIO()
+            with contextlib.redirect_stdout(text):
+                assert main(["pipeline", "--out", str(out), "--duration", "1500"]) == 0
+            printed.write_text(text.getvalue())
+    return out, printed.read_text()
+
+
+def test_pipeline_runs_end_to_end_and_writes_every_product(job):
+    tmp_path, printed = job
+    assert printed.count("on the simulated bench") == 2  # both runs say which bench made them
     for step in ("run", "validation", "identify", "report", "diagnose", "wear"):
         assert any(line.startswith(step) for line in printed.splitlines()), step
     fitting = load_run(tmp_path / "table1.h5")
@@ -23,7 +49,7 @@ def test_pipeline_runs_end_to_end_and_writes_every_product(tmp_path, capsys):
     diagnosis = json.loads((tmp_path / "diagnose.json").read_text())
     assert {"baseline", "findings", "best"} <= diagnosis.keys()
     assert diagnosis["best"]["rmse_K"] <= diagnosis["baseline"]["rmse_K"]
-    for page in ("report/report.md", "diagnose/diagnose.md"):
+    for page in ("report/report.md", "diagnose/diagnose.md", "report/report.html", "diagnose/diagnose.html"):
         assert (tmp_path / page).stat().st_size > 0
     assert json.loads((tmp_path / "wear.json").read_text())["engagements"] > 0
     _check_index(tmp_path)
@@ -47,7 +73,8 @@ def _check_index(out):
     page = _Links()
     page.feed((out / "index.html").read_text())
     assert page.targets and all((out / t).exists() for t in page.targets), page.targets
-    for figure in ("report/fig4_fit.png", "report/fig3_resistance.png", "wear.png", "diagnose.json"):
+    for figure in ("report/fig4_fit.png", "report/fig3_resistance.png", "wear.png", "diagnose.json",
+                   "report/report.html", "diagnose/diagnose.html"):
         assert figure in page.targets
     text = " ".join(page.text)
     assert "simulated bench" in text and "reference dry clutch" in text and "2.5 %" in text  # the paper beside ours
@@ -61,3 +88,42 @@ def _check_index(out):
     # the paper's plate: hotter than the flywheel while slipping, more so in the plant than the model assumes
     hotter = re.search(r"the plate is ([\d.]+) K hotter than the flywheel in truth, (-?[\d.]+) K by the model", text)
     assert hotter and float(hotter.group(1)) > float(hotter.group(2)), hotter
+
+
+_IMAGES = "Array.from(document.images).map(i => [i.getAttribute('src'), i.complete, i.naturalWidth])"
+
+
+def _loaded(browser: headless_chromium.Chromium, url: str) -> list[list]:
+    """Open `url` and wait (bounded) until the page and its images have loaded; its images' [src, complete, width]."""
+    browser.navigate(url)
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        if browser.evaluate("document.readyState") == "complete":
+            images = browser.evaluate(_IMAGES)
+            if all(done for _, done, _ in images):
+                return images
+        time.sleep(0.1)
+    return browser.evaluate(_IMAGES)
+
+
+@pytest.mark.skipif(headless_chromium.available() is not None, reason=str(headless_chromium.available()))
+def test_the_pages_open_as_html_from_the_index_with_every_figure(job):
+    """A person's path: the index page, then each HTML page it links, every figure shown (issue 34)."""
+    out, _ = job
+    browser = headless_chromium.Chromium()
+    try:
+        index = _loaded(browser, (out / "index.html").as_uri())
+        assert index and all(width > 0 for _, _, width in index), index
+        links = browser.evaluate("Array.from(document.links).map(a => a.href).filter(h => h.endsWith('.html'))")
+        assert {Path(h).name for h in links} == {"report.html", "diagnose.html"}
+        for link in links:
+            images = _loaded(browser, link)
+            figures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", Path(link.removeprefix("file://")).with_suffix(".md")
+                                 .read_text())
+            assert [src for src, _, _ in images] == figures  # every figure of the page, in its order
+            assert all(width > 0 for _, _, width in images), images  # and loaded
+            assert browser.evaluate("document.querySelectorAll('table').length") > 0
+            text = browser.evaluate("document.body.innerText")
+            assert "simulated bench" in text and "|---|" not in text and "![" not in text  # rendered, not raw
+    finally:
+        browser.close()

@@ -20,9 +20,9 @@ EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "bench.toml"
 
 def test_protocols_are_reproducible_checkable_data():
     for name in ("table1", "cooldown-sweep", "validation"):
-        a, b = build(name, seed=4), build(name, seed=4)
+        a, b = build(name, seed=4, limits=BenchLimits()), build(name, seed=4, limits=BenchLimits())
         assert a.steps == b.steps and a.steps
-        assert check_schedule(a.steps, BenchLimits()) == []
+        assert check_schedule(a.steps, BenchLimits()) == []  # built for the bench: no draw it cannot launch
         assert all(step_from_dict(s.as_dict()) == s for s in a.steps)
     assert build("table1", seed=5).steps != build("table1", seed=4).steps
 
@@ -126,15 +126,19 @@ def test_one_step_interpreter_plays_the_schedule_for_the_runner_and_the_batch_si
     from benchlab.runner.session import RunRequest, execute
     from protocols.schedule import setpoints
     from sim_bench.bench import SimulatedBench
+    from sim_bench.faults import parse_fault
     from sim_bench.virtual_run import drive_schedule
 
-    # a launch that synchronises (drive clamped) and one that cannot (drive stays open: the slip limit)
+    # a launch that synchronises (drive clamped) and one that does not (drive stays open: the slip limit): on the
+    # bench a stuck clutch holds back a launch the plan accepts (the plan refuses one that cannot synchronise); the
+    # batch simulator has no faults, so there the second launch is one that cannot
     steps = (Step("open", 20.0, 1500.0, 0.0, 0.0, 0), Step("launch", 8.0, 2000.0, 70.0, 100.0, 0),
-             Step("drive", 20.0, 2000.0, 70.0, 100.0, 0), Step("launch", 3.0, 2500.0, 10.0, 140.0, 1),
-             Step("drive", 20.0, 2500.0, 10.0, 140.0, 1), Step("open", 20.0, 1000.0, 0.0, 50.0, 1))
+             Step("drive", 20.0, 2000.0, 70.0, 100.0, 0), Step("launch", 3.0, 2500.0, 40.0, 140.0, 1),
+             Step("drive", 20.0, 2500.0, 40.0, 140.0, 1), Step("open", 20.0, 1000.0, 0.0, 50.0, 1))
     path = tmp_path / "run.h5"
+    stuck = parse_fault("stuck_clutch@41.5:value=10,duration_s=5")  # the second launch starts at about 41.3 s
     code, _ = execute(RunRequest("custom", path, steps=steps, install_signals=False,
-                                 bench=SimulatedBench(options={"dropouts": False})))
+                                 bench=SimulatedBench(faults=(stuck,), options={"dropouts": False})))
     assert code == 0
     with h5py.File(path, "r") as f:
         sp = f["raw/setpoints"]
@@ -145,7 +149,9 @@ def test_one_step_interpreter_plays_the_schedule_for_the_runner_and_the_batch_si
     expected = [row for i, row in enumerate(played) if i == 0 or row != played[i - 1]]  # changes are recorded
     commanded = [r for r in rows if r[0] != BenchLimits().idle_speed_rpm or r[2] == 0.0]  # without safe states
     assert commanded == expected
-    truth, events = drive_schedule(steps, 0.01)
+    stalled = steps[:3] + (Step("launch", 3.0, 2500.0, 10.0, 140.0, 1), Step("drive", 20.0, 2500.0, 10.0, 140.0, 1),
+                           steps[5])
+    truth, events = drive_schedule(stalled, 0.01)
     outcome = [e["event"] for e in events if e["event"] in ("synchronised", "slip_time_limit")]
     assert outcome == ["synchronised", "slip_time_limit"]
     open_after_stall = truth["clutch_state"][-int(40.0 / 0.01):]

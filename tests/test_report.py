@@ -53,6 +53,15 @@ def report(bench):
     return out
 
 
+def test_the_page_is_also_html_with_every_figure(report):
+    markdown, page = (report / "report.md").read_text(), (report / "report.html").read_text()
+    figures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", markdown)
+    assert len(figures) >= 4 and all(f'<img src="{name}"' in page for name in figures)
+    tables = len(re.findall(r"^\|(---\|)+$", markdown, flags=re.M))
+    assert tables >= 3 and page.count("<table>") == tables
+    assert "|---|" not in page and "![" not in page and "K/W" in page  # rendered, units kept
+
+
 def page_scores(page) -> dict[tuple[str, str, str], tuple[float, float]]:
     """(run, model, channel or "all") -> (RMSE K, NRMSE %) from the page's error-figure table."""
     rows = {}

@@ -93,18 +93,20 @@ def test_two_runs_on_one_file_one_is_refused_and_the_other_keeps_its_data(tmp_pa
 def test_a_locked_run_file_is_refused_even_with_force_and_taken_once_free(tmp_path, capsys):
     out = tmp_path / "run.h5"
     with RunFileLock(out):  # as a run in another process would hold it
-        assert main(["run", "table1", "--cycles", "1", "--out", str(out), "--quiet"]) == 2
+        assert main(["run", "table1", "--bench", "sim", "--cycles", "1", "--out", str(out), "--quiet"]) == 2
         err = capsys.readouterr().err
         assert f"process {os.getpid()}" in err and "--out" in err and len(err.strip().splitlines()) == 1
         assert not out.exists()
-    assert main(["run", "table1", "--cycles", "1", "--seed", "1", "--out", str(out), "--quiet"]) == 0
+    assert main(["run", "table1", "--bench", "sim", "--cycles", "1", "--seed", "1", "--out", str(out), "--quiet"]) == 0
     before = out.read_bytes()
     with RunFileLock(out):
-        assert main(["run", "table1", "--cycles", "1", "--seed", "2", "--out", str(out), "--force"]) == 2
-        assert main(["run", "--resume", str(out)]) == 2
+        assert main(["run", "table1", "--bench", "sim", "--cycles", "1", "--seed", "2", "--out", str(out),
+                     "--force"]) == 2
+        assert main(["run", "--resume", str(out), "--bench", "sim"]) == 2
         assert "--resume" in capsys.readouterr().err
     assert out.read_bytes() == before
-    assert main(["run", "table1", "--cycles", "1", "--seed", "2", "--out", str(out), "--force", "--quiet"]) == 0
+    assert main(["run", "table1", "--bench", "sim", "--cycles", "1", "--seed", "2", "--out", str(out), "--force",
+                 "--quiet"]) == 0
     assert _seed(out) == 2 and sorted(p.name for p in tmp_path.iterdir()) == ["run.blf", "run.h5"]
 
 

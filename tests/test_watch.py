@@ -268,12 +268,13 @@ def test_watch_refuses_what_is_not_a_run_and_a_port_in_use(tmp_path, run_file, c
         busy.close()
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--port" in err and "in use" in err
-    assert main(["run", "table1", "--out", str(tmp_path / "r.h5"), "--port", "0"]) == 2
+    assert main(["run", "table1", "--bench", "sim", "--out", str(tmp_path / "r.h5"), "--port", "0"]) == 2
     assert "--watch" in capsys.readouterr().err
     busy = listen(0)
     try:  # run --watch takes its port before anything moves
         out = tmp_path / "r.h5"
-        assert main(["run", "table1", "--out", str(out), "--watch", "--port", str(busy.getsockname()[1])]) == 2
+        assert main(["run", "table1", "--bench", "sim", "--out", str(out), "--watch", "--port",
+                     str(busy.getsockname()[1])]) == 2
     finally:
         busy.close()
     assert "in use" in capsys.readouterr().err and not out.exists()

@@ -31,9 +31,11 @@ from benchlab.watch.decimate import minmax
 DEADLINE_S = 600.0  # bounds every wait below; nothing asserts how long anything took
 
 
-def _start_run(out: Path, seed: int, duration_s: int, watch: bool) -> subprocess.Popen:
+def _start_run(out: Path, seed: int, duration_s: int, watch: bool, realtime: float = 1000.0) -> subprocess.Popen:
+    """The simulated run; watched, at `realtime` x real time (`--watch` alone would pace it at 1x)."""
     cmd = [sys.executable, "-m", "benchlab.cli", "run", "table1", "--bench", "sim", "--seed", str(seed),
-           "--duration", str(duration_s), "--out", str(out), "--quiet"] + (["--watch", "--port", "0"] if watch else [])
+           "--duration", str(duration_s), "--out", str(out), "--quiet"]
+    cmd += ["--watch", "--port", "0", "--realtime", f"{realtime:g}"] if watch else []
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -172,9 +174,9 @@ def test_headless_chromium_shows_the_run_arriving(tmp_path):
     from PIL import Image
 
     out = tmp_path / "run.h5"
-    # long enough that the page sees it grow on a loaded core (a simulated run goes ~500x real time); the test
-    # stops it once it has seen enough
-    proc = _start_run(out, seed=2, duration_s=14400, watch=True)
+    # paced at 50x real time, long enough that the page sees it grow on a loaded core; the test stops it once it
+    # has seen enough
+    proc = _start_run(out, seed=2, duration_s=14400, watch=True, realtime=50.0)
     browser = None
     try:
         url = _url(proc)

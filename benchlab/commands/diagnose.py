@@ -88,7 +88,8 @@ def load_diagnosed_runs(paths: list[str], model: ModelDefinition) -> list[pd.Dat
         duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
         if duration < MIN_DURATION_S:
             raise InputError(path, "/aligned/time", f"a run of at least {MIN_DURATION_S:.0f} s for held-out "
-                                                    f"scoring, got {duration:.0f} s")
+                                                    f"scoring, got {duration:.0f} s (a Table 1 run that long: "
+                                                    f"benchlab run table1 --bench ... --duration {MIN_DURATION_S:.0f})")
     return runs
 
 

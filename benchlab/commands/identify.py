@@ -22,8 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="nonlinear", help=f"{MODEL_HELP} (default nonlinear)")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="parameter file to write (JSON)")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file (never a run file)")
-    parser.add_argument("--validate", nargs="*", default=[], help="run files to validate on (not fitted)")
-    parser.add_argument("--fix", nargs="*", default=[], metavar="NAME=VALUE", help="hold parameters fixed")
+    parser.add_argument("--validate", action="append", default=[], metavar="V.h5",
+                        help="a run file to validate on (not fitted); repeat for more")
+    parser.add_argument("--fix", type=cliargs.name_values, action="extend", default=[], metavar="NAME=VALUE[,...]",
+                        help="hold parameters fixed; repeat or separate by commas")
     parser.add_argument("--starts", type=cliargs.count("a number of starting points", MAX_FIT_STARTS), default=6,
                         help="number of starting points (local minima exist)")
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="seed of the starting points")

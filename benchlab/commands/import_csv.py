@@ -29,6 +29,7 @@ from benchlab import cliargs
 from benchlab.bounds import MAX_CSV_COLUMNS, MAX_RUN_DURATION_S
 from benchlab.errors import InputError, read_document
 from benchlab.interrupts import interrupts_held
+from benchlab.provenance import IMPORTED
 from benchlab.model.names import MODEL_HELP
 from benchlab.outputs import check_output
 
@@ -58,8 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
                         help="time step in s of a CSV without a time column (one row per step); the grid of an MDF "
                              "file, a CAN log or several inputs (required for them)")
-    parser.add_argument("--unit", action="extend", nargs="+", default=[], metavar="NAME=UNIT",
-                        help="the unit of each column beyond the contract's channels, e.g. --unit IqFbk=A speed=rpm")
+    parser.add_argument("--unit", type=cliargs.name_values, action="extend", default=[], metavar="NAME=UNIT[,...]",
+                        help="the unit of each column beyond the contract's channels, repeatable or separated by "
+                             "commas, e.g. --unit IqFbk=A,speed=rpm")
     parser.add_argument("--model", help=f"{MODEL_HELP}: the CSV must hold the channels it names "
                                         "(default: the clutch channels of contract section 1)")
     parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
@@ -301,11 +303,11 @@ def run(args: argparse.Namespace) -> int:
         frame, dt, units = read_csv(Path(args.inputs[0]), args.dt, parse_units(args.unit), required, args.sep,
                                     args.decimal)
         write_run(args.out, frame, dt, protocol="imported", units=units,
-                  attrs={"source_file": Path(args.inputs[0]).name})
+                  attrs={"source_file": Path(args.inputs[0]).name, "bench": IMPORTED})
     else:
         merged = _read_inputs(args, required)
         frame, dt = merged.frame, args.dt
-        write_run(args.out, frame, dt, protocol="imported", units=merged.units, attrs=merged.attrs,
+        write_run(args.out, frame, dt, protocol="imported", units=merged.units, attrs={**merged.attrs, "bench": IMPORTED},
                   sources=merged.sources, raw=merged.raw)
         for what, n in json.loads(merged.attrs.get("import_skipped", "{}")).items():
             print(f"{what}: {n} skipped")

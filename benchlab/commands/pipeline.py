@@ -1,4 +1,5 @@
-"""`benchlab pipeline --out DIR`: the whole job on the simulated bench, end to end.
+"""`benchlab pipeline --out DIR`: the whole job on the simulated bench, end to end (always the simulated bench, by
+design: it is the demonstration and the check that everything fits together; each line and page says so).
 
 Runs Table 1 on the simulated bench (the reference clutch by default, docs/plant.md; `--plant paper` the paper's
 network), the validation protocol (long hot cool-downs with the engine speed or the clutch state changing, a few fresh
@@ -25,6 +26,7 @@ from benchlab.bounds import MAX_RUN_DURATION_S
 from benchlab.interrupts import interrupts_held
 from benchlab.outputs import check_output_dir, write_text
 from benchlab.progress import Progress, for_terminal
+from benchlab.provenance import bench_text
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -53,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _describe(label: str, path: Path, run: pd.DataFrame) -> None:
     print(f"{label:<9} {path}: {len(run)} samples, {run['time'].iloc[-1] / 3600:.2f} h, "
-          f"flywheel up to {run['T_flywheel'].max():.1f} degC")
+          f"flywheel up to {run['T_flywheel'].max():.1f} degC, on {bench_text(run.attrs.get('bench'))}")
 
 
 def _bench_run(label: str, path: Path, protocol: str, seed: int, plant: str, progress: Progress,
@@ -100,7 +102,7 @@ def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
     diagnosis = diagnose_runs([fitting], "nonlinear", progress=progress)
     summary = summarise(diagnosis, "nonlinear")
     write_text(out / "diagnose.json", json.dumps(summary, indent=2, default=float))
-    page = write_page(diagnosis, summary, [fitting], out / "diagnose")
+    page = write_page(diagnosis, summary, [fitting], out / "diagnose").with_suffix(".html")
     base, best = summary["baseline"], summary["best"]
     found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, gain {f['gain_pct']:.0f} %)"
                       for f in summary["findings"]) or "none"
@@ -190,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
     page = write_report(fitting, nonlinear, out / "report", compare=linear, validation=[validation],
                         sweep=out / "sweep.h5", progress=progress)
     print(f"report    nonlinear against linear, validated on {out / 'validation.h5'}, Fig. 3 measured on "
-          f"{out / 'sweep.h5'} -> {page}")
+          f"{out / 'sweep.h5'} -> {page.with_suffix('.html')}")
     diagnosis = _diagnose(fitting, out, progress)
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()

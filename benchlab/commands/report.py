@@ -20,7 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_model_option(parser)
     parser.add_argument("--out", required=True, help="directory for report.md and the PNG figures")
     parser.add_argument("--compare", help="second parameter file (typically linear against nonlinear) for Fig. 3 and 5")
-    parser.add_argument("--validate", nargs="*", default=[], help="validation run files for Fig. 5 (default: RUN)")
+    parser.add_argument("--validate", action="append", default=[], metavar="V.h5",
+                        help="a validation run file for Fig. 5, repeat for more (default: RUN)")
     parser.add_argument("--sweep", help="cooldown-sweep run file, or the file `benchlab cooldown --out` wrote from "
                                         "one: per-cool-down R with error bars in Fig. 3")
     parser.add_argument("--force", action="store_true", help="--out may hold files already: replace the ones the "

@@ -1,4 +1,7 @@
-"""`benchlab run PROTOCOL --bench sim|BENCH.toml --out RUN.h5`: run a protocol, acquire, write a run file."""
+"""`benchlab run PROTOCOL --bench sim|BENCH.toml --out RUN.h5`: run a protocol, acquire, write a run file.
+
+The bench is always named: without --bench nothing runs (a simulated run must never pass for a measured one), and
+the summary, the run file's `bench` attribute and every page made from it say which bench it was."""
 
 from __future__ import annotations
 
@@ -8,12 +11,13 @@ import sys
 from pathlib import Path
 
 from benchlab import cliargs
-from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S
+from benchlab.bounds import MAX_CYCLES, MAX_REALTIME_FACTOR, MAX_RUN_DURATION_S
 from benchlab.commands import watch
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
 from benchlab.outputs import check_output
 from benchlab.progress import for_terminal
+from benchlab.provenance import SIMULATED
 from protocols.catalog import NAMES
 from sim_bench.faults import SPEC, kinds_help
 
@@ -23,12 +27,14 @@ HELP = "run a protocol (table1, cooldown-sweep, validation) on the simulated ben
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("protocol", nargs="?", help=f"protocol: {', '.join(NAMES)} (taken from the file with --resume)")
-    parser.add_argument("--bench", default="sim", help="'sim' (simulated bench) or a BENCH.toml for hardware")
+    parser.add_argument("--bench", help="required: 'sim' for the simulated bench (emulated devices, a model plant) "
+                                         "or a hardware bench's BENCH.toml")
     parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the simulated bench")
     parser.add_argument("--cycles", type=cliargs.count("a number of cycles", MAX_CYCLES),
                         help="number of cycles (cooldown-sweep: grid points)")
     parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
-                        help="planned duration in s (table1)")
+                        help="table1: cycles are drawn until the plan lasts at least this many s (launches at "
+                             "their time to synchronise, so the run is at least this long)")
     parser.add_argument("--grid", help="cooldown-sweep grid: RPM:S[:SLIP_RPM],... e.g. 1000:1,1000:0,2000:0:500")
     parser.add_argument("--out", type=cliargs.output_file, help="run file to write (HDF5)")
     parser.add_argument("--dry-run", action="store_true", help="print the schedule, check limits, estimate duration")
@@ -45,10 +51,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--watch", action="store_true", help="serve the live view of the run on 127.0.0.1 while it "
                         "runs (as `benchlab watch`, in a process of its own)")
     parser.add_argument("--port", type=watch.port, help=f"with --watch: its port (default {watch.DEFAULT_PORT})")
+    parser.add_argument("--realtime", nargs="?", const=1.0, type=realtime_factor, metavar="FACTOR",
+                        help="simulated bench only: run at FACTOR x real time (1 if FACTOR is left out; with --watch "
+                             "1 unless given) to rehearse the live view, Ctrl-C and the interlocks at a bench's pace")
+
+
+def realtime_factor(text: str) -> float:
+    """--realtime's FACTOR: a speed-up over real time, with a hint when a protocol name landed here instead."""
+    try:
+        return cliargs.positive_float("a speed-up over real time", MAX_REALTIME_FACTOR)(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (give PROTOCOL before --realtime)") from None
 
 
 def run(args: argparse.Namespace) -> int:
     """The run file is locked before anything else (RunFileLock), so a second run on it is refused."""
+    if args.bench is None:
+        raise InputError("command line", "--bench", "'sim' to run on the simulated bench, or a hardware bench's "
+                                                    "BENCH.toml (nothing runs without naming the bench)")
+    if args.realtime is not None and args.bench != SIMULATED:
+        raise InputError("command line", "--realtime", f"--bench sim: a hardware bench runs at real time "
+                                                       f"(got --bench {args.bench})")
     if args.fault and args.bench != "sim":
         raise InputError("command line", "--fault", "--bench sim: faults are rehearsed on the simulated bench, "
                                                     f"never injected into a hardware bench (got --bench {args.bench})")
@@ -110,15 +133,16 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.runner.session import RunRequest, execute
     bench = args.bench
-    if args.plant is not None and args.bench != "sim":
+    realtime = args.realtime if args.realtime is not None or not args.watch else 1.0
+    if args.plant is not None and args.bench != SIMULATED:
         raise InputError("command line", "--plant", "--bench sim (a hardware bench has its own clutch)")
     plant = _plant(args, out)
-    if args.fault or plant != "reference":  # --bench sim (checked above): its plant, the faults to rehearse
-        with interrupts_held():
+    if args.bench == SIMULATED and (args.fault or realtime is not None or plant != "reference") and not args.dry_run:
+        with interrupts_held():  # the simulated bench: its plant, the faults to rehearse, the pace asked for
             from sim_bench.bench import SimulatedBench
             from sim_bench.reference_plant import plant_named
 
-        bench = SimulatedBench(plant_named(plant), faults=tuple(args.fault))
+        bench = SimulatedBench(plant_named(plant), faults=tuple(args.fault), realtime=realtime)
     request = RunRequest(protocol=args.protocol or "", out=out, bench=bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
                          progress=for_terminal(args.quiet))

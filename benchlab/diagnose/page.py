@@ -1,4 +1,5 @@
-"""The diagnosis as a readable page: what is wrong, where, why, what was added and how much better (diagnose.md + PNGs)."""
+"""The diagnosis as a readable page: what is wrong, where, why, what was added and how much better (diagnose.md, the
+same page as diagnose.html, PNGs)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ from benchlab.diagnose.figures import (WINDOW_S, measured_channels, plot_binned,
                                        plot_regimes, plot_window, worst_window)
 from benchlab.diagnose.regimes import MIN_REGIME_SAMPLES, worst_regimes
 from benchlab.outputs import write_text
+from benchlab.provenance import bench_text
+from benchlab.report.html import write_html
 from benchlab.report.page import channel_cell, number, table, unit
 from benchlab.report.plotting import run_name
 
@@ -147,7 +150,9 @@ def write_page(result: Diagnosis, summary: dict, runs: Sequence[pd.DataFrame],
     parts = ["# benchlab diagnose – " + ", ".join(f"`{n}`" for n in names),
              f"{len(runs)} run(s), {sum(len(d) for d in result.baseline_held.datasets)} samples at the fitting step "
              f"of {summary['method']['step_s']:g} s; baseline `{summary['baseline']['model']}`. "
-             f"Written by benchlab {benchlab.__version__}."]
+             f"Written by benchlab {benchlab.__version__}.",
+             "Measured on " + "; ".join(f"**{bench_text(bench)}** ({', '.join(f'`{n}`' for n in runs_of)})"
+                                        for bench, runs_of in _benches(runs, names).items()) + "."]
     parts += _what_is_wrong(summary, regimes_png)
     parts += _where(result, names, window_png)
     parts += _why(summary, evidence_png, finding_pngs)
@@ -155,4 +160,13 @@ def write_page(result: Diagnosis, summary: dict, runs: Sequence[pd.DataFrame],
     parts += _better(summary, gains_png)
     page = out / PAGE
     write_text(page, "\n\n".join(p for p in parts if p) + "\n")
+    write_html(page, "benchlab diagnose – " + ", ".join(names))
     return page
+
+
+def _benches(runs: Sequence[pd.DataFrame], names: Sequence[str]) -> dict[str | None, list[str]]:
+    """The runs' names by the bench that produced each (the run file's `bench` attribute)."""
+    benches: dict[str | None, list[str]] = {}
+    for run, name in zip(runs, names):
+        benches.setdefault(run.attrs.get("bench"), []).append(name)
+    return benches

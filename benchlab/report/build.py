@@ -14,7 +14,9 @@ from benchlab.errors import InputError
 from benchlab.outputs import write_text
 from benchlab.model.params import ModelParams
 from benchlab.progress import SILENT, Progress
+from benchlab.report.html import write_html
 from benchlab.report.page import Figures, render
+from benchlab.report.plotting import run_name
 from benchlab.report.residuals import plot_residuals, residuals
 from benchlab.report.resistance import has_convection_law, plot_resistance
 from benchlab.report.scores import estimate
@@ -53,7 +55,8 @@ def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams,
 def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.PathLike[str]",
                  compare: ModelParams | None = None, validation: Sequence[pd.DataFrame] = (),
                  sweep: "str | os.PathLike[str] | None" = None, progress: Progress = SILENT) -> Path:
-    """Write Fig. 4, Fig. 5 (per validation run, else on `run`), Fig. 3, the residual figure and report.md.
+    """Write Fig. 4, Fig. 5 (per validation run, else on `run`), Fig. 3, the residual figure, report.md and the same
+    page as report.html.
 
     `run` and `validation` are loaded run files (benchlab.load_run), `sweep` the path of a cooldown-sweep
     run file (its events mark the cool-downs). Returns the page's path.
@@ -84,4 +87,5 @@ def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.Path
     rows = [(run, e) for e in on_run] + [(v, e) for v, ests in checks if v is not run for e in ests]
     page = out / PAGE
     write_text(page, render(run, models, rows, figures, cooldowns, cooldowns_source, res))
+    write_html(page, f"benchlab report – {run_name(run)}")
     return page

@@ -21,6 +21,8 @@ import pandas as pd
 from benchlab.identify.metrics import nrmse_pct, rmse_k
 from benchlab.outputs import write_text
 from benchlab.model.params import ModelParams
+from benchlab.provenance import SIMULATED, bench_text
+from benchlab.report.html import STYLE
 from benchlab.report.page import number
 from benchlab.report.scores import estimate
 from benchlab.runfile import event_steps, load_attrs, load_events, load_schedule
@@ -111,11 +113,12 @@ def _run_section(runs: Mapping[str, tuple[Path, pd.DataFrame]], out: Path) -> st
         duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
         attrs = load_attrs(path)
         rows.append([html.escape(label), f'<a href="{html.escape(os.path.relpath(path, out))}">{path.name}</a>',
-                     html.escape(attrs.get("protocol", "")), _num(duration / 3600, 2, " h"), str(len(run)),
+                     html.escape(attrs.get("protocol", "")), html.escape(bench_text(attrs.get("bench"), short=True)),
+                     _num(duration / 3600, 2, " h"), str(len(run)),
                      _num(float(run["T_flywheel"].max()), 1, " °C"),
                      _num(float(run["friction_power"].sum()) * float(run.attrs["dt"]) / 1e6, 2, " MJ"),
                      html.escape(attrs.get("can_log", "—"))])
-    return _table(("run", "file", "protocol", "duration", "samples", "flywheel max", "friction energy",
+    return _table(("run", "file", "protocol", "bench", "duration", "samples", "flywheel max", "friction energy",
                    "raw CAN log"), rows)
 
 
@@ -206,7 +209,7 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
     fitting_path = next(iter(runs.values()))[0]
     attrs = load_attrs(fitting_path)
     truth = json.loads(attrs["sim_truth"]) if "sim_truth" in attrs else None
-    simulated = attrs.get("bench") == "sim"
+    simulated = attrs.get("bench") == SIMULATED
     findings = diagnosis.get("findings", [])
     found = "".join(f"<li><b>{html.escape(f['candidate'])}</b> ({html.escape(str(f['signal']))} / "
                     f"{html.escape(str(f['mechanism']))}): held-out gain {_num(f['gain_pct'], 0, ' %')}, "
@@ -226,7 +229,7 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         *([f"<p><b>{html.escape(story['verdict'])}</b></p>"] if story and story.get("verdict") else []),
         "<p class='sim'>" + ("<b>Everything on this page comes from the simulated bench</b> (<code>sim_bench</code>): "
                              f"the drivers talked to emulated devices whose plant is {plant_text}."
-                             if simulated else "Measured on the bench described in the run files.")
+                             if simulated else f"Measured on {html.escape(bench_text(attrs.get('bench')))}.")
         + "</p>",
         "<h2>1. The runs</h2>", _run_section(runs, out),
         _figure(out, out / "report" / "fig4_fit.png", "Fig. 4: the nonlinear model against the Table 1 run"),
@@ -244,12 +247,13 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         sections += ["<h3>The nonlinear model against the simulated plant's truth</h3>",
                      _truth_section(nonlinear, truth.get("params", {}), standard_errors)]
     sections += [
-        "<p>The full report with parameters, residual tests and error tables: <a href='report/report.md'>"
-        "report/report.md</a>.</p>",
+        "<p>The full report with parameters, residual tests and error tables: <a href='report/report.html'>"
+        "report/report.html</a> (as Markdown: <a href='report/report.md'>report/report.md</a>).</p>",
         f"<h2>3. What diagnose found ({html.escape(str(base.get('model', '')))} baseline)</h2>",
         f"<p>Held-out RMSE {_num(base['rmse_K'], 3, ' K')} → best model <b>{html.escape(str(best['model']))}</b> "
         f"{_num(best['rmse_K'], 3, ' K')}.</p><ul>{found}</ul>", _diagnosis_alternatives(findings),
-        '<p>Evidence, regimes and figures: <a href="diagnose/diagnose.md">diagnose/diagnose.md</a>, JSON: '
+        '<p>Evidence, regimes and figures: <a href="diagnose/diagnose.html">diagnose/diagnose.html</a> (as '
+        'Markdown: <a href="diagnose/diagnose.md">diagnose/diagnose.md</a>), JSON: '
         '<a href="diagnose.json">diagnose.json</a>.</p>',
         "<h2>4. Wear (eq. 1–3) from the estimated lining temperatures</h2>",
         f"<p>{wear['engagements']} engagements, {_num(wear['friction_energy_J'] / 1e6, 2, ' MJ')} of friction "
@@ -260,10 +264,7 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         _figure(out, out / "wear.png", "Energy, lining temperatures, wear per side and remaining-life distribution"),
         '<p>All numbers: <a href="wear.json">wear.json</a>.</p>',
     ]
-    style = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}table{border-collapse:collapse;"
-             "margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}th{background:#eee}"
-             "img{max-width:100%}figure{margin:1em 0}.sim{background:#fff4d6;padding:0.6em;border:1px solid #e0c060}")
     page = out / PAGE
     write_text(page, "<!DOCTYPE html><html><head><meta charset='utf-8'><title>benchlab: the whole job</title>"
-                    f"<style>{style}</style></head><body>{''.join(sections)}</body></html>")
+                    f"<style>{STYLE}</style></head><body>{''.join(sections)}</body></html>")
     return page

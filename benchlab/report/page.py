@@ -14,6 +14,7 @@ import benchlab
 from benchlab.identify.cooldown import COVERAGE_K, CooldownResult
 from benchlab.identify.metrics import RESIDUAL_LABEL
 from benchlab.model.params import ModelParams
+from benchlab.provenance import bench_text
 from benchlab.report.plotting import run_name
 from benchlab.report.resistance import resistance, standard_errors
 from benchlab.report.residuals import Residuals
@@ -122,7 +123,8 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
     models_text = ", ".join(f"**{label}** (`{params.model}`)" for label, params in models)
     parts = [
         f"# benchlab report – `{run_name(run)}`",
-        f"Run `{run.attrs.get('source', '')}`: protocol `{run.attrs.get('protocol', '')}`, {duration:.0f} s at a "
+        f"Run `{run.attrs.get('source', '')}` from **{bench_text(run.attrs.get('bench'))}**: protocol "
+        f"`{run.attrs.get('protocol', '')}`, {duration:.0f} s at a "
         f"step of {float(run.attrs['dt']):g} s, {len(run)} samples. Models: {models_text}. "
         f"Written by benchlab {benchlab.__version__}.",
         "## Error figures (contract §5)",

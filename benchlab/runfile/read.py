@@ -217,7 +217,7 @@ def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = (),
 
     path = Path(path)
     with open_run(path) as f:
-        attrs = {k: text(v) for k, v in f.attrs.items() if k in ("schema", "status", "protocol")}
+        attrs = {k: text(v) for k, v in f.attrs.items() if k in ("schema", "status", "protocol", "bench")}
         if not attrs.get("schema", "").startswith(SCHEMA):
             raise InputError(path, "schema", f"root attribute {SCHEMA!r}, got {attrs.get('schema')!r}")
         if "aligned" not in f or not isinstance(f["aligned"], h5py.Group):

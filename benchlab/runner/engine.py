@@ -69,12 +69,14 @@ class RunSummary:
     reason: str = ""
     sim_s: float = 0.0
     wall_s: float = 0.0
+    bench: str = ""  # which bench ran it, in words (benchlab.provenance.bench_text)
 
     def lines(self) -> list[str]:
         rate = self.frames_lost / max(1, self.frames_ok + self.frames_lost)
         ev = ", ".join(f"{k} {v}" for k, v in sorted(self.events.items())) or "none"
         speed = f" ({self.sim_s / self.wall_s:.0f}x real time)" if self.wall_s > 0 else ""
         return [f"run {self.status}{': ' + self.reason if self.reason else ''}",
+                *([f"  bench       {self.bench}"] if self.bench else []),
                 f"  cycles      {self.cycles_done} of {self.cycles_planned}",
                 f"  duration    {self.sim_s:.0f} s of bench time in {self.wall_s:.1f} s{speed}",
                 f"  energy      {self.energy_j / 1e3:.1f} kJ in {self.engagements} engagements",

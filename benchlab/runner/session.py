@@ -24,6 +24,7 @@ import numpy as np
 from benchlab.acquire import RunWriter
 from benchlab.progress import SILENT, Progress
 from benchlab.errors import InputError
+from benchlab.provenance import bench_text
 from benchlab.runfile.read import load_stopped_run
 from benchlab.runfile.schema import SCHEDULE_UNITS
 from benchlab.runner import opening
@@ -32,7 +33,7 @@ from benchlab.runner.devices import BenchConfig, DriverBench
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
 from drivers.errors import CanLogError
 from protocols import catalog
-from protocols.limits import BenchLimits, check_schedule, schedule_problems
+from protocols.limits import BenchLimits, check_schedule, schedule_problems, with_launch_estimates
 from protocols.schedule import Step, describe, duration_s
 
 if TYPE_CHECKING:
@@ -102,10 +103,12 @@ def plan(request: RunRequest) -> tuple[tuple[Step, ...], BenchConfig, dict[str, 
     """Schedule and bench config, checked: InputError before anything moves."""
     config = bench_config(request)
     if request.steps is not None:
-        protocol = catalog.Protocol(request.protocol, tuple(request.steps), {"custom": True})
+        protocol = catalog.Protocol(request.protocol, with_launch_estimates(request.steps, config.limits),
+                                    {"custom": True})
     else:
         try:
-            protocol = catalog.build(request.protocol, request.seed, request.cycles, request.duration_s, request.grid)
+            protocol = catalog.build(request.protocol, request.seed, request.cycles, request.duration_s, request.grid,
+                                     config.limits)
         except ValueError as exc:
             field = "--grid" if request.grid and "grid" in str(exc) else "protocol"
             raise InputError(request.protocol, field, str(exc)) from None
@@ -136,8 +139,10 @@ def dry_run(request: RunRequest, out: Any = None) -> int:
     problems = check_schedule(steps, config.limits)
     total = duration_s(steps)
     cycles = len({s.cycle for s in steps})
-    print(f"protocol {request.protocol}: {len(steps)} steps, {cycles} cycles, estimated {total:.0f} s "
-          f"({total / 3600:.2f} h)", file=out)
+    for note in options.get("dropped", []):
+        print(f"plan: {note}", file=out)
+    print(f"protocol {request.protocol} on {bench_text(bench_name(request.bench))}: {len(steps)} steps, {cycles} "
+          f"cycles, estimated {total:.0f} s ({total / 3600:.2f} h)", file=out)
     if problems:
         for p in problems:
             print(f"limit: {p}", file=out)
@@ -262,6 +267,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                                      duration_s(steps), unit="s")
         runner = Runner(bench, clock, steps, writer, config.limits, tick_s=config.tick_s,
                         fast_tick_s=config.fast_tick_s, dt=config.dt, progress=task)
+        runner.summary.bench = bench_text(bench_name(request.bench))
         for name, code in pending:
             runner.request_stop(name, code)
         try:
