@@ -9,9 +9,8 @@ import pandas as pd
 
 from benchlab.errors import InputError
 from benchlab.network.structure import Params, ThermalNetwork
-from benchlab.network import stream
 from benchlab.network.solver import DEFAULT_RESOLUTION, run_network
-from benchlab.network.stream import RunChannels, stream_network
+from benchlab.network.stream import RunChannels, first_valid_index, stream_network
 
 
 def _held(values: np.ndarray) -> np.ndarray:
@@ -70,7 +69,7 @@ def _first_valid(channels: Mapping[str, np.ndarray], name: str) -> float | None:
     if isinstance(channels, RunChannels):
         return channels.first_valid(name)
     values = channels.get(name)
-    at = -1 if values is None else stream._first_valid(np.asarray(values, dtype=np.float64))
+    at = -1 if values is None else first_valid_index(np.asarray(values, dtype=np.float64))
     return None if at < 0 else float(values[at])
 
 

@@ -220,7 +220,7 @@ class RunChannels(Mapping):
     def _column(self, name: str) -> np.ndarray | None:
         if name not in self._read:
             values = self._frame[name].to_numpy(np.float64) if name in self._frame.columns else None
-            measured = values is not None and (name == "time" or _first_valid(values) >= 0)
+            measured = values is not None and (name == "time" or first_valid_index(values) >= 0)
             self._read[name] = values if measured else None
         return self._read[name]
 
@@ -233,12 +233,10 @@ class RunChannels(Mapping):
             raise KeyError(name)
         part = raw[self._start:self._stop]
         if name not in self._gaps:
-            self._gaps[name] = _first_nan(raw) >= 0
-        if not self._gaps[name] or _first_nan(part) < 0:
+            self._gaps[name] = bool(np.isnan(raw).any())
+        if not self._gaps[name] or not np.isnan(part).any():
             return part
-        held = np.empty(len(part))
-        _hold(raw, self._start, held)
-        return held
+        return _held(raw, self._start, self._stop)
 
     def __iter__(self) -> Iterator[str]:
         return (name for name in self._frame.columns if self._column(name) is not None)
@@ -253,45 +251,35 @@ class RunChannels(Mapping):
     def first_valid(self, name: str) -> float | None:
         """The channel's first finite sample in the window, None where it has none."""
         raw = self._column(name)
-        at = -1 if raw is None else _first_valid(raw[self._start:self._stop])
+        at = -1 if raw is None else first_valid_index(raw[self._start:self._stop])
         return None if at < 0 else float(raw[self._start + at])
 
 
-@njit(cache=True, nogil=True)
-def _first_nan(values):  # pragma: no cover - compiled
-    """Index of the first NaN, -1 if none."""
-    for i in range(values.shape[0]):
-        if np.isnan(values[i]):
-            return i
-    return -1
-
-
-@njit(cache=True, nogil=True)
-def _first_valid(values):  # pragma: no cover - compiled
+def first_valid_index(values: np.ndarray) -> int:
     """Index of the first finite value, -1 if none."""
-    for i in range(values.shape[0]):
-        if np.isfinite(values[i]):
-            return i
-    return -1
+    finite = np.isfinite(values)
+    at = int(finite.argmax()) if len(finite) else 0
+    return at if len(finite) and finite[at] else -1
 
 
-@njit(cache=True, nogil=True)
-def _hold(raw, start, out):  # pragma: no cover - compiled
-    """raw[start:start + len(out)] with each NaN replaced by the last valid value before it (in the whole column),
-    leading NaNs by the column's first valid value; the column holds at least one."""
-    carry = np.nan
-    i = start - 1
-    while i >= 0 and np.isnan(carry):
-        carry = raw[i]
-        i -= 1
-    i = start
-    while np.isnan(carry):
-        carry = raw[i]
-        i += 1
-    for k in range(out.shape[0]):
-        v = raw[start + k]
-        if np.isnan(v):
-            out[k] = carry
-        else:
-            out[k] = v
-            carry = v
+def _held(raw: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """raw[start:stop] with each NaN replaced by the last valid value before it in the whole column (leading NaNs
+    by the column's first valid value; the column holds one)."""
+    part = raw[start:stop]
+    valid = ~np.isnan(part)
+    last = np.maximum.accumulate(np.where(valid, np.arange(len(part)), -1))
+    out = part[np.maximum(last, 0)]
+    out[last < 0] = _carried(raw, start)
+    return out
+
+
+def _carried(raw: np.ndarray, start: int) -> float:
+    """The last valid value before sample `start`, else the column's first valid value."""
+    stop = start
+    while stop > 0:  # looked for backwards a window at a time: it is usually just before
+        low = max(stop - 4096, 0)
+        valid = np.flatnonzero(~np.isnan(raw[low:stop]))
+        if len(valid):
+            return float(raw[low + valid[-1]])
+        stop = low
+    return float(raw[first_valid_index(raw)])
