@@ -153,13 +153,11 @@ def stream_network(network: ThermalNetwork, params: Params, channels: Channels, 
         size = stop - start
         laws = _conductances(network, params, part, size)
         pattern = tuple(i for i, g in enumerate(laws) if isinstance(g, np.ndarray))
+        columns = _key_columns(laws, pattern)
         if points is None:
-            varying = pattern
-            columns = _key_columns(laws, varying)
-            points = _Points(max(len(columns), 1), states, inputs)
+            varying, points = pattern, _Points(max(len(columns), 1), states, inputs)
         elif pattern != varying:
             return None  # a law constant on one block and not on another: key the run as a whole
-        columns = _key_columns(laws, varying)
         keys = np.empty((size, max(len(columns), 1)), dtype=np.int64)
         if columns:
             for c, (column, _) in enumerate(columns):
