@@ -20,7 +20,11 @@
    augmented matrices (batched, the previous implementation) and a numpy-batched
    eigendecomposition, on the networks' own operating points from the speed run; accuracy
    relative to expm (target 1e-9).
-4. --quick: smaller sizes (runs in well under 30 s).
+4. Flat cost (issue 36): CPU seconds (user + system, median of 3) of benchlab.simulate on 1 M and 10 M samples
+   (the speed run, and the same run tiled ten times: the same operating points at ten times the length) beside
+   the fixed-matrix numba loop at the same sizes, which like simulate allocates its result on every call;
+   targets >= 20 M samples per CPU second at both sizes, flat within 1.3x, within 5x of the loop.
+5. --quick: smaller sizes (runs in well under 30 s); section 4 on 0.2 M and 2 M.
 
 Exit code 1 if any target is missed (after printing everything).
 """
@@ -34,6 +38,7 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLA
 
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
+import resource  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -65,6 +70,9 @@ TARGET_ABS_RATE = 5e6
 TARGET_VS_LSIM = 10.0
 TARGET_VS_IVP = 100.0
 TARGET_ZOH_REL = 1e-9
+TARGET_FLAT_RATE = 20e6
+TARGET_FLAT_RATIO = 1.3
+TARGET_VS_FLOOR = 5.0
 COOLDOWN_SPEEDS_RPM = (800.0, 1000.0, 1500.0, 2000.0, 2500.0, 3000.0)
 
 
@@ -233,9 +241,9 @@ def breakdown(run: pd.DataFrame, p, repeats: int) -> tuple[dict[str, float], int
     stage("output DataFrame", frame)
     one_op = solver.Discretised(np.zeros(n, dtype=np.int64), ad[:1].copy(), bd[:1].copy(), inputs)
     times["(diag) propagate, 1 op only"], _ = best_of(lambda: solver.propagate(one_op, x0), repeats)
-    general = np.empty((n + 1, 4))
+    general = np.empty((4, n + 1))
     times["(diag) propagate, general-n kernel"], _ = best_of(
-        lambda: solver._propagate(op_index, ad, bd, inputs, x0, general), repeats)
+        lambda: solver._propagate(op_index, ad, bd, inputs, x0, general, 0), repeats)
     return times, m
 
 
@@ -261,6 +269,43 @@ def _floor_loop(ad, bd, u, x0, out):  # pragma: no cover - compiled
         y2 = a20 * x0_ + a21 * x1 + a22 * x2 + a23 * x3 + b20 * u0 + b21 * u1 + b22 * u2 + b23 * u3
         y3 = a30 * x0_ + a31 * x1 + a32 * x2 + a33 * x3 + b30 * u0 + b31 * u1 + b32 * u2 + b33 * u3
         x0_, x1, x2, x3 = y0, y1, y2, y3
+
+
+def cpu_median(fn, repeats: int) -> float:
+    """Median CPU seconds (user + system of this process: the kernel's page zero-filling counts) of `fn`."""
+    spent = []
+    for _ in range(repeats):
+        before = resource.getrusage(resource.RUSAGE_SELF)
+        fn()
+        after = resource.getrusage(resource.RUSAGE_SELF)
+        spent.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return float(np.median(spent))
+
+
+def floor_simulate(ad: np.ndarray, bd: np.ndarray, inputs: np.ndarray, x0: np.ndarray) -> np.ndarray:
+    """The fixed-matrix loop as a simulation: a fresh result per call, as benchlab.simulate returns one."""
+    out = np.empty((len(inputs), 4))
+    _floor_loop(ad, bd, inputs, x0, out)
+    return out
+
+
+def flat_cost(speed: pd.DataFrame, p, sizes: tuple[int, int], repeats: int) -> list[tuple[int, float, float]]:
+    """(samples, benchlab.simulate CPU s, fixed-matrix loop CPU s) at each size; the longer run is the speed run
+    tiled (time continued), the loop driven by the same run's inputs through its first operating point."""
+    rows = []
+    for n in sizes:
+        tiles = -(-n // len(speed))
+        run = pd.concat([speed] * tiles, ignore_index=True).iloc[:n] if tiles > 1 else speed.iloc[:n]
+        run = run.copy() if tiles > 1 else run
+        run.attrs = dict(speed.attrs)
+        disc = solver.discretise(clutch_network(), p, input_channels(run), float(run.attrs["dt"]))
+        x0 = initial_state(clutch_network(), input_channels(run.iloc[:10]))
+        ad, bd, inputs = disc.Ad[0].copy(), disc.Bd[0].copy(), disc.inputs
+        del disc
+        ours = cpu_median(lambda: benchlab.simulate(run, p), repeats)
+        floor = cpu_median(lambda: floor_simulate(ad, bd, inputs, x0), repeats)
+        rows.append((n, ours, floor))
+    return rows
 
 
 def linear_state_space(p) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -474,6 +519,26 @@ def main(argv: list[str] | None = None) -> int:
             targets.append((f"ZOH {name}, dt {step:g}", f"{expm_s / kernel_s:.1f}x expm, err {kernel_err:.0e}", ok))
         speedups = [r[3]["scipy expm (previous)"][0] / r[3]["benchlab kernel"][0] for r in rows]
         print(f"   benchlab kernel vs expm: {min(speedups):.1f}x - {max(speedups):.1f}x faster")
+
+    sizes = (200_000, 2_000_000) if args.quick else (1_000_000, 10_000_000)
+    rows = flat_cost(speed, p_nl, sizes, 3)
+    print(f"\n4. FLAT COST  CPU seconds (user + system), median of 3, benchlab.simulate beside the fixed-matrix numba "
+          "loop (fresh result per call, as simulate)")
+    print(f"   {'samples':>12}{'simulate s':>12}{'M/s':>8}{'loop s':>10}{'M/s':>8}{'simulate / loop':>18}")
+    rates = []
+    for n_flat, ours, floor in rows:
+        rates.append(n_flat / ours)
+        print(f"   {n_flat:>12,}{ours:>12.3f}{n_flat / ours / 1e6:>8.1f}{floor:>10.3f}{n_flat / floor / 1e6:>8.1f}"
+              f"{ours / floor:>17.1f}x")
+        ok = n_flat / ours >= TARGET_FLAT_RATE
+        targets.append((f"simulate rate at {n_flat:,}", f"{n_flat / ours / 1e6:.1f} M/s >= "
+                        f"{TARGET_FLAT_RATE / 1e6:.0f} M/s", ok))
+        ok = ours / floor <= TARGET_VS_FLOOR
+        targets.append((f"simulate / loop at {n_flat:,}", f"{ours / floor:.1f}x <= {TARGET_VS_FLOOR:.0f}x", ok))
+    flat = max(rates) / min(rates)
+    targets.append(("flat in length", f"{flat:.2f}x <= {TARGET_FLAT_RATIO}x", flat <= TARGET_FLAT_RATIO))
+    print(f"   per-sample cost, longer / shorter run: {rates[0] / rates[1]:.2f}x (target <= {TARGET_FLAT_RATIO}x)")
+
 
     load = os.getloadavg()[0]
     if load > 0.5 * (os.cpu_count() or 1):

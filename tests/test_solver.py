@@ -141,9 +141,9 @@ def test_four_state_kernel_equals_general_kernel():
     rng = np.random.default_rng(2)
     disc = Discretised(rng.integers(0, 50, size=3000), *_zoh(a, b, 0.5), rng.uniform(0, 100, size=(3000, 4)))
     x0 = np.array([60.0, 55.0, 40.0, 30.0])
-    out4, out = np.empty((3001, 4)), np.empty((3001, 4))
-    _propagate4(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out4)
-    _propagate(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out)
+    out4, out = np.empty((4, 3001)), np.empty((4, 3001))
+    _propagate4(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out4, 0)
+    _propagate(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out, 0)
     assert np.allclose(out4, out, rtol=1e-13, atol=1e-10)
 
 

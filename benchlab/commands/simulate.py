@@ -31,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.network.simulation import simulate
     check_output(args.out, "--out", args.force, inputs=[args.run, args.params], run_file=True)
     params = load_model_params(args.params, args.model)
-    measured = load_runs([args.run], params.definition, params, args.params)[0]
+    measured = load_runs([args.run], params.definition, params, args.params, model_channels_only=True)[0]
     simulated = simulate(measured, params)
     write_beside_run(args.out, args.run, "simulated", measured["time"].to_numpy(),
                      {name: (simulated[name].to_numpy(), "degC", f"model {params.model}: {name} driven by the run's "

@@ -37,6 +37,7 @@ class FitResult:
     residuals: np.ndarray
     starts: int = 1
     start_costs: list[float] = field(default_factory=list)
+    converged: bool = True  # False where the fit stopped at its evaluation budget (a scout), not at a minimum
 
     @property
     def free_names(self) -> list[str]:
@@ -150,31 +151,72 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
     scale = np.array([params[p.name] if p.log else p.linear_scale for p in spec.free])
     jac = sol.jac / scale  # chain rule: d r / d p = d r / d x * d x / d p
     return FitResult(spec, params, float(2 * sol.cost), float(np.sqrt(np.mean(sol.fun ** 2))), len(sol.fun),
-                     jac, sol.fun)
+                     jac, sol.fun, converged=sol.status > 0)
+
+
+def standard_errors(result: FitResult) -> np.ndarray:
+    """Each free parameter's standard error (physical units) from the fit's Jacobian and residual variance:
+    sqrt(diag(s² (JᵀJ)⁻¹)), s² = cost / (residuals - parameters)."""
+    from benchlab.identify.uncertainty import scaled_inverse  # (uncertainty builds on this module)
+
+    dof = max(result.n_residuals - len(result.free_names), 1)
+    return np.sqrt(np.abs(np.diag(scaled_inverse(result.jacobian.T @ result.jacobian))) * result.cost / dof)
+
+
+def same_minimum(a: FitResult, b: FitResult) -> bool:
+    """Whether two fits reached one minimum: every free parameter apart by less than the better fit's standard
+    error (its statistical resolution: closer than that, the data cannot tell the two apart)."""
+    better = a if a.cost <= b.cost else b
+    errors = standard_errors(better)
+    gaps = np.array([abs(a.params[name] - b.params[name]) for name in better.free_names])
+    return bool(np.all(np.isfinite(errors)) and np.all(gaps <= errors))
+
+
+def _start(spec: ModelSpec, i: int, rng: np.random.Generator, spread: float) -> dict[str, float]:
+    """Start i: the priors (i = 0), else magnitudes drawn log-uniform within ×/÷ spread of them."""
+    start = {p.name: p.initial for p in spec.free}
+    if i:
+        for p in (p for p in spec.free if p.log or not p.scale):  # magnitudes; offsets (°C starts) stay
+            factor = float(np.exp(rng.uniform(-np.log(spread), np.log(spread))))
+            start[p.name] = float(np.clip(p.initial * factor, p.lower, p.upper))
+    return start
 
 
 @single_threaded_blas
 def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6, seed: int = 0,
                    spread: float = 3.0, scout_nfev: int = 25, task: Task = Task()) -> FitResult:
-    """Scout fits from `starts` points (the priors, then log-uniform within ×/÷ spread), polish the best.
+    """Search from independent starts (the priors, then log-uniform within ×/÷ spread) until two agree on the best
+    minimum, then polish it; at most `starts` scout runs of `scout_nfev` evaluations each.
 
-    Only magnitudes are spread (log parameters and signed ones scaled by their own start value);
-    parameters with an absolute scale, such as start temperatures in °C, start at their prior.
-    `task` advances by one per scout and one for the polish.
+    Two starts agree when they reach one minimum within its parameters' standard errors (`same_minimum`): a further
+    start could only land there again or higher, so the search stops. While they disagree, the budget goes where
+    they do: a scout stopped by its budget short of a minimum is continued (the start that has come lowest first),
+    and only where every other start has settled in a different minimum is a new one drawn. Only magnitudes are
+    spread (log parameters and signed ones scaled by their own start value); parameters with an absolute scale,
+    such as start temperatures in °C, start at their prior. `task` advances by one per scout run (the unused
+    budget at the end) and one for the polish; `starts` of the result counts the independent starts drawn.
     """
     rng = np.random.default_rng(seed)
-    scouts = []
-    for i in range(starts):
-        start = {p.name: p.initial for p in spec.free}
-        if i:
-            for p in (p for p in spec.free if p.log or not p.scale):  # magnitudes; offsets (°C starts) stay
-                factor = float(np.exp(rng.uniform(-np.log(spread), np.log(spread))))
-                start[p.name] = float(np.clip(p.initial * factor, p.lower, p.upper))
-        scouts.append(fit(spec, datasets, max_nfev=scout_nfev, start=start))
+    found: list[FitResult] = []  # each start's latest scout
+    for run in range(starts):
+        best = min(found, key=lambda r: r.cost) if found else None
+        if best is not None and any(same_minimum(best, other) for other in found if other is not best):
+            task.advance(starts - run)
+            break
+        unsettled = sorted((r for r in found if not r.converged and r is not best), key=lambda r: r.cost)
+        if len(found) >= 2 and unsettled:
+            k = next(k for k, r in enumerate(found) if r is unsettled[0])
+            found[k] = fit(spec, datasets, max_nfev=scout_nfev, start={n: unsettled[0].params[n] for n in
+                                                                        unsettled[0].free_names})
+        elif len(found) >= 2 and not best.converged and all(r.converged for r in found if r is not best):
+            found[found.index(best)] = fit(spec, datasets, max_nfev=scout_nfev,
+                                           start={n: best.params[n] for n in best.free_names})
+        else:
+            found.append(fit(spec, datasets, max_nfev=scout_nfev, start=_start(spec, len(found), rng, spread)))
         task.advance()
-    best = min(scouts, key=lambda r: r.cost)
+    best = min(found, key=lambda r: r.cost)
     final = fit(spec, datasets, start={k: best.params[k] for k in best.free_names})
     task.advance()
-    final.starts = starts
-    final.start_costs = sorted(r.cost for r in scouts)
+    final.starts = len(found)
+    final.start_costs = sorted(r.cost for r in found)
     return final

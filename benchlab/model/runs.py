@@ -80,11 +80,13 @@ def _check_laws_at(model: ModelDefinition, run: pd.DataFrame, params: dict[str, 
 
 
 def load_runs(paths: Sequence["str | os.PathLike[str]"], model: ModelDefinition,
-              params: Mapping[str, float] | None = None, params_source: str = "") -> list[pd.DataFrame]:
-    """Each run file read and checked for the model (its laws at `params` where given: see check_laws)."""
+              params: Mapping[str, float] | None = None, params_source: str = "",
+              model_channels_only: bool = False) -> list[pd.DataFrame]:
+    """Each run file read and checked for the model (its laws at `params` where given: see check_laws).
+    `model_channels_only`: read no channel the model does not name (a command that only simulates it)."""
     runs = []
     for path in paths:
-        run = load_run(path, required=())
+        run = load_run(path, required=(), only=model.channels() if model_channels_only else None)
         check_run(model, run, params, params_source)
         runs.append(run)
     return runs

@@ -120,13 +120,13 @@ def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence
         Ads.append(Ad.reshape(-1, points, *Ad.shape[1:]))
         Bds.append(Bd.reshape(-1, points, *Bd.shape[1:]))
     x0s = np.ascontiguousarray(x0s, dtype=np.float64)
-    out = np.empty((len(param_sets), len(origin.op_index) + 1, x0s.shape[1]))
+    out = np.empty((len(param_sets), x0s.shape[1], len(origin.op_index) + 1))  # state-major, as propagate's
     together = np.array([s for s in range(len(param_sets)) if s not in alone], dtype=np.int64)
     _propagate_sets(origin.op_index, np.concatenate(Ads), np.concatenate(Bds), matrices_of, np.stack(moved_inputs),
                     inputs_of, x0s, together, out)
     for s, states in alone.items():
-        out[s] = states
-    return list(out)
+        out[s] = states.T
+    return [states.T for states in out]
 
 
 def _moved_matrices(network: ThermalNetwork, params: Params, moved: set[str], laws: list[_Law], origin: _Base,
@@ -174,6 +174,6 @@ def _propagate_sets(op_index, Ads, Bds, matrices_of, inputs, inputs_of, x0s, set
     for s in sets:
         k, j = matrices_of[s], inputs_of[s]
         if x0s.shape[1] == 4:
-            _propagate4(op_index, Ads[k], Bds[k], inputs[j], x0s[s], out[s])
+            _propagate4(op_index, Ads[k], Bds[k], inputs[j], x0s[s], out[s], 0)
         else:
-            _propagate(op_index, Ads[k], Bds[k], inputs[j], x0s[s], out[s])
+            _propagate(op_index, Ads[k], Bds[k], inputs[j], x0s[s], out[s], 0)

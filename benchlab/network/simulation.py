@@ -9,7 +9,8 @@ import pandas as pd
 
 from benchlab.errors import InputError
 from benchlab.network.structure import Params, ThermalNetwork
-from benchlab.network.solver import run_network
+from benchlab.network.solver import DEFAULT_RESOLUTION, run_network
+from benchlab.network.stream import RunChannels, first_valid_index, stream_network
 
 
 def _held(values: np.ndarray) -> np.ndarray:
@@ -56,12 +57,20 @@ def initial_state(network: ThermalNetwork, channels: Mapping[str, np.ndarray], s
             x0.append(float(overrides[state]))
             continue
         channel = network.initial[state]
-        values = channels.get(channel)
-        valid = np.flatnonzero(np.isfinite(values)) if values is not None else np.array([])
-        if valid.size == 0:
+        first = _first_valid(channels, channel)
+        if first is None:
             raise InputError(source, f"/aligned/{channel}", f"a valid sample to start state {state} from")
-        x0.append(float(values[valid[0]]))
+        x0.append(first)
     return np.array(x0)
+
+
+def _first_valid(channels: Mapping[str, np.ndarray], name: str) -> float | None:
+    """A channel's first finite sample, None where it has none (or is absent)."""
+    if isinstance(channels, RunChannels):
+        return channels.first_valid(name)
+    values = channels.get(name)
+    at = -1 if values is None else first_valid_index(np.asarray(values, dtype=np.float64))
+    return None if at < 0 else float(values[at])
 
 
 def simulate(run: pd.DataFrame, params: Params, network: ThermalNetwork | None = None,
@@ -69,8 +78,14 @@ def simulate(run: pd.DataFrame, params: Params, network: ThermalNetwork | None =
     """The model's temperatures (degC) on the run's grid, one column per output and simulated channel
     (the clutch: T_pressure_plate, T_flywheel, T_air, T_housing)."""
     network = model_network(params, network)
-    channels = input_channels(run)
+    channels = RunChannels(pd.DataFrame(run, copy=False))  # read on demand, block by block (no attrs deep-copied)
     x0 = initial_state(network, channels, run.attrs.get("source", "<run>"), initial)
-    states = run_network(network, params, channels, float(run.attrs["dt"]), x0)[:-1]
+    dt = float(run.attrs["dt"])
+    states = stream_network(network, params, channels, dt, x0, DEFAULT_RESOLUTION)
+    if states is None:
+        states = run_network(network, params, input_channels(run), dt, x0).T
     index = {name: i for i, name in enumerate(network.state_names)}
-    return pd.DataFrame({name: states[:, index[state]] for name, state in network.outputs.items()}, index=run.index)
+    rows = [index[state] for state in network.outputs.values()]
+    # state-major: each output's series is a contiguous row, which the frame takes without a copy
+    chosen = states[:len(rows)] if rows == list(range(len(rows))) else states[rows]
+    return pd.DataFrame(chosen[:, :-1].T, columns=list(network.outputs), index=run.index, copy=False)

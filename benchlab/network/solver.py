@@ -415,7 +415,9 @@ def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: 
 
 
 @njit(cache=True, nogil=True)
-def _propagate(op_index, Ad, Bd, inputs, x0, out):  # pragma: no cover - compiled
+def _propagate(op_index, Ad, Bd, inputs, x0, out, offset):  # pragma: no cover - compiled
+    """States from x0 over the samples, state-major: out[i, offset + k] is state i at sample k (the last column,
+    offset + N, the state after the last step), so that each state's series is one contiguous row."""
     n = x0.shape[0]
     m = inputs.shape[1]
     x = x0.copy()
@@ -423,7 +425,7 @@ def _propagate(op_index, Ad, Bd, inputs, x0, out):  # pragma: no cover - compile
     steps = op_index.shape[0]
     for k in range(steps):
         for i in range(n):
-            out[k, i] = x[i]
+            out[i, offset + k] = x[i]
         a = Ad[op_index[k]]
         b = Bd[op_index[k]]
         for i in range(n):
@@ -436,20 +438,20 @@ def _propagate(op_index, Ad, Bd, inputs, x0, out):  # pragma: no cover - compile
         for i in range(n):
             x[i] = nxt[i]
     for i in range(n):
-        out[steps, i] = x[i]
+        out[i, offset + steps] = x[i]
 
 
 @njit(cache=True, nogil=True)
-def _propagate4(op_index, Ad, Bd, inputs, x0, out):  # pragma: no cover - compiled
+def _propagate4(op_index, Ad, Bd, inputs, x0, out, offset):  # pragma: no cover - compiled
     """_propagate for four states (the paper's clutch), unrolled: the state lives in registers."""
     m = inputs.shape[1]
     x0_, x1, x2, x3 = x0[0], x0[1], x0[2], x0[3]
     steps = op_index.shape[0]
     for k in range(steps):
-        out[k, 0] = x0_
-        out[k, 1] = x1
-        out[k, 2] = x2
-        out[k, 3] = x3
+        out[0, offset + k] = x0_
+        out[1, offset + k] = x1
+        out[2, offset + k] = x2
+        out[3, offset + k] = x3
         o = op_index[k]
         y0 = Ad[o, 0, 0] * x0_ + Ad[o, 0, 1] * x1 + Ad[o, 0, 2] * x2 + Ad[o, 0, 3] * x3
         y1 = Ad[o, 1, 0] * x0_ + Ad[o, 1, 1] * x1 + Ad[o, 1, 2] * x2 + Ad[o, 1, 3] * x3
@@ -462,24 +464,40 @@ def _propagate4(op_index, Ad, Bd, inputs, x0, out):  # pragma: no cover - compil
             y2 += Bd[o, 2, j] * u
             y3 += Bd[o, 3, j] * u
         x0_, x1, x2, x3 = y0, y1, y2, y3
-    out[steps, 0] = x0_
-    out[steps, 1] = x1
-    out[steps, 2] = x2
-    out[steps, 3] = x3
+    out[0, offset + steps] = x0_
+    out[1, offset + steps] = x1
+    out[2, offset + steps] = x2
+    out[3, offset + steps] = x3
+
+
+def propagate_into(op_index: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, inputs: np.ndarray, x0: np.ndarray,
+                   out: np.ndarray, offset: int = 0) -> None:
+    """Write the states from x0 into the state-major `out` from column `offset` on (`_propagate`)."""
+    kernel = _propagate4 if x0.shape[0] == 4 else _propagate
+    kernel(op_index, Ad, Bd, inputs, np.ascontiguousarray(x0, dtype=np.float64), out, offset)
 
 
 def propagate(disc: Discretised, x0: np.ndarray) -> np.ndarray:
-    """States (N + 1, n): row k at time k*dt from x0 at row 0; the last row is the state after the last step."""
+    """States (N + 1, n): row k at time k*dt from x0 at row 0; the last row is the state after the last step.
+    (A transposed view of the state-major result: each state's column is contiguous.)"""
     x0 = np.asarray(x0, dtype=np.float64)
-    out = np.empty((disc.op_index.shape[0] + 1, x0.shape[0]))
-    kernel = _propagate4 if x0.shape[0] == 4 else _propagate
-    kernel(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out)
-    return out
+    out = np.empty((x0.shape[0], disc.op_index.shape[0] + 1))
+    propagate_into(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out)
+    return out.T
 
 
 def run_network(network: ThermalNetwork, params: Params, channels: Channels, dt: float, x0: np.ndarray,
                 resolution: float = DEFAULT_RESOLUTION, memo: LawMemo | None = None) -> np.ndarray:
-    """Simulate the network over the channels: states (N + 1, n), row k at time k*dt (`memo`: see discretise)."""
+    """Simulate the network over the channels: states (N + 1, n), row k at time k*dt (`memo`: see discretise).
+
+    Without a memo the run is streamed in blocks (benchlab.network.stream: the same numbers, flat cost per sample);
+    a fit's memo keeps the whole-run stages it reuses."""
+    if memo is None:
+        from benchlab.network.stream import stream_network
+
+        states = stream_network(network, params, channels, dt, x0, resolution)
+        if states is not None:
+            return states.T
     return propagate(discretise(network, params, channels, dt, resolution, memo), x0)
 
 

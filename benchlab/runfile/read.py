@@ -205,13 +205,14 @@ def grid_step(path: Path, group: h5py.Group) -> float:
 
 
 def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = (),
-             required: Sequence[str] = REQUIRED) -> pd.DataFrame:
+             required: Sequence[str] = REQUIRED, only: Sequence[str] | None = None) -> pd.DataFrame:
     """The /aligned channels as a DataFrame; attrs hold dt, units, source and the root attributes.
 
     `measured`: channels that must hold at least one measured (not NaN) sample, e.g. the temperatures a model
     is fitted to and started from; a file where one of them is NaN throughout is bad input for that use.
     `required`: channels the file must hold (default the contract's section 1 list; a model file's run needs
-    `time` and the channels the model names, contract section 6).
+    `time` and the channels the model names, contract section 6). `only`: read (and check) only `time`, the
+    required channels and these where the file holds them, for a command that uses no other (a simulation).
     """
     import pandas as pd
 
@@ -224,7 +225,8 @@ def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = (),
             raise InputError(path, "/aligned", "a group of channels on one time grid")
         group = f["aligned"]
         dt = grid_step(path, group)
-        columns, units = _read_channels(path, group, ("time", *required))
+        wanted = None if only is None else {"time", *required, *only}
+        columns, units = _read_channels(path, group, ("time", *required), wanted)
         time_dtype = group["time"].dtype
     frame = pd.DataFrame(columns)
     _check_time(path, frame["time"].to_numpy(), dt, time_dtype)
@@ -235,8 +237,8 @@ def load_run(path: "str | os.PathLike[str]", measured: Sequence[str] = (),
     return frame
 
 
-def _read_channels(path: Path, group: h5py.Group,
-                   required: Sequence[str]) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+def _read_channels(path: Path, group: h5py.Group, required: Sequence[str],
+                   wanted: set[str] | None = None) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     columns: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     for name in dict.fromkeys(required):
@@ -245,6 +247,8 @@ def _read_channels(path: Path, group: h5py.Group,
             raise InputError(path, f"/aligned/{name}", f"a required channel{unit} (missing)")
     length = None
     for name, ds in group.items():
+        if wanted is not None and name not in wanted:
+            continue
         if not isinstance(ds, h5py.Dataset) or ds.ndim != 1 or not np.issubdtype(ds.dtype, np.number):
             raise InputError(path, f"/aligned/{name}", "a 1-D numeric dataset")
         if "units" not in ds.attrs:

@@ -1,0 +1,283 @@
+"""A long run simulated block by block: cost flat in the run's length, the numbers of the whole-run solver.
+
+`solver.discretise` keys, discretises and stacks the whole run at once: a dozen run-sized temporaries per call
+(law values, keys, a hash table twice the run, the input matrix), each above glibc's mmap threshold on a long
+run, so each is a fresh mapping the kernel zero-fills page by page (half the CPU of a 10 M-sample simulate).
+Here the run goes through in blocks of `BLOCK` samples: laws, keys and inputs are block-sized (cache-resident,
+reused by the allocator), operating points are numbered across blocks in one growing table and each distinct
+point is discretised once, when first met; the only run-sized array is the result. Every law of a model file is
+pointwise (a sample's value depends on that sample's channels), so a block's laws are the run's laws on it, and
+the states are those of `propagate(discretise(...))` bit for bit (tests/test_stream.py).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+
+import numpy as np
+import pandas as pd
+from numba import njit
+
+from benchlab.network.solver import (_assembly, _coefficient_terms, _conductances, _quantised, _system_matrices, _zoh,
+                                     propagate_into)
+from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
+
+BLOCK = 1 << 14  # samples per block: a block's float64 column is 128 KiB, inside the core's L2 cache (16,384 measured best of 4,096..131,072)
+
+
+def samples(channels: Channels) -> int:
+    """The number of samples the channels hold."""
+    counted = getattr(channels, "samples", None)
+    return counted if counted is not None else len(next(iter(channels.values())))
+
+
+def window(channels: Channels, start: int, stop: int) -> Channels:
+    """Samples start..stop of every channel (views where the channels allow)."""
+    if hasattr(channels, "window"):
+        return channels.window(start, stop)
+    return {name: values[start:stop] for name, values in channels.items()}
+
+
+class _Points:
+    """Operating points met so far: their integer keys (one column per varying law) numbered in order of first
+    appearance, and the discrete matrices of each."""
+
+    def __init__(self, columns: int, n: int, m: int) -> None:
+        self.count = 0
+        self.bits = 12
+        self.table = np.full(1 << self.bits, -1, dtype=np.int64)
+        self.keys = np.empty((1024, columns), dtype=np.int64)
+        self.Ad = np.empty((1024, n, n))
+        self.Bd = np.empty((1024, n, m))
+
+    def number(self, keys: np.ndarray) -> np.ndarray:
+        """Each row's point index; rows not met before become new points (numbered after the known ones)."""
+        if self.count + len(keys) > len(self.keys):
+            self.keys = _grown(self.keys, self.count + len(keys))
+        codes = np.empty(len(keys), dtype=np.int64)
+        done = 0
+        while done < len(keys):  # the table is kept at most half full: grown (and refilled) when it would not be
+            self.count, done = _number(keys, done, self.table, self.bits, self.keys, self.count, codes)
+            if done < len(keys):
+                self.bits += 1
+                self.table = np.full(1 << self.bits, -1, dtype=np.int64)
+                _number(self.keys[:self.count].copy(), 0, self.table, self.bits, self.keys, 0,
+                        np.empty(self.count, dtype=np.int64))
+        return codes
+
+    def add_matrices(self, start: int, Ad: np.ndarray, Bd: np.ndarray) -> None:
+        """The discrete matrices of points start..count."""
+        if self.count > len(self.Ad):
+            self.Ad, self.Bd = _grown(self.Ad, self.count), _grown(self.Bd, self.count)
+        self.Ad[start:self.count], self.Bd[start:self.count] = Ad, Bd
+
+
+def _grown(array: np.ndarray, needed: int) -> np.ndarray:
+    """`array` with room for at least `needed` rows (doubling), its rows kept."""
+    rows = len(array)
+    while rows < needed:
+        rows *= 2
+    out = np.empty((rows, *array.shape[1:]), dtype=array.dtype)
+    out[:len(array)] = array
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _number(keys, first, table, bits, known, count, codes):  # pragma: no cover - compiled
+    """Number the rows of `keys` from `first` on by an open-addressing table over the rows of `known` (`count` so
+    far; room for every new one): codes[i] = index of keys[i] in `known`, new rows appended. Stops where the table
+    would become more than half full. Returns (the new count, the first row not numbered)."""
+    mask = (1 << bits) - 1
+    columns = keys.shape[1]
+    for i in range(first, keys.shape[0]):
+        if i > first:  # runs of one point are the usual case
+            same = True
+            for c in range(columns):
+                if keys[i, c] != keys[i - 1, c]:
+                    same = False
+                    break
+            if same:
+                codes[i] = codes[i - 1]
+                continue
+        h = np.uint64(0)
+        for c in range(columns):
+            h = (h ^ np.uint64(keys[i, c])) * np.uint64(0x9E3779B97F4A7C15)
+        slot = np.int64(h >> np.uint64(64 - bits)) & mask
+        while True:
+            j = table[slot]
+            if j < 0:
+                if 2 * (count + 1) > mask + 1:
+                    return count, i
+                table[slot] = count
+                for c in range(columns):
+                    known[count, c] = keys[i, c]
+                codes[i] = count
+                count += 1
+                break
+            same = True
+            for c in range(columns):
+                if known[j, c] != keys[i, c]:
+                    same = False
+                    break
+            if same:
+                codes[i] = j
+                break
+            slot = (slot + 1) & mask
+    return count, keys.shape[0]
+
+
+def _blocks(n: int, block: int) -> Iterator[tuple[int, int]]:
+    for start in range(0, n, block):
+        yield start, min(start + block, n)
+
+
+def stream_network(network: ThermalNetwork, params: Params, channels: Channels, dt: float, x0: np.ndarray,
+                   resolution: float, block: int | None = None) -> np.ndarray | None:
+    """States state-major (n, N + 1), column k at time k*dt from x0, as `solver.run_network` without a memo gives
+    them (transposed); None where the network has temperature-affine sources (their keys are scaled by the whole
+    run's largest value, so the whole-run solver keys them)."""
+    if _coefficient_terms(network):
+        return None
+    n = samples(channels)
+    x0 = np.asarray(x0, dtype=np.float64)
+    states = len(network.state_names)
+    inputs = len(network.sources) + len(network.boundaries)
+    assembly = _assembly(network)
+    out = np.empty((states, n + 1))
+    out[:, 0] = x0
+    points: _Points | None = None
+    varying: tuple[int, ...] = ()
+    decode = None
+    for start, stop in _blocks(n, block or BLOCK):
+        part = window(channels, start, stop)
+        size = stop - start
+        laws = _conductances(network, params, part, size)
+        pattern = tuple(i for i, g in enumerate(laws) if isinstance(g, np.ndarray))
+        columns = _key_columns(laws, pattern)
+        if points is None:
+            varying, points = pattern, _Points(max(len(columns), 1), states, inputs)
+        elif pattern != varying:
+            return None  # a law constant on one block and not on another: key the run as a whole
+        keys = np.empty((size, max(len(columns), 1)), dtype=np.int64)
+        if columns:
+            for c, (column, _) in enumerate(columns):
+                keys[:, c], decode = _quantised(column, True, resolution)
+        else:
+            keys[:] = 0
+        known = points.count
+        op_index = points.number(keys)
+        if points.count > known:
+            _discretise_points(network, params, laws, columns, points, known, decode, dt, assembly)
+        flows = [as_samples(s.heat_flow(params, part), size) for s in network.sources]
+        flows += [as_samples(b.temperature(part), size) for b in network.boundaries]
+        propagate_into(op_index, points.Ad, points.Bd, sample_matrix(flows, size), out[:, start], out, start)
+    return out
+
+
+def _key_columns(laws: list, varying: tuple[int, ...]) -> list[tuple[np.ndarray, list[int]]]:
+    """The varying laws' values as key columns, each with the laws it keys; laws that share one array (one law
+    object, R_PA = R_FA) share one column."""
+    columns: list[tuple[np.ndarray, list[int]]] = []
+    for i in varying:
+        for values, keyed in columns:
+            if values is laws[i]:
+                keyed.append(i)
+                break
+        else:
+            columns.append((laws[i], [i]))
+    return columns
+
+
+def _discretise_points(network: ThermalNetwork, params: Params, laws: list, columns: list, points: _Points,
+                       known: int, decode, dt: float, assembly: tuple) -> None:
+    """Discrete matrices of the points numbered known..count: each varying law at its key, the rest as they are."""
+    new = points.count - known
+    per_point: list = [np.full(new, g) if not isinstance(g, np.ndarray) else None for g in laws]
+    for c, (_, keyed) in enumerate(columns):
+        values = decode(points.keys[known:points.count, c])
+        for i in keyed:
+            per_point[i] = values
+    A, B = _system_matrices(network, params, per_point, [], new, assembly)
+    points.add_matrices(known, *_zoh(A, B, dt))
+
+
+class RunChannels(Mapping):
+    """A run's channels as the network's laws read them, held on demand: a channel's drop-outs (NaN) at the last
+    valid value (leading ones at the first), a channel never measured left out (`simulation.input_channels`'s
+    values), without copying a channel that has no drop-out or converting one no law asks for."""
+
+    def __init__(self, frame: pd.DataFrame, start: int = 0, stop: int | None = None,
+                 read: dict[str, np.ndarray | None] | None = None, gaps: dict[str, bool] | None = None) -> None:
+        self._frame = frame
+        self._start = start
+        self._stop = stop if stop is not None else len(frame)
+        self._read = read if read is not None else {}  # name -> float64 column, None where never measured
+        self._gaps = gaps if gaps is not None else {}  # name -> whether the column has a drop-out
+        self.samples = self._stop - self._start
+
+    def _column(self, name: str) -> np.ndarray | None:
+        if name not in self._read:
+            values = self._frame[name].to_numpy(np.float64) if name in self._frame.columns else None
+            measured = values is not None and (name == "time" or first_valid_index(values) >= 0)
+            self._read[name] = values if measured else None
+        return self._read[name]
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and self._column(name) is not None
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        raw = self._column(name)
+        if raw is None:
+            raise KeyError(name)
+        part = raw[self._start:self._stop]
+        if name not in self._gaps:
+            self._gaps[name] = bool(np.isnan(raw).any())
+        if not self._gaps[name] or not np.isnan(part).any():
+            return part
+        return _held(raw, self._start, self._stop)
+
+    def __iter__(self) -> Iterator[str]:
+        return (name for name in self._frame.columns if self._column(name) is not None)
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+    def window(self, start: int, stop: int) -> "RunChannels":
+        """Samples start..stop (of this window) of every channel."""
+        return RunChannels(self._frame, self._start + start, self._start + stop, self._read, self._gaps)
+
+    def first_valid(self, name: str) -> float | None:
+        """The channel's first finite sample in the window, None where it has none."""
+        raw = self._column(name)
+        at = -1 if raw is None else first_valid_index(raw[self._start:self._stop])
+        return None if at < 0 else float(raw[self._start + at])
+
+
+def first_valid_index(values: np.ndarray) -> int:
+    """Index of the first finite value, -1 if none."""
+    finite = np.isfinite(values)
+    at = int(finite.argmax()) if len(finite) else 0
+    return at if len(finite) and finite[at] else -1
+
+
+def _held(raw: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """raw[start:stop] with each NaN replaced by the last valid value before it in the whole column (leading NaNs
+    by the column's first valid value; the column holds one)."""
+    part = raw[start:stop]
+    valid = ~np.isnan(part)
+    last = np.maximum.accumulate(np.where(valid, np.arange(len(part)), -1))
+    out = part[np.maximum(last, 0)]
+    out[last < 0] = _carried(raw, start)
+    return out
+
+
+def _carried(raw: np.ndarray, start: int) -> float:
+    """The last valid value before sample `start`, else the column's first valid value."""
+    stop = start
+    while stop > 0:  # looked for backwards a window at a time: it is usually just before
+        low = max(stop - 4096, 0)
+        valid = np.flatnonzero(~np.isnan(raw[low:stop]))
+        if len(valid):
+            return float(raw[low + valid[-1]])
+        stop = low
+    return float(raw[first_valid_index(raw)])

@@ -1,0 +1,63 @@
+"""A run simulated block by block (benchlab.network.stream) gives the whole-run solver's states bit for bit."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import benchlab
+from benchlab.model.clutch import clutch_network
+from benchlab.model.params import paper_params
+from benchlab.network.simulation import initial_state, input_channels
+from benchlab.network.solver import discretise, propagate
+from benchlab.network.stream import RunChannels, stream_network
+
+
+def _run(n: int = 5000, seed: int = 4) -> pd.DataFrame:
+    """A clutch run with noisy engine speed (a new operating point nearly every sample), switching clutch state,
+    and drop-outs in the measured flywheel temperature and the ambient, leading ones included."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    state = (np.sin(t / 3.0) > 0).astype(float)
+    run = pd.DataFrame({"time": t, "engine_speed": 150 + 40 * np.sin(t) + rng.normal(0, 2, n),
+                        "clutch_state": state, "friction_power": 3000 * state * rng.uniform(0.5, 1, n),
+                        "T_flywheel": 40 + rng.normal(0, 0.1, n), "T_air": np.full(n, 35.0),
+                        "T_housing": np.full(n, 30.0), "T_ambient": 25 + rng.normal(0, 0.05, n),
+                        "T_engine": np.full(n, np.nan)})
+    run.loc[:6, "T_flywheel"] = np.nan
+    run.loc[rng.choice(n, 300, replace=False), "T_ambient"] = np.nan
+    run.loc[:2, "T_ambient"] = np.nan
+    run.attrs["dt"] = 0.01
+    return run
+
+
+@pytest.mark.parametrize("block", [1, 97, 1024, 10**6])
+def test_blocks_give_the_whole_run_states_bit_for_bit(block):
+    run = _run()
+    network, params = clutch_network(), paper_params("nonlinear")
+    channels = input_channels(run)
+    x0 = initial_state(network, channels)
+    want = propagate(discretise(network, params, channels, 0.01), x0)
+    got = stream_network(network, params, RunChannels(pd.DataFrame(run, copy=False)), 0.01, x0, 1e-6, block)
+    assert np.array_equal(got.T, want)
+
+
+def test_run_channels_hold_drop_outs_as_input_channels_does():
+    run = _run()
+    held = input_channels(run)
+    lazy = RunChannels(pd.DataFrame(run, copy=False))
+    assert set(lazy) == set(held) and "T_engine" not in lazy  # a channel never measured is left out
+    for name, values in held.items():
+        assert np.array_equal(lazy[name], values)
+        assert np.array_equal(lazy.window(1000, 2345)[name], values[1000:2345])
+
+
+def test_simulate_keeps_its_columns_and_values():
+    run = _run()
+    params = paper_params("nonlinear")
+    sim = benchlab.simulate(run, params)
+    network = clutch_network()
+    channels = input_channels(run)
+    states = propagate(discretise(network, params, channels, 0.01), initial_state(network, channels))[:-1]
+    assert list(sim.columns) == list(network.outputs)
+    for name, state in network.outputs.items():
+        assert np.array_equal(sim[name].to_numpy(), states[:, network.state_names.index(state)])
