@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from benchlab.batch import trends
 from benchlab.identify.api import Identification, identify
@@ -41,13 +42,21 @@ from sim_bench.plant import ThermalPlant
 from sim_bench.virtual_run import run_schedule
 
 Z95 = 1.959964
+NOMINAL = 0.95
 MIN_COVERAGE = 0.90
 MODELS = ("nonlinear", "linear")
+PLANT = "paper"  # every run here is of paper_plant: the records say so
+
+
+def paper_plant(params: dict) -> ThermalPlant:
+    """The paper's network with `params` and no extra effects: the plant the clutch models can match exactly, so
+    every deviation from its truth is estimation error (a richer plant would add model-structure error)."""
+    return ThermalPlant(params, effects=())
 
 
 def simulated_run(source: str, model: str, seed: int, minutes: float, params: dict | None = None) -> pd.DataFrame:
-    """A Table 1 run of `model`'s plant (or of `params`) through the drivers or batch-simulated."""
-    plant = ThermalPlant(params or paper_params(model))
+    """A Table 1 run of `model`'s paper plant (or of `params`) through the drivers or batch-simulated."""
+    plant = paper_plant(params or paper_params(model))
     if source == "virtual":
         return run_schedule(table1_schedule(seed, duration_s=60 * minutes), plant, seed=seed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -71,7 +80,7 @@ def record(source: str, model: str, seed: int, run: pd.DataFrame, truth: dict, s
     se = result.uncertainty.standard_errors
     names = [k for k in result.params if k in se and "@" not in k]
     wrong = residual_verdicts(identify([run], "linear", starts=starts, seed=0)) if model == "nonlinear" else None
-    return {"source": source, "model": model, "seed": seed, "truth": {k: truth[k] for k in names},
+    return {"source": source, "model": model, "plant": PLANT, "seed": seed, "truth": {k: truth[k] for k in names},
             "estimate": {k: result.params[k] for k in names}, "se": {k: se[k] for k in names},
             "method": result.summary()["uncertainty_method"]["name"], "residuals": residual_verdicts(result),
             "wrong_model_residuals": wrong}
@@ -99,12 +108,33 @@ def coverage_table(records: list[dict]) -> pd.DataFrame:
             est = np.array([r[name] for r in group["estimate"]])
             se = np.array([r[name] for r in group["se"]])
             truth = group.iloc[0]["truth"][name]
+            z = (est - truth) / se
+            held = int(np.sum(np.abs(z) <= Z95))
+            low, high = clopper_pearson(held, len(est))
             rows.append({"source": source, "model": model, "param": name, "runs": len(est),
-                         "coverage_pct": 100 * np.mean(np.abs(est - truth) <= Z95 * se),
+                         "coverage_pct": 100 * held / len(est), "ci_low_pct": 100 * low, "ci_high_pct": 100 * high,
+                         "p_vs_95": stats.binomtest(held, len(est), NOMINAL).pvalue,
+                         "z_mean": np.mean(z), "z_sd": np.std(z, ddof=1),
                          "spread_over_se": np.std(est, ddof=1) / np.median(se),
                          "bias_pct": 100 * (np.mean(est) - truth) / abs(truth),
                          "bias_over_se": (np.mean(est) - truth) / np.median(se)})
     return pd.DataFrame(rows)
+
+
+def clopper_pearson(held: int, runs: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper-Pearson) confidence interval of a coverage measured as `held` of `runs`."""
+    alpha = 1 - level
+    low = stats.beta.ppf(alpha / 2, held, runs - held + 1) if held else 0.0
+    high = stats.beta.ppf(1 - alpha / 2, held + 1, runs - held) if held < runs else 1.0
+    return float(low), float(high)
+
+
+def chance_below(runs: int, cells: int, threshold: float = MIN_COVERAGE) -> tuple[float, float]:
+    """If every interval held the truth at exactly the nominal 95 %: the chance that one parameter's measured
+    coverage over `runs` falls below `threshold`, and that at least one of `cells` such coverages does."""
+    misses_allowed = int(np.floor(runs * (1 - threshold) + 1e-9))
+    one = float(stats.binom.sf(misses_allowed, runs, 1 - NOMINAL))
+    return one, 1 - (1 - one) ** cells
 
 
 def batch_table(values: Iterable[dict], ses: Iterable[dict]) -> pd.DataFrame:
@@ -171,6 +201,16 @@ def main() -> int:
     methods = sorted({r["method"] for r in records})
     print(f"\ninterval methods in these records: {methods}")
     low = table[table["coverage_pct"] < 100 * MIN_COVERAGE]
+    one, any_cell = chance_below(int(table["runs"].min()), len(table))
+    rejected = table[table["p_vs_95"] < 0.01 / len(table)]
+    print(f"if every interval were exactly 95 %: a coverage over {int(table['runs'].min())} runs falls below "
+          f"{100 * MIN_COVERAGE:.0f} % by chance with p = {one:.3f}, at least one of these {len(table)} with "
+          f"p = {any_cell:.2f}")
+    print("coverage inconsistent with 95 % (binomial, 1 % Bonferroni over the table): "
+          f"{'none' if rejected.empty else ', '.join(f'{r.source}/{r.model}/{r.param}' for r in rejected.itertuples())}")
+    for (source, model), group in table.groupby(["source", "model"]):
+        print(f"pooled coverage {source}/{model}: {np.average(group['coverage_pct'], weights=group['runs']):.1f} % "
+              f"over {len(group)} parameters")
     print(f"coverage below {100 * MIN_COVERAGE:.0f} %: "
           f"{'none' if low.empty else ', '.join(f'{r.source}/{r.model}/{r.param}' for r in low.itertuples())}")
     rates = {}

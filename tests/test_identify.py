@@ -11,6 +11,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from scipy.signal import lfilter
 
 from benchlab.cli import main
 from benchlab.model.clutch import convection_resistance
@@ -18,8 +19,9 @@ from benchlab.identify.api import identify
 from benchlab.identify.data import hold_samples, prepare
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import residual_index
-from benchlab.identify.uncertainty import (CORRELATION_LIMIT, identifiability_warnings, long_run_covariance,
-                                           power_noise)
+from benchlab.identify.uncertainty import (CORRELATION_LIMIT, bartlett_bandwidth, identifiability_warnings,
+                                          long_run_covariance, prewhitened_long_run_covariance,
+                                          power_noise)
 from benchlab.identify.metrics import rmse_k
 from benchlab.model.params import load_params, paper_params
 from benchlab.runfile import load_run, write_run
@@ -202,6 +204,23 @@ def test_newey_west_matches_its_definition():
         gamma = scores[lag:].T @ scores[:-lag]
         expected += (1 - lag / bandwidth) * (gamma + gamma.T)
     assert np.allclose(long_run_covariance(scores, bandwidth), expected)
+
+
+def test_prewhitened_newey_west_holds_a_strongly_correlated_score():
+    """AR(1) scores (phi 0.9, two correlated columns): the long-run covariance of the sum is n/(1-phi)^2 times
+    the innovations'. Prewhitened it comes out within 10 % on average over 30 runs of 2400 steps; the plain
+    Bartlett estimate at Andrews' bandwidth falls short (why identify prewhitens)."""
+    rng = np.random.default_rng(3)
+    steps, phi = 2400, 0.9
+    truth = steps * np.array([1.0, 2.0]) / (1 - phi) ** 2
+    prewhitened, plain = [], []
+    for _ in range(30):
+        ar = lfilter([1.0], [1.0, -phi], rng.standard_normal((steps, 2)), axis=0)
+        scores = np.column_stack([ar[:, 0], ar[:, 0] + ar[:, 1]])
+        prewhitened.append(np.diag(prewhitened_long_run_covariance(scores)[0]) / truth)
+        plain.append(np.diag(long_run_covariance(scores, bartlett_bandwidth(scores))) / truth)
+    assert np.all(np.abs(np.mean(prewhitened, axis=0) - 1) < 0.1)
+    assert np.all(np.mean(plain, axis=0) < np.mean(prewhitened, axis=0))
 
 
 def test_power_noise_from_the_full_rate_record():

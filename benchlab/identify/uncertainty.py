@@ -10,8 +10,8 @@ neither holds, and the plain (JᵀJ)⁻¹s² was 3–100× too small against the
 - residuals are autocorrelated (held sensor readings, model error).
 
 So the covariance is the sandwich A⁻¹ (S_res + S_in) A⁻¹ with A = JᵀJ, where S_res is the Newey–West
-(Bartlett) long-run covariance of the per-step scores Jₜᵀrₜ of each run, bandwidth by Andrews' AR(1)
-rule, and S_in the covariance of the score Jᵀe that the input noise e causes: the friction power's level at
+(Bartlett) long-run covariance of the per-step scores Jₜᵀrₜ of each run, VAR(1)-prewhitened (Andrews &
+Monahan 1992), bandwidth by Andrews' AR(1) rule on the whitened scores, and S_in the covariance of the score Jᵀe that the input noise e causes: the friction power's level at
 each fitting step estimated from the run's own full-rate record (`power_noise`), the boundary temperatures'
 (T_ambient, T_engine) from their step means (`temperature_input_noise`), pushed through the fitted network by
 Monte Carlo (the temperatures respond linearly to these inputs, so this is exact up to sampling). The parameter
@@ -36,12 +36,16 @@ from benchlab.identify.metrics import MAD_TO_SIGMA, robust_sigma
 CORRELATION_LIMIT = 0.95
 RELATIVE_SE_LIMIT = 0.5
 INPUT_NOISE_DRAWS = 200
+PREWHITEN_CAP = 0.97  # largest singular value of the prewhitening VAR(1) (Andrews & Monahan 1992)
+PREWHITEN_MIN_STEPS = 10  # fitting steps per score column a run needs for the prewhitening VAR(1)
 MIN_NOISE_SAMPLES = 8  # slipping samples a fitting step needs for its own noise estimate (else the run's)
 #: How the parameter file's standard errors were made (its "uncertainty_method"): named methods, not inflation.
-METHOD = {"name": "HAC sandwich (Newey-West) with Monte Carlo input noise",
+METHOD = {"name": "HAC sandwich (prewhitened Newey-West) with Monte Carlo input noise",
           "covariance": "sandwich A^-1 (S_res + S_in) A^-1, A = J^T J with columns scaled to unit norm",
-          "residuals": "Newey-West (Bartlett kernel) long-run covariance of the per-step scores J_t^T r_t per run",
-          "bandwidth": "Andrews (1991) AR(1) plug-in rule, per run, in fitting steps (uncertainty_bandwidths)",
+          "residuals": "Newey-West (Bartlett kernel) long-run covariance of the per-step scores J_t^T r_t per run, "
+                       "VAR(1)-prewhitened and recoloured (Andrews & Monahan 1992; singular values capped at 0.97)",
+          "bandwidth": "Andrews (1991) AR(1) plug-in rule on the prewhitened scores, per run, in fitting steps "
+                       "(uncertainty_bandwidths)",
           "input_noise": "noise of the friction power (full-rate record) and of the boundary temperatures (step "
                          "means' differences) per fitting step, pushed through the fitted network by Monte Carlo",
           "interval": "estimate +- 1.96 standard errors: 95 %, normal"}
@@ -126,6 +130,32 @@ def long_run_covariance(scores: np.ndarray, bandwidth: int) -> np.ndarray:
     return windows.T @ windows / bandwidth
 
 
+def prewhitened_long_run_covariance(scores: np.ndarray) -> tuple[np.ndarray, int]:
+    """Long-run covariance of a run's score sum, VAR(1)-prewhitened (Andrews & Monahan 1992), and its bandwidth.
+
+    A small Bartlett bandwidth underweights strong short-lag correlation (the scanner's readings held over two
+    fitting steps: lag-1 correlation 0.6 on the drivers' runs), and the standard errors come out too small. So a
+    VAR(1) s_t = A s_(t-1) + u_t is fitted first (columns scaled to unit spread, A's singular values capped at
+    PREWHITEN_CAP so that I - A stays invertible), the Newey-West covariance is taken of the whitened u_t with
+    Andrews' bandwidth for u_t, and recoloured: (I - A)^-1 S_u (I - A)^-T. A run with fewer than
+    PREWHITEN_MIN_STEPS steps per parameter is not prewhitened (A is not estimable)."""
+    steps, p = scores.shape
+    if steps < PREWHITEN_MIN_STEPS * p:
+        bandwidth = bartlett_bandwidth(scores)
+        return long_run_covariance(scores, bandwidth), bandwidth
+    spread = scores.std(axis=0)
+    spread[spread == 0] = 1.0
+    scaled = scores / spread
+    transition = np.linalg.lstsq(scaled[:-1], scaled[1:], rcond=None)[0].T
+    left, singular, right = np.linalg.svd(transition)
+    transition = left @ np.diag(np.minimum(singular, PREWHITEN_CAP)) @ right
+    whitened = scaled[1:] - scaled[:-1] @ transition.T
+    bandwidth = bartlett_bandwidth(whitened)
+    recolour = np.linalg.inv(np.eye(p) - transition)
+    covariance = recolour @ long_run_covariance(whitened, bandwidth) @ recolour.T
+    return covariance * np.outer(spread, spread), bandwidth
+
+
 def temperature_input_noise(data: FitData) -> dict[str, np.ndarray]:
     """Noise (K) per fitting step of each measured temperature the model reads but does not fit (boundaries such
     as T_ambient, T_engine): from the step means' first differences (robust), the temperature being slow."""
@@ -204,9 +234,9 @@ def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: 
     J = result.jacobian
     n, p = J.shape
     inverse = scaled_inverse(J.T @ J)
-    scores = run_scores(result, datasets)
-    bandwidths = [bartlett_bandwidth(s) for s in scores]
-    residual_part = sum(long_run_covariance(s, b) for s, b in zip(scores, bandwidths)) * n / max(n - p, 1)
+    per_run = [prewhitened_long_run_covariance(s) for s in run_scores(result, datasets)]
+    bandwidths = [bandwidth for _, bandwidth in per_run]
+    residual_part = sum(covariance for covariance, _ in per_run) * n / max(n - p, 1)
     input_part = input_noise_covariance(result, datasets, noise)
     cov = inverse @ (residual_part + input_part) @ inverse
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
