@@ -121,7 +121,11 @@ def run_schedule(steps: Sequence[Step], plant: ThermalPlant, seed: int, dt: floa
     node = max(1, int(round(sensors.node_period_s / dt)))
     out: dict[str, np.ndarray] = {"time": time}
     out["engine_speed"] = truth["engine_speed"] + rng.normal(0, sensors.speed_noise_rpm, n)
-    out["clutch_speed"] = np.maximum(truth["clutch_speed"] + rng.normal(0, sensors.speed_noise_rpm, n), 0.0)
+    # a shaft that stands reads 0 (a pulse sensor counts no pulses): noise clipped at 0 rpm would read it ~0.4 rpm too
+    # fast while a launch starts, the slip and friction power too low (the bias issue 32's coverage study traced in C_F)
+    moving = truth["clutch_speed"] > 0
+    out["clutch_speed"] = np.where(moving, np.maximum(truth["clutch_speed"] + rng.normal(0, sensors.speed_noise_rpm, n),
+                                                      0.0), 0.0)
     out["clutch_torque"] = truth["clutch_torque"] + rng.normal(0, sensors.torque_noise_nm, n)
     out["clutch_state"] = truth["clutch_state"].copy()
     slipping = ((out["clutch_state"] > 0.5) & slipping_by_speed(out["engine_speed"], out["clutch_speed"])
