@@ -55,6 +55,7 @@ if TYPE_CHECKING:
 _ids = itertools.count()
 DMM_CHANNELS = {101: "T_air", 102: "T_housing", 103: "T_ambient"}
 MAX_DROPOUT_MEANS = 4.0  # radio drop-outs are exponential, cut at 4 means (8 s): longer silence is a fault
+MU_PERIOD_S = 1.0  # the lining's μ(ϑ) is held over periods this long: its temperature moves little in a second
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,10 @@ class SimPhysics:
         self.plant.reset(amb0 if init is None else init)
         self._chunks: list[tuple[int, dict[str, np.ndarray], dict[str, np.ndarray]]] = []
         self._end = k0  # first index not computed yet
+        # μ(ϑ) of the lining, held over fixed periods of the grid (MU_PERIOD_S, from the state at each period's start),
+        # so that how the run is cut into chunks never changes the torque: period index -> factor
+        self._mu_period = max(1, int(round(MU_PERIOD_S / self.dt)))
+        self._mu: dict[int, float] = {}
         self.fault_heat = {"F": 0.0, "A": 0.0}
         self.stuck: tuple[float, float] | None = None  # (clutch torque, until t): clutch clamped, output braked
         self._setpoints = (0.0, False, 0.0, 0.0)
@@ -140,6 +145,8 @@ class SimPhysics:
 
     def _compute(self, n: int) -> None:
         k0 = self._end
+        if self.plant.friction is not None:  # a chunk ends where μ's period does (see _friction_factor)
+            n = min(n, (k0 // self._mu_period + 1) * self._mu_period - k0)
         self._apply_stuck(k0 * self.dt)
         cols = self._channels(self.drivetrain, k0, n)
         states = self.plant.advance(cols, self.dt)
@@ -184,7 +191,7 @@ class SimPhysics:
 
     def _channels(self, drivetrain: Drivetrain, k0: int, n: int) -> dict[str, np.ndarray]:
         """The plant's channels on grid points k0 .. k0+n-1: `drivetrain` advanced over them, ambient, fault heat."""
-        drivetrain.torque_factor = self.plant.friction_factor()  # μ(ϑ) of the lining now, held over the chunk
+        drivetrain.torque_factor = self._friction_factor(k0)
         cols = drivetrain.advance(n, self.dt)
         if self.stuck is not None:
             cols["clutch_state"][:] = 1.0
@@ -192,6 +199,16 @@ class SimPhysics:
         cols["fault_heat_F"] = np.full(n, self.fault_heat["F"])
         cols["fault_heat_A"] = np.full(n, self.fault_heat["A"])
         return cols
+
+    def _friction_factor(self, k0: int) -> float:
+        """μ(ϑ)/μ_cal for the period holding grid point k0: from the plant's state at the period's start (taken when
+        a chunk starts there, kept for a chunk that starts inside it after a cut)."""
+        period = k0 // self._mu_period
+        if k0 % self._mu_period == 0 or period not in self._mu:
+            self._mu[period] = self.plant.friction_factor()
+            for old in [p for p in self._mu if p < period - 2]:
+                del self._mu[old]
+        return self._mu[period]
 
     def _cut(self, t: float) -> None:
         """Set-points change at t: drop everything computed from the first grid point at or after t, restore the state there."""

@@ -39,7 +39,7 @@ def job(tmp_path_factory) -> tuple[Path, str]:
 
 def test_pipeline_runs_end_to_end_and_writes_every_product(job):
     tmp_path, printed = job
-    assert printed.count("on the simulated bench") == 2  # both runs say which bench made them
+    assert printed.count("on the simulated bench") == 3  # the three runs (Table 1, validation, sweep) say which bench
     for step in ("run", "validation", "identify", "report", "diagnose", "wear"):
         assert any(line.startswith(step) for line in printed.splitlines()), step
     fitting = load_run(tmp_path / "table1.h5")

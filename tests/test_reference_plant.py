@@ -63,10 +63,11 @@ def test_run_records_which_plant_and_every_node(tmp_path, capsys):
     for plant, nodes in (("reference", set(CHANNEL_NAMES.values())),
                          ("paper", {"T_pressure_plate", "T_flywheel", "T_air", "T_housing"})):
         out = tmp_path / f"{plant}.h5"
-        assert main(["run", "table1", "--cycles", "1", "--out", str(out), "--plant", plant, "--quiet"]) == 0
+        assert main(["run", "table1", "--bench", "sim", "--cycles", "1", "--out", str(out), "--plant", plant,
+                     "--quiet"]) == 0
         with h5py.File(out, "r") as f:
             assert json.loads(f.attrs["sim_truth"])["plant"] == plant
             assert set(f["truth"]) == nodes | {"time"}
     # a resumed run keeps its plant: another one asked for is refused in one line
-    assert main(["run", "--resume", str(tmp_path / "paper.h5"), "--plant", "reference", "--quiet"]) == 2
+    assert main(["run", "--resume", str(tmp_path / "paper.h5"), "--bench", "sim", "--plant", "reference", "--quiet"]) == 2
     assert "sim_truth" in capsys.readouterr().err
