@@ -145,11 +145,8 @@ class SimPhysics:
 
     def _compute(self, n: int) -> None:
         k0 = self._end
-        if self.plant.friction is not None:  # a chunk ends where μ's period does (see _friction_factor)
-            n = min(n, (k0 // self._mu_period + 1) * self._mu_period - k0)
         self._apply_stuck(k0 * self.dt)
-        cols = self._channels(self.drivetrain, k0, n)
-        states = self.plant.advance(cols, self.dt)
+        cols, states = self._advance(k0, n)
         temps = self.plant.sensor_temperatures(states)
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
         self._record_truth(k0, temps["_states"])
@@ -200,6 +197,20 @@ class SimPhysics:
         cols["fault_heat_A"] = np.full(n, self.fault_heat["A"])
         return cols
 
+    def _advance(self, k0: int, n: int) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """The channels and true states on grid points k0 .. k0+n-1, the plant advanced over them: in one piece, or
+        for a plant with μ(ϑ) piece by piece along μ's periods (each piece's torque from its period's factor)."""
+        pieces, k = [], k0
+        while k < k0 + n:
+            end = k0 + n if self.plant.friction is None else min(k0 + n, (k // self._mu_period + 1) * self._mu_period)
+            cols = self._channels(self.drivetrain, k, end - k)
+            pieces.append((cols, self.plant.advance(cols, self.dt)))
+            k = end
+        if len(pieces) == 1:
+            return pieces[0]
+        return ({name: np.concatenate([c[name] for c, _ in pieces]) for name in pieces[0][0]},
+                {name: np.concatenate([t[name] for _, t in pieces]) for name in pieces[0][1]})
+
     def _friction_factor(self, k0: int) -> float:
         """μ(ϑ)/μ_cal for the period holding grid point k0: from the plant's state at the period's start (taken when
         a chunk starts there, kept for a chunk that starts inside it after a cut)."""
@@ -215,10 +226,9 @@ class SimPhysics:
         k = int(math.ceil(t / self.dt - 1e-6))
         if k > self._end:
             self._ensure(k - 1)
-        if k >= self._end:
+        if k >= self._end or not self._chunks:  # nothing kept before _end: the plant's state is _end's, it holds from there
             return
-        if self._chunks:  # a command stamped before the oldest state still kept takes effect from there
-            k = max(k, self._chunks[0][0])
+        k = max(k, self._chunks[0][0])  # a command stamped before the oldest state still kept takes effect from there
         while self._chunks and self._chunks[-1][0] > k:
             self._chunks.pop()
         k0, cols, temps = self._chunks[-1]

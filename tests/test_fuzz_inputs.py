@@ -243,7 +243,9 @@ def test_fuzzed_stored_schedules_are_refused_in_one_line_or_within_the_limits():
     """What resume does with /schedule (steps_from_rows, then refuse_over_limits), on rows as JSON stores them."""
     outcomes = {"passed": 0, "refused": 0}
 
-    @FUZZ
+    # since launches that cannot synchronise are refused too, about 1 in 70 random schedules passes: 800 examples,
+    # drawn the same way every run, so the passing branch is exercised without depending on the draw
+    @settings(FUZZ, max_examples=800, derandomize=True)
     @given(_or_junk(st.lists(step_rows, min_size=1, max_size=3)), limits)
     def check(rows: Any, lim: BenchLimits) -> None:
         stored = json.loads(json.dumps(rows))  # NaN and Infinity survive, tuples become lists
