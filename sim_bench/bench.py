@@ -55,7 +55,7 @@ if TYPE_CHECKING:
 _ids = itertools.count()
 DMM_CHANNELS = {101: "T_air", 102: "T_housing", 103: "T_ambient"}
 MAX_DROPOUT_MEANS = 4.0  # radio drop-outs are exponential, cut at 4 means (8 s): longer silence is a fault
-MU_PERIOD_S = 1.0  # the lining's μ(ϑ) is held over periods this long: its temperature moves little in a second
+MU_PERIOD_S = 2.0  # the lining's μ(ϑ) is held over periods this long (a launch lasts 1-6 s; 1 s cost 12 % of the bench's speed)
 
 
 @dataclass(frozen=True)
