@@ -217,7 +217,8 @@ class SimPhysics:
         period = k0 // self._mu_period
         if k0 % self._mu_period == 0 or period not in self._mu:
             self._mu[period] = self.plant.friction_factor()
-            for old in [p for p in self._mu if p < period - 2]:
+            oldest = (self._chunks[0][0] if self._chunks else self._end) // self._mu_period  # a cut reaches that far
+            for old in [p for p in self._mu if p < oldest]:
                 del self._mu[old]
         return self._mu[period]
 

@@ -42,7 +42,7 @@ from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import (FitResult, coordinate_bounds, fit, fit_multistart, from_coordinates, residual_vector,
                                    simulate_outputs, to_coordinates)
-from benchlab.identify.spec import ModelSpec
+from benchlab.identify.spec import ModelSpec, ParamSpec
 from benchlab.identify.metrics import difference_noise, nrmse_pct, residual
 from benchlab.model.build import build_spec
 from benchlab.model.catalog import resolve_model
@@ -303,9 +303,11 @@ def pinned(current: FitResult, datasets: Sequence[FitData]) -> FitResult:
 def _nested_start(spec: ModelSpec, current: FitResult) -> dict[str, float]:
     """A candidate's start: the current model's fitted values, the new parameters at their no-effect values (a
     parameter split per run group at its shared value for every group)."""
-    return {**{p.name: current.params.get(p.name.split("@")[0], p.initial) if p.name.split("@")[0] in spec.per_group
-               else p.initial for p in spec.free},
-            **{k: current.params[k] for k in current.free_names}}
+    def nested(p: ParamSpec) -> float:
+        shared = p.name.split("@")[0]
+        return current.params.get(shared, p.initial) if shared in spec.per_group else p.initial
+
+    return {**{p.name: nested(p) for p in spec.free}, **{k: current.params[k] for k in current.free_names}}
 
 
 def _starts(cand: Candidate, spec: ModelSpec, current: FitResult) -> list[dict[str, float]]:

@@ -23,12 +23,17 @@ def _unit(f: Finding, name: str) -> str:
     return found.unit if found is not None else ""
 
 
-def per_group_values(f: Finding, result: Diagnosis) -> list[dict]:
-    """For a finding that splits a parameter per run group: each group's runs (their order on the command line), its
-    value in the final model and the value's standard error (the final fit's sandwich covariance of the residuals,
-    benchlab.identify.uncertainty), so a lab sees how far apart the runs are against how well each is known."""
+def final_standard_errors(result: Diagnosis) -> dict[str, float]:
+    """The final model's standard errors: its fit's sandwich covariance of the residuals (benchlab.identify.uncertainty)."""
     datasets = result.final_held.datasets
-    errors = estimate_uncertainty(result.final, datasets, [{} for _ in datasets]).standard_errors
+    return estimate_uncertainty(result.final, datasets, [{} for _ in datasets]).standard_errors
+
+
+def per_group_values(f: Finding, result: Diagnosis, errors: dict[str, float]) -> list[dict]:
+    """For a finding that splits a parameter per run group: each group's runs (their order on the command line), its
+    value in the final model and the value's standard error (`errors`, final_standard_errors), so a lab sees how far
+    apart the runs are against how well each is known."""
+    datasets = result.final_held.datasets
     out = []
     for name in f.candidate.splits:
         for group in run_groups(datasets):
@@ -39,7 +44,7 @@ def per_group_values(f: Finding, result: Diagnosis) -> list[dict]:
     return out
 
 
-def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis) -> dict:
+def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors: dict[str, float]) -> dict:
     """Contract §3 keys, then the test figures, the fitted extension, and the alternatives the data cannot rule out
     with the measurement that would; for runs that disagree, each group's value."""
     c = f.candidate
@@ -57,7 +62,7 @@ def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis) -> dict
                              "p_vs_finding": a.p_vs_winner,
                              "tell_apart_by": telling_apart(model, c, a.candidate)} for a in f.alternatives]}
     if c.splits:
-        out["per_group"] = per_group_values(f, result)
+        out["per_group"] = per_group_values(f, result, errors)
     return out
 
 
@@ -94,10 +99,11 @@ def floor_json(result: Diagnosis) -> dict:
 def summarise(result: Diagnosis, baseline: str) -> dict:
     """Contract JSON of a diagnosis: baseline held-out error, findings by gain, best model, regimes, evidence."""
     final = result.final
+    errors = final_standard_errors(result) if any(f.candidate.splits for f in result.findings) else {}
     return {
         "baseline": {"model": baseline, "rmse_K": result.baseline_held.rmse,
                      "nrmse_pct": result.baseline_held.nrmse_pct},
-        "findings": [_finding_json(f, result.baseline.spec.definition, result) for f in result.findings],
+        "findings": [_finding_json(f, result.baseline.spec.definition, result, errors) for f in result.findings],
         "best": {"model": final.spec.name, "rmse_K": result.final_held.rmse,
                  "nrmse_pct": result.final_held.nrmse_pct, "params": final.params},
         "floor": floor_json(result),
