@@ -320,7 +320,9 @@ def _quantised(values: np.ndarray, positive: bool, resolution: float) -> tuple[n
     """Integer keys of per-sample values and the map from keys back to values: conductances (positive) on a
     log scale of relative step `resolution`, signed coefficients on a linear one relative to their largest size."""
     if positive:
-        return np.rint(np.log(values) / resolution).astype(np.int64), lambda codes: np.exp(codes * resolution)
+        keys = np.log(values)  # rint(log(values) / resolution), in place: one temporary, not three
+        np.divide(keys, resolution, out=keys)
+        return np.rint(keys, out=keys).astype(np.int64), lambda codes: np.exp(codes * resolution)
     step = float(np.max(np.abs(values))) * resolution or 1.0
     return np.rint(values / step).astype(np.int64), lambda codes: codes * step
 
