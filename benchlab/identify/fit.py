@@ -99,9 +99,11 @@ def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datase
     """Simulated minus measured, every fitted channel of every run, valid masked samples only."""
     parts = []
     for data in datasets:
-        states = _states(network, params, data)
+        values = run_values(params, data)
+        states = run_network(network, values, data.channels, data.dt, initial_state(network, data, values),
+                             KEY_RESOLUTION, data.memo)
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
-        parts.append(states.ravel().take(flat) - targets)
+        parts.append(_state_major(states).take(flat) - targets)
     return np.concatenate(parts)
 
 
@@ -117,8 +119,14 @@ def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_s
                                 KEY_RESOLUTION, data.memo)
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
         for part, states in zip(parts, runs):
-            part.append(states[:-1].ravel().take(flat) - targets)
+            part.append(_state_major(states).take(flat) - targets)
     return [np.concatenate(part) for part in parts]
+
+
+def _state_major(states: np.ndarray) -> np.ndarray:
+    """The solver's states (N + 1, n), a transposed view of its state-major array, raveled state after state:
+    a view, not a copy of the whole run for every residual."""
+    return np.ascontiguousarray(states.T).ravel()
 
 
 def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
