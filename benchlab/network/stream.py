@@ -19,7 +19,7 @@ import pandas as pd
 from numba import njit
 
 from benchlab.network.solver import (_assembly, _coefficient_terms, _conductances, _quantised, _system_matrices, _zoh,
-                                     propagate_into)
+                                     _propagate_combined44, propagate_into)
 from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
 
 BLOCK = 1 << 14  # samples per block: a block's float64 column is 128 KiB, inside the core's L2 cache (16,384 measured best of 4,096..131,072)
@@ -49,6 +49,8 @@ class _Points:
         self.keys = np.empty((1024, columns), dtype=np.int64)
         self.Ad = np.empty((1024, n, n))
         self.Bd = np.empty((1024, n, m))
+        # the paper's clutch (4 states, 4 inputs): [Ad Bd] side by side too, one contiguous record per step
+        self.ABd = np.empty((1024, n, n + m)) if (n, m) == (4, 4) else None
 
     def number(self, keys: np.ndarray) -> np.ndarray:
         """Each row's point index; rows not met before become new points (numbered after the known ones)."""
@@ -69,7 +71,18 @@ class _Points:
         """The discrete matrices of points start..count."""
         if self.count > len(self.Ad):
             self.Ad, self.Bd = _grown(self.Ad, self.count), _grown(self.Bd, self.count)
+            self.ABd = None if self.ABd is None else _grown(self.ABd, self.count)
         self.Ad[start:self.count], self.Bd[start:self.count] = Ad, Bd
+        if self.ABd is not None:
+            self.ABd[start:self.count, :, :4], self.ABd[start:self.count, :, 4:] = Ad, Bd
+
+    def propagate(self, op_index: np.ndarray, inputs: np.ndarray, out: np.ndarray, offset: int) -> None:
+        """States from out[:, offset] over the samples of `op_index` into `out` (`solver.propagate_into`)."""
+        x0 = np.ascontiguousarray(out[:, offset])
+        if self.ABd is not None:
+            _propagate_combined44(op_index, self.ABd, inputs, x0, out, offset)
+        else:
+            propagate_into(op_index, self.Ad, self.Bd, inputs, x0, out, offset)
 
 
 def _grown(array: np.ndarray, needed: int) -> np.ndarray:
@@ -172,7 +185,7 @@ def stream_network(network: ThermalNetwork, params: Params, channels: Channels, 
             _discretise_points(network, params, laws, columns, points, known, decode, dt, assembly)
         flows = [as_samples(s.heat_flow(params, part), size) for s in network.sources]
         flows += [as_samples(b.temperature(part), size) for b in network.boundaries]
-        propagate_into(op_index, points.Ad, points.Bd, sample_matrix(flows, size), out[:, start], out, start)
+        points.propagate(op_index, sample_matrix(flows, size), out, start)
     return out
 
 
