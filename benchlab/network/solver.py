@@ -66,12 +66,13 @@ def _all_positive_finite(values: np.ndarray) -> bool:  # pragma: no cover - comp
     return True
 
 
-def _system_matrices(network: ThermalNetwork, params: Params, conductances: list[np.ndarray],
+def _system_matrices(network: ThermalNetwork, params: Params, conductances: list[np.ndarray | float],
                      coefficients: list[np.ndarray], n_ops: int,
                      assembly: tuple[np.ndarray, list[tuple[int, str]]] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Continuous A (n_ops, n, n) and B (n_ops, n, m) for each operating point.
 
-    `coefficients`: per (source, node) term of `_coefficient_terms`, the heat flow per kelvin of that node
+    `conductances`: per link, its value at each point (or one for all). `coefficients`: per (source, node) term of
+    `_coefficient_terms`, the heat flow per kelvin of that node
     (an affine source, e.g. copper loss rising with winding temperature), which goes into A.
     The entries are written as a list of steps (`_assembly`) applied in one compiled pass, in the order and with
     the operations of writing them one by one; `assembly`: the network's, where the caller keeps it.

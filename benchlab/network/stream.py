@@ -207,7 +207,7 @@ def _discretise_points(network: ThermalNetwork, params: Params, laws: list, colu
                        known: int, decode, dt: float, assembly: tuple) -> None:
     """Discrete matrices of the points numbered known..count: each varying law at its key, the rest as they are."""
     new = points.count - known
-    per_point: list = [np.full(new, g) if not isinstance(g, np.ndarray) else None for g in laws]
+    per_point: list = [g if not isinstance(g, np.ndarray) else None for g in laws]  # a constant law stays a scalar
     for c, (_, keyed) in enumerate(columns):
         values = decode(points.keys[known:points.count, c])
         for i in keyed:
