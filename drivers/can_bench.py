@@ -34,7 +34,7 @@ from drivers import can_codec, can_log, timebase
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, MessageCodec, compile_codecs, decode_row, encode_rows
 from drivers.can_frames import (ERROR, EXTENDED, FRAME, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
-                                send_all)
+                                send_all, time_order)
 from drivers.can_log import log_frames
 from drivers.errors import CanBusError, CanConfigError, CanLogError
 from drivers.timebase import ClockMap
@@ -546,14 +546,12 @@ def _in_time_order(parts: list[np.ndarray]) -> np.ndarray:
 @njit(cache=True, nogil=True)
 def _sorted_by_time(frames: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     """FRAME records in time-stamp order, ties in the given order (a stable sort); as given if already in order."""
-    stamps = np.empty(frames.shape[0])
     in_order = True
-    for i in range(frames.shape[0]):
-        stamps[i] = frames[i].timestamp
-        in_order = in_order and (i == 0 or stamps[i] >= stamps[i - 1])
+    for i in range(1, frames.shape[0]):
+        in_order = in_order and frames[i].timestamp >= frames[i - 1].timestamp
     if in_order:
         return frames
-    order = np.argsort(stamps, kind="mergesort")
+    order = time_order(frames)
     out = np.empty_like(frames)
     for k in range(order.shape[0]):
         out[k] = frames[order[k]]
@@ -575,6 +573,7 @@ def _classify_decode(frames: np.ndarray, standard: np.ndarray, extended_ids: np.
     """Per FRAME record its message's slot, or why it is not decoded (UNKNOWN_ID, BAD_LENGTH, ERROR_FRAME,
     OWN_FRAME); the values of the frames of compiled messages (can_codec.decode_row), NaN elsewhere."""
     values[:] = np.nan
+    payload = np.empty(8, dtype=np.uint8)  # decode_row's one argument type (other kernels pass rows of a 2-D array)
     for i in range(frames.shape[0]):
         frame = frames[i]
         f, ident = frame.flags, frame.arbitration_id
@@ -583,15 +582,23 @@ def _classify_decode(frames: np.ndarray, standard: np.ndarray, extended_ids: np.
         elif f & (ERROR | REMOTE):
             m = ERROR_FRAME
         elif f & EXTENDED:
-            k = np.searchsorted(extended_ids, ident)
-            m = extended_slots[k] if k < extended_ids.shape[0] and extended_ids[k] == ident else UNKNOWN_ID
+            lo, hi = 0, extended_ids.shape[0]  # binary search (np.searchsorted compiles for a second longer)
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if extended_ids[mid] < ident:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            m = extended_slots[lo] if lo < extended_ids.shape[0] and extended_ids[lo] == ident else UNKNOWN_ID
         else:
             m = standard[ident] if ident < _STANDARD_IDS else UNKNOWN_ID
         if m >= 0 and frame.length != meta[m, LENGTH]:
             m = BAD_LENGTH
         slot[i] = m
         if m >= 0 and meta[m, COMPILED]:
-            decode_row(frame.data, m, bits, linear, values[i])
+            for b in range(8):
+                payload[b] = frame.data[b]
+            decode_row(payload, m, bits, linear, values[i])
 
 
 @njit(cache=True, nogil=True)
@@ -630,8 +637,9 @@ def _watch(slot: np.ndarray, values: np.ndarray, t: np.ndarray, meta: np.ndarray
     for k in range(k_all):
         i = order[k]
         m = slot[i]
-        grouped[k], times[k] = values[i], t[i]
-        last[m] = values[i]
+        times[k] = t[i]
+        for j in range(values.shape[1]):  # element by element: a row assignment compiles numba's shape-mismatch error
+            grouped[k, j] = last[m, j] = values[i, j]
         last_seen[m] = max(last_seen[m], t[i])
         alive_col, fault_col, state_col = meta[m, ALIVE_COL], meta[m, FAULT_COL], meta[m, STATE_COL]
         if alive_col >= 0:
@@ -692,14 +700,16 @@ def _next_frames(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, aliv
         m = which[k]
         if alive_col[m] >= 0:
             values[m, alive_col[m]] = (np.int64(values[m, alive_col[m]]) + 1) % alive_modulo[m]
-        rows[k] = values[m]
+        for j in range(values.shape[1]):  # element by element: a row assignment compiles numba's shape-mismatch error
+            rows[k, j] = values[m, j]
     payloads = np.zeros((which.shape[0], template[0].data.shape[0]), dtype=np.uint8)
     encode_rows(which, rows, bits, linear, compiled, payloads)
     frames = np.empty(which.shape[0], template.dtype)
     for k in range(which.shape[0]):
         frames[k] = template[which[k]]
         frames[k].timestamp = stamps[k]
-        frames[k].data[:] = payloads[k]
+        for b in range(payloads.shape[1]):
+            frames[k].data[b] = payloads[k, b]
     return frames, rows
 
 

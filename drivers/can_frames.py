@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import can
 import numpy as np
 from can.util import channel2int
+from numba import njit
 
 MAX_DATA = 64  # CAN FD; classic frames use the first 8 bytes, the rest stays 0
 
@@ -42,6 +43,22 @@ def make_frames(timestamp: np.ndarray, arbitration_id: "int | np.ndarray", paylo
     frames["channel"] = _CHANNEL_NONE
     frames["data"][:, :width] = payload
     return frames
+
+
+@njit(cache=True, nogil=True)
+def time_order(frames: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Indices of FRAME records in time-stamp order, ties in the given order (stable), for other kernels: an
+    insertion sort, one pass over frames in order (as a drained bus and a tick's sent and received frames nearly
+    are), and a small compile (np.argsort's mergesort took 1.6 s of a first run's compile)."""
+    order = np.empty(frames.shape[0], dtype=np.int64)
+    for i in range(frames.shape[0]):
+        t = frames[i].timestamp
+        j = i
+        while j > 0 and frames[order[j - 1]].timestamp > t:
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = i
+    return order
 
 
 def record(msg: can.Message) -> Record:
