@@ -34,7 +34,7 @@ from drivers import can_codec, can_log, timebase
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, MessageCodec, compile_codecs, decode_row, encode_rows
 from drivers.can_frames import (ERROR, EXTENDED, FRAME, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
-                                send_all, time_order)
+                                in_time_order, send_all)
 from drivers.can_log import log_frames
 from drivers.errors import CanBusError, CanConfigError, CanLogError
 from drivers.timebase import ClockMap
@@ -540,22 +540,7 @@ class CanBench:
 
 def _in_time_order(parts: list[np.ndarray]) -> np.ndarray:
     """FRAME arrays sent and received as one FRAME array, sorted by time (ties as given)."""
-    return _sorted_by_time(join(parts))
-
-
-@njit(cache=True, nogil=True)
-def _sorted_by_time(frames: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """FRAME records in time-stamp order, ties in the given order (a stable sort); as given if already in order."""
-    in_order = True
-    for i in range(1, frames.shape[0]):
-        in_order = in_order and frames[i].timestamp >= frames[i - 1].timestamp
-    if in_order:
-        return frames
-    order = time_order(frames)
-    out = np.empty_like(frames)
-    for k in range(order.shape[0]):
-        out[k] = frames[order[k]]
-    return out
+    return in_time_order(join(parts))
 
 
 def _samples(blocks: list[CanBlock]) -> list[CanSample]:
@@ -724,7 +709,6 @@ def prime() -> None:
     frames, none, index = np.zeros(0, FRAME), np.zeros(0), np.zeros(0, np.int64)
     meta, bits, linear = np.zeros((0, OWNER + 1), np.int64), np.zeros((0, 4, 0), np.uint64), np.zeros((0, 4, 0))
     values = np.zeros((0, 0))
-    _sorted_by_time(frames)
     _classify_decode(frames, index, index, index, meta, bits, linear, index, values)
     _watch(index, values, none, meta, index, 0.0, np.zeros(0, bool), values, none)
     _due_cyclic(0.0, none, index, none, np.zeros(0, bool), MAX_CATCH_UP_S)

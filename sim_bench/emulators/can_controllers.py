@@ -26,7 +26,7 @@ from numba import njit
 
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, compile_codecs, decode_row, encode_rows
-from drivers.can_frames import EXTENDED, FRAME, drain, make_frames, send_all, time_order
+from drivers.can_frames import EXTENDED, FRAME, drain, in_time_order, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
 
@@ -167,7 +167,7 @@ class CanBenchEmulator:
         change something.
         """
         now = self.clock()
-        frames = drain(self.bus)
+        frames = in_time_order(drain(self.bus))  # stable: frames of one instant stay in arrival order
         table = self._rx_table
         which, stamps, payloads, values, valid, ok, i = _take_commands(
             frames, self._rx, table.payload_bytes, table.bits, table.linear, table.compiled, self._rx_all_compiled,
@@ -304,14 +304,13 @@ def _first_deadline(last_cmd: np.ndarray, enabled: np.ndarray, timeout: float, a
 
 @njit(cache=True, nogil=True)
 def _known_frames(frames: np.ndarray, rx: np.ndarray, width: int) -> tuple:  # pragma: no cover - compiled
-    """The FRAME records of known command messages (id, length and id kind of a slot of `rx`) in time order (stable):
-    each one's slot, time stamp and first `width` data bytes."""
+    """The FRAME records (in time order) of known command messages (id, length and id kind of a slot of `rx`): each
+    one's slot, time stamp and first `width` data bytes."""
     n = frames.shape[0]
-    order = time_order(frames)  # stable: frames of one instant stay in arrival order
     which, stamps = np.empty(n, dtype=np.int64), np.empty(n)
     payloads = np.zeros((n, width), dtype=np.uint8)
     k = 0
-    for i in order:
+    for i in range(n):
         f = frames[i]
         for s in range(rx.shape[0]):
             if (f.arbitration_id == rx[s, _RX_ID] and f.length == rx[s, _RX_LENGTH]
