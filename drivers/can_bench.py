@@ -34,7 +34,7 @@ from drivers import can_codec, can_log, timebase
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, MessageCodec, compile_codecs, decode_row, encode_rows
 from drivers.can_frames import (ERROR, EXTENDED, FRAME, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
-                                send_all)
+                                in_time_order, send_all)
 from drivers.can_log import log_frames
 from drivers.errors import CanBusError, CanConfigError, CanLogError
 from drivers.timebase import ClockMap
@@ -540,24 +540,7 @@ class CanBench:
 
 def _in_time_order(parts: list[np.ndarray]) -> np.ndarray:
     """FRAME arrays sent and received as one FRAME array, sorted by time (ties as given)."""
-    return _sorted_by_time(join(parts))
-
-
-@njit(cache=True, nogil=True)
-def _sorted_by_time(frames: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """FRAME records in time-stamp order, ties in the given order (a stable sort); as given if already in order."""
-    stamps = np.empty(frames.shape[0])
-    in_order = True
-    for i in range(frames.shape[0]):
-        stamps[i] = frames[i].timestamp
-        in_order = in_order and (i == 0 or stamps[i] >= stamps[i - 1])
-    if in_order:
-        return frames
-    order = np.argsort(stamps, kind="mergesort")
-    out = np.empty_like(frames)
-    for k in range(order.shape[0]):
-        out[k] = frames[order[k]]
-    return out
+    return in_time_order(join(parts))
 
 
 def _samples(blocks: list[CanBlock]) -> list[CanSample]:
@@ -575,6 +558,7 @@ def _classify_decode(frames: np.ndarray, standard: np.ndarray, extended_ids: np.
     """Per FRAME record its message's slot, or why it is not decoded (UNKNOWN_ID, BAD_LENGTH, ERROR_FRAME,
     OWN_FRAME); the values of the frames of compiled messages (can_codec.decode_row), NaN elsewhere."""
     values[:] = np.nan
+    payload = np.empty(8, dtype=np.uint8)  # decode_row's one argument type (other kernels pass rows of a 2-D array)
     for i in range(frames.shape[0]):
         frame = frames[i]
         f, ident = frame.flags, frame.arbitration_id
@@ -583,15 +567,23 @@ def _classify_decode(frames: np.ndarray, standard: np.ndarray, extended_ids: np.
         elif f & (ERROR | REMOTE):
             m = ERROR_FRAME
         elif f & EXTENDED:
-            k = np.searchsorted(extended_ids, ident)
-            m = extended_slots[k] if k < extended_ids.shape[0] and extended_ids[k] == ident else UNKNOWN_ID
+            lo, hi = 0, extended_ids.shape[0]  # binary search (np.searchsorted compiles for a second longer)
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if extended_ids[mid] < ident:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            m = extended_slots[lo] if lo < extended_ids.shape[0] and extended_ids[lo] == ident else UNKNOWN_ID
         else:
             m = standard[ident] if ident < _STANDARD_IDS else UNKNOWN_ID
         if m >= 0 and frame.length != meta[m, LENGTH]:
             m = BAD_LENGTH
         slot[i] = m
         if m >= 0 and meta[m, COMPILED]:
-            decode_row(frame.data, m, bits, linear, values[i])
+            for b in range(8):
+                payload[b] = frame.data[b]
+            decode_row(payload, m, bits, linear, values[i])
 
 
 @njit(cache=True, nogil=True)
@@ -630,8 +622,9 @@ def _watch(slot: np.ndarray, values: np.ndarray, t: np.ndarray, meta: np.ndarray
     for k in range(k_all):
         i = order[k]
         m = slot[i]
-        grouped[k], times[k] = values[i], t[i]
-        last[m] = values[i]
+        times[k] = t[i]
+        for j in range(values.shape[1]):  # element by element: a row assignment compiles numba's shape-mismatch error
+            grouped[k, j] = last[m, j] = values[i, j]
         last_seen[m] = max(last_seen[m], t[i])
         alive_col, fault_col, state_col = meta[m, ALIVE_COL], meta[m, FAULT_COL], meta[m, STATE_COL]
         if alive_col >= 0:
@@ -692,14 +685,17 @@ def _next_frames(which: np.ndarray, stamps: np.ndarray, values: np.ndarray, aliv
         m = which[k]
         if alive_col[m] >= 0:
             values[m, alive_col[m]] = (np.int64(values[m, alive_col[m]]) + 1) % alive_modulo[m]
-        rows[k] = values[m]
+        for j in range(values.shape[1]):  # element by element: a row assignment compiles numba's shape-mismatch error
+            rows[k, j] = values[m, j]
     payloads = np.zeros((which.shape[0], template[0].data.shape[0]), dtype=np.uint8)
     encode_rows(which, rows, bits, linear, compiled, payloads)
     frames = np.empty(which.shape[0], template.dtype)
     for k in range(which.shape[0]):
         frames[k] = template[which[k]]
         frames[k].timestamp = stamps[k]
-        frames[k].data[:] = payloads[k]
+        data = frames[k].data
+        for b in range(payloads.shape[1]):
+            data[b] = payloads[k, b]
     return frames, rows
 
 
@@ -714,7 +710,6 @@ def prime() -> None:
     frames, none, index = np.zeros(0, FRAME), np.zeros(0), np.zeros(0, np.int64)
     meta, bits, linear = np.zeros((0, OWNER + 1), np.int64), np.zeros((0, 4, 0), np.uint64), np.zeros((0, 4, 0))
     values = np.zeros((0, 0))
-    _sorted_by_time(frames)
     _classify_decode(frames, index, index, index, meta, bits, linear, index, values)
     _watch(index, values, none, meta, index, 0.0, np.zeros(0, bool), values, none)
     _due_cyclic(0.0, none, index, none, np.zeros(0, bool), MAX_CATCH_UP_S)

@@ -171,8 +171,9 @@ def _words(payload: np.ndarray) -> tuple:  # pragma: no cover - compiled
 def _decode_rows(which: np.ndarray, payloads: np.ndarray, bits: np.ndarray, linear: np.ndarray,
                  compiled: np.ndarray, values: np.ndarray) -> None:  # pragma: no cover - compiled
     """CodecTable.decode of the rows whose message is compiled."""
-    for i in np.flatnonzero(compiled[which]):
-        decode_row(payloads[i], which[i], bits, linear, values[i])
+    for i in range(which.shape[0]):
+        if compiled[which[i]]:
+            decode_row(payloads[i], which[i], bits, linear, values[i])
 
 
 @njit(cache=True, nogil=True)

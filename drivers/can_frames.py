@@ -44,6 +44,17 @@ def make_frames(timestamp: np.ndarray, arbitration_id: "int | np.ndarray", paylo
     return frames
 
 
+def in_time_order(frames: np.ndarray) -> np.ndarray:
+    """FRAME records in time-stamp order, ties in the given order (a stable sort); as given if already in order.
+    Plain numpy, not a kernel: np.argsort's merge sort compiled in a kernel took 1.6 s of a first run."""
+    if len(frames) < 2:  # the usual poll of the emulated controllers: 4 us of numpy saved
+        return frames
+    stamps = frames["timestamp"]
+    if np.all(stamps[1:] >= stamps[:-1]):
+        return frames
+    return frames[np.argsort(stamps, kind="stable")]
+
+
 def record(msg: can.Message) -> Record:
     """One python-can message as a FRAME record (a plain tuple: cheap to keep until many are converted at once)."""
     data = bytes(msg.data or b"")[:MAX_DATA]

@@ -103,13 +103,13 @@ def wire_of_rows(fields: np.ndarray) -> np.ndarray:  # pragma: no cover - compil
     out = np.zeros((fields.shape[0], PAYLOAD_LEN + 2), dtype=np.uint8)
     payload = np.empty(PAYLOAD_LEN, dtype=np.uint8)
     for i in range(fields.shape[0]):
-        at = 0
+        at = np.int64(0)  # int64 from the start, not the literal 0: one signature of _crc16 (see _unpack_into)
         for j in range(len(_SIZES)):
             value = fields[i, j]
             for b in range(_SIZES[j]):
                 payload[at] = (value >> (8 * b)) & 0xFF
                 at += 1
-        crc = _crc16(payload, 0, at)
+        crc = _crc16(payload, np.int64(0), at)
         payload[at], payload[at + 1] = crc >> 8, crc & 0xFF
         cobs.encode_into(payload, 0, PAYLOAD_LEN, out[i], 0)  # the delimiter after it is the row's last byte, left 0
     return out
@@ -121,7 +121,8 @@ def _unpack_into(payload: np.ndarray, length: int, row: np.ndarray) -> tuple[int
     with detail the length (BAD_PAYLOAD) or the version (BAD_VERSION)."""
     if length != PAYLOAD_LEN:
         return BAD_PAYLOAD, length
-    if _crc16(payload, 0, length) != 0:
+    # from an int64 0, not the literal: a kernel called with a literal compiles a signature of its own
+    if _crc16(payload, np.int64(0), length) != 0:
         return BAD_CRC, 0
     at = 0
     for j in range(len(_SIZES)):
@@ -160,7 +161,7 @@ def decode_chunks(src: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:  # pra
     rows = np.zeros((count, len(_SIZES)), dtype=np.int64)
     status = np.empty(count, dtype=np.int8)
     payload = np.empty(ENCODED_LEN, dtype=np.uint8)
-    start, k = 0, 0
+    start, k = np.int64(0), 0  # int64, not the literal 0: _decode_into's one signature (as from `decode`)
     for i in range(src.shape[0]):
         if src[i] == 0:
             status[k] = _decode_into(src, start, i, payload, rows[k])[0]

@@ -391,7 +391,9 @@ def _grid_rows(times: np.ndarray, dt: float, k0: int, matrix: np.ndarray) -> np.
     """Rows of `matrix` (grid points from k0 on) at the grid point of each of `times`."""
     rows = np.empty((times.shape[0], matrix.shape[1]))
     for i in range(times.shape[0]):
-        rows[i] = matrix[grid_index(times[i], dt) - k0]
+        row = grid_index(times[i], dt) - k0
+        for j in range(matrix.shape[1]):  # element by element: a row assignment compiles numba's shape-mismatch error
+            rows[i, j] = matrix[row, j]
     return rows
 
 

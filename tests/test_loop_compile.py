@@ -48,7 +48,7 @@ print(json.dumps(seen))
 def test_the_real_time_loop_compiles_nothing():
     """A real-time run on the emulated devices from a fresh process: the drivers', devices' and writer's kernels and
     the simulated bench's (emulators, physics, solver) all take their signatures before the loop starts, nothing
-    takes one inside it, and each of the simulated bench's kernels takes one signature."""
+    takes one inside it, and each kernel takes one signature."""
     out = subprocess.run([sys.executable, "-c", _PROBE, str(TESTS)], capture_output=True, text=True, timeout=900,
                          cwd=TESTS.parent)
     assert out.returncode == 0, out.stderr[-2000:]
@@ -66,5 +66,8 @@ def test_the_real_time_loop_compiles_nothing():
                    "sim_bench.bench._measured_at", "sim_bench.drivetrain._fill_piece", "benchlab.network.solver._zoh_kernel",
                    "benchlab.network.solver._propagate"):  # the reference plant's 13 states (the paper's 4: _propagate4)
         assert kernel in primed, f"{kernel} not primed before the loop"
-    simulated = [name for _, name, _ in seen if name.startswith(("sim_bench.", "benchlab.network.solver."))]
-    assert len(simulated) == len(set(simulated)), f"a simulated bench kernel took two signatures: {sorted(simulated)}"
+    # one signature per kernel, the drivers' and the writer's too: a second one is a second compile in a first run
+    # (a kernel called with the literal 0 besides an int64, or with two array types)
+    kernels = [name for _, name, _ in seen if not name.startswith("numba.")]
+    twice = sorted({name for name in kernels if kernels.count(name) > 1})
+    assert not twice, f"kernels that took two signatures: {[(n, s) for _, n, s in seen if n in twice]}"

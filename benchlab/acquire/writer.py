@@ -261,7 +261,9 @@ def _hold_streams(carries: tuple, readings: tuple, k0: int, dt: float, holds: np
     for s in range(len(readings)):
         used = _hold_on_grid(carries[s], readings[s], k0, dt, holds[s], plans[s], grid)
         if used > 0:
-            carries[s][:] = readings[s][used - 1]
+            carry, newest = carries[s], readings[s]
+            for c in range(carry.shape[0]):  # element by element: a row assignment compiles numba's shape error
+                carry[c] = newest[used - 1, c]
         rest[s] = -1 if used < 0 else readings[s].shape[0] - used
     return rest
 

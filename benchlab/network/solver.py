@@ -252,10 +252,13 @@ def _zoh_kernel(A, B, dt, Ad, Bd):  # pragma: no cover - compiled
                     for l in range(n):
                         acc += P[i, l] * P[l, j]
                     T[i, j] = acc
-            P[:, :] = T
-            G[:, :] = G2
-        Ad[o] = P
-        Bd[o] = G
+            P, T = T, P  # the squares become the factors: the buffers swap roles, nothing is copied
+            G, G2 = G2, G
+        for i in range(n):  # element by element: an array assignment compiles numba's shape-mismatch error
+            for j in range(n):
+                Ad[o, i, j] = P[i, j]
+            for j in range(m):
+                Bd[o, i, j] = G[i, j]
 
 
 def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

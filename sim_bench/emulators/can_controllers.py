@@ -26,7 +26,7 @@ from numba import njit
 
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, compile_codecs, decode_row, encode_rows
-from drivers.can_frames import EXTENDED, FRAME, drain, make_frames, send_all
+from drivers.can_frames import EXTENDED, FRAME, drain, in_time_order, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
 
@@ -167,7 +167,7 @@ class CanBenchEmulator:
         change something.
         """
         now = self.clock()
-        frames = drain(self.bus)
+        frames = in_time_order(drain(self.bus))  # stable: frames of one instant stay in arrival order
         table = self._rx_table
         which, stamps, payloads, values, valid, ok, i = _take_commands(
             frames, self._rx, table.payload_bytes, table.bits, table.linear, table.compiled, self._rx_all_compiled,
@@ -304,17 +304,13 @@ def _first_deadline(last_cmd: np.ndarray, enabled: np.ndarray, timeout: float, a
 
 @njit(cache=True, nogil=True)
 def _known_frames(frames: np.ndarray, rx: np.ndarray, width: int) -> tuple:  # pragma: no cover - compiled
-    """The FRAME records of known command messages (id, length and id kind of a slot of `rx`) in time order (stable):
-    each one's slot, time stamp and first `width` data bytes."""
+    """The FRAME records (in time order) of known command messages (id, length and id kind of a slot of `rx`): each
+    one's slot, time stamp and first `width` data bytes."""
     n = frames.shape[0]
-    stamps_in = np.empty(n)
-    for i in range(n):
-        stamps_in[i] = frames[i].timestamp
-    order = np.argsort(stamps_in, kind="mergesort")  # stable: frames of one instant stay in arrival order
     which, stamps = np.empty(n, dtype=np.int64), np.empty(n)
     payloads = np.zeros((n, width), dtype=np.uint8)
     k = 0
-    for i in order:
+    for i in range(n):
         f = frames[i]
         for s in range(rx.shape[0]):
             if (f.arbitration_id == rx[s, _RX_ID] and f.length == rx[s, _RX_LENGTH]
@@ -391,17 +387,18 @@ def _due_frames(counters: np.ndarray, t_start: float, t_end: float, eps: float, 
     m, w = counters.shape[0], (layout.shape[1] - _SCALARS) // 2
     status = np.zeros((3, m))
     count = np.zeros(m, dtype=np.int64)
+    n = 0  # the frames due: summed here, np.sum's compile is a second kernel's
     for p in range(m):
         k1 = int(np.floor((t_end + eps - origin) / cycle[p])) + 1
         k0 = counters[p, _CYCLES]
         if k1 > k0:
             if not counters[p, _SILENT]:
                 count[p] = k1 - k0
+                n += k1 - k0
                 c = layout[p, 2 * w + _OWNER]
                 status[_STATE, p], status[_CODE, p] = _status(origin + k0 * cycle[p], fault[c], last_cmd[c],
                                                               enabled[c], estop, timeout)
             counters[p, _CYCLES] = k1
-    n = count.sum()
     index, stamps, times = np.empty((3, n), dtype=np.int64), np.empty(n), np.empty(n)
     taken = np.zeros(m, dtype=np.int64)
     distinct = 0

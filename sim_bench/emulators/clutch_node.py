@@ -182,7 +182,7 @@ def _frame_fields(times: np.ndarray, ohm: np.ndarray, link: np.ndarray, t_boot: 
                 flags |= _SHORT[ch]
                 out[i, 4 + ch] = node_frame.NO_VALUE
             else:
-                out[i, 4 + ch] = np.int64(min(np.rint(r * 1000.0), node_frame.NO_VALUE - 1))
+                out[i, 4 + ch] = np.int64(min(np.rint(r * 1000.0), float(node_frame.NO_VALUE - 1)))  # min of two floats
         out[i, 0], out[i, 1], out[i, 2] = node_frame.VERSION, flags, (seq + i) & 0xFFFF
         out[i, 3] = np.int64(np.rint((times[i] - t_boot) * 1000.0)) & 0xFFFFFFFF
         out[i, 6] = max(0, min(supply, 0xFFFF))
