@@ -34,8 +34,9 @@ class ScoreResponse:
         self.inputs = disc.inputs[: self.samples]
         flat, _ = data.fitted_flat(network.state_names, network.outputs)
         states = len(network.state_names)
-        weights = np.stack([np.bincount(flat, weights=column, minlength=self.samples * states)
-                            for column in np.asarray(jacobian, dtype=np.float64).T]).reshape(-1, self.samples, states)
+        weights = np.stack([np.bincount(flat, weights=column, minlength=states * (self.samples + 1))
+                            for column in np.asarray(jacobian, dtype=np.float64).T]).reshape(-1, states,
+                                                                                              self.samples + 1)
         gains = np.empty((len(weights), self.samples, self.inputs.shape[1]))
         _adjoint_gains(disc.op_index[: self.samples], disc.Ad, disc.Bd, weights, gains)
         self.gains = gains.reshape(len(weights), -1)
@@ -62,9 +63,10 @@ def _same(a: "np.ndarray | float", b: "np.ndarray | float") -> bool:
 
 @njit(cache=True, nogil=True)
 def _adjoint_gains(op_index, Ad, Bd, weights, gains):  # pragma: no cover - compiled
-    """gains[j, k] = Bdₖᵀ λₖ₊₁ with λₖ = weights[j, k] + Adₖᵀ λₖ₊₁ and λ after the last sample zero: d score j /
-    d input at sample k, the states at sample k depending on the inputs before it."""
-    p, samples, n = weights.shape
+    """gains[j, k] = Bdₖᵀ λₖ₊₁ with λₖ = weights[j, :, k] + Adₖᵀ λₖ₊₁ and λ after the last sample zero: d score j
+    / d input at sample k, the states at sample k depending on the inputs before it (weights: state-major)."""
+    p, n = weights.shape[0], weights.shape[1]
+    samples = gains.shape[1]
     m = Bd.shape[2]
     lam = np.zeros(n)
     nxt = np.empty(n)
@@ -78,7 +80,7 @@ def _adjoint_gains(op_index, Ad, Bd, weights, gains):  # pragma: no cover - comp
                     acc += Bd[o, i, c] * lam[i]
                 gains[j, k, c] = acc
             for i in range(n):
-                acc = weights[j, k, i]
+                acc = weights[j, i, k]
                 for l in range(n):
                     acc += Ad[o, l, i] * lam[l]
                 nxt[i] = acc

@@ -7,7 +7,7 @@ several points spread around the neutral priors and the best is polished to conv
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,7 +36,7 @@ class FitResult:
     jacobian: np.ndarray  # d residual / d parameter (physical units), fitting samples only
     residuals: np.ndarray
     starts: int = 1
-    start_costs: list[float] = field(default_factory=list)
+    start_costs: list[float] = field(default_factory=list)  # each start's latest cost on the data its scouts fit
     converged: bool = True  # False where the fit stopped at its evaluation budget (a scout), not at a minimum
 
     @property
@@ -83,26 +83,31 @@ def run_values(params: Mapping[str, float], data: FitData) -> Mapping[str, float
 
 def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
     """Model outputs at the fitting step for the measured channels of `data`."""
-    states = _states(network, params, data)
+    states = _states(network, params, data)[:-1]
     index = {s: i for i, s in enumerate(network.state_names)}
     return {c: states[:, index[network.outputs[c]]] for c in data.targets}
 
 
 def _states(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> np.ndarray:
-    """The network's states (samples × states) at the fitting step of `data`."""
+    """The network's states ((samples + 1) × states, the last after the last step) at the fitting step of `data`."""
     values = run_values(params, data)
     return run_network(network, values, data.channels, data.dt, initial_state(network, data, values),
-                       KEY_RESOLUTION, data.memo)[:-1]
+                       KEY_RESOLUTION, data.memo)
 
 
 def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datasets: Sequence[FitData]) -> np.ndarray:
     """Simulated minus measured, every fitted channel of every run, valid masked samples only."""
     parts = []
     for data in datasets:
-        states = _states(network, params, data)
-        flat, targets = data.fitted_flat(network.state_names, network.outputs)
-        parts.append(states.ravel().take(flat) - targets)
+        parts.append(_fitted(_states(network, params, data), network, data))
     return np.concatenate(parts)
+
+
+def _fitted(states: np.ndarray, network: ThermalNetwork, data: FitData) -> np.ndarray:
+    """Simulated minus measured at the fitted samples of `data`, from the states (N + 1, n) the solver gives (a
+    transposed view of its state-major result, which is read without a copy)."""
+    flat, targets = data.fitted_flat(network.state_names, network.outputs)
+    return states.T.ravel().take(flat) - targets
 
 
 def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_sets: Sequence[Mapping[str, float]],
@@ -115,9 +120,8 @@ def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_s
         x0s = np.array([initial_state(network, data, params) for params in own_sets])
         runs = run_network_sets(network, run_values(base, data), own_sets, data.channels, data.dt, x0s,
                                 KEY_RESOLUTION, data.memo)
-        flat, targets = data.fitted_flat(network.state_names, network.outputs)
         for part, states in zip(parts, runs):
-            part.append(states[:-1].ravel().take(flat) - targets)
+            part.append(_fitted(states, network, data))
     return [np.concatenate(part) for part in parts]
 
 
@@ -128,8 +132,10 @@ def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
 
 @single_threaded_blas
 def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = None,
-        start: Mapping[str, float] | None = None) -> FitResult:
-    """One local fit from the spec's starting values (or `start`)."""
+        start: Mapping[str, float] | None = None,
+        stop: Callable[[Mapping[str, float]], bool] | None = None) -> FitResult:
+    """One local fit from the spec's starting values (or `start`); `stop`: asked after each iteration with the
+    parameters reached, True ends the fit there (not converged)."""
     x0 = to_coordinates(spec, {p.name: p.initial for p in spec.free} | dict(start or {}))
     lo, hi = coordinate_bounds(spec)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
@@ -145,8 +151,14 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
         return residual_vectors(spec.network, from_coordinates(spec, last[0]),
                                 [from_coordinates(spec, x) for x in points], datasets)
 
+    def halt(x: np.ndarray) -> None:
+        """least_squares' callback after each iteration: StopIteration ends the fit there."""
+        if stop(from_coordinates(spec, x)):
+            raise StopIteration
+
     sol = least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10, workers=columns)
+                        xtol=1e-10, ftol=1e-10, gtol=1e-10, workers=columns,
+                        callback=None if stop is None else halt)
     params = from_coordinates(spec, sol.x)
     scale = np.array([params[p.name] if p.log else p.linear_scale for p in spec.free])
     jac = sol.jac / scale  # chain rule: d r / d p = d r / d x * d x / d p
@@ -167,9 +179,24 @@ def same_minimum(a: FitResult, b: FitResult) -> bool:
     """Whether two fits reached one minimum: every free parameter apart by less than the better fit's standard
     error (its statistical resolution: closer than that, the data cannot tell the two apart)."""
     better = a if a.cost <= b.cost else b
-    errors = standard_errors(better)
-    gaps = np.array([abs(a.params[name] - b.params[name]) for name in better.free_names])
+    return within_errors(better, b.params if better is a else a.params)
+
+
+def within_errors(result: FitResult, params: Mapping[str, float], errors: np.ndarray | None = None) -> bool:
+    """Whether every free parameter of `result` is within its standard error (`errors`, where already computed)
+    of `params`."""
+    errors = standard_errors(result) if errors is None else errors
+    gaps = np.array([abs(result.params[name] - params[name]) for name in result.free_names])
     return bool(np.all(np.isfinite(errors)) and np.all(gaps <= errors))
+
+
+def _arrived(best: FitResult) -> Callable[[Mapping[str, float]], bool] | None:
+    """A scout's `stop` once `best` has converged: the scout has arrived where its parameters are within the
+    standard errors of best's, the agreement `same_minimum` asks for; None while best is still moving."""
+    if not best.converged:
+        return None
+    errors = standard_errors(best)
+    return lambda params: within_errors(best, params, errors)
 
 
 def _start(spec: ModelSpec, i: int, rng: np.random.Generator, spread: float) -> dict[str, float]:
@@ -216,12 +243,13 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
         if len(found) >= 2 and unsettled:
             k = next(k for k, r in enumerate(found) if r is unsettled[0])
             found[k] = fit(spec, scouted, max_nfev=scout_nfev, start={n: unsettled[0].params[n] for n in
-                                                                       unsettled[0].free_names})
+                                                                       unsettled[0].free_names}, stop=_arrived(best))
         elif len(found) >= 2 and not best.converged and all(r.converged for r in found if r is not best):
             found[found.index(best)] = fit(spec, scouted, max_nfev=scout_nfev,
                                            start={n: best.params[n] for n in best.free_names})
         else:
-            found.append(fit(spec, scouted, max_nfev=scout_nfev, start=_start(spec, len(found), rng, spread)))
+            found.append(fit(spec, scouted, max_nfev=scout_nfev, start=_start(spec, len(found), rng, spread),
+                             stop=_arrived(best) if best is not None else None))
         task.advance()
     best = min(found, key=lambda r: r.cost)
     final = fit(polish or spec, datasets, start={k: best.params[k] for k in best.free_names})
