@@ -9,7 +9,7 @@ per input change: the input-noise Monte Carlo of benchlab.identify.uncertainty e
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping, Sequence
 
 import numpy as np
 from numba import njit
@@ -30,7 +30,9 @@ class ScoreResponse:
         self.values = run_values(params, data)
         self.samples = len(data)
         disc = discretise(network, self.values, data.channels, data.dt, KEY_RESOLUTION, data.memo)
-        self.laws = self._laws(data.channels)
+        reads = _Reads(data.channels)
+        self.laws = self._laws(reads)
+        self.law_channels = None if reads.listed else frozenset(reads.names)  # None: any channel may be read
         self.inputs = disc.inputs[: self.samples]
         flat, _ = data.fitted_flat(network.state_names, network.outputs)
         states = len(network.state_names)
@@ -45,15 +47,53 @@ class ScoreResponse:
         return (_conductances(self.network, self.values, channels, self.samples)
                 + _coefficients(self.network, self.values, channels))
 
-    def score(self, channels: Channels) -> np.ndarray | None:
-        """Jᵀe for the run driven by `channels` instead of its own; None where they move an operating point (a law
-        reads a changed channel: the states are then not linear in the change, and the caller simulates)."""
-        if not all(_same(a, b) for a, b in zip(self.laws, self._laws(channels))):
-            return None
-        columns = [as_samples(s.heat_flow(self.values, channels), self.samples) for s in self.network.sources]
-        columns += [as_samples(b.temperature(channels), self.samples) for b in self.network.boundaries]
-        change = sample_matrix(columns, self.samples) - self.inputs
-        return self.gains @ change.ravel()
+    def scores(self, draws: Sequence[Channels]) -> list[np.ndarray | None]:
+        """Jᵀe for the run driven by each of `draws` (channels) instead of its own; None where they move an operating
+        point (a law reads a changed channel and its value changes: the states are then not linear in the change,
+        and the caller simulates)."""
+        changes, out = [], []
+        for channels in draws:
+            if not self._same_points(channels):
+                out.append(None)
+                continue
+            columns = [as_samples(s.heat_flow(self.values, channels), self.samples) for s in self.network.sources]
+            columns += [as_samples(b.temperature(channels), self.samples) for b in self.network.boundaries]
+            changes.append((sample_matrix(columns, self.samples) - self.inputs).ravel())
+            out.append(len(changes) - 1)
+        together = self.gains @ np.stack(changes).T if changes else np.zeros((len(self.gains), 0))
+        return [None if k is None else together[:, k] for k in out]
+
+    def _same_points(self, channels: Channels) -> bool:
+        """Whether the laws give the run's own values on `channels`: certainly where they read none of the channels
+        that differ from the run's (as they did on the run's own), else checked by evaluating them."""
+        own = self.data.channels
+        changed = {name for name, values in channels.items() if own.get(name) is not values}
+        if self.law_channels is not None and not changed & self.law_channels and own.keys() == channels.keys():
+            return True
+        return all(_same(a, b) for a, b in zip(self.laws, self._laws(channels)))
+
+
+class _Reads(Mapping):
+    """A run's channels that note the names a law reads (`listed`: it went through all of them)."""
+
+    def __init__(self, channels: Channels) -> None:
+        self.channels, self.names, self.listed = channels, set(), False
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        self.names.add(name)
+        return self.channels[name]
+
+    def __contains__(self, name: object) -> bool:
+        self.names.add(name)
+        return name in self.channels
+
+    def __iter__(self) -> Iterator[str]:
+        self.listed = True
+        return iter(self.channels)
+
+    def __len__(self) -> int:
+        self.listed = True
+        return len(self.channels)
 
 
 def _same(a: "np.ndarray | float", b: "np.ndarray | float") -> bool:

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from benchlab._blas import single_threaded_blas
-from benchlab.identify.data import FitData, prepare
+from benchlab.identify.data import FitData, prepare, scout_runs
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.identify.evaluate import evaluate
 from benchlab.identify.fit import FitResult, fit_multistart
@@ -33,9 +33,6 @@ from benchlab.progress import SILENT, Progress
 from benchlab.network.simulation import simulate
 
 INITIAL_STATE_RANGE_K = 20.0
-#: The search's scouts fit every SEARCH_THIN-th fitting step (benchlab.identify.fit.fit_multistart): the same
-#: minima at a third of the search's CPU on a 2 h run (benchmarks/bench_identify_search.py).
-SEARCH_THIN = 4
 
 
 @dataclass
@@ -109,15 +106,16 @@ def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "non
     """Fit a model (a built-in name, a model file or a checked definition) to all runs at once at the fitting
     step `step_s`, then measure it on them and on validation runs.
 
-    `progress` gets one task in fits: the multistart's scouts (on every SEARCH_THIN-th fitting step), and its
-    polish on all of them, which fits the start states too.
+    `progress` gets one task in fits: the multistart's scouts (on cheaper versions of the runs, `scout_runs`), and
+    its polish on the runs themselves, which fits the start states too.
     """
     spec = model_spec(model).with_fixed(dict(fixed or {}))
     datasets = [prepare(run, step_s, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     late = late_channels(runs, initial_channels(spec))
     with progress.task(f"identify {spec.definition.label}", starts + 1, unit="fit") as task:
         result = fit_multistart(with_initial_states(spec, datasets, late) if late else spec, datasets, starts=starts,
-                                seed=seed, task=task, thin=SEARCH_THIN, polish=with_initial_states(spec, datasets))
+                                seed=seed, task=task, scout_data=[scout_runs(data) for data in datasets],
+                                polish=with_initial_states(spec, datasets))
     model_names = [p.name for p in spec.free]
     params = check_params(spec.definition, {k: v for k, v in result.params.items() if "@" not in k}, "identify")
     noise = [{"friction_power": power_noise(run, data.block, len(data)), **temperature_input_noise(data)}

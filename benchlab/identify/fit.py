@@ -211,16 +211,15 @@ def _start(spec: ModelSpec, i: int, rng: np.random.Generator, spread: float) -> 
 
 @single_threaded_blas
 def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6, seed: int = 0,
-                   spread: float = 3.0, scout_nfev: int = 25, task: Task = Task(), thin: int = 1,
-                   polish: ModelSpec | None = None) -> FitResult:
+                   spread: float = 3.0, scout_nfev: int = 25, task: Task = Task(),
+                   scout_data: Sequence[FitData] | None = None, polish: ModelSpec | None = None) -> FitResult:
     """Search from independent starts (the priors, then log-uniform within ×/÷ spread) until two agree on the best
     minimum, then polish it; at most `starts` scout runs of `scout_nfev` evaluations each.
 
-    `thin` > 1: the scouts fit every `thin`-th fitting step only, and agreement is judged by that data's standard
-    errors; the polish fits them all. A quarter of the samples holds the same minima, each found about twice as
-    coarsely, at a fraction of the cost per evaluation (the Jacobian's columns and its decomposition shrink with
-    the samples). `polish`: the spec the best start is polished in (default `spec`; identify adds each run's start
-    states, fitted once, in the polish, instead of a second fit after it).
+    `scout_data`: the runs the scouts fit, where not `datasets` (identify's: coarser and thinned, `scout_runs`):
+    agreement is then judged by that data's standard errors, and the polish fits `datasets` from the best scout.
+    `polish`: the spec the best start is polished in (default `spec`; identify adds each run's start states, fitted
+    once, in the polish, instead of a second fit after it).
 
     Two starts agree when they reach one minimum within its parameters' standard errors (`same_minimum`): a further
     start could only land there again or higher, so the search stops. While they disagree, the budget goes where
@@ -231,8 +230,7 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
     budget at the end) and one for the polish; `starts` of the result counts the independent starts drawn.
     """
     rng = np.random.default_rng(seed)
-    scouted = [data.with_mask(data.mask & (np.arange(len(data)) % thin == 0)) for data in datasets] if thin > 1 \
-        else datasets
+    scouted = datasets if scout_data is None else scout_data
     found: list[FitResult] = []  # each start's latest scout
     for run in range(starts):
         best = min(found, key=lambda r: r.cost) if found else None

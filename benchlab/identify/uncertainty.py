@@ -37,6 +37,7 @@ from benchlab.identify.metrics import MAD_TO_SIGMA, robust_sigma
 CORRELATION_LIMIT = 0.95
 RELATIVE_SE_LIMIT = 0.5
 INPUT_NOISE_DRAWS = 200
+DRAWS_TOGETHER = 16  # input-noise draws scored in one matrix product (their input changes held at once)
 PREWHITEN_CAP = 0.97  # largest singular value of the prewhitening VAR(1) (Andrews & Monahan 1992)
 PREWHITEN_MIN_STEPS = 10  # fitting steps per score column a run needs for the prewhitening VAR(1)
 MIN_NOISE_SAMPLES = 8  # slipping samples a fitting step needs for its own noise estimate (else the run's)
@@ -188,16 +189,19 @@ def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise
         use = [data.mask & np.isfinite(target) for target in data.targets.values()]
         response = ScoreResponse(network, params, data, jac)
         base = None
-        for _ in range(draws):
-            channels = dict(data.channels)
-            for c, sigma in sigmas.items():
-                channels[c] = channels[c] + sigma * rng.standard_normal(len(sigma))
-            score = response.score(channels)
-            if score is None:  # the noise moves an operating point: simulated (benchlab.identify.adjoint)
-                base = simulate_outputs(network, params, data) if base is None else base
-                sim = simulate_outputs(network, params, replace(data, channels=channels))
-                score = jac.T @ np.concatenate([sim[c][u] - base[c][u] for c, u in zip(data.targets, use)])
-            cov += np.outer(score, score) / draws
+        for first in range(0, draws, DRAWS_TOGETHER):
+            noisy = []
+            for _ in range(first, min(first + DRAWS_TOGETHER, draws)):
+                channels = dict(data.channels)
+                for c, sigma in sigmas.items():
+                    channels[c] = channels[c] + sigma * rng.standard_normal(len(sigma))
+                noisy.append(channels)
+            for channels, score in zip(noisy, response.scores(noisy)):
+                if score is None:  # the noise moves an operating point: simulated (benchlab.identify.adjoint)
+                    base = simulate_outputs(network, params, data) if base is None else base
+                    sim = simulate_outputs(network, params, replace(data, channels=channels))
+                    score = jac.T @ np.concatenate([sim[c][u] - base[c][u] for c, u in zip(data.targets, use)])
+                cov += np.outer(score, score) / draws
     return cov
 
 
