@@ -127,19 +127,10 @@ def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "non
                        for c in initial_channels(spec)} for label, data in zip(labels, datasets)}
     fitting = {label: evaluate(r, params) for label, r in zip(labels, runs)}
     validation = {label: evaluate(r, params) for label, r in zip(_labels(validate, "validation"), validate)}
-    residuals = {label: _residual_tests(r, params, data if step_s == FIT_STEP_S else None, initial[label])
-                 for label, r, data in zip(labels, runs, datasets)}
+    residuals = {label: run_residuals(r, simulate(r, params, initial=residual_start(r, params, data)), params,
+                                      data).tests
+                 for label, r, data in zip(labels, runs, datasets if step_s == FIT_STEP_S else [None] * len(runs))}
     return Identification(params, result, uncertainty, fitting, validation, residuals, initial)
-
-
-def _residual_tests(run: pd.DataFrame, params: ModelParams, data: FitData | None,
-                    fitted_starts: Mapping[str, Mapping[str, float]]) -> dict[str, dict]:
-    """The residual tests of the identified model on one run, from its residual start (identify.residuals); `data`:
-    the run as prepared at the residuals' step, where the fit's is that; the fit's start states are where the
-    start's own least squares begins."""
-    guess = {channel: entry["value"] for channel, entry in fitted_starts.items()}
-    start = residual_start(run, params, data, guess)
-    return run_residuals(run, simulate(run, params, initial=start), params, data).tests
 
 
 def parse_fixed(items: Sequence[str], source: str = "--fix") -> dict[str, float]:

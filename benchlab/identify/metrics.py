@@ -26,15 +26,12 @@ def residual(simulated: Values, measured: Values) -> Values:
 
 def rmse_k(measured: pd.DataFrame, simulated: pd.DataFrame, channels: Iterable[str] = PREDICTED_CHANNELS) -> float:
     """Root-mean-square error in K over all valid samples of the given channels together."""
-    errors = np.concatenate([residual(simulated[c], measured[c]).to_numpy() for c in channels])
-    errors = errors[np.isfinite(errors)]
-    return float(np.sqrt(np.mean(errors ** 2))) if errors.size else float("nan")
+    return _rms([_errors(measured, simulated, c) for c in channels])
 
 
 def nrmse_pct(measured: pd.DataFrame, simulated: pd.DataFrame, channels: Iterable[str] = PREDICTED_CHANNELS) -> float:
     """100 * RMSE / (max - min of the measured signal), per channel, then averaged."""
-    values = [v for v in channel_nrmse_pct(measured, simulated, channels).values() if np.isfinite(v)]
-    return float(np.mean(values)) if values else float("nan")
+    return _mean_finite(channel_nrmse_pct(measured, simulated, channels).values())
 
 
 def channel_rmse_k(measured: pd.DataFrame, simulated: pd.DataFrame,
@@ -46,11 +43,37 @@ def channel_rmse_k(measured: pd.DataFrame, simulated: pd.DataFrame,
 def channel_nrmse_pct(measured: pd.DataFrame, simulated: pd.DataFrame,
                       channels: Iterable[str] = PREDICTED_CHANNELS) -> dict[str, float]:
     """NRMSE in % of each channel on its own (NaN where the channel does not vary)."""
-    out = {}
-    for c in channels:
-        span = np.nanmax(measured[c].to_numpy()) - np.nanmin(measured[c].to_numpy())
-        out[c] = 100.0 * rmse_k(measured, simulated, (c,)) / span if span > 0 else float("nan")
-    return out
+    return {c: _nrmse(rmse_k(measured, simulated, (c,)), measured, c) for c in channels}
+
+
+def error_figures(measured: pd.DataFrame, simulated: pd.DataFrame, channels: Iterable[str]) -> dict:
+    """rmse_k and nrmse_pct of the channels together and of each (contract section 5's figures, as `evaluate`
+    reports them), each channel's error computed once."""
+    errors = {c: _errors(measured, simulated, c) for c in channels}
+    each = {c: {"rmse_K": _rms([e]), "nrmse_pct": _nrmse(_rms([e]), measured, c)} for c, e in errors.items()}
+    return {"rmse_K": _rms(list(errors.values())), "nrmse_pct": _mean_finite(v["nrmse_pct"] for v in each.values()),
+            "channels": each}
+
+
+def _errors(measured: pd.DataFrame, simulated: pd.DataFrame, channel: str) -> np.ndarray:
+    """The channel's valid residuals."""
+    errors = residual(simulated[channel], measured[channel]).to_numpy()
+    return errors[np.isfinite(errors)]
+
+
+def _rms(parts: list[np.ndarray]) -> float:
+    errors = np.concatenate(parts) if parts else np.zeros(0)
+    return float(np.sqrt(np.mean(errors ** 2))) if errors.size else float("nan")
+
+
+def _nrmse(rmse: float, measured: pd.DataFrame, channel: str) -> float:
+    span = np.nanmax(measured[channel].to_numpy()) - np.nanmin(measured[channel].to_numpy())
+    return 100.0 * rmse / span if span > 0 else float("nan")
+
+
+def _mean_finite(values: Iterable[float]) -> float:
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
 
 
 #: The median absolute deviation of normal noise times this is its standard deviation.

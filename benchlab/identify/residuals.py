@@ -23,7 +23,7 @@ residual they explain above EFFECT_THRESHOLD_K.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -145,15 +145,11 @@ def residual_tests(residual: np.ndarray, inputs: dict[str, np.ndarray], step_s: 
     return report
 
 
-def residual_start(run: pd.DataFrame, params: "ModelParams", data: "FitData | None" = None,
-                   guess: Mapping[str, float] | None = None) -> dict[str, float]:
+def residual_start(run: pd.DataFrame, params: "ModelParams", data: "FitData | None" = None) -> dict[str, float]:
     """Each state's start for the residuals: the measured channels' temperatures at t = 0 that fit the run best
     with the model's parameters held (least squares on identification's targets), as a toolbox's `resid` and
-    `compare` estimate initial conditions.
-
-    `data`: the run already prepared at identification's default step (else prepared here); `guess`: measured
-    channel -> a start temperature close to the answer (identify's fitted start states), where the fit starts
-    instead of at the first readings: the same least-squares answer in fewer evaluations."""
+    `compare` estimate initial conditions. `data`: the run already prepared at identification's default step
+    (else prepared here)."""
     from benchlab.identify.api import initial_channels, with_initial_states
     from benchlab.identify.fit import fit
     from benchlab.model.catalog import model_spec
@@ -161,8 +157,7 @@ def residual_start(run: pd.DataFrame, params: "ModelParams", data: "FitData | No
     spec = model_spec(params.definition)
     spec = spec.with_fixed({p.name: params[p.name] for p in spec.free})
     data = data if data is not None else prepare(run, name="run", network=spec.network)
-    start = {f"init_{c}@{data.name}": value for c, value in (guess or {}).items()}
-    fitted = fit(with_initial_states(spec, [data]), [data], start=start).params
+    fitted = fit(with_initial_states(spec, [data]), [data]).params
     starts = {c: fitted[f"init_{c}@{data.name}"] for c in initial_channels(spec)}
     return {s: starts[spec.network.initial[s]] for s in spec.network.state_names}
 
