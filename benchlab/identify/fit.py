@@ -1,4 +1,5 @@
-"""Output-error fit of a ModelSpec to one or more runs: simulate, compare, adjust (scipy least_squares).
+"""Output-error fit of a ModelSpec to one or more runs: simulate, compare, adjust (scipy's trust-region reflective
+least squares, benchlab.identify.trust_region).
 
 Positive parameters are fitted as logarithms, signed ones scaled by their start value, so
 every coordinate moves on a scale of one. The problem has local minima, so fits start from
@@ -11,11 +12,11 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from benchlab._blas import single_threaded_blas
 from benchlab.identify.data import FitData
 from benchlab.identify.spec import ModelSpec
+from benchlab.identify.trust_region import least_squares_trf
 from benchlab.network import ThermalNetwork
 from benchlab.progress import Task
 from benchlab.network.solver import run_network
@@ -140,7 +141,7 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
     lo, hi = coordinate_bounds(spec)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
 
-    last = [x0]  # the point least_squares evaluated last: where it then takes the Jacobian
+    last = [x0]  # the point the fit evaluated last: where it then takes the Jacobian
 
     def fun(x: np.ndarray) -> np.ndarray:
         last[0] = x.copy()
@@ -151,14 +152,8 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
         return residual_vectors(spec.network, from_coordinates(spec, last[0]),
                                 [from_coordinates(spec, x) for x in points], datasets)
 
-    def halt(x: np.ndarray) -> None:
-        """least_squares' callback after each iteration: StopIteration ends the fit there."""
-        if stop(from_coordinates(spec, x)):
-            raise StopIteration
-
-    sol = least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10, workers=columns,
-                        callback=None if stop is None else halt)
+    sol = least_squares_trf(fun, x0, (lo, hi), columns, max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10,
+                            stop=None if stop is None else lambda x: stop(from_coordinates(spec, x)))
     params = from_coordinates(spec, sol.x)
     scale = np.array([params[p.name] if p.log else p.linear_scale for p in spec.free])
     jac = sol.jac / scale  # chain rule: d r / d p = d r / d x * d x / d p
