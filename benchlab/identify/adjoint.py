@@ -16,7 +16,7 @@ from numba import njit
 
 from benchlab.identify.data import FitData
 from benchlab.identify.fit import KEY_RESOLUTION, run_values
-from benchlab.network import Channels, ThermalNetwork, as_samples, sample_matrix
+from benchlab.network import Channels, ThermalNetwork, as_samples
 from benchlab.network.solver import _coefficients, _conductances, discretise
 
 
@@ -42,6 +42,7 @@ class ScoreResponse:
         gains = np.empty((len(weights), self.samples, self.inputs.shape[1]))
         _adjoint_gains(disc.op_index[: self.samples], disc.Ad, disc.Bd, weights, gains)
         self.gains = gains.reshape(len(weights), -1)
+        self._changes = np.empty((0, self.gains.shape[1]))
 
     def _laws(self, channels: Channels) -> list:
         return (_conductances(self.network, self.values, channels, self.samples)
@@ -51,16 +52,21 @@ class ScoreResponse:
         """Jᵀe for the run driven by each of `draws` (channels) instead of its own; None where they move an operating
         point (a law reads a changed channel and its value changes: the states are then not linear in the change,
         and the caller simulates)."""
-        changes, out = [], []
+        if len(self._changes) < len(draws):  # one buffer for every batch: no fresh run-sized mapping per batch
+            self._changes = np.empty((len(draws), self.gains.shape[1]))
+        out, used = [], 0
         for channels in draws:
             if not self._same_points(channels):
                 out.append(None)
                 continue
+            change = self._changes[used].reshape(self.inputs.shape)
             columns = [as_samples(s.heat_flow(self.values, channels), self.samples) for s in self.network.sources]
             columns += [as_samples(b.temperature(channels), self.samples) for b in self.network.boundaries]
-            changes.append((sample_matrix(columns, self.samples) - self.inputs).ravel())
-            out.append(len(changes) - 1)
-        together = self.gains @ np.stack(changes).T if changes else np.zeros((len(self.gains), 0))
+            for j, column in enumerate(columns):
+                np.subtract(column, self.inputs[:, j], out=change[:, j])
+            out.append(used)
+            used += 1
+        together = self.gains @ self._changes[:used].T
         return [None if k is None else together[:, k] for k in out]
 
     def _same_points(self, channels: Channels) -> bool:
