@@ -19,8 +19,8 @@ import numpy as np
 from numpy.linalg import norm
 from scipy.linalg import qr_multiply, svd
 from scipy.optimize import OptimizeResult
-from scipy.optimize._lsq.common import (CL_scaling_vector, check_termination, compute_grad, compute_jac_scale,
-                                        make_strictly_feasible, solve_lsq_trust_region, update_tr_radius)
+from scipy.optimize._lsq.common import (CL_scaling_vector, check_termination, compute_grad, make_strictly_feasible,
+                                        solve_lsq_trust_region, update_tr_radius)
 from scipy.optimize._lsq.trf import select_step
 from scipy.optimize._numdiff import approx_derivative
 
@@ -45,8 +45,9 @@ def least_squares_trf(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, b
     m, n = J.shape
     cost = 0.5 * np.dot(f, f)
     g = compute_grad(J, f)
-    scale, scale_inv = compute_jac_scale(J)
-    R, qf = _triangular(J, f)
+    scale, scale_inv = _jac_scale(J)
+    work = np.empty(J.shape, order="F")  # the QR's working copy, one per fit (a 24 h run's J is 62 MB)
+    R, qf = _triangular(J, f, work)
     v, dv = CL_scaling_vector(x, g, lb, ub)
     v[dv != 0] *= scale_inv[dv != 0]
     Delta = norm(x0 * scale_inv / v ** 0.5) or 1.0
@@ -95,15 +96,27 @@ def least_squares_trf(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, b
             J = jacobian(x, f)
             njev += 1
             g = compute_grad(J, f)
-            scale, scale_inv = compute_jac_scale(J, scale_inv)
-            R, qf = _triangular(J, f)
+            scale, scale_inv = _jac_scale(J, scale_inv)
+            R, qf = _triangular(J, f, work)
         if stop is not None and status is None and stop(x):
             status = -2
             break
     return OptimizeResult(x=x, cost=cost, fun=f, jac=J, nfev=nfev, njev=njev, status=0 if status is None else status)
 
 
-def _triangular(J: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R and Qᵀf of J = QR (economic: R is min(m, n) × n)."""
-    qf, R = qr_multiply(J, f, mode="right")
+def _triangular(J: np.ndarray, f: np.ndarray, work: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R and Qᵀf of J = QR (economic: R is min(m, n) × n), factorised in `work` (Fortran order, J's shape)."""
+    np.copyto(work, J)
+    qf, R = qr_multiply(work, f, mode="right", overwrite_a=True)
     return R, qf
+
+
+def _jac_scale(J: np.ndarray, scale_inv_old: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """scipy's compute_jac_scale (x_scale="jac": the columns' norms, never shrinking), a column at a time instead of
+    through a temporary J² (the same sums: each column is contiguous in the Jacobian's layout)."""
+    scale_inv = np.array([np.sum(J[:, j] ** 2) for j in range(J.shape[1])]) ** 0.5
+    if scale_inv_old is None:
+        scale_inv[scale_inv == 0] = 1
+    else:
+        scale_inv = np.maximum(scale_inv, scale_inv_old)
+    return 1 / scale_inv, scale_inv
