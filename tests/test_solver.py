@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 import benchlab
 from benchlab.model.clutch import clutch_network, convection_resistance
 from benchlab.model.params import paper_params
-from benchlab.network.solver import Discretised, _propagate, _propagate4, _zoh
+from benchlab.network.solver import Discretised, _propagate, _propagate4, _propagate_combined44, _zoh
 
 
 def _reference(run: pd.DataFrame, params, x0: np.ndarray) -> np.ndarray:
@@ -145,6 +145,20 @@ def test_four_state_kernel_equals_general_kernel():
     _propagate4(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out4, 0)
     _propagate(disc.op_index, disc.Ad, disc.Bd, disc.inputs, x0, out, 0)
     assert np.allclose(out4, out, rtol=1e-13, atol=1e-10)
+
+
+def test_combined_matrices_give_the_separate_kernels_states_bit_for_bit():
+    """The stream's [Ad Bd] records (four states, four inputs) add the same products in the same order as
+    _propagate4."""
+    a, b = _thermal_systems(4, 4, 50, (1e3, 2e4), seed=3)
+    rng = np.random.default_rng(4)
+    Ad, Bd = _zoh(a, b, 0.5)
+    op_index, inputs = rng.integers(0, 50, size=3000), rng.uniform(0, 100, size=(3000, 4))
+    x0 = rng.uniform(20, 60, size=4)
+    want, got = np.empty((4, 3001)), np.empty((4, 3001))
+    _propagate4(op_index, Ad, Bd, inputs, x0, want, 0)
+    _propagate_combined44(op_index, np.concatenate([Ad, Bd], axis=2), inputs, x0, got, 0)
+    assert np.array_equal(got, want)
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads through /proc (Linux)")

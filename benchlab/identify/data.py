@@ -77,13 +77,13 @@ class FitData:
 
     def fitted_flat(self, states: list[str], outputs: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
         """The fitted samples (`fitted`, channel after channel) as indices into the raveled state-major states
-        (`states` × (samples + 1), the solver's own layout: no copy) of a model that outputs each channel from the
-        state `outputs` names, and their targets."""
+        (`states` × the run's samples + 1: the solver's own layout, read without a copy) of a model that outputs
+        each channel from the state `outputs` names, and their targets."""
         key = (tuple(states), tuple(outputs[c] for c in self.targets))
         found = self._flat.get(key)
         if found is None:
-            row = {s: i for i, s in enumerate(states)}
-            flat = [row[outputs[c]] * (len(self) + 1) + index for c, (index, _) in self.fitted.items()]
+            row = {s: i * (len(self) + 1) for i, s in enumerate(states)}
+            flat = [row[outputs[c]] + index for c, (index, _) in self.fitted.items()]
             targets = [target for index, target in self.fitted.values()]
             found = self._flat[key] = ((np.concatenate(flat), np.concatenate(targets)) if flat else
                                        (np.zeros(0, dtype=np.int64), np.zeros(0)))

@@ -84,31 +84,28 @@ def run_values(params: Mapping[str, float], data: FitData) -> Mapping[str, float
 
 def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
     """Model outputs at the fitting step for the measured channels of `data`."""
-    states = _states(network, params, data)[:-1]
+    states = _states(network, params, data)
     index = {s: i for i, s in enumerate(network.state_names)}
     return {c: states[:, index[network.outputs[c]]] for c in data.targets}
 
 
 def _states(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> np.ndarray:
-    """The network's states ((samples + 1) × states, the last after the last step) at the fitting step of `data`."""
+    """The network's states (samples × states) at the fitting step of `data`."""
     values = run_values(params, data)
     return run_network(network, values, data.channels, data.dt, initial_state(network, data, values),
-                       KEY_RESOLUTION, data.memo)
+                       KEY_RESOLUTION, data.memo)[:-1]
 
 
 def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datasets: Sequence[FitData]) -> np.ndarray:
     """Simulated minus measured, every fitted channel of every run, valid masked samples only."""
     parts = []
     for data in datasets:
-        parts.append(_fitted(_states(network, params, data), network, data))
+        values = run_values(params, data)
+        states = run_network(network, values, data.channels, data.dt, initial_state(network, data, values),
+                             KEY_RESOLUTION, data.memo)
+        flat, targets = data.fitted_flat(network.state_names, network.outputs)
+        parts.append(_state_major(states).take(flat) - targets)
     return np.concatenate(parts)
-
-
-def _fitted(states: np.ndarray, network: ThermalNetwork, data: FitData) -> np.ndarray:
-    """Simulated minus measured at the fitted samples of `data`, from the states (N + 1, n) the solver gives (a
-    transposed view of its state-major result, which is read without a copy)."""
-    flat, targets = data.fitted_flat(network.state_names, network.outputs)
-    return states.T.ravel().take(flat) - targets
 
 
 def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_sets: Sequence[Mapping[str, float]],
@@ -121,9 +118,16 @@ def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_s
         x0s = np.array([initial_state(network, data, params) for params in own_sets])
         runs = run_network_sets(network, run_values(base, data), own_sets, data.channels, data.dt, x0s,
                                 KEY_RESOLUTION, data.memo)
+        flat, targets = data.fitted_flat(network.state_names, network.outputs)
         for part, states in zip(parts, runs):
-            part.append(_fitted(states, network, data))
+            part.append(_state_major(states).take(flat) - targets)
     return [np.concatenate(part) for part in parts]
+
+
+def _state_major(states: np.ndarray) -> np.ndarray:
+    """The solver's states (N + 1, n), a transposed view of its state-major array, raveled state after state:
+    a view, not a copy of the whole run for every residual."""
+    return np.ascontiguousarray(states.T).ravel()
 
 
 def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:

@@ -156,10 +156,22 @@ def _compile(node: ast.expr, kinds: Mapping[str, str]) -> Compiled:
         return lambda p, c, t: np.asarray(op(left(p, c, t), right(p, c, t)), dtype=np.float64)
     function = FUNCTIONS[node.func.id][0]  # ast.Call: _check let nothing else through
     args = [_compile(a, kinds) for a in node.args]
+    if node.func.id == "where":
+        args[0] = _condition(node.args[0], kinds)
     if len(args) == 1:
         only = args[0]
         return lambda p, c, t: function(only(p, c, t))
     return lambda p, c, t: function(*(a(p, c, t) for a in args))
+
+
+def _condition(node: ast.expr, kinds: Mapping[str, str]) -> Compiled:
+    """where's condition: a comparison as booleans (what where reads; no round trip through 1.0/0.0), anything else
+    as a number."""
+    if isinstance(node, ast.Compare):
+        op, left = _COMPARE[type(node.ops[0])], _compile(node.left, kinds)
+        right = _compile(node.comparators[0], kinds)
+        return lambda p, c, t: op(left(p, c, t), right(p, c, t))
+    return _compile(node, kinds)
 
 
 def _temperature_free(node: ast.expr, nodes: frozenset[str]) -> bool:
@@ -205,7 +217,7 @@ def _affine(node: ast.expr, kinds: Mapping[str, str], nodes: frozenset[str]) -> 
         op = _BINARY[type(node.op)] if free_right else operator.mul
         return {k: (lambda f: lambda p, c, t: op(f(p, c, t), scale(p, c, t)))(f) for k, f in parts.items()}
     if isinstance(node, ast.Call) and node.func.id == "where" and _temperature_free(node.args[0], nodes):
-        cond = _compile(node.args[0], kinds)
+        cond = _condition(node.args[0], kinds)
         yes, no = _affine(node.args[1], kinds, nodes), _affine(node.args[2], kinds, nodes)
         zero = _constant(0.0)
         return {k: (lambda a, b: lambda p, c, t: np.where(cond(p, c, t), a(p, c, t), b(p, c, t)))(

@@ -19,7 +19,7 @@ import pandas as pd
 from numba import njit
 
 from benchlab.network.solver import (_assembly, _coefficient_terms, _conductances, _quantised, _system_matrices, _zoh,
-                                     propagate_into)
+                                     _propagate_combined44, propagate_into)
 from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
 
 BLOCK = 1 << 14  # samples per block: a block's float64 column is 128 KiB, inside the core's L2 cache (16,384 measured best of 4,096..131,072)
@@ -45,10 +45,12 @@ class _Points:
     def __init__(self, columns: int, n: int, m: int) -> None:
         self.count = 0
         self.bits = 12
-        self.table = np.full(1 << self.bits, -1, dtype=np.int64)
+        self.table = np.full((1 << self.bits, columns + 1), -1, dtype=np.int64)  # per slot: the key, then its point
         self.keys = np.empty((1024, columns), dtype=np.int64)
         self.Ad = np.empty((1024, n, n))
         self.Bd = np.empty((1024, n, m))
+        # the paper's clutch (4 states, 4 inputs): [Ad Bd] side by side too, one contiguous record per step
+        self.ABd = np.empty((1024, n, n + m)) if (n, m) == (4, 4) else None
 
     def number(self, keys: np.ndarray) -> np.ndarray:
         """Each row's point index; rows not met before become new points (numbered after the known ones)."""
@@ -60,7 +62,7 @@ class _Points:
             self.count, done = _number(keys, done, self.table, self.bits, self.keys, self.count, codes)
             if done < len(keys):
                 self.bits += 1
-                self.table = np.full(1 << self.bits, -1, dtype=np.int64)
+                self.table = np.full((1 << self.bits, self.table.shape[1]), -1, dtype=np.int64)
                 _number(self.keys[:self.count].copy(), 0, self.table, self.bits, self.keys, 0,
                         np.empty(self.count, dtype=np.int64))
         return codes
@@ -69,7 +71,18 @@ class _Points:
         """The discrete matrices of points start..count."""
         if self.count > len(self.Ad):
             self.Ad, self.Bd = _grown(self.Ad, self.count), _grown(self.Bd, self.count)
+            self.ABd = None if self.ABd is None else _grown(self.ABd, self.count)
         self.Ad[start:self.count], self.Bd[start:self.count] = Ad, Bd
+        if self.ABd is not None:
+            self.ABd[start:self.count, :, :4], self.ABd[start:self.count, :, 4:] = Ad, Bd
+
+    def propagate(self, op_index: np.ndarray, inputs: np.ndarray, out: np.ndarray, offset: int) -> None:
+        """States from out[:, offset] over the samples of `op_index` into `out` (`solver.propagate_into`)."""
+        x0 = np.ascontiguousarray(out[:, offset])
+        if self.ABd is not None:
+            _propagate_combined44(op_index, self.ABd, inputs, x0, out, offset)
+        else:
+            propagate_into(op_index, self.Ad, self.Bd, inputs, x0, out, offset)
 
 
 def _grown(array: np.ndarray, needed: int) -> np.ndarray:
@@ -84,11 +97,12 @@ def _grown(array: np.ndarray, needed: int) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def _number(keys, first, table, bits, known, count, codes):  # pragma: no cover - compiled
-    """Number the rows of `keys` from `first` on by an open-addressing table over the rows of `known` (`count` so
-    far; room for every new one): codes[i] = index of keys[i] in `known`, new rows appended. Stops where the table
-    would become more than half full. Returns (the new count, the first row not numbered)."""
-    mask = (1 << bits) - 1
+    """Number the rows of `keys` from `first` on by an open-addressing table whose slots hold a key and its row
+    in `known` (one cache line per probe): codes[i] = index of keys[i] in `known` (`count` rows so far; room for
+    every new one), new rows appended. Stops where the table would become more than half full. Returns (the new
+    count, the first row not numbered)."""
     columns = keys.shape[1]
+    mask = (1 << bits) - 1
     for i in range(first, keys.shape[0]):
         if i > first:  # runs of one point are the usual case
             same = True
@@ -104,19 +118,20 @@ def _number(keys, first, table, bits, known, count, codes):  # pragma: no cover 
             h = (h ^ np.uint64(keys[i, c])) * np.uint64(0x9E3779B97F4A7C15)
         slot = np.int64(h >> np.uint64(64 - bits)) & mask
         while True:
-            j = table[slot]
+            j = table[slot, columns]
             if j < 0:
                 if 2 * (count + 1) > mask + 1:
                     return count, i
-                table[slot] = count
                 for c in range(columns):
+                    table[slot, c] = keys[i, c]
                     known[count, c] = keys[i, c]
+                table[slot, columns] = count
                 codes[i] = count
                 count += 1
                 break
             same = True
             for c in range(columns):
-                if known[j, c] != keys[i, c]:
+                if table[slot, c] != keys[i, c]:
                     same = False
                     break
             if same:
@@ -170,7 +185,7 @@ def stream_network(network: ThermalNetwork, params: Params, channels: Channels, 
             _discretise_points(network, params, laws, columns, points, known, decode, dt, assembly)
         flows = [as_samples(s.heat_flow(params, part), size) for s in network.sources]
         flows += [as_samples(b.temperature(part), size) for b in network.boundaries]
-        propagate_into(op_index, points.Ad, points.Bd, sample_matrix(flows, size), out[:, start], out, start)
+        points.propagate(op_index, sample_matrix(flows, size), out, start)
     return out
 
 
@@ -192,7 +207,7 @@ def _discretise_points(network: ThermalNetwork, params: Params, laws: list, colu
                        known: int, decode, dt: float, assembly: tuple) -> None:
     """Discrete matrices of the points numbered known..count: each varying law at its key, the rest as they are."""
     new = points.count - known
-    per_point: list = [np.full(new, g) if not isinstance(g, np.ndarray) else None for g in laws]
+    per_point: list = [g if not isinstance(g, np.ndarray) else None for g in laws]  # a constant law stays a scalar
     for c, (_, keyed) in enumerate(columns):
         values = decode(points.keys[known:points.count, c])
         for i in keyed:
@@ -204,37 +219,41 @@ def _discretise_points(network: ThermalNetwork, params: Params, laws: list, colu
 class RunChannels(Mapping):
     """A run's channels as the network's laws read them, held on demand: a channel's drop-outs (NaN) at the last
     valid value (leading ones at the first), a channel never measured left out (`simulation.input_channels`'s
-    values), without copying a channel that has no drop-out or converting one no law asks for."""
+    values), without copying a block that has no drop-out or converting a channel no law asks for."""
 
     def __init__(self, frame: pd.DataFrame, start: int = 0, stop: int | None = None,
-                 read: dict[str, np.ndarray | None] | None = None, gaps: dict[str, bool] | None = None) -> None:
+                 read: dict[str, tuple[np.ndarray, bool] | None] | None = None) -> None:
         self._frame = frame
         self._start = start
         self._stop = stop if stop is not None else len(frame)
-        self._read = read if read is not None else {}  # name -> float64 column, None where never measured
-        self._gaps = gaps if gaps is not None else {}  # name -> whether the column has a drop-out
+        self._read = read if read is not None else {}  # name -> (float64 column, has a NaN), None if never measured
+        self._held: dict[str, np.ndarray] = {}  # name -> this window's samples with drop-outs held, once asked for
         self.samples = self._stop - self._start
 
-    def _column(self, name: str) -> np.ndarray | None:
+    def _column(self, name: str) -> tuple[np.ndarray, bool] | None:
+        """The channel's float64 column and whether it has a drop-out (a NaN makes the sum NaN: one pass, no
+        temporary), None where it was never measured."""
         if name not in self._read:
             values = self._frame[name].to_numpy(np.float64) if name in self._frame.columns else None
             measured = values is not None and (name == "time" or first_valid_index(values) >= 0)
-            self._read[name] = values if measured else None
+            self._read[name] = (values, bool(np.isnan(np.add.reduce(values)))) if measured else None
         return self._read[name]
 
     def __contains__(self, name: object) -> bool:
         return isinstance(name, str) and self._column(name) is not None
 
     def __getitem__(self, name: str) -> np.ndarray:
-        raw = self._column(name)
-        if raw is None:
+        column = self._column(name)
+        if column is None:
             raise KeyError(name)
+        raw, gaps = column
         part = raw[self._start:self._stop]
-        if name not in self._gaps:
-            self._gaps[name] = bool(np.isnan(raw).any())
-        if not self._gaps[name] or not np.isnan(part).any():
+        if not gaps:
             return part
-        return _held(raw, self._start, self._stop)
+        if name not in self._held:  # several laws may read it (the clutch: both heat shares)
+            self._held[name] = np.empty(len(part))
+            _hold(part, _carried(raw, self._start), self._held[name])
+        return self._held[name]
 
     def __iter__(self) -> Iterator[str]:
         return (name for name in self._frame.columns if self._column(name) is not None)
@@ -244,31 +263,36 @@ class RunChannels(Mapping):
 
     def window(self, start: int, stop: int) -> "RunChannels":
         """Samples start..stop (of this window) of every channel."""
-        return RunChannels(self._frame, self._start + start, self._start + stop, self._read, self._gaps)
+        return RunChannels(self._frame, self._start + start, self._start + stop, self._read)
 
     def first_valid(self, name: str) -> float | None:
         """The channel's first finite sample in the window, None where it has none."""
-        raw = self._column(name)
-        at = -1 if raw is None else first_valid_index(raw[self._start:self._stop])
-        return None if at < 0 else float(raw[self._start + at])
+        column = self._column(name)
+        at = -1 if column is None else first_valid_index(column[0][self._start:self._stop])
+        return None if at < 0 else float(column[0][self._start + at])
 
 
 def first_valid_index(values: np.ndarray) -> int:
-    """Index of the first finite value, -1 if none."""
-    finite = np.isfinite(values)
-    at = int(finite.argmax()) if len(finite) else 0
-    return at if len(finite) and finite[at] else -1
+    """Index of the first finite value, -1 if none; looked for in growing windows, since it is usually near the
+    start (a whole-column test would allocate and scan the whole run for every channel)."""
+    start, size = 0, 256
+    while start < len(values):
+        finite = np.isfinite(values[start:start + size])
+        if finite.any():
+            return start + int(finite.argmax())
+        start, size = start + size, size * 4
+    return -1
 
 
-def _held(raw: np.ndarray, start: int, stop: int) -> np.ndarray:
-    """raw[start:stop] with each NaN replaced by the last valid value before it in the whole column (leading NaNs
-    by the column's first valid value; the column holds one)."""
-    part = raw[start:stop]
-    valid = ~np.isnan(part)
-    last = np.maximum.accumulate(np.where(valid, np.arange(len(part)), -1))
-    out = part[np.maximum(last, 0)]
-    out[last < 0] = _carried(raw, start)
-    return out
+@njit(cache=True, nogil=True)
+def _hold(part, carried, out):  # pragma: no cover - compiled
+    """out = part with each NaN replaced by the last valid value before it (`carried` before the first)."""
+    last = carried
+    for i in range(part.shape[0]):
+        v = part[i]
+        if v == v:
+            last = v
+        out[i] = last
 
 
 def _carried(raw: np.ndarray, start: int) -> float:
