@@ -45,6 +45,7 @@ class ScoreResponse:
         self._changes = np.empty((0, self.gains.shape[1]))
 
     def _laws(self, channels: Channels) -> list:
+        """The laws the operating points are made of (conductances, then source coefficients) on `channels`."""
         return (_conductances(self.network, self.values, channels, self.samples)
                 + _coefficients(self.network, self.values, channels))
 

@@ -33,6 +33,9 @@ from benchlab.progress import SILENT, Progress
 from benchlab.network.simulation import simulate
 
 INITIAL_STATE_RANGE_K = 20.0
+#: Fitting steps from which a run's scouts fit its cheaper version (benchlab.identify.data.scout_runs): a shorter
+#: run is cheap to scout as it is, and its cheaper version would hold few targets per parameter.
+SCOUT_RUNS_FROM = 1000
 
 
 @dataclass
@@ -114,7 +117,9 @@ def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "non
     late = late_channels(runs, initial_channels(spec))
     with progress.task(f"identify {spec.definition.label}", starts + 1, unit="fit") as task:
         result = fit_multistart(with_initial_states(spec, datasets, late) if late else spec, datasets, starts=starts,
-                                seed=seed, task=task, scout_data=[scout_runs(data) for data in datasets],
+                                seed=seed, task=task,
+                                scout_data=[scout_runs(data) if len(data) >= SCOUT_RUNS_FROM else data
+                                            for data in datasets],
                                 polish=with_initial_states(spec, datasets))
     model_names = [p.name for p in spec.free]
     params = check_params(spec.definition, {k: v for k, v in result.params.items() if "@" not in k}, "identify")
