@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from benchlab.identify.data import prepare
+from benchlab.identify.data import prepare, scout_runs
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.identify.fit import _start, fit, fit_multistart, same_minimum
 from benchlab.model.catalog import builtin, model_spec
@@ -46,6 +46,20 @@ def test_a_failed_first_start_is_outvoted(datasets):
     assert not first.converged and first.cost > 1.5 * target.cost
     result = fit_multistart(spec, datasets, starts=6)
     assert same_minimum(result, target)
+    assert result.cost == pytest.approx(target.cost, rel=1e-6)
+
+
+def test_a_failed_first_start_is_outvoted_on_scout_runs(datasets):
+    """identify's search: the scouts fit a coarser, thinned version of the run (scout_runs), the polish the run
+    itself; from the failed priors it still ends at the minimum the good priors reach on the run."""
+    spec = model_spec(builtin("nonlinear").with_starts({"R0": 3.0, "a1": 0.01, "a2": 0.01}))
+    scouted = [scout_runs(data) for data in datasets]
+    first = fit(spec, scouted, max_nfev=SCOUT_NFEV, start=_start(spec, 0, np.random.default_rng(0), 3.0))
+    settled = fit(model_spec("nonlinear"), scouted)
+    assert not first.converged and first.cost > 1.5 * settled.cost
+    target = fit(model_spec("nonlinear"), datasets)
+    result = fit_multistart(spec, datasets, starts=6, scout_data=scouted)
+    assert result.starts >= 2 and same_minimum(result, target)
     assert result.cost == pytest.approx(target.cost, rel=1e-6)
 
 

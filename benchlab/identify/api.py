@@ -18,10 +18,10 @@ import numpy as np
 import pandas as pd
 
 from benchlab._blas import single_threaded_blas
-from benchlab.identify.data import FitData, prepare
+from benchlab.identify.data import FitData, prepare, scout_runs
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.identify.evaluate import evaluate
-from benchlab.identify.fit import FitResult, fit, fit_multistart
+from benchlab.identify.fit import FitResult, fit_multistart
 from benchlab.identify.residuals import residual_start, run_residuals
 from benchlab.identify.spec import ModelSpec, ParamSpec
 from benchlab.identify.uncertainty import (METHOD, Uncertainty, estimate_uncertainty, power_noise,
@@ -33,6 +33,9 @@ from benchlab.progress import SILENT, Progress
 from benchlab.network.simulation import simulate
 
 INITIAL_STATE_RANGE_K = 20.0
+#: Fitting steps from which a run's scouts fit its cheaper version (benchlab.identify.data.scout_runs): a shorter
+#: run is cheap to scout as it is, and its cheaper version would hold few targets per parameter.
+SCOUT_RUNS_FROM = 1000
 
 
 @dataclass
@@ -106,18 +109,18 @@ def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "non
     """Fit a model (a built-in name, a model file or a checked definition) to all runs at once at the fitting
     step `step_s`, then measure it on them and on validation runs.
 
-    `progress` gets one task in fits: the multistart's scouts and polish, the fit with the start states.
+    `progress` gets one task in fits: the multistart's scouts (on cheaper versions of the runs, `scout_runs`), and
+    its polish on the runs themselves, which fits the start states too.
     """
     spec = model_spec(model).with_fixed(dict(fixed or {}))
     datasets = [prepare(run, step_s, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     late = late_channels(runs, initial_channels(spec))
-    with progress.task(f"identify {spec.definition.label}", starts + 2, unit="fit") as task:
-        search = fit_multistart(with_initial_states(spec, datasets, late) if late else spec, datasets, starts=starts,
-                                seed=seed, task=task)
-        full = with_initial_states(spec, datasets)
-        result = fit(full.starting_point(search.params), datasets)
-        task.advance()
-    result.starts, result.start_costs = search.starts, search.start_costs
+    with progress.task(f"identify {spec.definition.label}", starts + 1, unit="fit") as task:
+        result = fit_multistart(with_initial_states(spec, datasets, late) if late else spec, datasets, starts=starts,
+                                seed=seed, task=task,
+                                scout_data=[scout_runs(data) if len(data) >= SCOUT_RUNS_FROM else data
+                                            for data in datasets],
+                                polish=with_initial_states(spec, datasets))
     model_names = [p.name for p in spec.free]
     params = check_params(spec.definition, {k: v for k, v in result.params.items() if "@" not in k}, "identify")
     noise = [{"friction_power": power_noise(run, data.block, len(data)), **temperature_input_noise(data)}
@@ -129,8 +132,9 @@ def identify(runs: Sequence[pd.DataFrame], model: "str | ModelDefinition" = "non
                        for c in initial_channels(spec)} for label, data in zip(labels, datasets)}
     fitting = {label: evaluate(r, params) for label, r in zip(labels, runs)}
     validation = {label: evaluate(r, params) for label, r in zip(_labels(validate, "validation"), validate)}
-    residuals = {label: run_residuals(r, simulate(r, params, initial=residual_start(r, params)), params).tests
-                 for label, r in zip(labels, runs)}
+    residuals = {label: run_residuals(r, simulate(r, params, initial=residual_start(r, params, data)), params,
+                                      data).tests
+                 for label, r, data in zip(labels, runs, datasets if step_s == FIT_STEP_S else [None] * len(runs))}
     return Identification(params, result, uncertainty, fitting, validation, residuals, initial)
 
 

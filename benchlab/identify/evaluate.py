@@ -6,7 +6,7 @@ from collections.abc import Mapping
 
 import pandas as pd
 
-from benchlab.identify.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
+from benchlab.identify.metrics import error_figures
 from benchlab.network import ThermalNetwork
 from benchlab.network.simulation import model_network, simulate
 
@@ -16,6 +16,4 @@ def evaluate(run: pd.DataFrame, params: Mapping[str, float], network: ThermalNet
     network = model_network(params, network)
     sim = simulate(run, params, network)
     measured = [c for c in network.measured if c in run.columns]
-    return {"rmse_K": rmse_k(run, sim, measured), "nrmse_pct": nrmse_pct(run, sim, measured),
-            "channels": {c: {"rmse_K": v, "nrmse_pct": channel_nrmse_pct(run, sim, (c,))[c]}
-                         for c, v in channel_rmse_k(run, sim, measured).items()}}
+    return error_figures(run, sim, measured)

@@ -1,4 +1,5 @@
-"""Output-error fit of a ModelSpec to one or more runs: simulate, compare, adjust (scipy least_squares).
+"""Output-error fit of a ModelSpec to one or more runs: simulate, compare, adjust (scipy's trust-region reflective
+least squares, benchlab.identify.trust_region).
 
 Positive parameters are fitted as logarithms, signed ones scaled by their start value, so
 every coordinate moves on a scale of one. The problem has local minima, so fits start from
@@ -7,15 +8,15 @@ several points spread around the neutral priors and the best is polished to conv
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from benchlab._blas import single_threaded_blas
 from benchlab.identify.data import FitData
 from benchlab.identify.spec import ModelSpec
+from benchlab.identify.trust_region import least_squares_trf
 from benchlab.network import ThermalNetwork
 from benchlab.progress import Task
 from benchlab.network.solver import run_network
@@ -36,7 +37,7 @@ class FitResult:
     jacobian: np.ndarray  # d residual / d parameter (physical units), fitting samples only
     residuals: np.ndarray
     starts: int = 1
-    start_costs: list[float] = field(default_factory=list)
+    start_costs: list[float] = field(default_factory=list)  # each start's latest cost on the data its scouts fit
     converged: bool = True  # False where the fit stopped at its evaluation budget (a scout), not at a minimum
 
     @property
@@ -136,13 +137,15 @@ def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
 
 @single_threaded_blas
 def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = None,
-        start: Mapping[str, float] | None = None) -> FitResult:
-    """One local fit from the spec's starting values (or `start`)."""
+        start: Mapping[str, float] | None = None,
+        stop: Callable[[Mapping[str, float]], bool] | None = None) -> FitResult:
+    """One local fit from the spec's starting values (or `start`); `stop`: asked after each iteration with the
+    parameters reached, True ends the fit there (not converged)."""
     x0 = to_coordinates(spec, {p.name: p.initial for p in spec.free} | dict(start or {}))
     lo, hi = coordinate_bounds(spec)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
 
-    last = [x0]  # the point least_squares evaluated last: where it then takes the Jacobian
+    last = [x0]  # the point the fit evaluated last: where it then takes the Jacobian
 
     def fun(x: np.ndarray) -> np.ndarray:
         last[0] = x.copy()
@@ -153,8 +156,8 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
         return residual_vectors(spec.network, from_coordinates(spec, last[0]),
                                 [from_coordinates(spec, x) for x in points], datasets)
 
-    sol = least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10, workers=columns)
+    sol = least_squares_trf(fun, x0, (lo, hi), columns, max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10,
+                            stop=None if stop is None else lambda x: stop(from_coordinates(spec, x)))
     params = from_coordinates(spec, sol.x)
     scale = np.array([params[p.name] if p.log else p.linear_scale for p in spec.free])
     jac = sol.jac / scale  # chain rule: d r / d p = d r / d x * d x / d p
@@ -175,9 +178,24 @@ def same_minimum(a: FitResult, b: FitResult) -> bool:
     """Whether two fits reached one minimum: every free parameter apart by less than the better fit's standard
     error (its statistical resolution: closer than that, the data cannot tell the two apart)."""
     better = a if a.cost <= b.cost else b
-    errors = standard_errors(better)
-    gaps = np.array([abs(a.params[name] - b.params[name]) for name in better.free_names])
+    return within_errors(better, b.params if better is a else a.params)
+
+
+def within_errors(result: FitResult, params: Mapping[str, float], errors: np.ndarray | None = None) -> bool:
+    """Whether every free parameter of `result` is within its standard error (`errors`, where already computed)
+    of `params`."""
+    errors = standard_errors(result) if errors is None else errors
+    gaps = np.array([abs(result.params[name] - params[name]) for name in result.free_names])
     return bool(np.all(np.isfinite(errors)) and np.all(gaps <= errors))
+
+
+def _arrived(best: FitResult) -> Callable[[Mapping[str, float]], bool] | None:
+    """A scout's `stop` once `best` has converged: the scout has arrived where its parameters are within the
+    standard errors of best's, the agreement `same_minimum` asks for; None while best is still moving."""
+    if not best.converged:
+        return None
+    errors = standard_errors(best)
+    return lambda params: within_errors(best, params, errors)
 
 
 def _start(spec: ModelSpec, i: int, rng: np.random.Generator, spread: float) -> dict[str, float]:
@@ -192,9 +210,15 @@ def _start(spec: ModelSpec, i: int, rng: np.random.Generator, spread: float) -> 
 
 @single_threaded_blas
 def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6, seed: int = 0,
-                   spread: float = 3.0, scout_nfev: int = 25, task: Task = Task()) -> FitResult:
+                   spread: float = 3.0, scout_nfev: int = 25, task: Task = Task(),
+                   scout_data: Sequence[FitData] | None = None, polish: ModelSpec | None = None) -> FitResult:
     """Search from independent starts (the priors, then log-uniform within ×/÷ spread) until two agree on the best
     minimum, then polish it; at most `starts` scout runs of `scout_nfev` evaluations each.
+
+    `scout_data`: the runs the scouts fit, where not `datasets` (identify's: coarser and thinned, `scout_runs`):
+    agreement is then judged by that data's standard errors, and the polish fits `datasets` from the best scout.
+    `polish`: the spec the best start is polished in (default `spec`; identify adds each run's start states, fitted
+    once, in the polish, instead of a second fit after it).
 
     Two starts agree when they reach one minimum within its parameters' standard errors (`same_minimum`): a further
     start could only land there again or higher, so the search stops. While they disagree, the budget goes where
@@ -205,6 +229,7 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
     budget at the end) and one for the polish; `starts` of the result counts the independent starts drawn.
     """
     rng = np.random.default_rng(seed)
+    scouted = datasets if scout_data is None else scout_data
     found: list[FitResult] = []  # each start's latest scout
     for run in range(starts):
         best = min(found, key=lambda r: r.cost) if found else None
@@ -214,16 +239,17 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
         unsettled = sorted((r for r in found if not r.converged and r is not best), key=lambda r: r.cost)
         if len(found) >= 2 and unsettled:
             k = next(k for k, r in enumerate(found) if r is unsettled[0])
-            found[k] = fit(spec, datasets, max_nfev=scout_nfev, start={n: unsettled[0].params[n] for n in
-                                                                        unsettled[0].free_names})
+            found[k] = fit(spec, scouted, max_nfev=scout_nfev, start={n: unsettled[0].params[n] for n in
+                                                                       unsettled[0].free_names}, stop=_arrived(best))
         elif len(found) >= 2 and not best.converged and all(r.converged for r in found if r is not best):
-            found[found.index(best)] = fit(spec, datasets, max_nfev=scout_nfev,
+            found[found.index(best)] = fit(spec, scouted, max_nfev=scout_nfev,
                                            start={n: best.params[n] for n in best.free_names})
         else:
-            found.append(fit(spec, datasets, max_nfev=scout_nfev, start=_start(spec, len(found), rng, spread)))
+            found.append(fit(spec, scouted, max_nfev=scout_nfev, start=_start(spec, len(found), rng, spread),
+                             stop=_arrived(best) if best is not None else None))
         task.advance()
     best = min(found, key=lambda r: r.cost)
-    final = fit(spec, datasets, start={k: best.params[k] for k in best.free_names})
+    final = fit(polish or spec, datasets, start={k: best.params[k] for k in best.free_names})
     task.advance()
     final.starts = len(found)
     final.start_costs = sorted(r.cost for r in found)

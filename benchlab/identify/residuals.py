@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from benchlab.identify.data import prepare
+from benchlab.identify.data import FitData, prepare
 from benchlab.identify.metrics import residual as model_error
 from benchlab.identify.metrics import robust_sigma
 
@@ -145,17 +145,18 @@ def residual_tests(residual: np.ndarray, inputs: dict[str, np.ndarray], step_s: 
     return report
 
 
-def residual_start(run: pd.DataFrame, params: "ModelParams") -> dict[str, float]:
+def residual_start(run: pd.DataFrame, params: "ModelParams", data: "FitData | None" = None) -> dict[str, float]:
     """Each state's start for the residuals: the measured channels' temperatures at t = 0 that fit the run best
     with the model's parameters held (least squares on identification's targets), as a toolbox's `resid` and
-    `compare` estimate initial conditions."""
+    `compare` estimate initial conditions. `data`: the run already prepared at identification's default step
+    (else prepared here)."""
     from benchlab.identify.api import initial_channels, with_initial_states
     from benchlab.identify.fit import fit
     from benchlab.model.catalog import model_spec
 
     spec = model_spec(params.definition)
     spec = spec.with_fixed({p.name: params[p.name] for p in spec.free})
-    data = prepare(run, name="run", network=spec.network)
+    data = data if data is not None else prepare(run, name="run", network=spec.network)
     fitted = fit(with_initial_states(spec, [data]), [data]).params
     starts = {c: fitted[f"init_{c}@{data.name}"] for c in initial_channels(spec)}
     return {s: starts[spec.network.initial[s]] for s in spec.network.state_names}
@@ -172,11 +173,12 @@ class RunResiduals:
     tests: dict[str, dict]
 
 
-def run_residuals(run: pd.DataFrame, simulated: pd.DataFrame, params: "ModelParams | None" = None) -> RunResiduals:
+def run_residuals(run: pd.DataFrame, simulated: pd.DataFrame, params: "ModelParams | None" = None,
+                  data: "FitData | None" = None) -> RunResiduals:
     """Residuals of `simulated` (benchlab.simulate's output for `run` with `params`, default the clutch) against
     identification's targets (centred block means of the model's measured channels, benchlab.identify.data.prepare
-    at its default step), with `residual_tests` on each measured channel."""
-    data = prepare(run, network=params.network if params is not None else None)
+    at its default step: `data` where the caller has it), with `residual_tests` on each measured channel."""
+    data = data if data is not None else prepare(run, network=params.network if params is not None else None)
     picks = slice(0, len(data) * data.block, data.block)
     residual = {c: model_error(simulated[c].to_numpy()[picks], target) for c, target in data.targets.items()}
     inputs = {k: data.channels[k] for k in residual_inputs(params.definition if params is not None else None,

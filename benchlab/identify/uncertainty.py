@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
+from benchlab.identify.adjoint import ScoreResponse
 from benchlab.identify.data import FitData
 from benchlab.identify.fit import FitResult, residual_index, simulate_outputs
 from benchlab.identify.metrics import MAD_TO_SIGMA, robust_sigma
@@ -36,9 +37,11 @@ from benchlab.identify.metrics import MAD_TO_SIGMA, robust_sigma
 CORRELATION_LIMIT = 0.95
 RELATIVE_SE_LIMIT = 0.5
 INPUT_NOISE_DRAWS = 200
+DRAWS_TOGETHER = 16  # input-noise draws scored in one matrix product (their input changes held at once)
 PREWHITEN_CAP = 0.97  # largest singular value of the prewhitening VAR(1) (Andrews & Monahan 1992)
 PREWHITEN_MIN_STEPS = 10  # fitting steps per score column a run needs for the prewhitening VAR(1)
 MIN_NOISE_SAMPLES = 8  # slipping samples a fitting step needs for its own noise estimate (else the run's)
+POWER_NOISE_STEPS = 4096  # fitting steps `power_noise` reads at a time
 #: How the parameter file's standard errors were made (its "uncertainty_method"): named methods, not inflation.
 METHOD = {"name": "HAC sandwich (prewhitened Newey-West) with Monte Carlo input noise",
           "covariance": "sandwich A^-1 (S_res + S_in) A^-1, A = J^T J with columns scaled to unit norm",
@@ -68,24 +71,34 @@ def power_noise(run: pd.DataFrame, block: int, steps: int) -> np.ndarray:
 
     While slipping, the measured power is smooth (torque held, slip ramping), so second differences of three
     slipping samples are noise of variance 6σ² (σ from their median, robust to engagement edges); samples are
-    taken as independent, so a step's mean over n slipping samples of `block` carries √n·σ/block.
+    taken as independent, so a step's mean over n slipping samples of `block` carries √n·σ/block. The record is
+    read POWER_NOISE_STEPS fitting steps at a time: no run-sized temporaries (on a 24 h run they cost more system
+    time in fresh pages than the arithmetic).
     """
     if "friction_power" not in run.columns:  # a model without the clutch's heat input: no such noise
         return np.zeros(steps)
-    p = np.nan_to_num(run["friction_power"].to_numpy(np.float64)[: steps * block])
-    slipping = p != 0
-    d2 = np.full(p.shape, np.nan)
-    usable = slipping[2:] & slipping[1:-1] & slipping[:-2]
-    d2[1:-1] = np.where(usable, np.abs(p[2:] - 2 * p[1:-1] + p[:-2]), np.nan)
-    per_step = d2.reshape(steps, block)
-    counts = np.sum(np.isfinite(per_step), axis=1)
-    overall = float(np.nanmedian(d2)) if np.any(np.isfinite(d2)) else 0.0
-    medians = np.full(steps, overall)
-    enough = counts >= MIN_NOISE_SAMPLES
-    if np.any(enough):
-        medians[enough] = np.nanmedian(per_step[enough], axis=1)
+    power = run["friction_power"].to_numpy(np.float64)
+    samples = steps * block
+    medians, slipping, finite = np.empty(steps), np.empty(steps), []
+    for first in range(0, steps, POWER_NOISE_STEPS):
+        last = min(first + POWER_NOISE_STEPS, steps)
+        lo, hi = first * block, last * block
+        p = np.zeros(hi - lo + 2)  # samples lo - 1 .. hi; none beyond the record (0: not slipping)
+        a, b = max(lo - 1, 0), min(hi + 1, samples)
+        p[a - lo + 1: b - lo + 1] = np.nan_to_num(power[a:b])
+        slips = p != 0
+        usable = slips[2:] & slips[1:-1] & slips[:-2]
+        per_step = np.where(usable, np.abs(p[2:] - 2 * p[1:-1] + p[:-2]), np.nan).reshape(last - first, block)
+        finite.append(per_step[np.isfinite(per_step)])
+        enough = np.sum(np.isfinite(per_step), axis=1) >= MIN_NOISE_SAMPLES
+        medians[first:last] = np.nan
+        if np.any(enough):
+            medians[first:last][enough] = np.nanmedian(per_step[enough], axis=1)
+        slipping[first:last] = slips[1:-1].reshape(last - first, block).sum(axis=1)
+    finite = np.concatenate(finite) if finite else np.zeros(0)
+    medians[np.isnan(medians)] = float(np.median(finite)) if finite.size else 0.0
     sigma = MAD_TO_SIGMA * medians / np.sqrt(6.0)
-    return np.sqrt(slipping.reshape(steps, block).sum(axis=1)) * sigma / block
+    return np.sqrt(slipping) * sigma / block
 
 
 def run_scores(result: FitResult, datasets: Sequence[FitData]) -> list[np.ndarray]:
@@ -171,7 +184,9 @@ def temperature_input_noise(data: FitData) -> dict[str, np.ndarray]:
 
 def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise: Sequence[Mapping[str, np.ndarray]],
                            draws: int = INPUT_NOISE_DRAWS, seed: int = 0) -> np.ndarray:
-    """Covariance of the score Jᵀe caused by input noise of the given level per step and channel (Monte Carlo)."""
+    """Covariance of the score Jᵀe caused by input noise of the given level per step and channel (Monte Carlo; each
+    draw's scores by the adjoint gains of benchlab.identify.adjoint, one backward pass per parameter instead of one
+    simulation per draw, where the noisy channels move no operating point)."""
     rng = np.random.default_rng(seed)
     p = result.jacobian.shape[1]
     cov, offset = np.zeros((p, p)), 0
@@ -183,15 +198,21 @@ def input_noise_covariance(result: FitResult, datasets: Sequence[FitData], noise
         if not sigmas:
             continue
         use = [data.mask & np.isfinite(target) for target in data.targets.values()]
-        base = simulate_outputs(network, params, data)
-        for _ in range(draws):
-            channels = dict(data.channels)
-            for c, sigma in sigmas.items():
-                channels[c] = channels[c] + sigma * rng.standard_normal(len(sigma))
-            sim = simulate_outputs(network, params, replace(data, channels=channels))
-            error = np.concatenate([sim[c][u] - base[c][u] for c, u in zip(data.targets, use)])
-            score = jac.T @ error
-            cov += np.outer(score, score) / draws
+        response = ScoreResponse(network, params, data, jac)
+        base = None
+        for first in range(0, draws, DRAWS_TOGETHER):
+            noisy = []
+            for _ in range(first, min(first + DRAWS_TOGETHER, draws)):
+                channels = dict(data.channels)
+                for c, sigma in sigmas.items():
+                    channels[c] = channels[c] + sigma * rng.standard_normal(len(sigma))
+                noisy.append(channels)
+            for channels, score in zip(noisy, response.scores(noisy)):
+                if score is None:  # the noise moves an operating point: simulated (benchlab.identify.adjoint)
+                    base = simulate_outputs(network, params, data) if base is None else base
+                    sim = simulate_outputs(network, params, replace(data, channels=channels))
+                    score = jac.T @ np.concatenate([sim[c][u] - base[c][u] for c, u in zip(data.targets, use)])
+                cov += np.outer(score, score) / draws
     return cov
 
 
