@@ -125,6 +125,15 @@ def test_initial_states_are_fitted_per_run(nonlinear):
         assert abs(value["value"] - 22.0) < max(4 * value["standard_error"], 0.01)
 
 
+def test_start_costs_are_on_the_runs_themselves(nonlinear):
+    """The scouts fit cheaper versions of the run, but each start's cost in the parameter file is on the run itself:
+    the polish, which starts from the best of them, ends at or below it (costs on the scouts' data, an eighth of
+    the targets, would lie several times below it)."""
+    costs = nonlinear.fit.start_costs
+    assert len(costs) == nonlinear.fit.starts >= 2
+    assert nonlinear.fit.cost <= costs[0] * (1 + 1e-9)
+
+
 def test_validation_rmse_at_the_noise_floor(nonlinear, validation_run):
     floor = evaluate(validation_run, TRUTH)["rmse_K"]
     assert evaluate(validation_run, nonlinear.params)["rmse_K"] < 1.2 * floor

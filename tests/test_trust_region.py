@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
+from benchlab.identify import trust_region
 from benchlab.identify.trust_region import least_squares_trf
 
 T = np.linspace(0.0, 4.0, 400)
@@ -39,3 +40,18 @@ def test_stop_ends_the_fit_where_it_says():
                                stop=lambda x: seen.append(x.copy()) or len(seen) == 3)
     assert result.status == -2 and len(seen) == 3 and np.array_equal(result.x, seen[-1])
     np.testing.assert_array_equal(result.fun, _decay(result.x))
+
+
+def test_a_scipy_without_the_private_helpers_gets_the_public_solver(monkeypatch):
+    """Where a scipy release moves trf's private helpers, the fit is scipy's own least_squares: the same minimum,
+    and `stop` still ends it."""
+    lower, upper, x0 = np.zeros(4), np.full(4, 10.0), np.array([1.0, 2.0, 0.3, 0.05])
+    fast = least_squares_trf(_decay, x0, (lower, upper), _columns(_decay), xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    monkeypatch.setattr(trust_region, "select_step", None)
+    public = least_squares_trf(_decay, x0, (lower, upper), _columns(_decay), xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    assert public.status > 0 and public.cost == pytest.approx(fast.cost, rel=1e-9)
+    np.testing.assert_allclose(public.x, fast.x, rtol=1e-6, atol=1e-9)
+    seen = []
+    stopped = least_squares_trf(_decay, x0, (lower, upper), _columns(_decay),
+                                stop=lambda x: seen.append(x.copy()) or len(seen) == 3)
+    assert stopped.status == -2 and len(seen) == 3

@@ -37,7 +37,7 @@ class FitResult:
     jacobian: np.ndarray  # d residual / d parameter (physical units), fitting samples only
     residuals: np.ndarray
     starts: int = 1
-    start_costs: list[float] = field(default_factory=list)  # each start's latest cost on the data its scouts fit
+    start_costs: list[float] = field(default_factory=list)  # each start's latest cost on the runs themselves
     converged: bool = True  # False where the fit stopped at its evaluation budget (a scout), not at a minimum
 
     @property
@@ -252,5 +252,12 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
     final = fit(polish or spec, datasets, start={k: best.params[k] for k in best.free_names})
     task.advance()
     final.starts = len(found)
-    final.start_costs = sorted(r.cost for r in found)
+    final.start_costs = sorted(r.cost if scouted is datasets else _cost(spec, r.params, datasets) for r in found)
     return final
+
+
+def _cost(spec: ModelSpec, params: Mapping[str, float], datasets: Sequence[FitData]) -> float:
+    """The sum of squared residuals of `params` on `datasets`: a scout's end on the runs themselves, comparable with
+    the polished fit's cost."""
+    residuals = residual_vector(spec.network, {**spec.fixed, **params}, datasets)
+    return float(residuals @ residuals)

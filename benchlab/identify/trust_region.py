@@ -18,11 +18,15 @@ from collections.abc import Callable
 import numpy as np
 from numpy.linalg import norm
 from scipy.linalg import qr_multiply, svd
-from scipy.optimize import OptimizeResult
-from scipy.optimize._lsq.common import (CL_scaling_vector, check_termination, compute_grad, make_strictly_feasible,
-                                        solve_lsq_trust_region, update_tr_radius)
-from scipy.optimize._lsq.trf import select_step
-from scipy.optimize._numdiff import approx_derivative
+from scipy.optimize import OptimizeResult, least_squares
+
+try:  # scipy's own trf building blocks: private, so pinned by the lock; a release that moves them gets _public
+    from scipy.optimize._lsq.common import (CL_scaling_vector, check_termination, compute_grad,
+                                            make_strictly_feasible, solve_lsq_trust_region, update_tr_radius)
+    from scipy.optimize._lsq.trf import select_step
+    from scipy.optimize._numdiff import approx_derivative
+except ImportError:  # pragma: no cover - depends on the installed scipy; tests/test_trust_region.py forces it
+    select_step = None
 
 
 def least_squares_trf(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
@@ -31,6 +35,8 @@ def least_squares_trf(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, b
     """`scipy.optimize.least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", workers=workers, ...)`
     with its 2-point Jacobian; `stop(x)` after each iteration, True ends the fit (status -2, as a callback's
     StopIteration). Returns x, cost, fun, jac, nfev, njev and status as least_squares does."""
+    if select_step is None:
+        return _public(fun, x0, bounds, workers, max_nfev, ftol, xtol, gtol, stop)
     lb, ub = bounds
     x0 = make_strictly_feasible(np.asarray(x0, dtype=float), lb, ub)
 
@@ -120,3 +126,16 @@ def _jac_scale(J: np.ndarray, scale_inv_old: np.ndarray | None = None) -> tuple[
     else:
         scale_inv = np.maximum(scale_inv, scale_inv_old)
     return 1 / scale_inv, scale_inv
+
+
+def _public(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
+            workers: Callable, max_nfev: int | None, ftol: float, xtol: float, gtol: float,
+            stop: Callable[[np.ndarray], bool] | None) -> OptimizeResult:
+    """The same fit by scipy's public `least_squares` (an SVD of the whole Jacobian per iteration): the answer where
+    an installed scipy keeps the private helpers elsewhere, at scipy's cost."""
+    def callback(intermediate_result: OptimizeResult) -> None:
+        if stop is not None and stop(intermediate_result.x):
+            raise StopIteration  # least_squares ends with status -2
+
+    return least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev, xtol=xtol, ftol=ftol,
+                         gtol=gtol, workers=workers, callback=callback)
