@@ -62,17 +62,23 @@ def residual_inputs(model: "ModelDefinition | None", channels: Sequence[str]) ->
 
 def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
     """Normalised autocorrelation at lags 0..max_lag (NaN skipped by zeroing after centring)."""
-    x = np.where(np.isfinite(x), x - np.nanmean(x), 0.0)
+    x = _centred(x)
     denom = float(np.dot(x, x))
     return np.array([np.dot(x[k:], x[: len(x) - k]) / denom if denom > 0 else 0.0 for k in range(max_lag + 1)])
 
 
 def cross_correlation(residual: np.ndarray, signal: np.ndarray, max_lag: int) -> np.ndarray:
     """Normalised correlation of the residual with the signal at lags 0..max_lag (signal leading)."""
-    r = np.where(np.isfinite(residual), residual - np.nanmean(residual), 0.0)
-    s = np.where(np.isfinite(signal), signal - np.nanmean(signal), 0.0)
+    r, s = _centred(residual), _centred(signal)
     denom = np.sqrt(np.dot(r, r) * np.dot(s, s))
     return np.array([np.dot(r[k:], s[: len(s) - k]) / denom if denom > 0 else 0.0 for k in range(max_lag + 1)])
+
+
+def _centred(x: np.ndarray) -> np.ndarray:
+    """x less the mean of its finite values, the others 0 (all 0 where none is finite: a blanked channel on a short
+    run, no warning)."""
+    finite = np.isfinite(x)
+    return np.where(finite, x - np.nanmean(x), 0.0) if finite.any() else np.zeros(len(x))
 
 
 def window_means(x: np.ndarray, window: int) -> np.ndarray:
@@ -138,7 +144,7 @@ def residual_tests(residual: np.ndarray, inputs: dict[str, np.ndarray], step_s: 
         report["input_correlation"][name] = float(ccf[np.argmax(np.abs(ccf))])
         decimated = cross_correlation(means, window_means(np.asarray(signal, float), window), decimated_lags)
         strongest = float(np.max(np.abs(decimated)))
-        effect = strongest * float(np.nanstd(means))
+        effect = strongest * float(np.nanstd(means)) if np.isfinite(means).any() else 0.0
         significant = strongest > stats.norm.ppf(1 - ALPHA / 2) / np.sqrt(max(len(means_valid), 1))
         report["input_effect_K"][name] = effect if significant else 0.0
     report["input_correlated"] = any(v > EFFECT_THRESHOLD_K for v in report["input_effect_K"].values())
