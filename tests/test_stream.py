@@ -47,6 +47,7 @@ def test_run_channels_hold_drop_outs_as_input_channels_does():
     lazy = RunChannels(pd.DataFrame(run, copy=False))
     assert set(lazy) == set(held) and "T_engine" not in lazy  # a channel never measured is left out
     for name, values in held.items():
+        assert np.array_equal(values, run[name].ffill().bfill().to_numpy())  # pandas' hold: an independent reference
         assert np.array_equal(lazy[name], values)
         assert np.array_equal(lazy.window(1000, 2345)[name], values[1000:2345])
 

@@ -84,27 +84,24 @@ def run_values(params: Mapping[str, float], data: FitData) -> Mapping[str, float
 
 def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
     """Model outputs at the fitting step for the measured channels of `data`."""
-    states = _states(network, params, data)
+    states = _states(network, params, data)[:-1]
     index = {s: i for i, s in enumerate(network.state_names)}
     return {c: states[:, index[network.outputs[c]]] for c in data.targets}
 
 
 def _states(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> np.ndarray:
-    """The network's states (samples × states) at the fitting step of `data`."""
+    """The network's states ((samples + 1) × states, the last after the last step) at the fitting step of `data`."""
     values = run_values(params, data)
     return run_network(network, values, data.channels, data.dt, initial_state(network, data, values),
-                       KEY_RESOLUTION, data.memo)[:-1]
+                       KEY_RESOLUTION, data.memo)
 
 
 def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datasets: Sequence[FitData]) -> np.ndarray:
     """Simulated minus measured, every fitted channel of every run, valid masked samples only."""
     parts = []
     for data in datasets:
-        values = run_values(params, data)
-        states = run_network(network, values, data.channels, data.dt, initial_state(network, data, values),
-                             KEY_RESOLUTION, data.memo)
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
-        parts.append(_state_major(states).take(flat) - targets)
+        parts.append(_state_major(_states(network, params, data)).take(flat) - targets)
     return np.concatenate(parts)
 
 

@@ -10,14 +10,17 @@ import pandas as pd
 from benchlab.errors import InputError
 from benchlab.network.structure import Params, ThermalNetwork
 from benchlab.network.solver import DEFAULT_RESOLUTION, run_network
-from benchlab.network.stream import RunChannels, first_valid_index, stream_network
+from benchlab.network.stream import RunChannels, first_valid_index, hold, stream_network
 
 
 def _held(values: np.ndarray) -> np.ndarray:
-    """Drop-outs (NaN) held at the last valid value, leading ones at the first; untouched if there are none."""
+    """Drop-outs (NaN) held at the last valid value, leading ones at the first (the stream's compiled hold);
+    untouched if there are none. The channel holds a valid value."""
     if not np.isnan(values).any():
         return values
-    return pd.Series(values).ffill().bfill().to_numpy()
+    out = np.empty(len(values))
+    hold(np.ascontiguousarray(values), float(values[first_valid_index(values)]), out)
+    return out
 
 
 def input_channels(run: pd.DataFrame) -> dict[str, np.ndarray]:

@@ -47,10 +47,9 @@ class _Points:
         self.bits = 12
         self.table = np.full((1 << self.bits, columns + 1), -1, dtype=np.int64)  # per slot: the key, then its point
         self.keys = np.empty((1024, columns), dtype=np.int64)
-        self.Ad = np.empty((1024, n, n))
-        self.Bd = np.empty((1024, n, m))
-        # the paper's clutch (4 states, 4 inputs): [Ad Bd] side by side too, one contiguous record per step
+        # the paper's clutch (4 states, 4 inputs): [Ad Bd] side by side, one contiguous record per step; else apart
         self.ABd = np.empty((1024, n, n + m)) if (n, m) == (4, 4) else None
+        self.Ad, self.Bd = (None, None) if self.ABd is not None else (np.empty((1024, n, n)), np.empty((1024, n, m)))
 
     def number(self, keys: np.ndarray) -> np.ndarray:
         """Each row's point index; rows not met before become new points (numbered after the known ones)."""
@@ -69,12 +68,14 @@ class _Points:
 
     def add_matrices(self, start: int, Ad: np.ndarray, Bd: np.ndarray) -> None:
         """The discrete matrices of points start..count."""
+        if self.ABd is not None:
+            if self.count > len(self.ABd):
+                self.ABd = _grown(self.ABd, self.count)
+            self.ABd[start:self.count, :, :4], self.ABd[start:self.count, :, 4:] = Ad, Bd
+            return
         if self.count > len(self.Ad):
             self.Ad, self.Bd = _grown(self.Ad, self.count), _grown(self.Bd, self.count)
-            self.ABd = None if self.ABd is None else _grown(self.ABd, self.count)
         self.Ad[start:self.count], self.Bd[start:self.count] = Ad, Bd
-        if self.ABd is not None:
-            self.ABd[start:self.count, :, :4], self.ABd[start:self.count, :, 4:] = Ad, Bd
 
     def propagate(self, op_index: np.ndarray, inputs: np.ndarray, out: np.ndarray, offset: int) -> None:
         """States from out[:, offset] over the samples of `op_index` into `out` (`solver.propagate_into`)."""
@@ -252,7 +253,7 @@ class RunChannels(Mapping):
             return part
         if name not in self._held:  # several laws may read it (the clutch: both heat shares)
             self._held[name] = np.empty(len(part))
-            _hold(part, _carried(raw, self._start), self._held[name])
+            hold(part, _carried(raw, self._start), self._held[name])
         return self._held[name]
 
     def __iter__(self) -> Iterator[str]:
@@ -285,7 +286,7 @@ def first_valid_index(values: np.ndarray) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _hold(part, carried, out):  # pragma: no cover - compiled
+def hold(part, carried, out):  # pragma: no cover - compiled
     """out = part with each NaN replaced by the last valid value before it (`carried` before the first)."""
     last = carried
     for i in range(part.shape[0]):
