@@ -12,6 +12,7 @@ import time
 from html.parser import HTMLParser
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import headless_chromium
@@ -55,6 +56,30 @@ def test_pipeline_runs_end_to_end_and_writes_every_product(job):
     _check_index(tmp_path)
 
 
+def test_summary_holds_the_figures_the_verdict_names_and_they_agree_with_the_files(job, tmp_path):
+    out, printed = job
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("unseen_gain_pct", "plate_band_coverage", "eq11_rel_error", "cooldown_nrmse_pct", "verdict"):
+        assert key in summary, key
+    # eq. (11) against the sweep, re-derived through the command a user runs: `benchlab cooldown` on the job's sweep
+    # with the job's nonlinear parameters, then the parameter file's law at the points of 1000 and 2500 rpm
+    from benchlab.model.clutch import convection_resistance
+    from benchlab.runfile import load_analysis
+
+    assert main(["cooldown", str(out / "sweep.h5"), "--params", str(out / "nonlinear.json"),
+                 "--out", str(tmp_path / "analysis.h5")]) == 0
+    rows = load_analysis(tmp_path / "analysis.h5").cooldowns
+    params = load_params(out / "nonlinear.json")
+    errors = [abs(float(np.ravel(convection_resistance(params, {"engine_speed": np.array([row["engine_speed"]]),
+                                                                "clutch_state": np.array([row["clutch_state"]])}))[0])
+                  / row["R"] - 1) for row in rows if row["engine_speed"] in (1000, 2500)]
+    assert len(errors) == 4 and summary["eq11_rel_error"] == pytest.approx(max(errors), rel=1e-6)
+    # the long cool-downs beside the paper's 3.8 %, each model's figure printed and the best one in the summary
+    printed_nrmse = [float(x) for x in re.findall(r"long cool-downs of the validation run, mean NRMSE ([\d.]+) % "
+                                                  r"\(paper: nonlinear 3.8 %", printed)]
+    assert len(printed_nrmse) >= 2 and summary["cooldown_nrmse_pct"] == pytest.approx(min(printed_nrmse), abs=0.06)
+
+
 class _Links(HTMLParser):
     def __init__(self) -> None:
         super().__init__()
@@ -78,7 +103,8 @@ def _check_index(out):
         assert figure in page.targets
     text = " ".join(page.text)
     assert "simulated bench" in text and "reference dry clutch" in text and "2.5 %" in text  # the paper beside ours
-    assert -1 < text.find("The nonlinear model ") < text.index("Everything on this page")  # the verdict on top
+    verdict = json.loads((out / "summary.json").read_text())["verdict"]
+    assert -1 < text.find(verdict[:60]) < text.index("Everything on this page")  # the verdict on top
     for section in ("Misfit at the heating peaks", "Extrapolation", "against the plant's truth", "Cannot be told apart"
                     if "Cannot be told apart" in text else "No alternative", "wear this run"):
         assert section in text, section
