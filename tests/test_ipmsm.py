@@ -3,8 +3,8 @@ examples/ipmsm.toml identified, held-out profiles simulated.
 
 Bounded for the test suite: four training profiles (2, 4, 9, 11) at a 10 s fitting step and one start, instead
 of all but 6, 14 and 15 at 2 s with three starts; the full split, its comparison with the independent reference
-(1.47 K) and diagnose on the motor are benchmarks/accuracy_ipmsm.py's. Skipped where ../shared/data/ipmsm-bench
-is absent.
+(1.47 K) and diagnose on the motor are benchmarks/accuracy_ipmsm.py's. Skipped where the data
+(examples/ipmsm.md says where they come from) are not in `data/ipmsm-bench/` or `BENCHLAB_IPMSM_DATA`.
 """
 
 from __future__ import annotations

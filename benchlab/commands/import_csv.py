@@ -63,7 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the unit of each column beyond the contract's channels, repeatable or separated by "
                              "commas, e.g. --unit IqFbk=A,speed=rpm")
     parser.add_argument("--model", help=f"{MODEL_HELP}: the CSV must hold the channels it names "
-                                        "(default: the clutch channels of contract section 1)")
+                                        "(default: the clutch channels of docs/contract.md §1)")
     parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
     parser.add_argument("--decimal", choices=(".", ","),
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
