@@ -1,5 +1,6 @@
 """The repository sends no reader outside itself: no tracked text file names a path beyond its root (a sibling
-checkout's `../shared`, the machine's `/work/`), and the contract it cites lives in docs/contract.md."""
+folder `shared` next to the checkout, the development machine's work folder; OUTSIDE below), and the contract it
+cites lives in docs/contract.md."""
 
 from __future__ import annotations
 
