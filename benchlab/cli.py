@@ -14,6 +14,7 @@ other tools.
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import os
 import pkgutil
@@ -40,6 +41,18 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # argparse's own usage errors: exit 2, one line
         self.exit(2, f"{self.prog}: {message}\n")
 
+    def _check_value(self, action: argparse.Action, value: object) -> None:
+        """argparse's check of a choice, naming the closest one for a typo (`identfy`: did you mean 'identify'?)."""
+        choices = action.choices
+        if choices is not None and isinstance(value, str) and value not in choices:
+            names = {str(choice): choice for choice in choices}
+            close = difflib.get_close_matches(value, list(names), n=1)
+            if close:
+                listed = ", ".join(map(repr, choices))
+                raise argparse.ArgumentError(action, f"invalid choice: {value!r}, did you mean {names[close[0]]!r}? "
+                                                     f"(choose from {listed})")
+        super()._check_value(action, value)
+
 
 class _DefaultsShown(argparse.HelpFormatter):
     """`--help` names each option's default where it has one worth saying (not None, off or empty) and its own
@@ -60,12 +73,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {benchlab.__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0,
                         help="log what benchlab does on stderr (-v: info, -vv: debug)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars (there are none on a pipe)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for info in sorted(pkgutil.iter_modules(benchlab.commands.__path__), key=lambda m: m.name):
         module = importlib.import_module(f"benchlab.commands.{info.name}")
         cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP, formatter_class=_DefaultsShown)
         module.add_arguments(cmd)
-        cmd.add_argument("--quiet", "-q", action="store_true", help="no progress bars (there are none on a pipe)")
+        cmd.add_argument("--quiet", "-q", action="store_true", default=argparse.SUPPRESS,
+                         help="no progress bars (there are none on a pipe; as before the command)")
         cmd.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
                          help="log what benchlab does on stderr (-v: info, -vv: debug, as before the command)")
         cmd.add_argument("--log", nargs="?", const="", metavar="FILE", help="keep the log (debug) in FILE; without "

@@ -39,7 +39,8 @@ if TYPE_CHECKING:
     from benchlab.importing.sources import Input, Merged
 
 NAME = "import"
-HELP = "convert a CSV or an MDF file (contract channel names, a mapping, any channel with its unit) into a run file"
+HELP = ("convert a CSV, an MDF file or a CAN log (.blf, .asc, .trc, .log, decoded with a DBC), or several merged on "
+        "one clock, into a run file (the channel names of docs/contract.md §1, a mapping, any channel with its unit)")
 SEPARATORS = {",": ",", ";": ";", "tab": "\t"}
 #: What asammdf reads, and python-can's LogReader (benchlab.importing.canlog.CAN_LOG_SUFFIXES: `.mf4` where it
 #: holds CAN bus logging), kept here so that `--help` loads neither.
@@ -64,8 +65,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "commas, e.g. --unit IqFbk=A,speed=rpm")
     parser.add_argument("--model", help=f"{MODEL_HELP}: the CSV must hold the channels it names "
                                         "(default: the clutch channels of docs/contract.md §1)")
-    parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
-    parser.add_argument("--decimal", choices=(".", ","),
+    parser.add_argument("--sep", choices=tuple(SEPARATORS), metavar="{',',';',tab}",
+                        help="a CSV's column separator: ',' ';' or tab (default: the one in the header)")
+    parser.add_argument("--decimal", choices=(".", ","), metavar="{'.',','}",
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
     parser.add_argument("--mapping", metavar="MAP.toml", help="an MDF file's channels or a CAN log's signals: "
                                                               "run-file channel = source channel, with group, unit, "
