@@ -54,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("inputs", nargs="+", metavar="DATA",
                         help="CSV file, one column per channel, header = channel names or `name [unit]` (optionally "
                              "a second header line of units); an MDF file (.mf4, .mdf, .dat); a CAN log (.blf, .asc, "
-                             ".trc, .log, .mf4 bus logging) with --dbc. Several are merged into one run on one clock "
+                             ".trc, .log, .mf4 bus logging) decoded with --dbc's database. Several are merged into one run on one clock "
                              "(then --dt is the grid)")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="run file to write")
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
