@@ -29,7 +29,7 @@ from benchlab import logs
 from benchlab.errors import InputError
 from benchlab.interrupts import (TERMINATED_EXIT, RedeliverInterrupts, Terminated, interrupts_answered,
                                  interrupts_held, terminate_as_interrupt)
-from benchlab.outputs import OutputError, is_no_space, no_space
+from benchlab.outputs import OutputError, is_no_space, is_run_file, no_space
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
 BROKEN_PIPE_EXIT = 141
@@ -113,11 +113,23 @@ def _log_file(args: argparse.Namespace) -> Path | None:
     if log is None:
         return None
     if log:
-        return Path(log)
+        return _log_beside_no_input(Path(log), args)
     run_file = getattr(args, "out", None) or getattr(args, "resume", None)
     if not run_file:
         raise InputError("command line", "--log", "a FILE (this command writes no run file to put it beside)")
     return Path(run_file).with_suffix(".log")
+
+
+def _log_beside_no_input(path: Path, args: argparse.Namespace) -> Path:
+    """`--log FILE` if appending to it loses nothing: never a run file nor a file the command line names otherwise
+    (`--log` takes an optional FILE, so `identify --log RUN.h5 …` would otherwise log into the run)."""
+    named = [value for key, given in vars(args).items() if key != "log"
+             for value in (given if isinstance(given, list) else [given]) if isinstance(value, str)]
+    existing = [name for name in named if os.path.exists(name)]
+    if is_run_file(path) or (path.exists() and any(os.path.samefile(path, name) for name in existing)):
+        raise InputError(path, "--log", "a log file of its own (this is a run file or another file of the command "
+                                        "line; --log takes the word after it as its FILE)")
+    return path
 
 
 def _stdout_reader_gone() -> bool:

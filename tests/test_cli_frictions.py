@@ -75,3 +75,17 @@ def test_help_cites_the_contract_by_its_file_and_nothing_outside(command, capsys
     text = _help(capsys, command)
     assert "../" not in text
     assert not re.search(r"contract(?:'s)? (?:section|§)|(?<!contract\.md )§ ?\d", text), text
+
+
+def test_log_never_appends_to_a_run_file_or_another_file_of_the_command_line(foreign_run, tmp_path, capsys):
+    before = foreign_run.read_bytes()
+    params = tmp_path / "p.json"  # `--log` takes the word after it: here the run file meant as identify's input
+    assert main(["identify", "--log", str(foreign_run), str(foreign_run), "--out", str(params)]) == 2
+    err = capsys.readouterr().err
+    assert "--log" in err and "run file" in err and len(err.strip().splitlines()) == 1
+    assert foreign_run.read_bytes() == before and not params.exists()
+    mapping = tmp_path / "map.toml"
+    mapping.write_text("")
+    assert main(["import", str(tmp_path / "d.csv"), "--mapping", str(mapping), "--log", str(mapping),
+                 "--out", str(tmp_path / "r.h5")]) == 2
+    assert "--log" in capsys.readouterr().err and mapping.read_text() == ""
