@@ -89,3 +89,12 @@ def test_log_never_appends_to_a_run_file_or_another_file_of_the_command_line(for
     assert main(["import", str(tmp_path / "d.csv"), "--mapping", str(mapping), "--log", str(mapping),
                  "--out", str(tmp_path / "r.h5")]) == 2
     assert "--log" in capsys.readouterr().err and mapping.read_text() == ""
+
+
+def test_an_output_naming_a_run_file_says_so_in_plain_words(foreign_run, tmp_path, capsys):
+    other = tmp_path / "other.h5"
+    other.write_bytes(foreign_run.read_bytes())
+    assert main(["identify", str(foreign_run), "--out", str(other)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("--out: a file of another name: this one is a run file, a measurement never written over")
+    assert other.read_bytes() == foreign_run.read_bytes()
