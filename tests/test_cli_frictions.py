@@ -98,3 +98,10 @@ def test_an_output_naming_a_run_file_says_so_in_plain_words(foreign_run, tmp_pat
     err = capsys.readouterr().err.strip()
     assert err.endswith("--out: a file of another name: this one is a run file, a measurement never written over")
     assert other.read_bytes() == foreign_run.read_bytes()
+
+
+def test_cooldown_of_a_run_without_cool_downs_says_what_the_run_is(foreign_run, params_file, capsys):
+    assert main(["cooldown", str(foreign_run), "--params", str(params_file)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("protocol: a cool-down sweep run (`benchlab run cooldown-sweep`): this imported run has no "
+                        "completed cool-down to fit") and len(err.splitlines()) == 1
