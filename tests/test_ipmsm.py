@@ -25,8 +25,10 @@ from accuracy_ipmsm import DATA, MODEL, TARGETS, UNITS  # noqa: E402 - the data'
 TRAIN, HELD_OUT = (2, 4, 9, 11), (6, 15)
 ARTICLE_RMSE_K = 2.5  # the article's own hand-tuned 3rd-order network on profiles 6 and 15 (data README)
 
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"the IPMSM data is not at {DATA} (another machine's "
-                                                           "measurements, not part of the project)")
+pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"the IPMSM data is not at {DATA} (another project's "
+                                                           "measurements, not in the repository: examples/ipmsm.md "
+                                                           "says where they come from; BENCHLAB_IPMSM_DATA names "
+                                                           "their folder)")
 
 
 @pytest.fixture(scope="module")
