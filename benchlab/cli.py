@@ -8,7 +8,8 @@ are one line and exit 1; Ctrl-C, from the
 moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
 early (`benchlab run table1 --bench sim --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends
 other tools.
-`-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`.
+`-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`; `-v` and `-q` (no
+progress bars) are taken before or after the command. A mistyped command or choice is answered with the closest one.
 """
 
 from __future__ import annotations
@@ -113,14 +114,14 @@ def _log_file(args: argparse.Namespace) -> Path | None:
     if log is None:
         return None
     if log:
-        return _log_beside_no_input(Path(log), args)
+        return _checked_log_file(Path(log), args)
     run_file = getattr(args, "out", None) or getattr(args, "resume", None)
     if not run_file:
         raise InputError("command line", "--log", "a FILE (this command writes no run file to put it beside)")
     return Path(run_file).with_suffix(".log")
 
 
-def _log_beside_no_input(path: Path, args: argparse.Namespace) -> Path:
+def _checked_log_file(path: Path, args: argparse.Namespace) -> Path:
     """`--log FILE` if appending to it loses nothing: never a run file nor a file the command line names otherwise
     (`--log` takes an optional FILE, so `identify --log RUN.h5 …` would otherwise log into the run)."""
     named = [value for key, given in vars(args).items() if key != "log"
