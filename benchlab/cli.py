@@ -8,12 +8,14 @@ are one line and exit 1; Ctrl-C, from the
 moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
 early (`benchlab run table1 --bench sim --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends
 other tools.
-`-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`.
+`-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`; `-v` and `-q` (no
+progress bars) are taken before or after the command. A mistyped command or choice is answered with the closest one.
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import os
 import pkgutil
@@ -28,7 +30,7 @@ from benchlab import logs
 from benchlab.errors import InputError
 from benchlab.interrupts import (TERMINATED_EXIT, RedeliverInterrupts, Terminated, interrupts_answered,
                                  interrupts_held, terminate_as_interrupt)
-from benchlab.outputs import OutputError, is_no_space, no_space
+from benchlab.outputs import OutputError, is_no_space, is_run_file, no_space
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
 BROKEN_PIPE_EXIT = 141
@@ -39,6 +41,18 @@ INTERRUPTED_EXIT = 130
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # argparse's own usage errors: exit 2, one line
         self.exit(2, f"{self.prog}: {message}\n")
+
+    def _check_value(self, action: argparse.Action, value: object) -> None:
+        """argparse's check of a choice, naming the closest one for a typo (`identfy`: did you mean 'identify'?)."""
+        choices = action.choices
+        if choices is not None and isinstance(value, str) and value not in choices:
+            names = {str(choice): choice for choice in choices}
+            close = difflib.get_close_matches(value, list(names), n=1)
+            if close:
+                listed = ", ".join(map(repr, choices))
+                raise argparse.ArgumentError(action, f"invalid choice: {value!r}, did you mean {names[close[0]]!r}? "
+                                                     f"(choose from {listed})")
+        super()._check_value(action, value)
 
 
 class _DefaultsShown(argparse.HelpFormatter):
@@ -60,12 +74,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {benchlab.__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0,
                         help="log what benchlab does on stderr (-v: info, -vv: debug)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars (there are none on a pipe)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for info in sorted(pkgutil.iter_modules(benchlab.commands.__path__), key=lambda m: m.name):
         module = importlib.import_module(f"benchlab.commands.{info.name}")
         cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP, formatter_class=_DefaultsShown)
         module.add_arguments(cmd)
-        cmd.add_argument("--quiet", "-q", action="store_true", help="no progress bars (there are none on a pipe)")
+        cmd.add_argument("--quiet", "-q", action="store_true", default=argparse.SUPPRESS,
+                         help="no progress bars (there are none on a pipe; as before the command)")
         cmd.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
                          help="log what benchlab does on stderr (-v: info, -vv: debug, as before the command)")
         cmd.add_argument("--log", nargs="?", const="", metavar="FILE", help="keep the log (debug) in FILE; without "
@@ -98,11 +114,23 @@ def _log_file(args: argparse.Namespace) -> Path | None:
     if log is None:
         return None
     if log:
-        return Path(log)
+        return _checked_log_file(Path(log), args)
     run_file = getattr(args, "out", None) or getattr(args, "resume", None)
     if not run_file:
         raise InputError("command line", "--log", "a FILE (this command writes no run file to put it beside)")
     return Path(run_file).with_suffix(".log")
+
+
+def _checked_log_file(path: Path, args: argparse.Namespace) -> Path:
+    """`--log FILE` if appending to it loses nothing: never a run file nor a file the command line names otherwise
+    (`--log` takes an optional FILE, so `identify --log RUN.h5 …` would otherwise log into the run)."""
+    named = [value for key, given in vars(args).items() if key != "log"
+             for value in (given if isinstance(given, list) else [given]) if isinstance(value, str)]
+    existing = [name for name in named if os.path.exists(name)]
+    if is_run_file(path) or (path.exists() and any(os.path.samefile(path, name) for name in existing)):
+        raise InputError(path, "--log", "a log file of its own (this is a run file or another file of the command "
+                                        "line; --log takes the word after it as its FILE)")
+    return path
 
 
 def _stdout_reader_gone() -> bool:

@@ -102,9 +102,8 @@ def check_target(path: "str | os.PathLike[str]", option: str, force: bool,
     if kind is not None:
         raise InputError(path, option, f"a new file or, with --force, a regular file to replace (it is {kind})")
     if is_run_file(path) and not (run_file and force):
-        need = (f"{hint}--force to replace it" if run_file else
-                "a file of another name (it is a run file: a measurement)")
-        raise InputError(path, option, f"a new file ({need})")
+        raise InputError(path, option, f"a new file ({hint}--force to replace it)" if run_file else
+                         "a file of another name: this one is a run file, a measurement never written over")
     if not force:
         raise InputError(path, option, f"a new file (it exists: {hint}--force to replace it)")
     return path

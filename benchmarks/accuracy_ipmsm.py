@@ -1,4 +1,5 @@
-"""Real data from another machine through the command line: the IPMSM bench (../shared/data/ipmsm-bench).
+"""Real data from another machine through the command line: the IPMSM bench (examples/ipmsm.md:
+where the data come from; read from `data/ipmsm-bench/`, `BENCHLAB_IPMSM_DATA` or `--data`).
 
     .venv/bin/python benchmarks/accuracy_ipmsm.py [--data DIR] [--work DIR] [--step S] [--starts N] [--page]
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -40,7 +42,8 @@ from benchlab.model.definition import load_model, parse_model, to_toml  # noqa: 
 from ipmsm_page import DIAGNOSE_PAGE, write_page  # noqa: E402 - benchmarks/ipmsm_page.py: examples/ipmsm.md
 from targets import load, print_target, summarise_targets  # noqa: E402 - benchmarks/targets.py
 
-DATA = ROOT.parent / "shared" / "data" / "ipmsm-bench"
+#: the IPMSM profiles: not part of the repository (another project's measurements), found where the user put them
+DATA = Path(os.environ.get("BENCHLAB_IPMSM_DATA") or ROOT / "data" / "ipmsm-bench")
 MODEL = ROOT / "examples" / "ipmsm.toml"
 HELD_OUT = (6, 15)
 LEFT_OUT = (6, 14, 15)  # the reference trains on all others

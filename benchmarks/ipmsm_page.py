@@ -73,7 +73,11 @@ def write_page(runs: dict[int, Path], params: Path, rmse: dict[str, float], per_
     page = f"""# Example: a motor on a test bench (real data, not the clutch)
 
 The data are sixteen measured profiles of an interior permanent-magnet synchronous motor
-(`../shared/data/ipmsm-bench`, Liu et al., IEEE TPEL 2024, MIT licence; not copied here). The model is
+(`id_0.csv` … `id_15.csv` of the `dataset/` folder of the public repository `Zirui24/lptn_informed_LSTM`,
+published with Z. Liu et al., "Hybrid Thermal Modeling with LPTN-Informed Neural Network for Multi-Node
+Temperature Estimation in PMSM", IEEE Transactions on Power Electronics, 2024, doi 10.1109/TPEL.2024.3409388;
+MIT licence; not copied here: put them in `data/ipmsm-bench/` or name their folder in `BENCHLAB_IPMSM_DATA`).
+The model is
 [`ipmsm.toml`](ipmsm.toml): winding W, stator tooth T, stator yoke Y and rotor R, coolant and ambient as
 boundaries, copper losses from the d/q currents rising with the winding temperature (affine in W, exact in
 the solver), iron losses from speed, rotor losses with speed squared, an air gap that conducts better at speed.

@@ -3,8 +3,8 @@ examples/ipmsm.toml identified, held-out profiles simulated.
 
 Bounded for the test suite: four training profiles (2, 4, 9, 11) at a 10 s fitting step and one start, instead
 of all but 6, 14 and 15 at 2 s with three starts; the full split, its comparison with the independent reference
-(1.47 K) and diagnose on the motor are benchmarks/accuracy_ipmsm.py's. Skipped where ../shared/data/ipmsm-bench
-is absent.
+(1.47 K) and diagnose on the motor are benchmarks/accuracy_ipmsm.py's. Skipped where the data
+(examples/ipmsm.md says where they come from) are not in `data/ipmsm-bench/` or `BENCHLAB_IPMSM_DATA`.
 """
 
 from __future__ import annotations
@@ -25,8 +25,10 @@ from accuracy_ipmsm import DATA, MODEL, TARGETS, UNITS  # noqa: E402 - the data'
 TRAIN, HELD_OUT = (2, 4, 9, 11), (6, 15)
 ARTICLE_RMSE_K = 2.5  # the article's own hand-tuned 3rd-order network on profiles 6 and 15 (data README)
 
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"the IPMSM data is not at {DATA} (another machine's "
-                                                           "measurements, not part of the project)")
+pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"the IPMSM data is not at {DATA} (another project's "
+                                                           "measurements, not in the repository: examples/ipmsm.md "
+                                                           "says where they come from; BENCHLAB_IPMSM_DATA names "
+                                                           "their folder)")
 
 
 @pytest.fixture(scope="module")

@@ -145,7 +145,7 @@ def test_cooldown_leaves_the_run_file_alone_unless_asked(foreign_run, params_fil
     """`cooldown RUN.h5` used to write /analysis into the run by default; now only --store does (or --out elsewhere).
     The foreign run has no cool-downs: refused as such, and the file is untouched either way."""
     before = _digest(foreign_run)
-    refused(["cooldown", str(foreign_run), "--params", str(params_file)], "/events")
+    refused(["cooldown", str(foreign_run), "--params", str(params_file)], "a cool-down sweep run")
     assert _digest(foreign_run) == before
     refused(["cooldown", str(foreign_run), "--params", str(params_file), "--store", "--out", str(tmp_path / "a.h5")],
             "--store")

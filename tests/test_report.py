@@ -147,7 +147,7 @@ def test_bad_input_is_one_line_and_exit_2(bench, tmp_path, capsys, case):
         text.write_text("time,T_air\n0,20\n")
         extra, expected = ["--validate", str(text)], "v.h5: file: an HDF5 run file"
     elif case == "sweep without events":
-        extra, expected = ["--sweep", run], "run.h5: /events:"
+        extra, expected = ["--sweep", run], "run.h5: protocol: a cool-down sweep run"
     else:
         out.write_text("")
         expected = "out: --out: a directory"

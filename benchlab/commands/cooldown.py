@@ -74,8 +74,6 @@ def run(args: argparse.Namespace) -> int:
     load_run(path)  # checks the file (InputError on a bad one)
     params = load_analysis_params(args.params, path)
     results = analyse(path, params, args.sample, progress=for_terminal(args.quiet))
-    if not results:
-        raise InputError(path, "/events", "completed cool-downs (cooldown_start/cooldown_end events)")
     try:
         eq11 = fit_eq11(results)
     except ValueError:

@@ -29,9 +29,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", help="run files")
     parser.add_argument("--baseline", "--model", dest="baseline", default="linear", metavar="MODEL",
                        help=f"the model to start from: {MODEL_HELP} (default linear, the paper's starting point)")
-    parser.add_argument("--json", action="store_true", help="print the contract's JSON object on stdout")
+    parser.add_argument("--json", action="store_true", help="print the JSON object of docs/contract.md §3 on stdout")
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="seed of the baseline's starting points")
-    parser.add_argument("--report", metavar="DIR", help="write diagnose.md and its PNG figures into DIR")
+    parser.add_argument("--report", metavar="DIR", help="write the page into DIR: diagnose.md, the same page as diagnose.html for a browser, "
+                        "and its PNG figures")
     parser.add_argument("--save-model", metavar="OUT.toml", type=cliargs.output_file,
                         help="write the best model found as a model file, its fitted values as starting values "
                              "(ready for identify --model OUT.toml)")

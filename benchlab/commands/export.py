@@ -17,8 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1)")
     parser.add_argument("--to", required=True, type=cliargs.output_file, metavar="OUT",
                         help="file to write: .mf4 (MDF 4.10), .csv or .parquet (needs the [export] extra)")
-    parser.add_argument("--channels", action="extend", nargs="+", type=_names, metavar="NAME[,NAME…]",
-                        help="only these channels (their export names: T_air, can_drive.speed, events.kind, ...)")
+    parser.add_argument("--channels", action="extend", type=_names, metavar="NAME[,NAME…]",
+                        help="only these channels (their export names: T_air, can_drive.speed, events.kind, ...), "
+                             "separated by commas or the option repeated")
     run_time = cliargs.signed_float("a run time in s", MAX_RUN_DURATION_S)
     parser.add_argument("--start", type=run_time, metavar="S", help="from this run time on (s)")
     parser.add_argument("--stop", type=run_time, metavar="S", help="up to this run time (s)")
@@ -38,8 +39,7 @@ def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # asammdf and pyarrow load only when exporting (Ctrl-C meanwhile: see benchlab.cli)
         from benchlab.export import export
 
-    channels = [name for names in args.channels for name in names] if args.channels else None
-    content = export(args.run, args.to, args.force, channels, args.start, args.stop, args.raster)
+    content = export(args.run, args.to, args.force, args.channels or None, args.start, args.stop, args.raster)
     groups = content.groups if args.to.lower().endswith(".mf4") else content.groups[:1]
     skipped = f", {content.skipped_rows} rows without a time stamp skipped" if content.skipped_rows else ""
     print(f"{args.to}: {len(groups)} channel group(s), {sum(len(g.channels) + 1 for g in groups)} channels "

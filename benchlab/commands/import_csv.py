@@ -39,7 +39,8 @@ if TYPE_CHECKING:
     from benchlab.importing.sources import Input, Merged
 
 NAME = "import"
-HELP = "convert a CSV or an MDF file (contract channel names, a mapping, any channel with its unit) into a run file"
+HELP = ("convert a CSV, an MDF file or a CAN log (.blf, .asc, .trc, .log, decoded with a DBC), or several merged on "
+        "one clock, into a run file (the channel names of docs/contract.md §1, a mapping, any channel with its unit)")
 SEPARATORS = {",": ",", ";": ";", "tab": "\t"}
 #: What asammdf reads, and python-can's LogReader (benchlab.importing.canlog.CAN_LOG_SUFFIXES: `.mf4` where it
 #: holds CAN bus logging), kept here so that `--help` loads neither.
@@ -53,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("inputs", nargs="+", metavar="DATA",
                         help="CSV file, one column per channel, header = channel names or `name [unit]` (optionally "
                              "a second header line of units); an MDF file (.mf4, .mdf, .dat); a CAN log (.blf, .asc, "
-                             ".trc, .log, .mf4 bus logging) with --dbc. Several are merged into one run on one clock "
+                             ".trc, .log, .mf4 bus logging) decoded with --dbc's database. Several are merged into one run on one clock "
                              "(then --dt is the grid)")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="run file to write")
     parser.add_argument("--dt", type=cliargs.positive_float("a time step in s", MAX_RUN_DURATION_S),
@@ -63,9 +64,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the unit of each column beyond the contract's channels, repeatable or separated by "
                              "commas, e.g. --unit IqFbk=A,speed=rpm")
     parser.add_argument("--model", help=f"{MODEL_HELP}: the CSV must hold the channels it names "
-                                        "(default: the clutch channels of contract section 1)")
-    parser.add_argument("--sep", choices=tuple(SEPARATORS), help="column separator (default: the one in the header)")
-    parser.add_argument("--decimal", choices=(".", ","),
+                                        "(default: the clutch channels of docs/contract.md §1)")
+    parser.add_argument("--sep", choices=tuple(SEPARATORS), metavar="{',',';',tab}",
+                        help="a CSV's column separator: ',' ';' or tab (default: the one in the header)")
+    parser.add_argument("--decimal", choices=(".", ","), metavar="{'.',','}",
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
     parser.add_argument("--mapping", metavar="MAP.toml", help="an MDF file's channels or a CAN log's signals: "
                                                               "run-file channel = source channel, with group, unit, "

@@ -11,14 +11,15 @@ from benchlab.outputs import check_output_dir
 from benchlab.progress import for_terminal
 
 NAME = "report"
-HELP = "figures of the paper (Fig. 3, 4, 5), residual analysis and a Markdown page of error figures"
+HELP = ("figures of the paper (Fig. 3, 4, 5), residual analysis and a page of error figures: report.md and the same "
+        "page as report.html for a browser")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run file (HDF5, benchlab-run/1) the model is shown on (Fig. 4, residuals)")
     parser.add_argument("--params", required=True, help="parameter file (JSON) of the model to report")
     add_model_option(parser)
-    parser.add_argument("--out", required=True, help="directory for report.md and the PNG figures")
+    parser.add_argument("--out", required=True, help="directory for report.md, report.html and the PNG figures")
     parser.add_argument("--compare", help="second parameter file (typically linear against nonlinear) for Fig. 3 and 5")
     parser.add_argument("--validate", action="append", default=[], metavar="V.h5",
                         help="a validation run file for Fig. 5, repeat for more (default: RUN)")

@@ -222,16 +222,31 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
             "rmse_K": float(np.sqrt(np.nanmean(err ** 2))), "n": n, "chi2_red": chi2}
 
 
+def no_cooldowns(path: "str | os.PathLike[str]") -> InputError:
+    """The refusal of a run without completed cool-downs: what the run is instead (its protocol), not a dataset."""
+    protocol = load_attrs(path).get("protocol") or "unnamed"
+    return InputError(path, "protocol", f"a cool-down sweep run (`benchlab run cooldown-sweep`): this {protocol} run "
+                                        "has no completed cool-down to fit")
+
+
 def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_s: float = 1.0,
             progress: Progress = SILENT) -> list[CooldownResult]:
-    """Every cool-down of a cooldown-sweep run, fitted (one progress step each); R_true filled in for a simulated bench."""
+    """Every cool-down of a cooldown-sweep run, fitted (one progress step each); R_true filled in for a simulated bench.
+    A run without completed cool-downs (or without /events at all: another tool's file) is no_cooldowns' InputError."""
     path = Path(path)
     run = load_run(path)
     sim_truth = load_attrs(path).get("sim_truth")
     recorded = json.loads(sim_truth) if sim_truth is not None else {}
     # the true R of eq. (11) exists only for the paper's plant (the reference clutch has no such resistance)
     truth = recorded.get("params") if recorded.get("plant", "paper") == "paper" else None
-    found = segments(path)
+    try:
+        found = segments(path)
+    except InputError as exc:
+        if exc.field != "/events":
+            raise
+        found = []
+    if not found:
+        raise no_cooldowns(path)
     with progress.task("cool-downs", len(found), unit="fit") as task:
         return [_fit_cooldown(run, params, sample_s, truth, *segment, task) for segment in found]
 

@@ -6,4 +6,4 @@ the names to their model files.
 
 #: The paper's clutch models, shipped as models/clutch-NAME.toml.
 BUILTIN_NAMES = ("linear", "nonlinear")
-MODEL_HELP = f"a model file (TOML, contract section 6) or a built-in clutch model: {', '.join(BUILTIN_NAMES)}"
+MODEL_HELP = f"a model file (TOML, docs/contract.md §6) or a built-in clutch model: {', '.join(BUILTIN_NAMES)}"

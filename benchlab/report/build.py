@@ -46,8 +46,6 @@ def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams,
         return analysed.results, (f"Cool-downs of the sweep as `benchlab cooldown` stored them in the run file's "
                                   f"`/analysis` (fitted with the other parameters of `{source}`):")
     results = analyse(sweep, params, progress=progress)
-    if not results:
-        raise InputError(sweep, "/events", "completed cool-downs (cooldown_start/cooldown_end of a cooldown-sweep run)")
     return results, ("Cool-downs of the sweep, fitted here with the other parameters of the first model (the run "
                      "file has no `/analysis`: `benchlab cooldown` stores one):")
 

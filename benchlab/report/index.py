@@ -243,7 +243,7 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         "<h2>1. The runs</h2>", _run_section(runs, out),
         _figure(out, out / "report" / "fig4_fit.png", "Fig. 4: the nonlinear model against the Table 1 run"),
         "<h2>2. Identification: linear against nonlinear (eq. 6–11)</h2>",
-        "<p>NRMSE = 100 · RMSE / (max − min of the measured channel), averaged over ϑ_F, ϑ_A, ϑ_T (contract §5). "
+        "<p>NRMSE = 100 · RMSE / (max − min of the measured channel), averaged over ϑ_F, ϑ_A, ϑ_T (benchlab's docs/contract.md §5). "
         "The paper's percentages are its own error measure on its own bench; they are shown for orientation.</p>",
         _identify_section(identification, cooldowns),
     ]

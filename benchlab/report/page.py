@@ -127,7 +127,7 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
         f"`{run.attrs.get('protocol', '')}`, {duration:.0f} s at a "
         f"step of {float(run.attrs['dt']):g} s, {len(run)} samples. Models: {models_text}. "
         f"Written by benchlab {benchlab.__version__}.",
-        "## Error figures (contract §5)",
+        "## Error figures (benchlab's docs/contract.md §5)",
         "RMSE in K over the valid samples; NRMSE = 100 · RMSE / (max − min of the measured channel), "
         f"for **all** averaged over {', '.join(channel_cell(c) for c in rows[0][1].channels)}. The model is driven by "
         "the run's measured inputs from the "
