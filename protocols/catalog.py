@@ -16,6 +16,9 @@ if TYPE_CHECKING:
 
 NAMES = ("table1", "cooldown-sweep", "validation")
 DEFAULT_TABLE1_DURATION_S = 7200.0
+#: The channels each protocol holds at several values through long cool-downs (no heat source on): what a link's law
+#: of those channels needs to be identified (benchlab.identify.excitation names the protocol).
+COOLDOWNS_AT: dict[str, tuple[str, ...]] = {"cooldown-sweep": ("engine_speed", "clutch_state", "clutch_speed")}
 
 
 @dataclass(frozen=True)

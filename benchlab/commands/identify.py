@@ -37,6 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.identify.api import identify, parse_fixed
+        from benchlab.identify.identifiability import not_identified_lines
         from benchlab.model.catalog import model_spec, resolve_model
         from benchlab.model.runs import load_runs
         from benchlab.model.params import save_params
@@ -58,10 +59,12 @@ def run(args: argparse.Namespace) -> int:
     result = identify(runs, model, fixed, validate, starts=args.starts, seed=args.seed, step_s=args.step,
                       progress=for_terminal(args.quiet))
     save_params(args.out, result.params, result.summary())
-    se = result.uncertainty.standard_errors
+    se, unidentified = result.uncertainty.standard_errors, result.uncertainty.not_identified
     print(f"{args.out}: {model.label} model from {len(runs)} run(s), {result.fit.starts} starts")
+    for name, why in unidentified.items():
+        print(f"  {name:7s} = {result.params[name]:12.6g}   not identified: {why}")
     for name, value in result.params.items():
-        if name in se:
+        if name in se and name not in unidentified:
             print(f"  {name:7s} = {value:12.6g} ± {se[name]:.3g}")
     for path, states in result.initial_states.items():
         fitted = ", ".join(f"{s} {v['value']:.2f}" for s, v in states.items())
@@ -77,8 +80,10 @@ def run(args: argparse.Namespace) -> int:
                   f"{tests['structure_K']:.3f} K, limit {tests['effect_threshold_K']:.2f} K; "
                   f"{tests['whiteness_outside_pct']:.0f} % of 1-step lags outside), lag-1 autocorrelation "
                   f"{tests['autocorrelation'][1]:+.2f}, strongest input correlation {signal} {corr:+.2f}")
+    said = set(not_identified_lines(unidentified))  # printed above, with the parameters
     for warning in result.uncertainty.warnings:
-        print(f"  warning: {warning}")
+        if warning not in said:
+            print(f"  warning: {warning}")
     return 0
 
 

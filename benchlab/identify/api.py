@@ -51,7 +51,8 @@ class Identification:
     initial_states: dict[str, dict[str, dict[str, float]]]  # run -> channel -> value, standard_error
 
     def summary(self) -> dict:
-        """The parameter file's extra keys: uncertainties, fit figures, residual tests, warnings."""
+        """The parameter file's extra keys: uncertainties, fit figures, residual tests, the parameters the runs do not
+        identify (with why and what would), warnings."""
         u = self.uncertainty
         names = [k for k in self.params if k in u.standard_errors]
         index = [u.names.index(k) for k in names]
@@ -64,6 +65,7 @@ class Identification:
                 "initial_states": self.initial_states,
                 "fit": {"fitting": self.fitting, "validation": self.validation, "starts": self.fit.starts,
                         "start_costs": self.fit.start_costs, "residuals": self.residuals},
+                "not_identified": self.uncertainty.not_identified,
                 "warnings": self.uncertainty.warnings}
 
 

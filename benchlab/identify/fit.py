@@ -38,6 +38,7 @@ class FitResult:
     residuals: np.ndarray
     starts: int = 1
     start_costs: list[float] = field(default_factory=list)  # each start's latest cost on the runs themselves
+    start_params: list[dict[str, float]] = field(default_factory=list)  # each start's parameters at that cost
     converged: bool = True  # False where the fit stopped at its evaluation budget (a scout), not at a minimum
 
     @property
@@ -223,7 +224,9 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
     and only where every other start has settled in a different minimum is a new one drawn. Only magnitudes are
     spread (log parameters and signed ones scaled by their own start value); parameters with an absolute scale,
     such as start temperatures in °C, start at their prior. `task` advances by one per scout run (the unused
-    budget at the end) and one for the polish; `starts` of the result counts the independent starts drawn.
+    budget at the end) and one for the polish; `starts` of the result counts the independent starts drawn, and
+    `start_costs` and `start_params` hold where each ended (its cost on the runs, lowest first, and its parameters
+    there: starts at one cost far apart show a flat direction, benchlab.identify.identifiability).
     """
     rng = np.random.default_rng(seed)
     scouted = datasets if scout_data is None else scout_data
@@ -249,7 +252,10 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
     final = fit(polish or spec, datasets, start={k: best.params[k] for k in best.free_names})
     task.advance()
     final.starts = len(found)
-    final.start_costs = sorted(r.cost if scouted is datasets else _cost(spec, r.params, datasets) for r in found)
+    ends = sorted(((r.cost if scouted is datasets else _cost(spec, r.params, datasets), r.params) for r in found),
+                  key=lambda end: end[0])
+    final.start_costs = [cost for cost, _ in ends]
+    final.start_params = [{p.name: params[p.name] for p in spec.free} for _, params in ends]
     return final
 
 

@@ -24,7 +24,7 @@ otherwise biases the slow parameters far beyond any error bar.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -32,6 +32,7 @@ import pandas as pd
 from benchlab.identify.adjoint import ScoreResponse
 from benchlab.identify.data import FitData
 from benchlab.identify.fit import FitResult, residual_index, simulate_outputs
+from benchlab.identify.identifiability import not_identified, not_identified_lines, starts_at_the_minimum
 from benchlab.identify.metrics import MAD_TO_SIGMA, robust_sigma
 
 CORRELATION_LIMIT = 0.95
@@ -64,6 +65,7 @@ class Uncertainty:
     sources: dict[str, dict[str, float]]  # "residuals" / "input_noise": the standard error each alone gives
     bandwidths: list[int]  # Newey–West bandwidth per run, in fitting steps
     warnings: list[str]
+    not_identified: dict[str, str] = field(default_factory=dict)  # parameter -> why and what would identify it
 
 
 def power_noise(run: pd.DataFrame, block: int, steps: int) -> np.ndarray:
@@ -228,21 +230,57 @@ def _errors(inverse: np.ndarray, middle: np.ndarray) -> np.ndarray:
 
 
 def identifiability_warnings(names: Sequence[str], values: Sequence[float], errors: Sequence[float],
-                             correlation: np.ndarray, effect: Sequence[float]) -> list[str]:
-    """Pairs the data cannot tell apart (|corr| > 0.95), poorly excited parameters, parameters without effect."""
-    warnings = []
-    for i in range(len(names)):
-        for j in range(i + 1, len(names)):
-            if abs(correlation[i, j]) > CORRELATION_LIMIT:
-                warnings.append(f"{names[i]} and {names[j]} are hard to tell apart "
-                                f"(correlation {correlation[i, j]:+.3f})")
+                             correlation: np.ndarray, effect: Sequence[float],
+                             reasons: Mapping[str, str] | None = None) -> list[str]:
+    """What the data cannot tell, the parameters they do not identify first (`reasons`, benchlab.identify.
+    identifiability): then each cluster of parameters the data cannot tell apart (connected by |corr| > 0.95; pairs
+    with a zero or non-finite standard error have no correlation), poorly excited parameters and parameters without
+    effect (those not identified are said once, in their own line)."""
+    reasons = dict(reasons or {})
+    warnings = not_identified_lines(reasons)
+    usable = [i for i, error in enumerate(errors) if np.isfinite(error) and error > 0]
+    warnings += [_cluster_line(cluster, names, correlation) for cluster in _clusters(usable, correlation)]
     largest = max(effect, default=0.0)
     for name, value, error, size in zip(names, values, errors, effect):
+        if name in reasons:
+            continue
         if value != 0 and error / abs(value) > RELATIVE_SE_LIMIT:
             warnings.append(f"{name} is poorly excited by the data (standard error {100 * error / abs(value):.0f} %)")
         elif size < 1e-6 * largest:
             warnings.append(f"{name} has no visible effect on the measured channels")
     return warnings
+
+
+def _clusters(usable: Sequence[int], correlation: np.ndarray) -> list[list[int]]:
+    """The groups of parameters (indices among `usable`) connected by pairs with |corr| > CORRELATION_LIMIT, each of
+    two or more, in the order of their first parameter."""
+    group = {i: i for i in usable}
+
+    def root(i: int) -> int:
+        while group[i] != i:
+            i = group[i]
+        return i
+    for a, i in enumerate(usable):
+        for j in usable[a + 1:]:
+            if abs(correlation[i, j]) > CORRELATION_LIMIT:
+                group[root(j)] = root(i)
+    members: dict[int, list[int]] = {}
+    for i in usable:
+        members.setdefault(root(i), []).append(i)
+    return [m for m in members.values() if len(m) > 1]
+
+
+def _cluster_line(cluster: Sequence[int], names: Sequence[str], correlation: np.ndarray) -> str:
+    """One cluster of parameters the data cannot tell apart: its members, how many of their pairs correlate beyond
+    the limit and the strongest pair."""
+    pairs = [(correlation[i, j], i, j) for a, i in enumerate(cluster) for j in cluster[a + 1:]
+             if abs(correlation[i, j]) > CORRELATION_LIMIT]
+    strongest, i, j = max(pairs, key=lambda pair: abs(pair[0]))
+    listed = ", ".join(names[k] for k in cluster[:-1]) + f" and {names[cluster[-1]]}"
+    if len(cluster) == 2:
+        return f"{listed} are hard to tell apart (correlation {strongest:+.3f})"
+    return (f"{listed} are hard to tell apart ({len(pairs)} of their {len(cluster) * (len(cluster) - 1) // 2} pairs "
+            f"correlate beyond ±{CORRELATION_LIMIT:g}; strongest {names[i]} and {names[j]}, {strongest:+.3f})")
 
 
 def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: Sequence[Mapping[str, np.ndarray]],
@@ -269,17 +307,20 @@ def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: 
     keep = [i for i, name in enumerate(names) if model_names is None or name in model_names]
     values = [result.params[names[i]] for i in keep]
     effect = np.sqrt(np.diag(J.T @ J))[keep] * np.abs(values)
+    kept = [result.spec.free[i] for i in keep]
+    reasons = not_identified(kept, result.params, dict(zip(names, map(float, se))),
+                             starts_at_the_minimum(result), result.spec.definition)
     warnings = identifiability_warnings([names[i] for i in keep], values, se[keep], corr[np.ix_(keep, keep)],
-                                        effect)
+                                        effect, reasons)
     network = result.spec.network
     measured_states = {network.outputs[c] for c in network.measured if c in network.outputs}
     measured_nodes = measured_states | {lag.node for lag in network.lags if lag.name in measured_states}
     seen_through = ", ".join(network.measured)
     for node in network.nodes:
-        if node.name not in measured_nodes and node.capacity in names:
+        if node.name not in measured_nodes and node.capacity in names and node.capacity not in reasons:
             i = names.index(node.capacity)
             warnings.append(f"{node.capacity} is seen only through the measured temperatures ({seen_through}; node "
                             f"{node.name} is not measured): its standard error is "
                             f"{100 * se[i] / result.params[node.capacity]:.1f} % and its temperature is an "
                             f"estimate, not a measurement")
-    return Uncertainty(names, dict(zip(names, map(float, se))), corr, sources, bandwidths, warnings)
+    return Uncertainty(names, dict(zip(names, map(float, se))), corr, sources, bandwidths, warnings, reasons)

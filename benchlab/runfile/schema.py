@@ -26,6 +26,9 @@ ALIGNED_MEANING: dict[str, str] = {
     "load_torque": "load machine torque", "T_flywheel_1": "flywheel sensor 1", "T_flywheel_2": "flywheel sensor 2",
 }
 
+#: The named states of a channel that holds states, as words a sentence can use ("runs ... with the clutch open").
+ALIGNED_LEVELS: dict[str, dict[float, str]] = {"clutch_state": {1.0: "the clutch clamped", 0.0: "the clutch open"}}
+
 
 def aligned_description(name: str, source: "dict | None" = None) -> str:
     """The `description` an /aligned dataset carries (and an export shows as its comment): what the contract
