@@ -18,12 +18,13 @@ from typing import Any
 
 import pandas as pd
 
+from benchlab.identify.identifiability import recorded
 from benchlab.identify.metrics import nrmse_pct, rmse_k
 from benchlab.outputs import write_text
 from benchlab.model.params import ModelParams
 from benchlab.provenance import SIMULATED, bench_text
 from benchlab.report.html import STYLE
-from benchlab.report.page import number
+from benchlab.report.page import error_cell, number
 from benchlab.report.scores import estimate
 from benchlab.runfile import event_steps, load_attrs, load_events, load_schedule
 
@@ -150,17 +151,30 @@ def _identify_section(figures: Mapping[str, Mapping[str, Mapping[str, float]]],
 
 
 def _truth_section(params: ModelParams, truth: Mapping[str, float], standard_errors: Mapping[str, float]) -> str:
+    """The identified parameters against the plant's truth: error, and error over the standard error where the runs
+    identify the parameter (else why not, in the ± SE cell)."""
     rows = []
+    reasons = recorded(params)
     for name, value in params.items():
         if name not in truth:
             continue
         true = float(truth[name])
-        se = standard_errors.get(name, math.nan)
-        rows.append([f"<code>{html.escape(name)}</code>", f"{value:.6g}", f"{se:.2g}" if math.isfinite(se) else "—",
-                     f"{true:.6g}",
+        se = standard_errors.get(name, math.nan) if name not in reasons else math.nan
+        rows.append([f"<code>{html.escape(name)}</code>", f"{value:.6g}",
+                     html.escape(error_cell(se, reasons.get(name))), f"{true:.6g}",
                      _num(100 * (value - true) / true if true else math.nan, 2, " %"),
                      _num(abs(value - true) / se if se and se > 0 else math.nan, 1)])
     return _table(("parameter", "identified", "± SE", "plant truth", "error", "error / SE"), rows)
+
+
+def _not_identified_section(params: ModelParams) -> str:
+    """The nonlinear model's parameters the runs do not identify, each with its value, why and what would identify
+    it ("" where the runs identify every one)."""
+    reasons = recorded(params)
+    items = "".join(f"<li><code>{html.escape(name)}</code> = {params[name]:.4g}: {html.escape(why)}</li>"
+                    for name, why in reasons.items())
+    return (f"<p>Not identified by these runs ({len(reasons)} of the {params.model} model's parameters: their "
+            f"values are where the fit stopped, not measurements):</p><ul>{items}</ul>") if reasons else ""
 
 
 def _story_sections(story: Mapping[str, Any]) -> list[str]:
@@ -246,6 +260,7 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         "<p>NRMSE = 100 · RMSE / (max − min of the measured channel), averaged over ϑ_F, ϑ_A, ϑ_T (benchlab's docs/contract.md §5). "
         "The paper's percentages are its own error measure on its own bench; they are shown for orientation.</p>",
         _identify_section(identification, cooldowns),
+        _not_identified_section(nonlinear),
     ]
     sections += [_figure(out, p, f"Fig. 5: validation {i}")
                  for i, p in enumerate(sorted((out / "report").glob("fig5_validation_*.png")), 1)]

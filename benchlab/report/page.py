@@ -12,6 +12,7 @@ import pandas as pd
 
 import benchlab
 from benchlab.identify.cooldown import COVERAGE_K, CooldownResult
+from benchlab.identify.identifiability import recorded
 from benchlab.identify.metrics import RESIDUAL_LABEL
 from benchlab.model.params import ModelParams
 from benchlab.provenance import bench_text
@@ -74,17 +75,27 @@ def scores_table(rows: Sequence[tuple[pd.DataFrame, Estimate]]) -> str:
 
 
 def params_table(models: Sequence[tuple[str, ModelParams]]) -> str:
-    """Each model's parameter values with their standard errors where the file holds them."""
+    """Each model's parameter values with their standard errors where the file holds them, or why the runs do not
+    identify them."""
     names = list(dict.fromkeys(name for _, params in models for name in params))
     header = ["parameter", "unit"] + [h for label, _ in models for h in (label, "± SE")]
+    unidentified = [recorded(params) for _, params in models]
     cells = []
     for name in names:
         row = [f"`{name}`", unit(name, models)]
-        for _, params in models:
-            se = standard_errors(params).get(name, math.nan)
-            row += [f"{params[name]:.6g}" if name in params else "—", f"{se:.2g}" if math.isfinite(se) else "—"]
+        for (_, params), reasons in zip(models, unidentified):
+            row += [f"{params[name]:.6g}" if name in params else "—",
+                    error_cell(standard_errors(params).get(name, math.nan), reasons.get(name))]
         cells.append(row)
     return table(header, cells)
+
+
+def error_cell(error: float, not_identified: str | None) -> str:
+    """A parameter's ± SE cell: "not identified: why" where the runs do not identify it (its standard error says
+    nothing), else the standard error, or an em dash where the file has none."""
+    if not_identified is not None:
+        return f"not identified: {not_identified}"
+    return f"{error:.2g}" if math.isfinite(error) else "—"
 
 
 def cooldown_table(cooldowns: Sequence[CooldownResult], models: Sequence[tuple[str, ModelParams]]) -> str:
@@ -134,7 +145,8 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
         "first valid measured temperatures (`benchlab simulate`).",
         scores_table(rows),
         "## Parameters",
-        "Standard errors as the parameter file's `uncertainty` holds them (from `benchlab identify`).",
+        "Standard errors as the parameter file's `uncertainty` holds them (from `benchlab identify`); a parameter "
+        "the runs do not identify shows why and what would identify it instead (its `not_identified`).",
         params_table(models),
         "## Fig. 4 – measured and estimated temperatures",
         f"![Fig. 4]({figures.fit.name})",
