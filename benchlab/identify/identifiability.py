@@ -106,7 +106,7 @@ def not_identified(specs: Sequence[ParamSpec], values: Mapping[str, float], erro
         why = _why(spec, value, errors.get(spec.name), [s[spec.name] for s in starts if spec.name in s])
         if why is None:
             continue
-        needs = what_identifies(model, spec.name) if model is not None else ""
+        needs = what_identifies(model, spec.name.split("@")[0]) if model is not None else ""  # X@group: X's law
         reasons[spec.name] = f"{why}; would be identified by {needs}" if needs else why
     return reasons
 
