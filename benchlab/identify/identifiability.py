@@ -15,7 +15,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from benchlab.identify.excitation import what_identifies
 from benchlab.identify.spec import ParamSpec
+from benchlab.model.build import build_spec
+from benchlab.values import finite_number
 
 if TYPE_CHECKING:
     from benchlab.identify.fit import FitResult
@@ -96,8 +99,6 @@ def not_identified(specs: Sequence[ParamSpec], values: Mapping[str, float], erro
     """Parameter -> why the runs do not identify it (on a bound; no effect; standard error above its value; starts
     at the same cost far apart: `starts`, as `starts_at_the_minimum` gives them) and, with the `model`, what would
     identify it (benchlab.identify.excitation)."""
-    from benchlab.identify.excitation import what_identifies
-
     reasons: dict[str, str] = {}
     for spec in specs:
         value = values.get(spec.name)
@@ -125,9 +126,6 @@ def recorded(params: "ModelParams") -> dict[str, str]:
     errors = params.extra.get("uncertainty")
     if not isinstance(errors, dict):
         return {}
-    from benchlab.model.build import build_spec
-    from benchlab.values import finite_number
-
     numbers = {k: finite_number(v) for k, v in errors.items()}
     return not_identified(build_spec(params.definition).free, params,
                           {k: v if v is not None else float("nan") for k, v in numbers.items()},
