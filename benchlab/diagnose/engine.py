@@ -40,8 +40,9 @@ from benchlab.diagnose.library import Candidate, candidates, per_group_candidate
 from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
-from benchlab.identify.fit import (FitResult, coordinate_bounds, fit, fit_multistart, from_coordinates, residual_vector,
+from benchlab.identify.fit import (FitResult, fit, fit_multistart, from_coordinates, residual_vector,
                                    simulate_outputs, to_coordinates)
+from benchlab.identify.identifiability import on_bound
 from benchlab.identify.spec import ModelSpec, ParamSpec
 from benchlab.identify.metrics import difference_noise, nrmse_pct, residual
 from benchlab.model.build import build_spec
@@ -69,7 +70,6 @@ CROSS_VALIDATED = 3
 IN_SAMPLE_SHARE = 0.5
 MAX_VALIDATED = 6  # screened candidates polished at most per round, failed fits (on a bound) included
 GLOBAL_STARTS = 2  # the refit after an acceptance: scouts from the model file's neutral start, beside the warm one
-BOUND_TOL = 1e-3  # a fitted coordinate this close to a bound, as a share of its range, is on it
 MAX_ROUNDS = 3
 BEYOND_FLOOR = 3.0  # a final model this many times the measurements' noise floor has an error left no finding explains
 # The flywheel's temperature at t = 0 is fitted per run: a run that starts with a launch leaves one
@@ -276,16 +276,16 @@ Screened = tuple[float, Candidate, ModelSpec, dict[str, float]]  # in-sample cos
 
 
 def at_bound(result: FitResult) -> tuple[str, ...]:
-    """The free parameters a fit left on (within BOUND_TOL of the range of) a bound: where they sit, the fit failed."""
+    """The free parameters a fit left on a bound (benchlab.identify.identifiability.on_bound): where they sit, the
+    fit failed."""
     return tuple(name for name, _ in bound_sides(result))
 
 
 def bound_sides(result: FitResult) -> list[tuple[str, str]]:
     """Each free parameter on a bound with the side it sits on ("min" or "max"): the bound a user would widen."""
-    x, (lo, hi) = to_coordinates(result.spec, result.params), coordinate_bounds(result.spec)
-    tol = BOUND_TOL * (hi - lo)
-    return [(p.name, "min" if x[j] - lo[j] <= tol[j] else "max") for j, p in enumerate(result.spec.free)
-            if min(x[j] - lo[j], hi[j] - x[j]) <= tol[j]]
+    sides = {"lower": "min", "upper": "max"}
+    return [(p.name, sides[side]) for p in result.spec.free
+            if (side := on_bound(p, result.params[p.name])) is not None]
 
 
 def pinned(current: FitResult, datasets: Sequence[FitData]) -> FitResult:
