@@ -141,6 +141,23 @@ def test_the_job_page_says_what_is_not_identified(tmp_path):
     assert _not_identified_section(params) == ""
 
 
+def test_the_batch_table_names_what_is_not_identified_and_gives_it_no_standard_error():
+    from types import SimpleNamespace
+
+    from benchlab.batch import adapter
+    from benchlab.batch.tasks import parameter_columns
+    from benchlab.identify.uncertainty import Uncertainty
+
+    reasons = {"a2": "standard error 90 exceeds its value 0.45"}
+    u = Uncertainty(["a1", "a2"], {"a1": 0.01, "a2": 90.0}, np.eye(2), {}, [1], not_identified_lines(reasons),
+                    reasons)
+    result = SimpleNamespace(params={"a1": 0.35, "a2": 0.45}, uncertainty=u, fitting={"r": {"rmse_K": 0.1,
+                                                                                              "nrmse_pct": 1.0}})
+    columns = parameter_columns(*adapter.fitted(result))
+    assert columns["a1_se"] == 0.01 and math.isnan(columns["a2_se"]) and columns["a2"] == 0.45
+    assert adapter.fit_figures(result)["not_identified"] == "a2"
+
+
 def _cooldown(speed: float, state: int, r: float) -> CooldownResult:
     return CooldownResult(0, speed, state, 0.0, 0.0, 1.0, r, 0.01, 0.02, 60.0, 0.1, 0.05, 100, 1.0)
 

@@ -66,16 +66,21 @@ def save_fit(path: "str | os.PathLike[str]", result: Identification) -> None:
 
 
 def fitted(result: Identification) -> tuple[ModelParams, dict[str, float]]:
-    """The fitted parameters and the standard error of each free one."""
-    return result.params, result.uncertainty.standard_errors
+    """The fitted parameters and the standard error of each free one; NaN for one the runs do not identify (its
+    standard error says nothing, and its trend leaves the run out)."""
+    unidentified = result.uncertainty.not_identified
+    return result.params, {name: float("nan") if name in unidentified else error
+                           for name, error in result.uncertainty.standard_errors.items()}
 
 
-def fit_figures(result: Identification) -> dict[str, float]:
-    """RMSE (K) and NRMSE (%) on the fitted runs (mean over them) and the number of identifiability warnings."""
+def fit_figures(result: Identification) -> dict[str, object]:
+    """RMSE (K) and NRMSE (%) on the fitted runs (mean over them), the number of identifiability warnings and the
+    parameters the runs do not identify (their names)."""
     figures = list(result.fitting.values())
     return {"rmse_K": float(np.mean([f["rmse_K"] for f in figures])),
             "nrmse_pct": float(np.mean([f["nrmse_pct"] for f in figures])),
-            "warnings": len(result.uncertainty.warnings)}
+            "warnings": len(result.uncertainty.warnings),
+            "not_identified": ", ".join(result.uncertainty.not_identified)}
 
 
 def diagnosis(runs: Sequence[pd.DataFrame], baseline: ModelDefinition, seed: int) -> dict:
