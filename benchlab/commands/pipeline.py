@@ -193,6 +193,7 @@ def job_figures(nonlinear: dict, story: dict, cooldowns, comparison, diagnosis: 
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.identify.api import identify
+        from benchlab.identify.identifiability import recorded
         from benchlab.model.params import load_params, save_params
         from benchlab.report import write_report
         from benchlab.report.index import cooldown_scores, mean_cooldown_nrmse, write_index
@@ -261,6 +262,7 @@ def run(args: argparse.Namespace) -> int:
               f"{mean_cooldown_nrmse(cooldowns, label):.1f} % (paper: nonlinear 3.8 %, linear 8.4 %), the flywheel "
               f"alone {mean_cooldown_nrmse(cooldowns, label, flywheel=True):.1f} %")
     figures_held = job_figures(figures["nonlinear"], story, cooldowns, comparison, diagnosis)
+    figures_held["not_identified"] = recorded(nonlinear)
     story["verdict"] = figures_held["verdict"] = verdict(figures_held)
     print(f"verdict   {story['verdict']}")
     write_text(out / "summary.json", json.dumps(finite_or_null(figures_held), indent=2))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from typing import Any
 from dataclasses import dataclass
 
 import numpy as np
@@ -110,7 +111,7 @@ REFERENCES = {"cooldown_nrmse_pct": (3.8, "%", "the paper's nonlinear model on i
               "validation_nrmse_pct": (10.0, "%", "the paper's validation runs")}
 
 
-def largest_misses(figures: Mapping[str, float]) -> list[str]:
+def largest_misses(figures: Mapping[str, Any]) -> list[str]:
     """Each figure the job can hold against a reference, worst (largest ratio to its reference) first, in words."""
     texts = {"cooldown_nrmse_pct": "long cool-downs {v:.1f} % NRMSE" + (
                  f" (the flywheel alone {figures['cooldown_flywheel_nrmse_pct']:.1f} %)"
@@ -123,7 +124,7 @@ def largest_misses(figures: Mapping[str, float]) -> list[str]:
     return [text for ratio, text in sorted(rows, key=lambda row: -row[0]) if ratio > 1.0]
 
 
-def verdict(figures: Mapping[str, float]) -> str:
+def verdict(figures: Mapping[str, Any]) -> str:
     """The index page's one line: the extension's gain on a run it never saw first, then the nonlinear model's
     largest misses against the paper's figures, then the plate that wear needs (against /truth where known)."""
     parts = []
@@ -133,6 +134,9 @@ def verdict(figures: Mapping[str, float]) -> str:
     misses = largest_misses(figures)
     parts.append("the nonlinear model's largest misses: " + "; ".join(misses) if misses
                  else "the nonlinear model meets the paper's figures on this plant")
+    unidentified = figures.get("not_identified") or {}
+    if unidentified:
+        parts.append(f"not identified by the Table 1 run: {', '.join(sorted(unidentified))}")
     plate = figures.get("plate_rmse_k", np.nan)
     if np.isfinite(plate):
         coverage = figures.get("plate_band_coverage", np.nan)
