@@ -11,12 +11,14 @@ import numpy as np
 import pytest
 
 import benchlab
+import headless_chromium
 from benchlab.cli import main
 from benchlab.model.clutch import PREDICTED_CHANNELS
 from benchlab.identify.cooldown import CooldownResult, store
 from benchlab.identify.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
 from benchlab.model.params import paper_params, save_params
 from benchlab.report import build, write_report
+from benchlab.report.html import markdown_html
 from benchlab.report.resistance import resistance
 from benchlab.runfile import write_run
 from benchlab.runner.session import RunRequest, execute
@@ -243,3 +245,26 @@ def test_a_sweeps_stored_analysis_is_read_not_fitted_again(bench, tmp_path, monk
     results, source = build.sweep_cooldowns(sweep, paper_params("nonlinear"))
     assert results[0] == rows[0] and results[1].R == 0.2345 and np.isnan(results[1].R_true)
     assert "`/analysis`" in source and "identified.json" in source
+
+
+def test_renderer_turns_no_strangers_html_into_markup():
+    page = markdown_html("# t\n\n<details><script>alert(1)</script>\n\n[a](javascript:alert(1)) [b](JaVa&#x53;cript:1) "
+                         "[c](http://x/y?a=1&b=2) [d](fig.png)\n\n![e](data:text/html,x)\n\n<details><summary>ok</summary>"
+                         "\n\n</details>", "t")
+    assert "<script" not in page and "<img" not in page
+    assert re.findall(r'href="([^"]*)"', page) == ["http://x/y?a=1&amp;b=2", "fig.png"]
+    assert "&lt;details&gt;&lt;script&gt;" in page and "<details><summary>ok</summary>" in page
+
+
+@pytest.mark.skipif(headless_chromium.available() is not None, reason=str(headless_chromium.available()))
+def test_hostile_run_attributes_run_no_script_in_the_page(tmp_path, short_run):
+    run = short_run.copy()
+    run.attrs = {**short_run.attrs, "source": headless_chromium.HOSTILE, "bench": headless_chromium.HOSTILE,
+                 "protocol": headless_chromium.HOSTILE}
+    page = write_report(run, paper_params("linear"), tmp_path).with_suffix(".html")
+    browser = headless_chromium.Chromium()
+    try:
+        state = headless_chromium.page_state(browser, page)
+    finally:
+        browser.close()
+    headless_chromium.assert_inert(state, "benchlab report – " + run.attrs["source"].rsplit("/", 1)[-1])
