@@ -53,3 +53,23 @@ MAX_LOCAL_WORKERS = 256
 #: Most grid rows `benchlab import` puts an MDF file's channels on: a week's run on the bench's 10 ms grid (a
 #: finer --dt over a long recording is a typo that would allocate memory until the machine gives up).
 MAX_IMPORT_ROWS = int(MAX_RUN_DURATION_S / 0.01)
+#: The physical range of each BENCH.toml number that feeds a loop or a division: beyond it is a typo, not a bench
+#: (`gear_ratio = 1e-300` made the launch estimate of `run --dry-run` loop without end). A gear ratio between the
+#: input shaft and the load machine of 1:10 to 100:1; a load inertia from a light rotor to a heavy dynamometer; serial
+#: lines from 300 baud to 12 Mbaud (USB adapters); device periods and the run's ticks from 1 ms (no device or loop
+#: of the bench is faster) to what still makes a measurement; the grid at most 0.1 s and a tick at most 0.5 s (the
+#: interlocks are polled twice a second at least, a launch's slip every 0.1 s), the run file flushed at least once a
+#: second (a crash loses at most 1 s, docs/runfile.md).
+BENCH_NUMBER_RANGES = {
+    "drivetrain.gear_ratio": (0.1, 100.0),
+    "drivetrain.load_inertia_kgm2": (1e-3, 1e5),
+    "instrument.baudrate": (300, 12_000_000),
+    "node.baudrate": (300, 12_000_000),
+    "instrument.timeout_s": (1e-3, MAX_TIMEOUT_S),
+    "instrument.period_s": (1e-3, 3600.0),
+    "node.period_s": (1e-3, 60.0),
+    "acquisition.dt": (1e-3, 0.1),
+    "acquisition.tick_s": (1e-3, 0.5),
+    "acquisition.fast_tick_s": (1e-3, 0.1),
+    "acquisition.flush_every_s": (1e-3, 1.0),
+}

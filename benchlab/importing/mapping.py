@@ -20,6 +20,7 @@ import tomllib
 from dataclasses import dataclass
 
 from benchlab.errors import InputError, read_document
+from benchlab.model.definition import is_name
 from benchlab.values import check_keys, finite_number
 
 RULES = ("interpolate", "hold")
@@ -42,6 +43,9 @@ class Mapped:
 def _entry(path: str, channel: str, value: object) -> Mapped:
     """One `[channels]` entry, checked field by field."""
     field = f"channels.{channel}"
+    if not is_name(channel):
+        raise InputError(path, "channels", f"run-file channel names of letters, digits and _ (as in a model file), "
+                                           f"got {channel!r}")
     if channel == "time":
         raise InputError(path, field, "a channel other than time (the grid's time comes from --dt)")
     if isinstance(value, str):
