@@ -13,6 +13,8 @@ from __future__ import annotations
 MAX_RUN_DURATION_S = 7 * 24 * 3600.0
 #: Fastest pace `benchlab run --realtime` asks of the simulated bench: beyond it a tick's own work (ms) sets the pace.
 MAX_REALTIME_FACTOR = 1000.0
+#: Slowest pace: a hundredth of real time (slow motion for watching a launch); 1e-9 paced a 60 s run over 1900 years.
+MIN_REALTIME_FACTOR = 0.01
 #: Most cycles one run may plan: 10 000 Table 1 cycles (40-130 s each) are 5-15 days, so a run this long is
 #: refused by MAX_RUN_DURATION_S first for all but the shortest cycles.
 MAX_CYCLES = 10_000
@@ -45,6 +47,9 @@ MAX_RESUMES = 10_000
 #: Most columns of a CSV `benchlab import` reads: a run file holds a few dozen channels; the bound is checked on
 #: the header line, before any row is parsed (a 100 000-column file used to take 104 s to be refused).
 MAX_CSV_COLUMNS = 1_000
+#: Most channels a mapping file may map (`benchlab import --mapping`): as many as a CSV may have columns; each is a
+#: source channel read, resampled and written on its own (10 000 entries took over a minute before a word was said).
+MAX_MAPPED_CHANNELS = MAX_CSV_COLUMNS
 #: Largest time stamp of a run file's grid, s: run time, or Unix time of an imported log (1e10 s is the year 2286).
 #: Beyond it float64 no longer resolves a 10 ms grid, and the uniform-grid check would pass anything.
 MAX_TIME_STAMP_S = 1e10

@@ -85,6 +85,10 @@ def test_probe_reading_count_is_bounded(capsys):
     (["wear", "RUN", "--params", "p.json", "--predict", "-4"], "--predict"),
     (["cooldown", "RUN", "--params", "p.json", "--sample", "nan"], "--sample"),
     (["cooldown", "RUN", "--params", "p.json", "--sample", "1e9"], "--sample"),
+    (["run", "table1", "--bench", "sim", "--realtime", "1e-9"], "--realtime"),  # a 60 s run over 1900 years
+    (["run", "table1", "--bench", "sim", "--realtime", "1e-300"], "--realtime"),  # was an OverflowError
+    (["diagnose", "RUN", "--group-by", ""], "--group-by"),
+    (["batch", "identify", "RUN", "--out", "d", "--group-by", ""], "--group-by"),
 ])
 def test_counts_and_seeds_are_checked(argv, field, tmp_path, capsys):
     argv = [str(tmp_path / "run.h5") if a == "RUN" else a for a in argv]

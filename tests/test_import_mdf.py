@@ -141,6 +141,11 @@ def test_a_run_exported_to_mf4_and_imported_back_identifies_to_the_same_paramete
     ('[channels.T_air]\nsource = "T_Luft"\nrule = "smooth"', "channels.T_air.rule"),
     ('[channels.T_air]\nsource = "T_Luft"\nscale = "2"', "channels.T_air.scale"),
     ('[channels.T_air]\nsorce = "T_Luft"', "channels.T_air.sorce"),
+    # run-file channel names follow the model files' name rule (they become HDF5 paths and expression names)
+    ('[channels]\n"a/b/c" = "T_Luft"', "'a/b/c'"), ('[channels]\n".." = "T_Luft"', "'..'"),
+    ('[channels]\n"a\\u0000b" = "T_Luft"', "channels"), ('[channels]\n"<script>" = "T_Luft"', "'<script>'"),
+    ('[channels]\n"" = "T_Luft"', "''"), ('[channels]\n"__class__" = "T_Luft"', "__class__"),
+    ("[channels]\n" + "".join(f'e{i} = "T_Luft"\n' for i in range(10_000)), "at most 1000 channels, got 10000"),
 ])
 def test_a_bad_mapping_is_one_line_naming_the_field(mapping, field, tmp_path, recorder_part, refused):
     src, path = tmp_path / "m.mf4", tmp_path / "map.toml"

@@ -19,6 +19,7 @@ import os
 import tomllib
 from dataclasses import dataclass
 
+from benchlab.bounds import MAX_MAPPED_CHANNELS
 from benchlab.errors import InputError, read_document
 from benchlab.model.definition import is_name
 from benchlab.values import check_keys, finite_number
@@ -80,4 +81,6 @@ def read_mapping(path: "str | os.PathLike[str]") -> list[Mapped]:
     channels = doc.get("channels")
     if not isinstance(channels, dict) or not channels:
         raise InputError(path, "channels", "a table: run-file channel = source channel")
+    if len(channels) > MAX_MAPPED_CHANNELS:
+        raise InputError(path, "channels", f"at most {MAX_MAPPED_CHANNELS} channels, got {len(channels)}")
     return [_entry(str(path), name, value) for name, value in channels.items()]
