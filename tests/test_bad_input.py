@@ -387,3 +387,20 @@ def test_bench_file_number_beyond_its_physical_range_is_refused(field, side, tmp
 def test_a_tiny_gear_ratio_is_refused_not_a_dry_run_that_never_ends(tmp_path, capsys):
     bench = _bench_with(tmp_path, "drivetrain.gear_ratio", "1e-300")
     _refused(["run", "table1", "--bench", str(bench), "--dry-run"], "drivetrain.gear_ratio", capsys)
+
+
+@pytest.mark.parametrize("field, url, words", [
+    ("instrument.url", '"TCPIP0::10.0.0.5\\u0000::inst0::INSTR"', "printable"),
+    ("instrument.url", '"TCPIP0::::INSTR"', "VISA resource"),
+    ("instrument.url", '"TCPIP0::10.0.0.5::99999999::SOCKET"', "port from 1 to 65535"),
+    ("instrument.url", '"GPIB0::99::INSTR"', "GPIB address"),
+    ("node.url", '"socket://127.0.0.1:99999999"', "port from 1 to 65535"),
+    ("node.url", '"garbage"', "device path"),
+    ("node.url", '"ftp://host/x"', "pyserial URL scheme"),
+])
+def test_dry_run_checks_device_addresses_as_probe_does(field, url, words, tmp_path, capsys):
+    """`run --dry-run` opens no device, but an address no device can have is refused as probe refuses it."""
+    bench = _bench_with(tmp_path, field, url)
+    dry = _refused(["run", "table1", "--bench", str(bench), "--dry-run"], field, capsys)
+    probe = _refused(["probe", "--bench", str(bench)], field, capsys)
+    assert words in dry and dry.split(": ", 1)[1] == probe.split(": ", 1)[1]

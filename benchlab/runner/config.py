@@ -19,6 +19,7 @@ from benchlab.bounds import BENCH_NUMBER_RANGES
 from benchlab.drivetrain import DrivetrainFacts
 from benchlab.errors import InputError, read_document
 from benchlab.runner.devices import BenchConfig, load_dbc, status_cycle_s
+from benchlab.runner.opening import check_address
 from benchlab.values import check_keys, finite_number, positive_number
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS
@@ -180,7 +181,8 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
     drivetrain = DrivetrainFacts(*(_num(drive, key, f"drivetrain.{key}", src, getattr(DrivetrainFacts, key))
                                    for key in DrivetrainFacts.__dataclass_fields__))
     config = BenchConfig(
-        instrument_url=_str(inst, "url", "instrument.url", src), node_url=_str(node, "url", "node.url", src),
+        instrument_url=check_address(_str(inst, "url", "instrument.url", src), source=src, key="instrument.url"),
+        node_url=check_address(_str(node, "url", "node.url", src), source=src, key="node.url"),
         can=can_cfg, instrument_channels=channels, instrument_mode=mode,
         instrument_baudrate=int(_num(inst, "baudrate", "instrument.baudrate", src, 115200, True)),
         instrument_timeout_s=_num(inst, "timeout_s", "instrument.timeout_s", src, 2.0),
