@@ -268,3 +268,30 @@ def test_hostile_run_attributes_run_no_script_in_the_page(tmp_path, short_run):
     finally:
         browser.close()
     headless_chromium.assert_inert(state, "benchlab report – " + run.attrs["source"].rsplit("/", 1)[-1])
+
+
+@pytest.mark.skipif(headless_chromium.available() is not None, reason=str(headless_chromium.available()))
+def test_hostile_run_attributes_and_findings_run_no_script_in_the_jobs_index(tmp_path, short_run):
+    from benchlab.report.index import write_index
+
+    hostile = headless_chromium.HOSTILE
+    path = tmp_path / "run.h5"
+    write_run(path, short_run.iloc[:2000], short_run.attrs["dt"], protocol=hostile,
+              attrs={"bench": hostile, "can_log": hostile})
+    finding = {"candidate": hostile, "signal": hostile, "mechanism": hostile, "gain_pct": 5.0, "p_value": 0.01,
+               "alternatives": [{"candidate": hostile, "gain_pct": 4.0, "tell_apart_by": hostile}]}
+    scores = {"rmse_K": 0.1, "nrmse_pct": 1.0}
+    page = write_index(tmp_path, {hostile: (path, short_run.iloc[:2000])},
+                       {"nonlinear": {"fit": scores, "validation": scores}}, [], paper_params("nonlinear"), {},
+                       {"findings": [finding], "baseline": {"model": hostile, "rmse_K": 0.2},
+                        "best": {"model": hostile, "rmse_K": 0.1}},
+                       {"life": {"engagements": {}, "horizon_engagements": 1000, "p_fail_within_horizon": 0.0},
+                        "health": {"health": 1.0, "worn": False}, "engagements": 10, "friction_energy_J": 1e6,
+                        "wear": {}},
+                       {"verdict": hostile, "peaks": {hostile: {}}, "extrapolation": {}})
+    browser = headless_chromium.Chromium()
+    try:
+        state = headless_chromium.page_state(browser, page)
+    finally:
+        browser.close()
+    headless_chromium.assert_inert(state, "benchlab: the whole job")
