@@ -4,6 +4,7 @@ replaces only a regular file, and every output is renamed into place when whole.
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 from pathlib import Path
 
@@ -230,3 +231,21 @@ def test_log_follows_the_output_rule(kind, foreign_run, run_file, tmp_path, refu
     if kind == "an existing log":  # with --force it is replaced, as any output
         assert main(["export", str(foreign_run), "--to", str(out), "--log", str(log), "--force"]) == 0
         assert "an earlier log" not in log.read_text() and "benchlab.export" in log.read_text()
+
+
+def test_a_resumed_runs_log_goes_on_and_a_new_one_needs_force(tmp_path):
+    from benchlab import logs
+    from benchlab.outputs import check_log
+
+    log = tmp_path / "run.log"
+    log.write_text("the first part\n")
+    with pytest.raises(InputError, match="--force"):
+        check_log(log, {"--out": str(tmp_path / "run.h5")}, force=False, resume=False)
+    assert check_log(log, {"--resume": str(tmp_path / "run.h5")}, force=False, resume=True) == log
+    handler = logs.keep_in_file(log, append=True)
+    try:
+        logging.getLogger("benchlab.test").warning("the second part")
+    finally:
+        logs.stop_file(log)
+    assert handler.stream.closed
+    assert log.read_text().startswith("the first part\n") and "the second part" in log.read_text()

@@ -248,9 +248,9 @@ def test_a_sweeps_stored_analysis_is_read_not_fitted_again(bench, tmp_path, monk
 
 
 def test_renderer_turns_no_strangers_html_into_markup():
-    page = markdown_html("# t\n\n<details><script>alert(1)</script>\n\n[a](javascript:alert(1)) [b](JaVa&#x53;cript:1) "
-                         "[c](http://x/y?a=1&b=2) [d](fig.png)\n\n![e](data:text/html,x)\n\n<details><summary>ok</summary>"
-                         "\n\n</details>", "t")
+    page = markdown_html("# t\n\n<details><script>alert(1)</script>\n\n[a](javascript:alert(1)) "
+                         "[b](JaVa&#x53;cript:1) [c](http://x/y?a=1&b=2) [d](fig.png)\n\n![e](data:text/html,x)\n\n"
+                         "<details><summary>ok</summary>\n\n</details>", "t")
     assert "<script" not in page and "<img" not in page
     assert re.findall(r'href="([^"]*)"', page) == ["http://x/y?a=1&amp;b=2", "fig.png"]
     assert "&lt;details&gt;&lt;script&gt;" in page and "<details><summary>ok</summary>" in page

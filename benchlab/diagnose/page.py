@@ -113,15 +113,18 @@ def _added(summary: dict) -> list[str]:
         return parts + ["Nothing: no extension lowers the held-out error significantly, so the model is kept as it is."]
     for f in summary["findings"]:
         units = f.get("units", {})  # the extended model file's (library.py writes one for each parameter it adds)
-        params = [(literal(k), f"{v:.6g}", text(units[k]) if units.get(k) else unit(k)) for k, v in f["params"].items()]
+        params = [(literal(k), f"{v:.6g}", text(units[k]) if units.get(k) else unit(k))
+                  for k, v in f["params"].items()]
         parts += [f"**{text(f['candidate'])}** – {text(f['summary'])}. Signal {literal(f['signal'])}, mechanism "
-                  f"{literal(f['mechanism'])}: {literal(f['extension'])}", table(("parameter", "value", "unit"), params)]
+                  f"{literal(f['mechanism'])}: {literal(f['extension'])}",
+                  table(("parameter", "value", "unit"), params)]
     return parts
 
 
 def _better(summary: dict, gains_png: Path) -> list[str]:
-    cells = [(literal(f["candidate"]), literal(f["signal"]), number(f["rmse_before_K"], 4), number(f["rmse_after_K"], 4),
-              number(f["gain_pct"], 1), f"{f['p_value']:.2g}") for f in summary["findings"]]
+    cells = [(literal(f["candidate"]), literal(f["signal"]), number(f["rmse_before_K"], 4),
+              number(f["rmse_after_K"], 4), number(f["gain_pct"], 1), f"{f['p_value']:.2g}")
+             for f in summary["findings"]]
     base, best = summary["baseline"], summary["best"]
     return [
         "## How much better",

@@ -43,7 +43,8 @@ def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams,
     as `benchlab cooldown` stored it, else fitted here by benchlab.identify.cooldown with the other parameters of `params`."""
     analysed = stored(sweep)
     if analysed is not None and analysed.results:
-        source = literal(analysed.params_source) if analysed.params_source else "a parameter file not named in the run"
+        source = (literal(analysed.params_source) if analysed.params_source
+                  else "a parameter file not named in the run")
         return analysed.results, (f"Cool-downs of the sweep as `benchlab cooldown` stored them in the run file's "
                                   f"`/analysis` (fitted with the other parameters of {source}):")
     results = analyse(sweep, params, progress=progress)

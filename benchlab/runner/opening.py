@@ -170,9 +170,10 @@ def address_problem(url: str) -> str | None:
             return f"a GPIB address from 0 to 30, got {primary!r}"
         return None
     scheme, sep, rest = url.partition("://")
+    if not sep and not _DEVICE_PATH.fullmatch(url):
+        return "a device path (/dev/ttyUSB0, COM3), a pyserial URL or a VISA resource"
     if not sep:
-        return None if _DEVICE_PATH.fullmatch(url) else "a device path (/dev/ttyUSB0, COM3), a pyserial URL or a VISA " \
-                                                         "resource"
+        return None
     if scheme not in SERIAL_SCHEMES:
         return f"a pyserial URL scheme ({', '.join(SERIAL_SCHEMES)}) or a VISA resource, got {scheme!r}"
     if scheme in _NETWORK_SCHEMES:
