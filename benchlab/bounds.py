@@ -13,6 +13,8 @@ from __future__ import annotations
 MAX_RUN_DURATION_S = 7 * 24 * 3600.0
 #: Fastest pace `benchlab run --realtime` asks of the simulated bench: beyond it a tick's own work (ms) sets the pace.
 MAX_REALTIME_FACTOR = 1000.0
+#: Slowest pace: a hundredth of real time (slow motion for watching a launch); 1e-9 paced a 60 s run over 1900 years.
+MIN_REALTIME_FACTOR = 0.01
 #: Most cycles one run may plan: 10 000 Table 1 cycles (40-130 s each) are 5-15 days, so a run this long is
 #: refused by MAX_RUN_DURATION_S first for all but the shortest cycles.
 MAX_CYCLES = 10_000
@@ -45,6 +47,9 @@ MAX_RESUMES = 10_000
 #: Most columns of a CSV `benchlab import` reads: a run file holds a few dozen channels; the bound is checked on
 #: the header line, before any row is parsed (a 100 000-column file used to take 104 s to be refused).
 MAX_CSV_COLUMNS = 1_000
+#: Most channels a mapping file may map (`benchlab import --mapping`): as many as a CSV may have columns; each is a
+#: source channel read, resampled and written on its own (10 000 entries took over a minute before a word was said).
+MAX_MAPPED_CHANNELS = MAX_CSV_COLUMNS
 #: Largest time stamp of a run file's grid, s: run time, or Unix time of an imported log (1e10 s is the year 2286).
 #: Beyond it float64 no longer resolves a 10 ms grid, and the uniform-grid check would pass anything.
 MAX_TIME_STAMP_S = 1e10
@@ -53,3 +58,23 @@ MAX_LOCAL_WORKERS = 256
 #: Most grid rows `benchlab import` puts an MDF file's channels on: a week's run on the bench's 10 ms grid (a
 #: finer --dt over a long recording is a typo that would allocate memory until the machine gives up).
 MAX_IMPORT_ROWS = int(MAX_RUN_DURATION_S / 0.01)
+#: The physical range of each BENCH.toml number that feeds a loop or a division: beyond it is a typo, not a bench
+#: (`gear_ratio = 1e-300` made the launch estimate of `run --dry-run` loop without end). A gear ratio between the
+#: input shaft and the load machine of 1:10 to 100:1; a load inertia from a light rotor to a heavy dynamometer; serial
+#: lines from 300 baud to 12 Mbaud (USB adapters); device periods and the run's ticks from 1 ms (no device or loop
+#: of the bench is faster) to what still makes a measurement; the grid at most 0.1 s and a tick at most 0.5 s (the
+#: interlocks are polled twice a second at least, a launch's slip every 0.1 s), the run file flushed at least once a
+#: second (a crash loses at most 1 s, docs/runfile.md).
+BENCH_NUMBER_RANGES = {
+    "drivetrain.gear_ratio": (0.1, 100.0),
+    "drivetrain.load_inertia_kgm2": (1e-3, 1e5),
+    "instrument.baudrate": (300, 12_000_000),
+    "node.baudrate": (300, 12_000_000),
+    "instrument.timeout_s": (1e-3, MAX_TIMEOUT_S),
+    "instrument.period_s": (1e-3, 3600.0),
+    "node.period_s": (1e-3, 60.0),
+    "acquisition.dt": (1e-3, 0.1),
+    "acquisition.tick_s": (1e-3, 0.5),
+    "acquisition.fast_tick_s": (1e-3, 0.1),
+    "acquisition.flush_every_s": (1e-3, 1.0),
+}

@@ -30,7 +30,7 @@ from benchlab import logs
 from benchlab.errors import InputError
 from benchlab.interrupts import (TERMINATED_EXIT, RedeliverInterrupts, Terminated, interrupts_answered,
                                  interrupts_held, terminate_as_interrupt)
-from benchlab.outputs import OutputError, is_no_space, is_run_file, no_space
+from benchlab.outputs import OutputError, check_log, is_no_space, no_space
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
 BROKEN_PIPE_EXIT = 141
@@ -108,29 +108,29 @@ def configure_logging(verbosity: int) -> None:
     logs.configure(verbosity)
 
 
-def _log_file(args: argparse.Namespace) -> Path | None:
-    """The file `--log` asks for: FILE, or the run file's name with .log; None without --log."""
+#: The parsed arguments that hold no path of the command's (what check_log compares the log with).
+_NOT_PATHS = ("log", "handler", "command", "verbose", "debug", "quiet", "force")
+
+
+def _argument_names(parser: argparse.ArgumentParser, command: str) -> dict[str, str]:
+    """The command's arguments as the user wrote them: dest -> option (`--out`) or positional name (`run`)."""
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[command]
+    return {a.dest: a.option_strings[-1] if a.option_strings else a.dest for a in commands._actions}
+
+
+def _log_file(args: argparse.Namespace, names: dict[str, str]) -> Path | None:
+    """The file `--log` asks for (FILE, or the run file's name with .log), checked by the output rule; None without
+    --log."""
     log = getattr(args, "log", None)
     if log is None:
         return None
-    if log:
-        return _checked_log_file(Path(log), args)
     run_file = getattr(args, "out", None) or getattr(args, "resume", None)
-    if not run_file:
+    if not log and not run_file:
         raise InputError("command line", "--log", "a FILE (this command writes no run file to put it beside)")
-    return Path(run_file).with_suffix(".log")
-
-
-def _checked_log_file(path: Path, args: argparse.Namespace) -> Path:
-    """`--log FILE` if appending to it loses nothing: never a run file nor a file the command line names otherwise
-    (`--log` takes an optional FILE, so `identify --log RUN.h5 …` would otherwise log into the run)."""
-    named = [value for key, given in vars(args).items() if key != "log"
-             for value in (given if isinstance(given, list) else [given]) if isinstance(value, str)]
-    existing = [name for name in named if os.path.exists(name)]
-    if is_run_file(path) or (path.exists() and any(os.path.samefile(path, name) for name in existing)):
-        raise InputError(path, "--log", "a log file of its own (this is a run file or another file of the command "
-                                        "line; --log takes the word after it as its FILE)")
-    return path
+    path = Path(log) if log else Path(run_file).with_suffix(".log")
+    arguments = {names.get(k, k): v for k, v in vars(args).items() if k not in _NOT_PATHS}
+    return check_log(path, arguments, force=bool(getattr(args, "force", False)),
+                     resume=bool(getattr(args, "resume", None)))
 
 
 def _stdout_reader_gone() -> bool:
@@ -180,10 +180,10 @@ def _dispatch(argv: Sequence[str] | None) -> int:
             parser = build_parser()
         args = parser.parse_args(argv)
         configure_logging(args.verbose)
-        log_file = _log_file(args)
+        log_file = _log_file(args, _argument_names(parser, args.command))
         if log_file is not None:
             try:
-                logs.keep_in_file(log_file)
+                logs.keep_in_file(log_file, append=bool(getattr(args, "resume", None)))
             except OSError as exc:
                 raise InputError(log_file, "--log", f"a file that can be written ({exc.strerror or exc})") from None
         try:

@@ -35,6 +35,18 @@ def positive_float(what: str, maximum: float) -> Callable[[str], float]:
     return _bounded_float(what, 0.0, maximum, f"in (0, {maximum:g}]")
 
 
+def ranged_float(what: str, minimum: float, maximum: float) -> Callable[[str], float]:
+    """A finite number in [minimum, maximum]; `what` says what it is, e.g. "a speed-up over real time"."""
+    return _bounded_float(what, minimum, maximum, f"in [{minimum:g}, {maximum:g}]")
+
+
+def attribute_name(text: str) -> str:
+    """The name of a run file's root attribute (`--group-by bench`): not empty, no white space around it."""
+    if not text.strip() or text != text.strip() or not text.isprintable():
+        raise argparse.ArgumentTypeError(f"a run attribute's name (e.g. bench, specimen), got {text!r}")
+    return text
+
+
 def signed_float(what: str, maximum: float) -> Callable[[str], float]:
     """A finite number in [-maximum, maximum]; `what` says what it is, e.g. "a run time in s"."""
     return _bounded_float(what, -maximum, maximum, f"within ±{maximum:g}")

@@ -8,8 +8,11 @@ a missing vendor library is explained once, in the line that names the setting (
 
 from __future__ import annotations
 
+import errno
+import io
 import logging
 import os
+import stat
 import sys
 
 #: The project's top-level packages: their loggers follow -v/-vv.
@@ -50,12 +53,28 @@ def configure(verbosity: int) -> None:
     _set_levels()
 
 
-def keep_in_file(path: "str | os.PathLike[str]") -> logging.Handler:
-    """Everything the project logs at DEBUG (libraries from INFO), with times, appended to `path` besides the
-    terminal's share; a file that cannot be opened is OSError."""
+def _open_log(path: str, append: bool) -> "io.TextIOWrapper":
+    """`path` opened for writing as a regular file only: never through a symbolic link, never blocking on a FIFO
+    (the output rule has refused those by name already; this holds if one appeared since). OSError otherwise."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | (os.O_APPEND if append else os.O_TRUNC)
+    fd = os.open(path, flags, 0o644)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file")
+        os.set_blocking(fd, True)
+        return open(fd, "a", encoding="utf-8", closefd=True)
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def keep_in_file(path: "str | os.PathLike[str]", append: bool = True) -> logging.Handler:
+    """Everything the project logs at DEBUG (libraries from INFO), with times, in `path` (appended to, else
+    replaced) besides the terminal's share; a file that cannot be opened, or is no regular file, is OSError.
+    Which file may be a log is the output rule's (benchlab.outputs `check_log`)."""
     key = os.fspath(path)
     if key not in _files:
-        handler = logging.FileHandler(key, encoding="utf-8")
+        handler = logging.StreamHandler(_open_log(key, append))
         handler.setFormatter(logging.Formatter("%(asctime)s " + _FORMAT))
         logging.getLogger().addHandler(handler)
         _files[key] = handler
@@ -69,6 +88,7 @@ def stop_file(path: "str | os.PathLike[str]") -> None:
     if handler is not None:
         logging.getLogger().removeHandler(handler)
         handler.close()
+        handler.stream.close()
     _set_levels()
 
 

@@ -118,6 +118,29 @@ def check_output(path: "str | os.PathLike[str]", option: str, force: bool,
     return check_target(path, option, force, inputs, run_file, hint)
 
 
+def _paths(value: object) -> list[str]:
+    """The paths an argument's value names (a text or path, or a list of them), as given."""
+    values = value if isinstance(value, (list, tuple)) else [value]
+    return [os.fspath(v) for v in values if isinstance(v, (str, os.PathLike)) and os.fspath(v)]
+
+
+def _names_one_file(a: Path, b: Path) -> bool:
+    """Whether two paths name one file: the same file by any name, or the same place where one does not exist."""
+    return _same_file(a, b) or a.resolve() == b.resolve()
+
+
+def check_log(path: "str | os.PathLike[str]", arguments: dict[str, object], force: bool, resume: bool) -> Path:
+    """The `--log` file if the rule lets it be written: a regular file (never a link, device or FIFO), never a run
+    file, never a file any other argument names (an input the command reads, its `--out`); an existing log only
+    with `--force` (replaced) or when resuming (appended to: the run's log goes on)."""
+    path = Path(path)
+    for option, value in arguments.items():
+        for other in _paths(value):
+            if _names_one_file(path, Path(other)):
+                raise InputError(path, "--log", f"a file of its own (it is also the command's {option}: {other})")
+    return check_output(path, "--log", force or resume)
+
+
 def check_output_dir(path: "str | os.PathLike[str]", option: str, force: bool) -> Path:
     """The output directory if it may be written (the command creates it where missing; its parent must exist): one
     that holds files already needs `force`, and a file or anything else by that name is refused."""

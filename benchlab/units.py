@@ -26,6 +26,48 @@ _ENGINEERS = (
     (re.compile(r"℃"), "degC"),
     (re.compile(r"^\s*-\s*$"), ""),
 )
+#: The grammar a unit's text must follow before pint sees it (pint evaluates what it reads: `10**10**10*K` never
+#: ends, 5000 parentheses exhaust its recursion): names of letters (a leading `°`, `%`), numbers of at most 6 digits
+#: (no exponent), `*`, `/`, `·`, spaces, small literal integer powers (`^2`, `**-1`, `²`, `⁻¹`) and parentheses at
+#: most MAX_UNIT_DEPTH deep, MAX_UNIT_CHARS characters in all.
+MAX_UNIT_CHARS = 64
+MAX_UNIT_DEPTH = 3
+_UNIT_TOKEN = re.compile(r"""\s*(?:
+    (?P<name>[^\W\d_][^\W_]{0,31}|[°%℃][^\W\d_]{0,31})
+  | (?P<number>\d{1,6}(?:\.\d{1,6})?)(?![\w.])
+  | (?P<power>(?:\^|\*\*)\s*-?[1-9](?!\d)|⁻?[¹²³⁴⁵⁶⁷⁸⁹](?![⁰¹²³⁴⁵⁶⁷⁸⁹]))
+  | (?P<op>[*/·⋅])
+  | (?P<open>\()
+  | (?P<close>\))
+)""", re.VERBOSE)
+
+
+def unit_problem(unit: str) -> str | None:
+    """Why `unit` is no unit text benchlab reads (its grammar above), or None where it follows the grammar.
+    The gate before pint: a bomb or markup is refused here, never evaluated."""
+    text = unit.strip()
+    if not text or text == "-":
+        return None
+    if len(text) > MAX_UNIT_CHARS:
+        return f"at most {MAX_UNIT_CHARS} characters"
+    depth, position, operand = 0, 0, False
+    while position < len(text):
+        token = _UNIT_TOKEN.match(text, position)
+        if token is None or token.end() == position:
+            return f"names, numbers, *, /, ^ and parentheses only (at {text[position:position + 10].strip()!r})"
+        kind = token.lastgroup
+        if kind in ("power", "op", "close") and not operand:
+            return "*, /, a power or a closing parenthesis after a name, a number or parentheses"
+        depth += {"open": 1, "close": -1}.get(kind or "", 0)
+        if not 0 <= depth <= MAX_UNIT_DEPTH:
+            return f"balanced parentheses at most {MAX_UNIT_DEPTH} deep"
+        operand = kind in ("name", "number", "close", "power")
+        position = token.end()
+    if not operand:
+        return "a name, a number or parentheses at the end"
+    return "balanced parentheses" if depth else None
+
+
 #: What a dimension is called in a message, by a unit of it.
 _KINDS = {"degC": "temperature", "N*m": "torque", "rpm": "rotational speed", "W": "power", "s": "time",
           "1": "number"}
@@ -61,13 +103,19 @@ def registry() -> Any:
 
 @lru_cache(maxsize=256)
 def _parsed(unit: str) -> Any:
-    """`unit` as a pint Unit (empty: dimensionless), None where pint does not read it."""
+    """`unit` as a pint Unit (empty: dimensionless), None where it breaks the grammar (unit_problem), pint does not
+    read it (an arithmetic or recursion error included) or its scale is not a finite positive number."""
     import pint
 
-    try:
-        return registry().parse_units(unit.strip()) if unit.strip() else registry().dimensionless
-    except (pint.errors.PintError, AttributeError, TypeError, ValueError, SyntaxError):
+    if unit_problem(unit) is not None:
         return None
+    try:
+        parsed = registry().parse_units(unit.strip()) if unit.strip() else registry().dimensionless
+        scale = float(registry().Quantity(1.0, parsed).to_base_units().magnitude)
+    except (pint.errors.PintError, AttributeError, TypeError, ValueError, SyntaxError, ArithmeticError,
+            RecursionError):
+        return None
+    return parsed if np.isfinite(scale) and scale > 0 else None
 
 
 def _kind(parsed: Any) -> str:
@@ -82,7 +130,8 @@ def _check(unit: str, target: str) -> tuple[Any, Any]:
     if wanted is None:
         raise ValueError(f"not a unit: {target!r}")
     if source is None:
-        raise UnitMismatch(f"{target} or a unit convertible to it, got {unit!r} (not a unit pint knows)")
+        why = unit_problem(unit) or "not a unit pint knows"
+        raise UnitMismatch(f"{target} or a unit convertible to it, got {unit!r} ({why})")
     if source.dimensionality != wanted.dimensionality:
         raise UnitMismatch(f"{target} ({_kind(wanted)}) or a unit convertible to it, got {unit!r} "
                            f"({_kind(source)})")
@@ -123,14 +172,17 @@ def to_stored(source: object, field: str, name: str, values: np.ndarray, unit: s
     """A channel's values and the unit a run file stores them in: a contract channel (`T_air`, …) converted to the
     contract's unit, any other temperature to degC (every temperature a model reads is in degC), any other channel
     as given, its unit in the contract's spelling where it is one of the contract's units. InputError on `field` of
-    `source` for a unit that is not its contract unit's dimension."""
+    `source` for a unit that is not its contract unit's dimension, or no unit at all (unit_problem, pint)."""
     from benchlab.runfile.schema import ALIGNED_UNITS
 
     target = ALIGNED_UNITS.get(name)
     if target is None:
         parsed = _parsed(unit)
-        if parsed is None or parsed.dimensionality != _parsed("degC").dimensionality:
-            return np.asarray(values, dtype=np.float64), _canonical(unit) if parsed is not None else unit
+        if parsed is None:
+            problem = unit_problem(unit)
+            raise InputError(str(source), field, f"{name} in a unit ({problem or 'one pint knows'}), got {unit!r}")
+        if parsed.dimensionality != _parsed("degC").dimensionality:
+            return np.asarray(values, dtype=np.float64), _canonical(unit)
         target = "degC"
     try:
         return convert(values, unit, target), target

@@ -117,3 +117,36 @@ class Chromium:
         os.close(self._to_browser)
         os.close(self._from_browser)
         shutil.rmtree(self.profile, ignore_errors=True)
+
+
+#: What a hostile sender puts in a run attribute, a channel name or a file name: a blank line and raw HTML with
+#: scripts, a javascript: link, an image whose error handler runs. Each sets `window.pwned` and the page's title.
+HOSTILE = ("x\n\n<details><script>window.pwned=1;document.title='pwned'</script>\n\n"
+           "<img src=nowhere onerror=\"window.pwned=2;document.title='pwned'\"> "
+           "[click](javascript:window.pwned=3) ![f](javascript:window.pwned=4) `a`b|c **d** _e_ *f* &amp; \\<")
+#: What a page holds once loaded: whether a script ran, the script elements and event handlers in it, every
+#: address it links to or loads.
+PAGE_STATE = """(() => ({pwned: window.pwned === undefined ? null : window.pwned, title: document.title,
+  scripts: document.querySelectorAll('script').length,
+  handlers: [...document.querySelectorAll('*')].flatMap(e => [...e.attributes].map(a => a.name))
+            .filter(n => n.startsWith('on')).length,
+  addresses: [...document.querySelectorAll('[href],[src]')].map(e => e.href || e.src),
+  text: document.body.innerText}))()"""
+
+
+def page_state(browser: Chromium, page: Path) -> dict[str, Any]:
+    """Open a page from disk, wait for it to load and say what it holds (PAGE_STATE)."""
+    browser.navigate(page.resolve().as_uri())
+    deadline = time.monotonic() + browser.timeout_s
+    while browser.evaluate("document.readyState") != "complete" and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return browser.evaluate(PAGE_STATE)
+
+
+def assert_inert(state: dict[str, Any], title: str) -> None:
+    """A page that ran no script of a stranger: no script element, no handler, its own title, only file: and
+    http(s) addresses, and the hostile text shown as text."""
+    assert state["pwned"] is None and state["title"] == " ".join(title.split())  # as a browser shows a title
+    assert state["scripts"] == 0 and state["handlers"] == 0
+    assert all(a.split(":", 1)[0] in ("file", "http", "https") for a in state["addresses"]), state["addresses"]
+    assert "<script>" in state["text"] and "javascript:window.pwned=3" in state["text"], state["text"][:3000]

@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from benchlab.bounds import MAX_CYCLES, MAX_RUN_DURATION_S, MAX_SCAN_CHANNELS, MAX_TIMEOUT_S
+from benchlab.bounds import BENCH_NUMBER_RANGES, MAX_CYCLES, MAX_RUN_DURATION_S, MAX_SCAN_CHANNELS, MAX_TIMEOUT_S
 from benchlab.cli import main
 from benchlab.runfile import load_run
 from benchlab.runner.config import load_bench_config
@@ -85,6 +85,10 @@ def test_probe_reading_count_is_bounded(capsys):
     (["wear", "RUN", "--params", "p.json", "--predict", "-4"], "--predict"),
     (["cooldown", "RUN", "--params", "p.json", "--sample", "nan"], "--sample"),
     (["cooldown", "RUN", "--params", "p.json", "--sample", "1e9"], "--sample"),
+    (["run", "table1", "--bench", "sim", "--realtime", "1e-9"], "--realtime"),  # a 60 s run over 1900 years
+    (["run", "table1", "--bench", "sim", "--realtime", "1e-300"], "--realtime"),  # was an OverflowError
+    (["diagnose", "RUN", "--group-by", ""], "--group-by"),
+    (["batch", "identify", "RUN", "--out", "d", "--group-by", ""], "--group-by"),
 ])
 def test_counts_and_seeds_are_checked(argv, field, tmp_path, capsys):
     argv = [str(tmp_path / "run.h5") if a == "RUN" else a for a in argv]
@@ -349,3 +353,54 @@ def test_run_params_file_is_read_and_checked_before_the_protocol_runs(dry_run, t
     err = _refused(["run", "cooldown-sweep", "--bench", "sim", "--out", str(out), "--params", str(tmp_path / "no.json")]
                    + (["--dry-run"] if dry_run else []), "no.json", capsys)
     assert "not found" in err and not out.exists() and not list(tmp_path.glob("*.lock")) and not list(tmp_path.glob("*.blf"))
+
+
+def _bench_with(tmp_path: Path, field: str, value: str) -> Path:
+    """The example BENCH.toml with one `table.key` set to `value` (the key's line in its table replaced)."""
+    table, key = field.rsplit(".", 1)
+    lines, inside = EXAMPLE_BENCH.read_text().splitlines(), False
+    for i, line in enumerate(lines):
+        if line.startswith("["):
+            inside = line.split("#")[0].strip() == f"[{table}]"
+        elif inside and line.split("=")[0].strip() == key:
+            lines[i] = f"{key} = {value}"
+            break
+    else:
+        raise AssertionError(f"{field} not in {EXAMPLE_BENCH}")
+    bench = tmp_path / "bench.toml"
+    bench.write_text("\n".join(lines) + "\n")
+    return bench
+
+
+@pytest.mark.parametrize("field", sorted(BENCH_NUMBER_RANGES))
+@pytest.mark.parametrize("side", ["below", "above"])
+def test_bench_file_number_beyond_its_physical_range_is_refused(field, side, tmp_path, capsys):
+    low, high = BENCH_NUMBER_RANGES[field]
+    value = low / 1000 if side == "below" else high * 1000
+    if "baudrate" in field:
+        value = int(value) if side == "above" else 1
+    bench = _bench_with(tmp_path, field, repr(value))
+    err = _refused(["run", "table1", "--bench", str(bench), "--dry-run"], field, capsys)
+    assert str(bench) in err and f"{low:g} to {high:g}" in err
+
+
+def test_a_tiny_gear_ratio_is_refused_not_a_dry_run_that_never_ends(tmp_path, capsys):
+    bench = _bench_with(tmp_path, "drivetrain.gear_ratio", "1e-300")
+    _refused(["run", "table1", "--bench", str(bench), "--dry-run"], "drivetrain.gear_ratio", capsys)
+
+
+@pytest.mark.parametrize("field, url, words", [
+    ("instrument.url", '"TCPIP0::10.0.0.5\\u0000::inst0::INSTR"', "printable"),
+    ("instrument.url", '"TCPIP0::::INSTR"', "VISA resource"),
+    ("instrument.url", '"TCPIP0::10.0.0.5::99999999::SOCKET"', "port from 1 to 65535"),
+    ("instrument.url", '"GPIB0::99::INSTR"', "GPIB address"),
+    ("node.url", '"socket://127.0.0.1:99999999"', "port from 1 to 65535"),
+    ("node.url", '"garbage"', "device path"),
+    ("node.url", '"ftp://host/x"', "pyserial URL scheme"),
+])
+def test_dry_run_checks_device_addresses_as_probe_does(field, url, words, tmp_path, capsys):
+    """`run --dry-run` opens no device, but an address no device can have is refused as probe refuses it."""
+    bench = _bench_with(tmp_path, field, url)
+    dry = _refused(["run", "table1", "--bench", str(bench), "--dry-run"], field, capsys)
+    probe = _refused(["probe", "--bench", str(bench)], field, capsys)
+    assert words in dry and dry.split(": ", 1)[1] == probe.split(": ", 1)[1]

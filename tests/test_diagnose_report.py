@@ -12,6 +12,8 @@ import re
 import numpy as np
 import pytest
 
+import headless_chromium
+
 from benchlab.cli import main
 from benchlab.diagnose.engine import diagnose_runs
 from benchlab.diagnose.evidence import bin_labels, residual_evidence, shift_offsets, shift_test, column_spectrum
@@ -177,3 +179,20 @@ def test_bad_input_exits_2_with_one_line(case, tmp_path, capsys):
     assert main(args) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and err.startswith("benchlab diagnose:")
+
+
+@pytest.mark.skipif(headless_chromium.available() is not None, reason=str(headless_chromium.available()))
+def test_hostile_run_attributes_run_no_script_in_the_page(churn, tmp_path):
+    from benchlab.diagnose.page import write_page
+
+    run, diagnosis, summary = churn
+    hostile = run.copy()
+    hostile.attrs = {**run.attrs, "source": headless_chromium.HOSTILE, "bench": headless_chromium.HOSTILE,
+                     "protocol": headless_chromium.HOSTILE}
+    page = write_page(diagnosis, summary, [hostile], tmp_path).with_suffix(".html")
+    browser = headless_chromium.Chromium()
+    try:
+        state = headless_chromium.page_state(browser, page)
+    finally:
+        browser.close()
+    headless_chromium.assert_inert(state, "benchlab diagnose – " + headless_chromium.HOSTILE.rsplit("/", 1)[-1])

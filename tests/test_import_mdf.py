@@ -40,10 +40,10 @@ scale = 0.001
 INVALID = 200
 
 
-def _recorder_mdf(path, run):
+def _recorder_mdf(path, run, odd_unit="V"):
     """`run` as a bench recorder would log it (asammdf): a 100 Hz CAN group whose stamps are 4 ms off the grid, a
     20 Hz node group, a 2 Hz scanner group with invalidation bits, a master per group, vendor names and units;
-    `T_Gehaeuse` in two groups (the mapping says which)."""
+    `T_Gehaeuse` in two groups (the mapping says which); `U_Fremd` in `odd_unit`."""
     from asammdf import MDF, Signal
 
     t = run["time"].to_numpy()
@@ -57,7 +57,8 @@ def _recorder_mdf(path, run):
                 Signal(col["clutch_torque"][can], t[can] + 0.004, unit="Nm", name="M_Kupplung"),
                 Signal(col["clutch_state"][can].astype(np.uint8), t[can] + 0.004, unit="-", name="KU_Zustand"),
                 Signal(col["load_torque"][can], t[can] + 0.004, unit="N·m", name="M_Last"),
-                Signal(col["friction_power"][can], t[can] + 0.004, unit="", name="P_Reib_raw")],
+                Signal(col["friction_power"][can], t[can] + 0.004, unit="", name="P_Reib_raw"),
+                Signal(np.ones(len(t[can])), t[can] + 0.004, unit=odd_unit, name="U_Fremd")],
                acq_name="CAN1 100 Hz", comment="drive CAN")
     mdf.append([Signal(col["T_flywheel"][node], t[node], unit="°C", name="T_Schwungrad"),
                 Signal(col["T_housing"][node] + 273.15, t[node], unit="K", name="T_Gehaeuse")],
@@ -140,6 +141,11 @@ def test_a_run_exported_to_mf4_and_imported_back_identifies_to_the_same_paramete
     ('[channels.T_air]\nsource = "T_Luft"\nrule = "smooth"', "channels.T_air.rule"),
     ('[channels.T_air]\nsource = "T_Luft"\nscale = "2"', "channels.T_air.scale"),
     ('[channels.T_air]\nsorce = "T_Luft"', "channels.T_air.sorce"),
+    # run-file channel names follow the model files' name rule (they become HDF5 paths and expression names)
+    ('[channels]\n"a/b/c" = "T_Luft"', "'a/b/c'"), ('[channels]\n".." = "T_Luft"', "'..'"),
+    ('[channels]\n"a\\u0000b" = "T_Luft"', "channels"), ('[channels]\n"<script>" = "T_Luft"', "'<script>'"),
+    ('[channels]\n"" = "T_Luft"', "''"), ('[channels]\n"__class__" = "T_Luft"', "__class__"),
+    ("[channels]\n" + "".join(f'e{i} = "T_Luft"\n' for i in range(10_000)), "at most 1000 channels, got 10000"),
 ])
 def test_a_bad_mapping_is_one_line_naming_the_field(mapping, field, tmp_path, recorder_part, refused):
     src, path = tmp_path / "m.mf4", tmp_path / "map.toml"
@@ -173,3 +179,19 @@ def test_the_grid_rules_hold_interpolate_and_never_bridge_a_gap():
     assert all(np.isnan(at[g]) for g in (-1.0, 1.5, 2.5, 3.5, 6.0, 9.5, 11.5))   # before, beside NaN, a gap, after
     held = dict(zip(grid, hold))
     assert held[0.5] == 0.0 and np.isnan(held[2.5]) and held[5.5] == 3.0 and np.isnan(held[6.5]) and held[14.0] == 11
+
+
+@pytest.mark.parametrize("unit", ["10**10**10*K", "K/0", "(" * 5000 + "K" + ")" * 5000, "delta_degC", "1e309*K",
+                                  "<script>", "no_such_unit"], ids=range(7))
+@pytest.mark.parametrize("where", ["mapping, contract channel", "mapping, extra channel", "MF4 channel"])
+def test_a_unit_that_is_no_unit_is_one_line_exit_2(unit, where, tmp_path, recorder_part, refused):
+    src, path = tmp_path / "m.mf4", tmp_path / "map.toml"
+    _recorder_mdf(src, recorder_part.iloc[:2000], odd_unit=unit if where == "MF4 channel" else "V")
+    unit_toml = json.dumps(unit)
+    extra = {"mapping, contract channel": f'[channels.T_air]\nsource = "T_Luft"\nunit = {unit_toml}',
+             "mapping, extra channel": f'[channels.fremd]\nsource = "U_Fremd"\nunit = {unit_toml}',
+             "MF4 channel": '[channels.fremd]\nsource = "U_Fremd"'}[where]
+    path.write_text(MAPPING.replace('T_air = "T_Luft"\n', "") + "\n" + extra + "\n")
+    refused(["import", str(src), "--mapping", str(path), "--dt", "0.1", "--out", str(tmp_path / "r.h5")],
+            str(src), "T_air ← T_Luft" if where.endswith("contract channel") else "fremd ← U_Fremd")
+    assert not (tmp_path / "r.h5").exists()

@@ -4,6 +4,7 @@ replaces only a regular file, and every output is renamed into place when whole.
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 from pathlib import Path
 
@@ -199,3 +200,52 @@ def test_simulate_output_is_a_run_file_and_the_input_keeps_its_bytes(foreign_run
     with h5py.File(tmp_path / "s.h5") as f:
         assert "simulated" in f and f.attrs["schema"] == "benchlab-run/1"
     assert _digest(foreign_run) == before
+
+
+@pytest.mark.parametrize("kind", ["the input", "another run file", "the --to file", "a FIFO", "a symbolic link",
+                                  "a character device", "an existing log"])
+def test_log_follows_the_output_rule(kind, foreign_run, run_file, tmp_path, refused):
+    """`--log FILE` used to append to anything: the command's own input, a run file, a link's target, a device, and
+    blocked forever on a FIFO; now it is an output like any other."""
+    out, log = tmp_path / "out.csv", tmp_path / "x.log"
+    outside = tmp_path / "precious.txt"
+    outside.write_text("keep me")
+    other = tmp_path / "other.h5"
+    other.write_bytes(run_file.read_bytes())
+    if kind == "a FIFO":
+        os.mkfifo(log)
+    elif kind == "a symbolic link":
+        log.symlink_to(outside)
+    elif kind == "an existing log":
+        log.write_text("an earlier log\n")
+    log = {"the input": foreign_run, "another run file": other, "the --to file": out,
+           "a character device": Path(os.devnull)}.get(kind, log)
+    digests = {p: _digest(p) for p in (foreign_run, other, outside)}
+    force = [] if kind == "an existing log" else ["--force"]
+    words = {"the input": "command's run", "another run file": "run file", "the --to file": "--to", "a FIFO": "a FIFO",
+             "a symbolic link": "a symbolic link", "a character device": "a character device",
+             "an existing log": "--force"}[kind]
+    line = refused(["export", str(foreign_run), "--to", str(out), "--log", str(log), *force], "--log", str(log))
+    assert words in line, line
+    assert {p: _digest(p) for p in digests} == digests and not out.exists()
+    if kind == "an existing log":  # with --force it is replaced, as any output
+        assert main(["export", str(foreign_run), "--to", str(out), "--log", str(log), "--force"]) == 0
+        assert "an earlier log" not in log.read_text() and "benchlab.export" in log.read_text()
+
+
+def test_a_resumed_runs_log_goes_on_and_a_new_one_needs_force(tmp_path):
+    from benchlab import logs
+    from benchlab.outputs import check_log
+
+    log = tmp_path / "run.log"
+    log.write_text("the first part\n")
+    with pytest.raises(InputError, match="--force"):
+        check_log(log, {"--out": str(tmp_path / "run.h5")}, force=False, resume=False)
+    assert check_log(log, {"--resume": str(tmp_path / "run.h5")}, force=False, resume=True) == log
+    handler = logs.keep_in_file(log, append=True)
+    try:
+        logging.getLogger("benchlab.test").warning("the second part")
+    finally:
+        logs.stop_file(log)
+    assert handler.stream.closed
+    assert log.read_text().startswith("the first part\n") and "the second part" in log.read_text()

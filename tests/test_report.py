@@ -11,12 +11,14 @@ import numpy as np
 import pytest
 
 import benchlab
+import headless_chromium
 from benchlab.cli import main
 from benchlab.model.clutch import PREDICTED_CHANNELS
 from benchlab.identify.cooldown import CooldownResult, store
 from benchlab.identify.metrics import channel_nrmse_pct, channel_rmse_k, nrmse_pct, rmse_k
 from benchlab.model.params import paper_params, save_params
 from benchlab.report import build, write_report
+from benchlab.report.html import markdown_html
 from benchlab.report.resistance import resistance
 from benchlab.runfile import write_run
 from benchlab.runner.session import RunRequest, execute
@@ -243,3 +245,53 @@ def test_a_sweeps_stored_analysis_is_read_not_fitted_again(bench, tmp_path, monk
     results, source = build.sweep_cooldowns(sweep, paper_params("nonlinear"))
     assert results[0] == rows[0] and results[1].R == 0.2345 and np.isnan(results[1].R_true)
     assert "`/analysis`" in source and "identified.json" in source
+
+
+def test_renderer_turns_no_strangers_html_into_markup():
+    page = markdown_html("# t\n\n<details><script>alert(1)</script>\n\n[a](javascript:alert(1)) "
+                         "[b](JaVa&#x53;cript:1) [c](http://x/y?a=1&b=2) [d](fig.png)\n\n![e](data:text/html,x)\n\n"
+                         "<details><summary>ok</summary>\n\n</details>", "t")
+    assert "<script" not in page and "<img" not in page
+    assert re.findall(r'href="([^"]*)"', page) == ["http://x/y?a=1&amp;b=2", "fig.png"]
+    assert "&lt;details&gt;&lt;script&gt;" in page and "<details><summary>ok</summary>" in page
+
+
+@pytest.mark.skipif(headless_chromium.available() is not None, reason=str(headless_chromium.available()))
+def test_hostile_run_attributes_run_no_script_in_the_page(tmp_path, short_run):
+    run = short_run.copy()
+    run.attrs = {**short_run.attrs, "source": headless_chromium.HOSTILE, "bench": headless_chromium.HOSTILE,
+                 "protocol": headless_chromium.HOSTILE}
+    page = write_report(run, paper_params("linear"), tmp_path).with_suffix(".html")
+    browser = headless_chromium.Chromium()
+    try:
+        state = headless_chromium.page_state(browser, page)
+    finally:
+        browser.close()
+    headless_chromium.assert_inert(state, "benchlab report – " + run.attrs["source"].rsplit("/", 1)[-1])
+
+
+@pytest.mark.skipif(headless_chromium.available() is not None, reason=str(headless_chromium.available()))
+def test_hostile_run_attributes_and_findings_run_no_script_in_the_jobs_index(tmp_path, short_run):
+    from benchlab.report.index import write_index
+
+    hostile = headless_chromium.HOSTILE
+    path = tmp_path / "run.h5"
+    write_run(path, short_run.iloc[:2000], short_run.attrs["dt"], protocol=hostile,
+              attrs={"bench": hostile, "can_log": hostile})
+    finding = {"candidate": hostile, "signal": hostile, "mechanism": hostile, "gain_pct": 5.0, "p_value": 0.01,
+               "alternatives": [{"candidate": hostile, "gain_pct": 4.0, "tell_apart_by": hostile}]}
+    scores = {"rmse_K": 0.1, "nrmse_pct": 1.0}
+    page = write_index(tmp_path, {hostile: (path, short_run.iloc[:2000])},
+                       {"nonlinear": {"fit": scores, "validation": scores}}, [], paper_params("nonlinear"), {},
+                       {"findings": [finding], "baseline": {"model": hostile, "rmse_K": 0.2},
+                        "best": {"model": hostile, "rmse_K": 0.1}},
+                       {"life": {"engagements": {}, "horizon_engagements": 1000, "p_fail_within_horizon": 0.0},
+                        "health": {"health": 1.0, "worn": False}, "engagements": 10, "friction_energy_J": 1e6,
+                        "wear": {}},
+                       {"verdict": hostile, "peaks": {hostile: {}}, "extrapolation": {}})
+    browser = headless_chromium.Chromium()
+    try:
+        state = headless_chromium.page_state(browser, page)
+    finally:
+        browser.close()
+    headless_chromium.assert_inert(state, "benchlab: the whole job")

@@ -87,3 +87,39 @@ def test_channels_beyond_the_contract_keep_their_unit_but_temperatures_are_degc(
 
 def test_figures_show_the_units_people_write_files_keep_the_stored_spelling():
     assert [units.display(u) for u in ("degC", "N*m", "rpm", "A")] == ["°C", "N·m", "rpm", "A"]
+
+
+#: Unit texts a hostile or careless sender writes: a number tower pint would evaluate forever, a division by zero,
+#: nesting past pint's recursion, an offset difference, a scale that is no finite positive number, markup, nonsense.
+NOT_UNITS = ["10**10**10*K", "K/0", "(" * 5000 + "K" + ")" * 5000, "delta_degC", "1e309*K", "nan*K", "0*K",
+             "<script>alert(1)</script>", "no_such_unit", "K^99", "((((K))))", "K/", "*K"]
+
+
+@pytest.mark.parametrize("unit", NOT_UNITS, ids=range(len(NOT_UNITS)))
+def test_a_text_that_is_no_unit_is_refused_before_or_by_pint(unit):
+    with pytest.raises(units.UnitMismatch, match="degC or a unit convertible to it"):
+        units.convert(np.ones(2), unit, "degC")
+    assert not units.same(unit, "degC")
+
+
+@pytest.mark.parametrize("unit", ["°C", "K", "N·m", "min⁻¹", "kg·m²", "J/(kg*K)", "W/(m^2*K)", "(K/W)**2", "%", "1"])
+def test_the_grammar_lets_engineers_units_through(unit):
+    assert units.unit_problem(unit) is None
+
+
+@pytest.mark.parametrize("unit", NOT_UNITS, ids=range(len(NOT_UNITS)))
+@pytest.mark.parametrize("channel", ["T_air", "extra"])
+@pytest.mark.parametrize("given", ["title", "--unit"])
+def test_a_csv_unit_that_is_no_unit_is_one_line_exit_2(unit, channel, given, tmp_path, short_run, refused):
+    csv = tmp_path / "d.csv"
+    part = short_run.iloc[:20].drop(columns="time").assign(extra=1.0)
+    if given == "title":
+        part = part.rename(columns={channel: f"{channel} [{unit}]"})
+    part.to_csv(csv, index=False)
+    options = ["--unit", f"{channel}={unit}"] if given == "--unit" else []
+    if given == "--unit" and channel == "T_air":
+        options += ["--unit", "extra=A"]
+    elif given == "title" and channel == "T_air":
+        options = ["--unit", "extra=A"]
+    refused(["import", str(csv), "--out", str(tmp_path / "r.h5"), "--dt", "0.01", *options], str(csv), channel)
+    assert not (tmp_path / "r.h5").exists()

@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the baseline (diagnose; default linear)")
     parser.add_argument("--params", metavar="P.json",
                         help="wear only: one parameter file for every run instead of a fit per task")
-    parser.add_argument("--group-by", metavar="ATTR",
+    parser.add_argument("--group-by", metavar="ATTR", type=cliargs.attribute_name,
                         help="runs sharing this root attribute (e.g. a clutch's id) are one task, fitted together")
     parser.add_argument("--scheduler", metavar="ADDRESS",
                         help="an existing dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")

@@ -36,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--save-model", metavar="OUT.toml", type=cliargs.output_file,
                         help="write the best model found as a model file, its fitted values as starting values "
                              "(ready for identify --model OUT.toml)")
-    parser.add_argument("--group-by", metavar="ATTR",
+    parser.add_argument("--group-by", metavar="ATTR", type=cliargs.attribute_name,
                         help="a run attribute (bench, batch, specimen, ...) whose values group the runs when asking "
                              "whether the runs disagree on a parameter (default: every run on its own)")
     parser.add_argument("--force", action="store_true", help="replace an existing --save-model file and the files "

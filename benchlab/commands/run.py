@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from benchlab import cliargs
-from benchlab.bounds import MAX_CYCLES, MAX_REALTIME_FACTOR, MAX_RUN_DURATION_S
+from benchlab.bounds import MAX_CYCLES, MAX_REALTIME_FACTOR, MAX_RUN_DURATION_S, MIN_REALTIME_FACTOR
 from benchlab.commands import watch
 from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def realtime_factor(text: str) -> float:
     """--realtime's FACTOR: a speed-up over real time, with a hint when a protocol name landed here instead."""
     try:
-        return cliargs.positive_float("a speed-up over real time", MAX_REALTIME_FACTOR)(text)
+        return cliargs.ranged_float("a speed-up over real time", MIN_REALTIME_FACTOR, MAX_REALTIME_FACTOR)(text)
     except argparse.ArgumentTypeError as exc:
         raise argparse.ArgumentTypeError(f"{exc} (give PROTOCOL before --realtime)") from None
 

@@ -18,6 +18,7 @@ from benchlab.diagnose.regimes import MIN_REGIME_SAMPLES, worst_regimes
 from benchlab.outputs import write_text
 from benchlab.provenance import bench_text
 from benchlab.report.html import write_html
+from benchlab.report.markdown import literal, text
 from benchlab.report.page import channel_cell, number, table, unit
 from benchlab.report.plotting import run_name
 
@@ -33,15 +34,15 @@ def _what_is_wrong(summary: dict, regimes_png: Path) -> list[str]:
     per_channel = [(channel_cell(c), str(reg["baseline"]["all"]["all"]["channels"][c]["samples"]),
                     _rmse(reg["baseline"]["all"]["all"], c), _rmse(reg["best"]["all"]["all"], c)) for c in channels]
     overall = reg["baseline"]["all"]["all"]["channels"]
-    worst = [(g, f"`{label}`", channel_cell(c), number(rmse, 4), number(rmse / overall[c]["rmse_K"], 2),
+    worst = [(text(g), literal(label), channel_cell(c), number(rmse, 4), number(rmse / overall[c]["rmse_K"], 2),
               _rmse(reg["best"][g][label], c), str(n)) for g, label, c, rmse, n in worst_regimes(reg["baseline"], 6)]
-    full = [(g, f"`{label}`", channel_cell(c), _rmse(entry, c), _rmse(reg["best"][g][label], c),
+    full = [(text(g), literal(label), channel_cell(c), _rmse(entry, c), _rmse(reg["best"][g][label], c),
              str(entry["channels"][c]["samples"]))
             for g, labels in reg["baseline"].items() if g != "all" for label, entry in labels.items() for c in channels]
     return [
         "## What is wrong",
-        f"The baseline model (`{base['model']}`) misses the measured temperatures by a held-out RMSE of "
-        f"**{base['rmse_K']:.4f} K** ({base['nrmse_pct']:.2f} % NRMSE); the final model (`{best['model']}`) by "
+        f"The baseline model ({literal(base['model'])}) misses the measured temperatures by a held-out RMSE of "
+        f"**{base['rmse_K']:.4f} K** ({base['nrmse_pct']:.2f} % NRMSE); the final model ({literal(best['model'])}) by "
         f"**{best['rmse_K']:.4f} K** ({best['nrmse_pct']:.2f} %). Held-out: {summary['method']['validation']}.",
         table(("channel", "samples", "baseline RMSE (K)", "final RMSE (K)"), per_channel),
         f"Worst regimes of the baseline (held-out residuals, regimes of at least {MIN_REGIME_SAMPLES} samples):",
@@ -62,7 +63,7 @@ def _where(result: Diagnosis, names: Sequence[str], window_png: Path) -> list[st
     dt = result.baseline_held.datasets[run].dt
     return [
         "## Where",
-        f"The {WINDOW_S / 60:.0f} minutes with the largest baseline held-out error: run `{names[run]}`, "
+        f"The {WINDOW_S / 60:.0f} minutes with the largest baseline held-out error: run {literal(names[run])}, "
         f"minutes {start * dt / 60:.1f}–{stop * dt / 60:.1f}. Dots: measured; dashed: baseline, solid: final "
         "model, each sample predicted by the fold fit that did not see it.",
         f"![Worst window]({window_png.name})",
@@ -72,7 +73,8 @@ def _where(result: Diagnosis, names: Sequence[str], window_png: Path) -> list[st
 def _why(summary: dict, evidence_png: Path, finding_pngs: Sequence[tuple[dict, str, Path]]) -> list[str]:
     rows = summary["evidence"]
     significant = sum(r["p_value"] < ALPHA for r in rows)
-    cells = [(str(i), f"`{r['signal']}`", r["kind"], channel_cell(r["channel"]), r["form"], number(r["explained_pct"], 1),
+    cells = [(str(i), literal(r["signal"]), text(r["kind"]), channel_cell(r["channel"]), text(r["form"]),
+              number(r["explained_pct"], 1),
               number(r["shifted_pct"], 1), f"{r['p_value']:.3f}", str(r["samples"]))
              for i, r in enumerate(rows[:EVIDENCE_ROWS], 1)]
     parts = [
@@ -86,10 +88,10 @@ def _why(summary: dict, evidence_png: Path, finding_pngs: Sequence[tuple[dict, s
         f"![Evidence]({evidence_png.name})",
     ]
     for f, signal, png in finding_pngs:
-        parts += [f"### {f['summary']}",
-                  f"Baseline residual against `{signal}` before (without the extension) and after (with it): "
+        parts += [f"### {text(f['summary'])}",
+                  f"Baseline residual against {literal(signal)} before (without the extension) and after (with it): "
                   "binned means with 95 % intervals from block-robust standard errors (5-minute blocks).",
-                  f"![{f['candidate']}]({png.name})"]
+                  f"![{text(f['candidate'])}]({png.name})"]
     return parts
 
 
@@ -100,7 +102,8 @@ def _added(summary: dict) -> list[str]:
         parts += ["The baseline's fit leaves these parameters on a bound of the model file; each was held there while "
                   "the candidates were judged, so an extension is credited only with what it adds:",
                   table(("parameter", "value", "bound", "limit", "what to do"),
-                        [(f"`{b['parameter']}`", f"{b['value']:.6g}", b["bound"], f"{b['limit']:.6g}", b["advice"])
+                        [(literal(b["parameter"]), f"{b['value']:.6g}", text(b["bound"]), f"{b['limit']:.6g}",
+                          text(b["advice"]))
                          for b in bounds])]
     floor = summary["floor"]
     parts.append(f"Noise floor of the measurements (what a perfect model scores): **{floor['noise_K']:.4f} K**; the "
@@ -110,15 +113,18 @@ def _added(summary: dict) -> list[str]:
         return parts + ["Nothing: no extension lowers the held-out error significantly, so the model is kept as it is."]
     for f in summary["findings"]:
         units = f.get("units", {})  # the extended model file's (library.py writes one for each parameter it adds)
-        params = [(f"`{k}`", f"{v:.6g}", units.get(k) or unit(k)) for k, v in f["params"].items()]
-        parts += [f"**{f['candidate']}** – {f['summary']}. Signal `{f['signal']}`, mechanism `{f['mechanism']}`: "
-                  f"`{f['extension']}`", table(("parameter", "value", "unit"), params)]
+        params = [(literal(k), f"{v:.6g}", text(units[k]) if units.get(k) else unit(k))
+                  for k, v in f["params"].items()]
+        parts += [f"**{text(f['candidate'])}** – {text(f['summary'])}. Signal {literal(f['signal'])}, mechanism "
+                  f"{literal(f['mechanism'])}: {literal(f['extension'])}",
+                  table(("parameter", "value", "unit"), params)]
     return parts
 
 
 def _better(summary: dict, gains_png: Path) -> list[str]:
-    cells = [(f"`{f['candidate']}`", f"`{f['signal']}`", number(f["rmse_before_K"], 4), number(f["rmse_after_K"], 4),
-              number(f["gain_pct"], 1), f"{f['p_value']:.2g}") for f in summary["findings"]]
+    cells = [(literal(f["candidate"]), literal(f["signal"]), number(f["rmse_before_K"], 4),
+              number(f["rmse_after_K"], 4), number(f["gain_pct"], 1), f"{f['p_value']:.2g}")
+             for f in summary["findings"]]
     base, best = summary["baseline"], summary["best"]
     return [
         "## How much better",
@@ -147,11 +153,11 @@ def write_page(result: Diagnosis, summary: dict, runs: Sequence[pd.DataFrame],
     window_png = plot_window(result, names, out / "worst_window.png")
     evidence_png = plot_evidence(summary["evidence"], out / "evidence.png")
     gains_png = plot_gains(summary["regimes"], summary["findings"], out / "gains.png")
-    parts = ["# benchlab diagnose – " + ", ".join(f"`{n}`" for n in names),
+    parts = ["# benchlab diagnose – " + ", ".join(literal(n) for n in names),
              f"{len(runs)} run(s), {sum(len(d) for d in result.baseline_held.datasets)} samples at the fitting step "
              f"of {summary['method']['step_s']:g} s; baseline `{summary['baseline']['model']}`. "
              f"Written by benchlab {benchlab.__version__}.",
-             "Measured on " + "; ".join(f"**{bench_text(bench)}** ({', '.join(f'`{n}`' for n in runs_of)})"
+             "Measured on " + "; ".join(f"**{text(bench_text(bench))}** ({', '.join(literal(n) for n in runs_of)})"
                                         for bench, runs_of in _benches(runs, names).items()) + "."]
     parts += _what_is_wrong(summary, regimes_png)
     parts += _where(result, names, window_png)

@@ -19,7 +19,9 @@ import os
 import tomllib
 from dataclasses import dataclass
 
+from benchlab.bounds import MAX_MAPPED_CHANNELS
 from benchlab.errors import InputError, read_document
+from benchlab.model.definition import is_name
 from benchlab.values import check_keys, finite_number
 
 RULES = ("interpolate", "hold")
@@ -42,6 +44,9 @@ class Mapped:
 def _entry(path: str, channel: str, value: object) -> Mapped:
     """One `[channels]` entry, checked field by field."""
     field = f"channels.{channel}"
+    if not is_name(channel):
+        raise InputError(path, "channels", f"run-file channel names of letters, digits and _ (as in a model file), "
+                                           f"got {channel!r}")
     if channel == "time":
         raise InputError(path, field, "a channel other than time (the grid's time comes from --dt)")
     if isinstance(value, str):
@@ -76,4 +81,6 @@ def read_mapping(path: "str | os.PathLike[str]") -> list[Mapped]:
     channels = doc.get("channels")
     if not isinstance(channels, dict) or not channels:
         raise InputError(path, "channels", "a table: run-file channel = source channel")
+    if len(channels) > MAX_MAPPED_CHANNELS:
+        raise InputError(path, "channels", f"at most {MAX_MAPPED_CHANNELS} channels, got {len(channels)}")
     return [_entry(str(path), name, value) for name, value in channels.items()]

@@ -154,8 +154,14 @@ def _fail(source: str, entry: str, expected: str) -> InputError:
     return InputError(source, entry, expected)
 
 
+def is_name(value: object) -> bool:
+    """The name rule of model files (nodes, parameters, the channels they read): letters, digits and _, not starting
+    with a digit or __; also what a run file's channel may be called (an HDF5 dataset and an expression's name)."""
+    return isinstance(value, str) and NAME.match(value) is not None and not value.startswith("__")
+
+
 def _name(source: str, entry: str, value: object, what: str) -> str:
-    if not isinstance(value, str) or not NAME.match(value) or value.startswith("__"):
+    if not is_name(value):
         raise _fail(source, entry, f"{what}: a name of letters, digits and _, got {value!r}")
     return value
 

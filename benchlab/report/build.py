@@ -15,6 +15,7 @@ from benchlab.outputs import write_text
 from benchlab.model.params import ModelParams
 from benchlab.progress import SILENT, Progress
 from benchlab.report.html import write_html
+from benchlab.report.markdown import literal
 from benchlab.report.page import Figures, render
 from benchlab.report.plotting import run_name
 from benchlab.report.residuals import plot_residuals, residuals
@@ -42,9 +43,10 @@ def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams,
     as `benchlab cooldown` stored it, else fitted here by benchlab.identify.cooldown with the other parameters of `params`."""
     analysed = stored(sweep)
     if analysed is not None and analysed.results:
-        source = analysed.params_source or "a parameter file not named in the run"
+        source = (literal(analysed.params_source) if analysed.params_source
+                  else "a parameter file not named in the run")
         return analysed.results, (f"Cool-downs of the sweep as `benchlab cooldown` stored them in the run file's "
-                                  f"`/analysis` (fitted with the other parameters of `{source}`):")
+                                  f"`/analysis` (fitted with the other parameters of {source}):")
     results = analyse(sweep, params, progress=progress)
     return results, ("Cool-downs of the sweep, fitted here with the other parameters of the first model (the run "
                      "file has no `/analysis`: `benchlab cooldown` stores one):")

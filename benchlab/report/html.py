@@ -1,8 +1,10 @@
 """The pages a person opens in a browser: benchlab's Markdown pages (report.md, diagnose.md) as HTML beside them.
 
 One small renderer for the subset those pages are written in (headings, paragraphs, pipe tables, images on a line of
-their own, **bold**, `code`, *italics*, [links](url), <details> blocks), not a general Markdown engine: the pages are
-ours, so a dependency for the rest of Markdown would earn nothing. Figures become <figure>s with their caption, tables
+their own, **bold**, `code`, *italics*, [links](url), backslash escapes, the pages' own <details> blocks), not a
+general Markdown engine: the pages are ours, so a dependency for the rest of Markdown would earn nothing. What a
+stranger wrote enters a page through benchlab/report/markdown.py as text; the renderer itself still turns no other
+HTML into markup and links only relative or http(s) addresses. Figures become <figure>s with their caption, tables
 keep their units in the header, and the page is one file that opens from disk (a bench PC without a web server).
 """
 
@@ -14,6 +16,7 @@ import re
 from pathlib import Path
 
 from benchlab.outputs import write_text
+from benchlab.report.markdown import ESCAPABLE
 
 #: The look of every page benchlab writes as HTML (the job's index page too): readable width, ruled tables with
 #: numbers right-aligned, figures no wider than the page.
@@ -26,29 +29,53 @@ STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em;l
 
 _IMAGE = re.compile(r"^!\[([^\]]*)\]\(([^)\s]+)\)$")
 _TABLE_RULE = re.compile(r"^\|(\s*:?-+:?\s*\|)+$")
-_RAW = ("<details", "</details")
+_SUMMARY = re.compile(r"^<details><summary>([^<>\n]*)</summary>$")  # the pages' own HTML, a collapsed table
 _NUMBER = re.compile(r"^([-+−]?\d[\d.,]*(e[-+]?\d+)?|—)(\s*[^\s\d]{1,4})?$")
+_CODE_OR_ESCAPE = re.compile(r"(`[^`]*`|\\[" + re.escape(ESCAPABLE) + "])")
+_CELL = re.compile(r"(?<!\\)\|")
+#: Each code span or escaped character stands in the text as one character of Unicode's private use plane 15 while
+#: the markup is read, so no markup inside them counts; such characters in the page itself are dropped.
+_HOLDER = 0xF0000
+_HOLDERS = re.compile("[\U000F0000-\U000FFFFF]")
+_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*):")
+
+
+def safe_url(url: str) -> bool:
+    """Whether a link or image may point there: relative, or http(s); never javascript:, data: or any other scheme
+    (as a browser reads the address: entities decoded, white space and control characters ignored)."""
+    bare = re.sub(r"[\x00-\x20\x7f]", "", html.unescape(url))
+    scheme = _SCHEME.match(bare)
+    return scheme is None or scheme[1].lower() in ("http", "https")
+
+
+def _link(match: re.Match[str]) -> str:
+    label, url = match[1], html.unescape(match[2])
+    if _HOLDERS.search(url) or not safe_url(url):  # an address with code or escapes in it is none of ours
+        return match[0]
+    return f'<a href="{html.escape(url)}">{label}</a>'
 
 
 def _inline(text: str) -> str:
-    """One line of Markdown text as HTML: escaped, then `code` (left as it is inside), **bold**, *italics*, links."""
-    pieces = re.split(r"(`[^`]*`)", text)
-    out = []
-    for piece in pieces:
-        if len(piece) >= 2 and piece.startswith("`") and piece.endswith("`"):
-            out.append(f"<code>{html.escape(piece[1:-1])}</code>")
-            continue
-        piece = html.escape(piece, quote=False)
-        piece = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", piece)
-        piece = re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"<i>\1</i>", piece)
-        piece = re.sub(r"\[([^\]]+)\]\(([^)\s]+)\)", lambda m: f'<a href="{html.escape(m[2])}">{m[1]}</a>', piece)
-        piece = re.sub(r"([ϑωΔ])_([A-Za-z]{1,3})\b", r"\1<sub>\2</sub>", piece)  # ϑ_F as the paper writes it
-        out.append(piece)
-    return "".join(out)
+    """One line of Markdown text as HTML: escaped, then `code` (left as it is inside), backslash escapes (the
+    character itself), **bold**, *italics*, links (relative or http(s) only)."""
+    held: list[str] = []
+
+    def hold(match: re.Match[str]) -> str:
+        piece = match[0]
+        held.append(f"<code>{html.escape(piece[1:-1])}</code>" if piece.startswith("`") else html.escape(piece[1]))
+        return chr(_HOLDER + len(held) - 1)
+
+    text = _CODE_OR_ESCAPE.sub(hold, _HOLDERS.sub("", text))
+    text = html.escape(text, quote=False)
+    text = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", text)
+    text = re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"<i>\1</i>", text)
+    text = re.sub(r"\[([^\]]+)\]\(([^)\s]+)\)", _link, text)
+    text = re.sub(r"([ϑωΔ])_([A-Za-z]{1,3})\b", r"\1<sub>\2</sub>", text)  # ϑ_F as the paper writes it
+    return _HOLDERS.sub(lambda m: held[ord(m[0]) - _HOLDER], text)
 
 
 def _cells(line: str) -> list[str]:
-    return [c.strip() for c in line.strip().strip("|").split("|")]
+    return [c.strip() for c in _CELL.split(line.strip().strip("|"))]
 
 
 def _table(lines: list[str]) -> str:
@@ -63,11 +90,24 @@ def _table(lines: list[str]) -> str:
     return f"<div class='scroll'><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>"
 
 
+def _figure(match: re.Match[str]) -> str:
+    """An image on a line of its own as a figure with its caption (a link to it); text where its address is unsafe."""
+    if not safe_url(match[2]):
+        return f"<p>{html.escape(match[0])}</p>"
+    src, caption = html.escape(match[2]), html.escape(match[1])
+    return f'<figure><a href="{src}"><img src="{src}" alt="{caption}"></a><figcaption>{caption}</figcaption></figure>'
+
+
 def _block(block: str) -> str:
+    """One block as HTML. Raw HTML only as the pages' own blocks (a <details> with its <summary>, its end); any
+    other HTML is text."""
     lines = block.strip().splitlines()
     first = lines[0]
-    if first.startswith(_RAW):  # the pages' own HTML (a collapsed table): kept as written
-        return block.strip()
+    summary = _SUMMARY.match(block.strip())
+    if summary:
+        return f"<details><summary>{_inline(summary[1])}</summary>"
+    if block.strip() == "</details>":
+        return "</details>"
     if first.startswith("#"):
         level = min(len(first) - len(first.lstrip("#")), 6)
         heading = f"<h{level}>{_inline(first[level:].strip())}</h{level}>"
@@ -76,9 +116,7 @@ def _block(block: str) -> str:
         return _table(lines)
     images = [_IMAGE.match(line.strip()) for line in lines]
     if all(images):
-        return "".join(f'<figure><a href="{html.escape(m[2])}"><img src="{html.escape(m[2])}" '
-                       f'alt="{html.escape(m[1])}"></a><figcaption>{html.escape(m[1])}</figcaption></figure>'
-                       for m in images if m is not None)
+        return "".join(_figure(m) for m in images if m is not None)
     return f"<p>{_inline(' '.join(line.strip() for line in lines))}</p>"
 
 

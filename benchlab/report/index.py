@@ -122,7 +122,8 @@ def _run_section(runs: Mapping[str, tuple[Path, pd.DataFrame]], out: Path) -> st
     for label, (path, run) in runs.items():
         duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
         attrs = load_attrs(path)
-        rows.append([html.escape(label), f'<a href="{html.escape(os.path.relpath(path, out))}">{path.name}</a>',
+        link = f'<a href="{html.escape(os.path.relpath(path, out))}">{html.escape(path.name)}</a>'
+        rows.append([html.escape(label), link,
                      html.escape(attrs.get("protocol", "")), html.escape(bench_text(attrs.get("bench"), short=True)),
                      _num(duration / 3600, 2, " h"), str(len(run)),
                      _num(float(run["T_flywheel"].max()), 1, " °C"),

@@ -16,6 +16,7 @@ from benchlab.identify.identifiability import recorded
 from benchlab.identify.metrics import RESIDUAL_LABEL
 from benchlab.model.params import ModelParams
 from benchlab.provenance import bench_text
+from benchlab.report.markdown import literal, text
 from benchlab.report.plotting import run_name
 from benchlab.report.resistance import resistance, standard_errors
 from benchlab.report.residuals import Residuals
@@ -26,7 +27,7 @@ SYMBOLS = {"T_flywheel": "ϑ_F", "T_air": "ϑ_A", "T_housing": "ϑ_T"}
 
 def channel_cell(channel: str) -> str:
     """A measured channel in a table: the clutch's symbol and the channel name."""
-    return f"{SYMBOLS[channel]} `{channel}`" if channel in SYMBOLS else f"`{channel}`"
+    return f"{SYMBOLS[channel]} `{channel}`" if channel in SYMBOLS else literal(channel)
 
 
 @dataclass(frozen=True)
@@ -51,10 +52,10 @@ def table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
 
 
 def unit(name: str, models: Sequence[tuple[str, ModelParams]] = ()) -> str:
-    """The unit of a parameter: as its model file gives it, else the contract's (section 2)."""
+    """The unit of a parameter (as Markdown text): as its model file gives it, else the contract's (section 2)."""
     given = next((p.definition.parameters[name].unit for _, p in models if name in p.definition.parameters), "")
     if given:
-        return given
+        return text(given)
     if name.startswith("C_"):
         return "J/K"
     if name.startswith("R") or name in ("a1", "a2"):
@@ -68,9 +69,10 @@ def scores_table(rows: Sequence[tuple[pd.DataFrame, Estimate]]) -> str:
     for run, est in rows:
         s = est.scores
         for c in est.channels:
-            cells.append((f"`{run_name(run)}`", est.label, channel_cell(c), number(s.channel_rmse_k[c], 4),
+            cells.append((literal(run_name(run)), text(est.label), channel_cell(c), number(s.channel_rmse_k[c], 4),
                           number(s.channel_nrmse_pct[c], 3)))
-        cells.append((f"`{run_name(run)}`", est.label, "**all** (§5)", number(s.rmse_k, 4), number(s.nrmse_pct, 3)))
+        cells.append((literal(run_name(run)), text(est.label), "**all** (§5)", number(s.rmse_k, 4),
+                      number(s.nrmse_pct, 3)))
     return table(("run", "model", "channel", "RMSE (K)", "NRMSE (%)"), cells)
 
 
@@ -78,11 +80,11 @@ def params_table(models: Sequence[tuple[str, ModelParams]]) -> str:
     """Each model's parameter values with their standard errors where the file holds them, or why the runs do not
     identify them."""
     names = list(dict.fromkeys(name for _, params in models for name in params))
-    header = ["parameter", "unit"] + [h for label, _ in models for h in (label, "± SE")]
+    header = ["parameter", "unit"] + [h for label, _ in models for h in (text(label), "± SE")]
     unidentified = [recorded(params) for _, params in models]
     cells = []
     for name in names:
-        row = [f"`{name}`", unit(name, models)]
+        row = [literal(name), unit(name, models)]
         for (_, params), reasons in zip(models, unidentified):
             row += [f"{params[name]:.6g}" if name in params else "—",
                     error_cell(standard_errors(params).get(name, math.nan), reasons.get(name))]
@@ -94,14 +96,14 @@ def error_cell(error: float, not_identified: str | None) -> str:
     """A parameter's ± SE cell: "not identified: why" where the runs do not identify it (its standard error says
     nothing), else the standard error, or an em dash where the file has none."""
     if not_identified is not None:
-        return f"not identified: {not_identified}"
+        return text(f"not identified: {not_identified}")
     return f"{error:.2g}" if math.isfinite(error) else "—"
 
 
 def cooldown_table(cooldowns: Sequence[CooldownResult], models: Sequence[tuple[str, ModelParams]]) -> str:
     """Per cool-down: operating point, fitted R ± U and each model's eq. (11) at that point."""
     header = ["cycle", "ω_e (rpm)", "S", "R fitted (K/W)", f"± U, k = {COVERAGE_K:g} (K/W)"]
-    header += [f"R {label} (K/W)" for label, _ in models]
+    header += [f"R {text(label)} (K/W)" for label, _ in models]
     cells = []
     for r in cooldowns:
         row = [str(r.cycle), number(r.engine_speed, 0), str(r.clutch_state), number(r.R, 4), number(r.R_u, 4)]
@@ -115,7 +117,7 @@ def residual_table(res: Residuals) -> str:
     (Ljung–Box p, structure in K against its threshold), strongest input correlations."""
     inputs = list(res.inputs)
     header = ["channel", "samples", "ACF outside ±2.58/√N, lags 1–50 (%)", "Ljung–Box p (window means)",
-              "structure (K)", "white"] + [f"corr. with `{k}`" for k in inputs]
+              "structure (K)", "white"] + [f"corr. with {literal(k)}" for k in inputs]
     cells = []
     for c, t in res.tests.items():
         row = [channel_cell(c), str(t["samples"]), number(t["whiteness_outside_pct"], 1), number(t["ljung_box_p"], 3),
@@ -131,11 +133,11 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
     """The whole page: error figures, parameters, Fig. 4, Fig. 5, Fig. 3 (with the sweep's cool-downs, introduced
     by `cooldowns_source`: where they come from), residuals."""
     duration = float(run["time"].iloc[-1] - run["time"].iloc[0])
-    models_text = ", ".join(f"**{label}** (`{params.model}`)" for label, params in models)
+    models_text = ", ".join(f"**{text(label)}** ({literal(params.model)})" for label, params in models)
     parts = [
-        f"# benchlab report – `{run_name(run)}`",
-        f"Run `{run.attrs.get('source', '')}` from **{bench_text(run.attrs.get('bench'))}**: protocol "
-        f"`{run.attrs.get('protocol', '')}`, {duration:.0f} s at a "
+        f"# benchlab report – {literal(run_name(run))}",
+        f"Run {literal(run.attrs.get('source', ''))} from **{text(bench_text(run.attrs.get('bench')))}**: protocol "
+        f"{literal(run.attrs.get('protocol', ''))}, {duration:.0f} s at a "
         f"step of {float(run.attrs['dt']):g} s, {len(run)} samples. Models: {models_text}. "
         f"Written by benchlab {benchlab.__version__}.",
         "## Error figures (benchlab's docs/contract.md §5)",
@@ -150,7 +152,7 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
         params_table(models),
         "## Fig. 4 – measured and estimated temperatures",
         f"![Fig. 4]({figures.fit.name})",
-        "## Fig. 5 – validation: " + " against ".join(label for label, _ in models),
+        "## Fig. 5 – validation: " + " against ".join(text(label) for label, _ in models),
         *[f"![Fig. 5]({p.name})" for p in figures.validation],
     ]
     if figures.resistance is not None:
@@ -158,7 +160,7 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
     if cooldowns:
         parts += [cooldowns_source, cooldown_table(cooldowns, models)]
     parts += [
-        f"## Residual analysis – {res.label} model on `{res.run}`",
+        f"## Residual analysis – {text(res.label)} model on {literal(res.run)}",
         f"Residual = {RESIDUAL_LABEL} at the identification step of {res.step_s:g} s, the model started from the "
         "temperatures that fit the run best with its parameters held (`benchlab identify`'s residual tests: a channel "
         "is not white when its 60 s means are autocorrelated or hold more than the white noise's share, at 1 %, and "

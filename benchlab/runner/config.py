@@ -6,7 +6,6 @@ See examples/bench.toml.
 
 from __future__ import annotations
 
-import math
 import os
 import tomllib
 from collections.abc import Mapping
@@ -16,10 +15,11 @@ from typing import Any
 
 import cantools
 
-from benchlab.bounds import MAX_TIMEOUT_S
+from benchlab.bounds import BENCH_NUMBER_RANGES
 from benchlab.drivetrain import DrivetrainFacts
 from benchlab.errors import InputError, read_document
 from benchlab.runner.devices import BenchConfig, load_dbc, status_cycle_s
+from benchlab.runner.opening import check_address
 from benchlab.values import check_keys, finite_number, positive_number
 from drivers import cvd
 from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS
@@ -28,9 +28,6 @@ from protocols.limits import BenchLimits
 ALIGNED_TEMPERATURES = ("T_air", "T_housing", "T_ambient", "T_engine")
 _SECTIONS = ("instrument", "node", "can", "drivetrain", "acquisition", "limits")
 ACQUISITION_KEYS = ("dt", "tick_s", "fast_tick_s", "flush_every_s")  # [acquisition]; defaults: BenchConfig's
-# their largest values: the run file loses at most 1 s on a crash (docs/runfile.md), the interlocks are polled at
-# least twice a second, a launch's slip at least every 0.1 s
-ACQUISITION_MAX = {"dt": 0.1, "tick_s": 0.5, "fast_tick_s": 0.1, "flush_every_s": 1.0}
 # The keys of [instrument] and [node]; [can] is python-can's (passed to can.Bus) and takes any key.
 INSTRUMENT_KEYS = ("url", "channels", "mode", "calibration", "baudrate", "timeout_s", "period_s")
 NODE_KEYS = ("url", "calibration", "baudrate", "period_s")
@@ -53,13 +50,15 @@ def _str(t: Mapping[str, Any], key: str, field: str, src: str, default: str | No
     return value
 
 
-def _num(t: Mapping[str, Any], key: str, field: str, src: str, default: float, integer: bool = False,
-         maximum: float = math.inf) -> float:
+def _num(t: Mapping[str, Any], key: str, field: str, src: str, default: float, integer: bool = False) -> float:
+    """A number of BENCH.toml within its physical range (benchlab.bounds.BENCH_NUMBER_RANGES)."""
     value = t.get(key, default)
     if positive_number(value) is None:
         raise InputError(src, field, f"a positive number, got {value!r}")
-    if value > maximum:
-        raise InputError(src, field, f"at most {maximum:g}, got {value!r}")
+    low, high = BENCH_NUMBER_RANGES[field]
+    if not low <= value <= high:
+        raise InputError(src, field, f"{'at least' if value < low else 'at most'} {low if value < low else high:g} "
+                                     f"(from {low:g} to {high:g}), got {value!r}")
     if integer and int(value) != value:
         raise InputError(src, field, f"an integer, got {value!r}")
     return int(value) if integer else float(value)
@@ -182,17 +181,18 @@ def load_bench_config(path: "str | os.PathLike[str]") -> BenchConfig:
     drivetrain = DrivetrainFacts(*(_num(drive, key, f"drivetrain.{key}", src, getattr(DrivetrainFacts, key))
                                    for key in DrivetrainFacts.__dataclass_fields__))
     config = BenchConfig(
-        instrument_url=_str(inst, "url", "instrument.url", src), node_url=_str(node, "url", "node.url", src),
+        instrument_url=check_address(_str(inst, "url", "instrument.url", src), source=src, key="instrument.url"),
+        node_url=check_address(_str(node, "url", "node.url", src), source=src, key="node.url"),
         can=can_cfg, instrument_channels=channels, instrument_mode=mode,
         instrument_baudrate=int(_num(inst, "baudrate", "instrument.baudrate", src, 115200, True)),
-        instrument_timeout_s=_num(inst, "timeout_s", "instrument.timeout_s", src, 2.0, maximum=MAX_TIMEOUT_S),
+        instrument_timeout_s=_num(inst, "timeout_s", "instrument.timeout_s", src, 2.0),
         instrument_period_s=_num(inst, "period_s", "instrument.period_s", src, 0.2),
         instrument_calibration=calibration,
         node_baudrate=int(_num(node, "baudrate", "node.baudrate", src, 921600, True)),
         node_period_s=_num(node, "period_s", "node.period_s", src, 0.05),
         node_calibration=(node_coefs[0], node_coefs[1]), dbc=dbc,
         drivetrain=drivetrain,
-        **{key: _num(acq, key, f"acquisition.{key}", src, getattr(BenchConfig, key), maximum=ACQUISITION_MAX[key])
+        **{key: _num(acq, key, f"acquisition.{key}", src, getattr(BenchConfig, key))
            for key in ACQUISITION_KEYS},
         limits=replace(limits, drivetrain=drivetrain), source=src)
     _check_ages(config, src)

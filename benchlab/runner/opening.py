@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import re
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -126,6 +127,69 @@ def can_interfaces() -> str:
                                                           if i != "udp_multicast"))
 
 
+#: pyserial's URL schemes (serial.urlhandler) a bench device may use, and which of them name a host and a port.
+SERIAL_SCHEMES = ("socket", "rfc2217", "loop", "spy", "hwgrep", "alt", "cp2110")
+_NETWORK_SCHEMES = ("socket", "rfc2217")
+_HOST = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9.-]{0,252}[A-Za-z0-9])?|\[[0-9A-Fa-f:.]{2,45}\]")
+_DEVICE_PATH = re.compile(r"/[^\s]{1,250}|COM[1-9]\d{0,2}")
+_GPIB_ADDRESSES = range(31)
+_PORTS = range(1, 65536)
+
+
+def _host_port_problem(host: str | None, port: "int | str | None") -> str | None:
+    """What is wrong with a network device's host and port (a name or address; a port 1-65535), None if nothing."""
+    if not host or not _HOST.fullmatch(host):
+        return f"a host name or address, got {host!r}"
+    if port is not None and not (str(port).isdigit() and int(port) in _PORTS):
+        return f"a port from 1 to 65535, got {port!r}"
+    return None
+
+
+def address_problem(url: str) -> str | None:
+    """What makes `url` no device address at all, judged by its text alone (nothing is opened): a VISA resource
+    string (parsed by pyvisa; its host and port, a GPIB address 0-30), a pyserial URL (a known scheme; a host and a
+    port 1-65535 for socket:// and rfc2217://), a device path (/dev/..., COMn) or sim://NAME. None where it may be
+    one; whether the device is there is for opening it to say."""
+    from drivers.visa_port import is_visa_resource
+
+    if not url.isprintable() or len(url) > 256:
+        return "printable text of at most 256 characters"
+    if is_simulated(url):
+        return None if len(url) > len("sim://") else "sim://NAME"
+    if is_visa_resource(url):
+        from pyvisa import rname
+
+        try:
+            resource = rname.parse_resource_name(url)
+        except (rname.InvalidResourceName, ValueError) as exc:
+            return f"a VISA resource string ({_first_line(exc)})"
+        if hasattr(resource, "host_address"):
+            return _host_port_problem(resource.host_address, getattr(resource, "port", None))
+        primary = getattr(resource, "primary_address", None)
+        if primary is not None and not (str(primary).isdigit() and int(primary) in _GPIB_ADDRESSES):
+            return f"a GPIB address from 0 to 30, got {primary!r}"
+        return None
+    scheme, sep, rest = url.partition("://")
+    if not sep and not _DEVICE_PATH.fullmatch(url):
+        return "a device path (/dev/ttyUSB0, COM3), a pyserial URL or a VISA resource"
+    if not sep:
+        return None
+    if scheme not in SERIAL_SCHEMES:
+        return f"a pyserial URL scheme ({', '.join(SERIAL_SCHEMES)}) or a VISA resource, got {scheme!r}"
+    if scheme in _NETWORK_SCHEMES:
+        host, colon, port = rest.split("/", 1)[0].split("?", 1)[0].rpartition(":")
+        return _host_port_problem(host, port) if colon else f"{scheme}://HOST:PORT"
+    return None
+
+
+def check_address(url: str, *, source: str, key: str) -> str:
+    """`url` if it may be a device address (address_problem); else InputError naming `key` of `source`."""
+    problem = address_problem(url)
+    if problem is not None:
+        raise InputError(source, key, f"a device address: {problem}, got {url!r}")
+    return url
+
+
 def _opened(opener: Callable[[], Any], source: str, key: str, tried: str, exists: Callable[[], str]) -> Any:
     try:
         return opener()
@@ -144,6 +208,7 @@ def open_scanner(url: str, channels: Any, *, source: str, key: str = "[instrumen
     from drivers.pt1000 import Pt1000Scanner
     from drivers.visa_port import DEFAULT_BACKEND, is_visa_resource
 
+    check_address(url, source=source, key=key)
     exists = (lambda: visa_resources(DEFAULT_BACKEND)) if is_visa_resource(url) else serial_ports
     scanner = _opened(lambda: Pt1000Scanner.open(url, channels, **kwargs), source, key, repr(url), exists)
     try:
@@ -160,6 +225,7 @@ def open_gateway(url: str, *, source: str, key: str = "[node] url", **kwargs: An
     """The clutch node's PC gateway at `url`; DeviceOpenError naming `key`."""
     from drivers.clutch_node import ClutchNodeGateway
 
+    check_address(url, source=source, key=key)
     gateway = _opened(lambda: ClutchNodeGateway.open(url, **kwargs), source, key, repr(url), serial_ports)
     log.info("node gateway %s open", url)
     return gateway
