@@ -82,8 +82,13 @@ def test_log_never_appends_to_a_run_file_or_another_file_of_the_command_line(for
     params = tmp_path / "p.json"  # `--log` takes the word after it: here the run file meant as identify's input
     assert main(["identify", "--log", str(foreign_run), str(foreign_run), "--out", str(params)]) == 2
     err = capsys.readouterr().err
-    assert "--log" in err and "run file" in err and len(err.strip().splitlines()) == 1
+    assert "--log" in err and "a file of its own" in err and len(err.strip().splitlines()) == 1
     assert foreign_run.read_bytes() == before and not params.exists()
+    other = tmp_path / "other.h5"  # a run file named as the log and nowhere else on the command line
+    other.write_bytes(before)
+    assert main(["identify", str(foreign_run), "--log", str(other), "--out", str(params)]) == 2
+    err = capsys.readouterr().err
+    assert "--log" in err and "run file" in err and other.read_bytes() == before
     mapping = tmp_path / "map.toml"
     mapping.write_text("")
     assert main(["import", str(tmp_path / "d.csv"), "--mapping", str(mapping), "--log", str(mapping),
