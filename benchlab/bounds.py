@@ -53,3 +53,19 @@ MAX_LOCAL_WORKERS = 256
 #: Most grid rows `benchlab import` puts an MDF file's channels on: a week's run on the bench's 10 ms grid (a
 #: finer --dt over a long recording is a typo that would allocate memory until the machine gives up).
 MAX_IMPORT_ROWS = int(MAX_RUN_DURATION_S / 0.01)
+#: Most bytes a compressed input (an MDF file's ##DZ blocks, a BLF log's containers) may declare it inflates to, as
+#: a multiple of the file's own size: measurement data compress 2-10 times (the bench's own MF4 export: see
+#: docs/runfile.md), and a file claiming more is a compression bomb (1.3 MB declaring a TB crashed the MDF reader).
+MAX_INFLATION = 50
+#: Most bytes any one input may inflate to, whatever its size: a week of 100 channels at 100 Hz as float64 is 48 GB,
+#: more than a bench PC holds in memory; 8 GiB is a long run's worth.
+MAX_INFLATED_BYTES = 8 << 30
+#: Memory a foreign file's reader (asammdf, python-can) runs within, in a child process, beyond what the command
+#: already holds: this floor plus READER_MEMORY_PER_BYTE for every byte of the file and of what it declares it
+#: inflates to. A reader asking for more is stopped (a file that inflates beyond what it declares).
+READER_MEMORY_FLOOR = 512 << 20
+READER_MEMORY_PER_BYTE = 4
+#: CPU seconds a foreign file's reader gets: this floor plus READER_CPU_S_PER_MB per MB of the file and of what it
+#: declares it inflates to (python-can parses about 0.3 M CAN frames, some 15 MB of BLF objects, per second).
+READER_CPU_FLOOR_S = 60.0
+READER_CPU_S_PER_MB = 1.0
