@@ -57,6 +57,9 @@ MAX_IMPORT_ROWS = int(MAX_RUN_DURATION_S / 0.01)
 #: a multiple of the file's own size: measurement data compress 2-10 times (the bench's own MF4 export: see
 #: docs/runfile.md), and a file claiming more is a compression bomb (1.3 MB declaring a TB crashed the MDF reader).
 MAX_INFLATION = 50
+#: What any compressed input may inflate to however small it is: a short log's one container or a few MDF blocks of
+#: constant values compress far more than a long recording does.
+INFLATION_FLOOR_BYTES = 16 << 20
 #: Most bytes any one input may inflate to, whatever its size: a week of 100 channels at 100 Hz as float64 is 48 GB,
 #: more than a bench PC holds in memory; 8 GiB is a long run's worth.
 MAX_INFLATED_BYTES = 8 << 30

@@ -141,11 +141,13 @@ def read_foreign(path: Path, mapped: list[Mapped], dbc: "str | os.PathLike[str]"
                                                                                              "directory")
     suffix = path.suffix.lower()
     if suffix == ".blf":
-        limits, what = ReaderLimits.for_input(path, blf_inflated_size(path), "log containers"), "a CAN log"
+        limits = ReaderLimits.for_input(path, blf_inflated_size(path), "log containers")
     elif suffix in CAN_LOG_SUFFIXES and suffix != ".mf4":
-        limits, what = ReaderLimits.for_input(path), "a CAN log"
+        limits = ReaderLimits.for_input(path)
     else:
-        limits, what = ReaderLimits.for_input(path, inflated_size(path), "compressed blocks (##DZ)"), "an MDF file"
+        limits = ReaderLimits.for_input(path, inflated_size(path), "compressed blocks (##DZ)")
+    what = "an MDF file asammdf reads" if suffix in (".mdf", ".dat") else \
+        "a CAN log python-can reads" if suffix != ".mf4" else "an MF4 file asammdf reads"
     return read_in_child(path, what, limits, _read_log_or_mdf, path, mapped, dbc, gear_ratio)
 
 
@@ -186,7 +188,7 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
                  gear_ratio: float) -> Input:
     """The log's frames decoded with `dbc`: the signals the mapping names and, for the bench's DBC, the bench's
     contract channels (module docstring), each at its frames' time stamps."""
-    from benchlab.runner.devices import load_dbc
+    from benchlab.runner.devices import duplicate_message, load_dbc
     from drivers.can_codec import compile_codecs
     from drivers.can_frames import ERROR, EXTENDED, REMOTE
 
@@ -195,6 +197,8 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
         db = load_dbc(str(dbc))
     except Exception as exc:  # cantools raises its own errors, and OSError, for a file it cannot parse
         raise InputError(dbc, "file", f"a CAN database (DBC) cantools reads ({type(exc).__name__})") from None
+    if (twice := duplicate_message(db)) is not None:
+        raise InputError(dbc, "messages", f"each message defined once (the {twice})")
     frames, broken, why = _frames(path)
     if broken:
         log.warning("%s: unreadable from frame %d on (%s); the frames before are imported", path, len(frames), why)

@@ -8,6 +8,7 @@ reader that does not end is one line naming the file (InputError, exit 2); the c
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import pickle
 import resource
@@ -17,8 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from benchlab.bounds import (MAX_INFLATED_BYTES, MAX_INFLATION, READER_CPU_FLOOR_S, READER_CPU_S_PER_MB,
-                             READER_MEMORY_FLOOR, READER_MEMORY_PER_BYTE)
+from benchlab.bounds import (INFLATION_FLOOR_BYTES, MAX_INFLATED_BYTES, MAX_INFLATION, READER_CPU_FLOOR_S,
+                             READER_CPU_S_PER_MB, READER_MEMORY_FLOOR, READER_MEMORY_PER_BYTE)
 from benchlab.errors import InputError
 
 T = TypeVar("T")
@@ -35,12 +36,13 @@ class ReaderLimits:
     def for_input(cls, path: Path, inflated_bytes: int = 0, blocks: str = "compressed blocks") -> "ReaderLimits":
         """The limits for reading `path`, whose `blocks` declare they inflate to `inflated_bytes` (bounds.py says
         how much); InputError before anything is inflated where that is more than MAX_INFLATION times the file's
-        size or MAX_INFLATED_BYTES."""
+        size (INFLATION_FLOOR_BYTES at least) or MAX_INFLATED_BYTES."""
         size = path.stat().st_size
-        most = min(MAX_INFLATED_BYTES, MAX_INFLATION * size)
+        most = min(MAX_INFLATED_BYTES, max(MAX_INFLATION * size, INFLATION_FLOOR_BYTES))
         if inflated_bytes > most:
             raise InputError(path, blocks, f"at most {most:,} bytes uncompressed ({MAX_INFLATION} times the file's "
-                                           f"size, at most {MAX_INFLATED_BYTES >> 30} GiB), they declare "
+                                           f"size, {INFLATION_FLOOR_BYTES >> 20} MiB at least, "
+                                           f"{MAX_INFLATED_BYTES >> 30} GiB at most), they declare "
                                            f"{inflated_bytes:,}: a compression bomb or a damaged file")
         size += inflated_bytes
         return cls(READER_MEMORY_FLOOR + READER_MEMORY_PER_BYTE * size,
@@ -57,6 +59,7 @@ def _in_child(write_fd: int, limits: ReaderLimits, function: Callable[..., Any],
     """The child's side: limits set, `function(*args)` run, ("ok", result), ("input", error fields) or ("failed",
     text) sent on `write_fd`, and the process ended without running the parent's exit handlers."""
     code = 0
+    faulthandler.disable()  # a crash is the parent's one line, not a dump of the child's stack
     try:
         _, hard = resource.getrlimit(resource.RLIMIT_AS)
         memory = _address_space() + limits.memory_bytes
