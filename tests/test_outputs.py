@@ -199,3 +199,24 @@ def test_simulate_output_is_a_run_file_and_the_input_keeps_its_bytes(foreign_run
     with h5py.File(tmp_path / "s.h5") as f:
         assert "simulated" in f and f.attrs["schema"] == "benchlab-run/1"
     assert _digest(foreign_run) == before
+
+
+def test_a_partial_file_of_a_killed_writer_is_removed_by_the_next_write(tmp_path):
+    """Issue 44: `import` or `export` killed mid-write left a hidden `.NAME.PID-TOKEN.part.EXT` for good. The next
+    write of that destination removes those of writers that no longer exist; a live writer's stays."""
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "table.csv"
+    code = (f"import os, signal\nfrom benchlab.outputs import replacing\nwith replacing({str(out)!r}) as tmp:\n"
+            "    tmp.write_text('half')\n    os.kill(os.getpid(), signal.SIGKILL)\n")
+    proc = subprocess.run([sys.executable, "-c", code], timeout=120)
+    assert proc.returncode == -signal.SIGKILL
+    (left,) = tmp_path.glob(".table.*.part.csv")
+    live = tmp_path / f".table.{os.getpid()}-0123abcd.part.csv"  # this process: a writer still at work
+    live.write_text("being written")
+    other = tmp_path / ".table.notes.part.csv"  # not a name replacing makes
+    other.write_text("")
+    write_text(out, "whole")
+    assert out.read_text() == "whole" and not left.exists() and live.exists() and other.exists()
