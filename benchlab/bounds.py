@@ -57,6 +57,9 @@ MAX_IMPORT_ROWS = int(MAX_RUN_DURATION_S / 0.01)
 #: a multiple of the file's own size: measurement data compress 2-10 times (the bench's own MF4 export: see
 #: docs/runfile.md), and a file claiming more is a compression bomb (1.3 MB declaring a TB crashed the MDF reader).
 MAX_INFLATION = 50
+#: The same for a BLF log, whose every 48-byte CAN object python-can makes a Python message of (some 10 us each):
+#: 20 times 10 MB is about 4 M frames, under a minute and under 1 GB (the bench's own BLF log declares 7 times).
+MAX_BLF_INFLATION = 20
 #: What any compressed input may inflate to however small it is: a short log's one container or a few MDF blocks of
 #: constant values compress far more than a long recording does.
 INFLATION_FLOOR_BYTES = 16 << 20

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from benchlab.bounds import MAX_BLF_INFLATION
 from benchlab.errors import InputError
 from benchlab.importing.child import ReaderLimits, read_in_child
 from benchlab.importing.mapping import Mapped
@@ -50,6 +51,8 @@ BLF_OBJECT = struct.Struct("<4sHHLL")
 BLF_CONTAINER = struct.Struct("<H6xL4x")
 BLF_LOG_CONTAINER = 10
 BLF_ZLIB = 2
+#: Frames read from a log kept as python-can's tuples before they become one array of FRAME records.
+FRAMES_PER_PART = 1 << 16
 #: Bytes inflated at a time when a container's declared size is checked.
 INFLATE_PIECE = 1 << 20
 
@@ -141,7 +144,7 @@ def read_foreign(path: Path, mapped: list[Mapped], dbc: "str | os.PathLike[str]"
                                                                                              "directory")
     suffix = path.suffix.lower()
     if suffix == ".blf":
-        limits = ReaderLimits.for_input(path, blf_inflated_size(path), "log containers")
+        limits = ReaderLimits.for_input(path, blf_inflated_size(path), "log containers", MAX_BLF_INFLATION)
     elif suffix in CAN_LOG_SUFFIXES and suffix != ".mf4":
         limits = ReaderLimits.for_input(path)
     else:
@@ -155,22 +158,27 @@ def _frames(path: Path) -> tuple[np.ndarray, int, str | None]:
     """Every frame of the log as FRAME records, the count of unreadable ends (0 or 1), and why."""
     import can
 
-    from drivers.can_frames import frames_from_records, record
+    from drivers.can_frames import frames_from_records, join, record
 
     try:
         reader = can.LogReader(path)
     except (ValueError, OSError, EOFError) as exc:
         raise InputError(path, "file", f"a CAN log python-can reads ({type(exc).__name__}: {exc})") from None
-    records, broken = [], None
+    parts, records, broken = [], [], None
     try:
         with reader:
             for msg in reader:
                 records.append(record(msg))
+                if len(records) == FRAMES_PER_PART:  # as FRAME records: a third of the memory of the tuples
+                    parts.append(frames_from_records(records))
+                    records = []
     except Exception as exc:  # a truncated or corrupt container, a line no reader parses: the frames before stay
         broken = f"{type(exc).__name__}: {exc}"
-    if not records:
+    parts.append(frames_from_records(records))
+    frames = join(parts)
+    if not len(frames):
         raise InputError(path, "file", "a CAN log with frames" + (f" ({broken})" if broken else " (it holds none)"))
-    return frames_from_records(records), int(broken is not None), broken
+    return frames, int(broken is not None), broken
 
 
 def _signal(path: Path, db: Any, entry: Mapped) -> tuple[Any, Any] | None:

@@ -33,14 +33,15 @@ class ReaderLimits:
     cpu_s: float
 
     @classmethod
-    def for_input(cls, path: Path, inflated_bytes: int = 0, blocks: str = "compressed blocks") -> "ReaderLimits":
+    def for_input(cls, path: Path, inflated_bytes: int = 0, blocks: str = "compressed blocks",
+                  ratio: int = MAX_INFLATION) -> "ReaderLimits":
         """The limits for reading `path`, whose `blocks` declare they inflate to `inflated_bytes` (bounds.py says
-        how much); InputError before anything is inflated where that is more than MAX_INFLATION times the file's
-        size (INFLATION_FLOOR_BYTES at least) or MAX_INFLATED_BYTES."""
+        how much); InputError before anything is inflated where that is more than `ratio` times the file's size
+        (INFLATION_FLOOR_BYTES at least) or MAX_INFLATED_BYTES."""
         size = path.stat().st_size
-        most = min(MAX_INFLATED_BYTES, max(MAX_INFLATION * size, INFLATION_FLOOR_BYTES))
+        most = min(MAX_INFLATED_BYTES, max(ratio * size, INFLATION_FLOOR_BYTES))
         if inflated_bytes > most:
-            raise InputError(path, blocks, f"at most {most:,} bytes uncompressed ({MAX_INFLATION} times the file's "
+            raise InputError(path, blocks, f"at most {most:,} bytes uncompressed ({ratio} times the file's "
                                            f"size, {INFLATION_FLOOR_BYTES >> 20} MiB at least, "
                                            f"{MAX_INFLATED_BYTES >> 30} GiB at most), they declare "
                                            f"{inflated_bytes:,}: a compression bomb or a damaged file")
