@@ -50,10 +50,13 @@ class ReaderLimits:
                    READER_CPU_FLOOR_S + READER_CPU_S_PER_MB * size / 1e6)
 
 
-def _address_space() -> int:
-    """This process's address space now, bytes (Linux: /proc/self/statm, first field in pages)."""
-    with open("/proc/self/statm") as f:
-        return int(f.read().split()[0]) * resource.getpagesize()
+def _address_space() -> int | None:
+    """This process's address space now, bytes (Linux: /proc/self/statm, first field in pages); None elsewhere."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[0]) * resource.getpagesize()
+    except OSError:
+        return None
 
 
 def _in_child(write_fd: int, limits: ReaderLimits, function: Callable[..., Any], args: tuple[Any, ...]) -> None:
@@ -63,8 +66,10 @@ def _in_child(write_fd: int, limits: ReaderLimits, function: Callable[..., Any],
     faulthandler.disable()  # a crash is the parent's one line, not a dump of the child's stack
     try:
         _, hard = resource.getrlimit(resource.RLIMIT_AS)
-        memory = _address_space() + limits.memory_bytes
-        resource.setrlimit(resource.RLIMIT_AS, (memory if hard == resource.RLIM_INFINITY else min(memory, hard), hard))
+        if (now := _address_space()) is not None:  # where the system cannot say, the CPU limit alone
+            memory = now + limits.memory_bytes
+            resource.setrlimit(resource.RLIMIT_AS, (memory if hard == resource.RLIM_INFINITY else min(memory, hard),
+                                                    hard))
         cpu = int(limits.cpu_s) + 1
         resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 5))  # SIGXCPU at the soft limit, SIGKILL at the hard
         try:
