@@ -267,3 +267,20 @@ def test_two_recordings_530_years_apart_are_not_merged_as_one_run(tmp_path, refu
         mdf.close()
     refused(["import", *map(str, paths), "--dt", "0.01", "--out", str(tmp_path / "run.h5")],
             "time stamps", "rec1980.mf4", "rec2510.mf4", "--offset")
+
+
+@pytest.mark.parametrize("kind", ["##DG", "##CN"])
+def test_an_mf4_whose_chain_of_blocks_loops_back_is_refused_before_asammdf_follows_it(tmp_path, refused, kind):
+    """A data group (or channel) whose next link points at itself: asammdf followed it until its CPU limit
+    (over a minute); the block walk finds the loop from the headers."""
+    path = tmp_path / "loop.mf4"
+    data = _small_mf4(path)
+    group = struct.unpack_from("<Q", data, 64 + BLOCK_HEADER.size)[0]
+    channel_group = struct.unpack_from("<Q", data, group + BLOCK_HEADER.size + 8)[0]
+    channel = struct.unpack_from("<Q", data, channel_group + BLOCK_HEADER.size + 8)[0]
+    at = group if kind == "##DG" else channel
+    assert data[at:at + 4] == kind.encode()
+    struct.pack_into("<Q", data, at + BLOCK_HEADER.size, at)  # its next link: itself
+    path.write_bytes(data)
+    refused(["import", str(path), "--dt", "0.01", "--out", str(tmp_path / "run.h5")], str(path),
+            f"the {kind} block at byte {at}")

@@ -38,18 +38,22 @@ DZ_FIELDS = struct.Struct("<2sBxIQQ")
 #: The identification block before the header block (MDF 4: "MDF     " and the version, e.g. "4.10").
 HEADER_BLOCK_AT = 64
 LINK = struct.Struct("<Q")
+#: Blocks whose first link is the next block of their kind (ASAM MDF 4: data groups, channel groups, channels, data
+#: lists, attachments, events, channel hierarchies, file histories, sample reductions): readers follow it to its end.
+CHAINED_BLOCKS = frozenset({b"##DG", b"##CG", b"##CN", b"##DL", b"##AT", b"##EV", b"##CH", b"##FH", b"##SR"})
 
 
 def inflated_size(path: Path) -> int:
     """The bytes an MDF 4 file's ##DZ blocks declare they inflate to, read from the block headers alone; 0 for an
-    older MDF (no compressed blocks). InputError where the blocks overlap (more of them than the file can hold)."""
+    older MDF (no compressed blocks). InputError where the blocks overlap (more of them than the file can hold) or
+    a chain of them loops back (a reader following it would never end)."""
     size = path.stat().st_size
     if size < HEADER_BLOCK_AT + BLOCK_HEADER.size:
         return 0
     with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
         if data[:3] != b"MDF" or data[8:9] != b"4":
             return 0
-        pending, seen, total = [HEADER_BLOCK_AT], set(), 0
+        pending, seen, total, chained, kinds = [HEADER_BLOCK_AT], set(), 0, {}, {}
         while pending:
             at = pending.pop()
             if at in seen or not 0 < at <= size - BLOCK_HEADER.size:
@@ -62,10 +66,31 @@ def inflated_size(path: Path) -> int:
                 continue
             first = at + BLOCK_HEADER.size
             count = min(links, (size - first) // LINK.size)
-            pending.extend(struct.unpack_from(f"<{count}Q", data, first))
+            links = struct.unpack_from(f"<{count}Q", data, first)
+            pending.extend(links)
+            if block_id in CHAINED_BLOCKS and links:
+                chained[at], kinds[at] = links[0], block_id.decode(errors="replace")
             if block_id == b"##DZ" and first + DZ_FIELDS.size <= size:
                 total += DZ_FIELDS.unpack_from(data, first)[3]
-        return total
+    if (looped := _loop(chained)) is not None:
+        raise InputError(path, "blocks", f"chains of MDF blocks that end (the {kinds[looped]} block at byte {looped} "
+                                         "is reached again from its own next links)")
+    return total
+
+
+def _loop(following: dict[int, int]) -> int | None:
+    """A block whose chain of next links (`following`: block -> next block) comes back to it, None if none does."""
+    done: set[int] = set()
+    for start in following:
+        path: dict[int, None] = {}
+        at = start
+        while at in following and at not in done:
+            if at in path:
+                return at
+            path[at] = None
+            at = following[at]
+        done.update(path)
+    return None
 
 
 def _open(path: Path) -> Any:
