@@ -78,3 +78,26 @@ BENCH_NUMBER_RANGES = {
     "acquisition.fast_tick_s": (1e-3, 0.1),
     "acquisition.flush_every_s": (1e-3, 1.0),
 }
+#: Most bytes a compressed input (an MDF file's ##DZ blocks, a BLF log's containers) may declare it inflates to, as
+#: a multiple of the file's own size: measurement data compress 2-10 times (the bench's own MF4 export: see
+#: docs/runfile.md), and a file claiming more is a compression bomb (1.3 MB declaring a TB crashed the MDF reader).
+MAX_INFLATION = 50
+#: The same for a BLF log, whose every 48-byte CAN object python-can makes a Python message of (some 10 us each):
+#: 20 times 10 MB is about 4 M frames, under a minute and under 1 GB (the bench's own BLF log declares 7 times).
+MAX_BLF_INFLATION = 20
+#: What any compressed input may inflate to however small it is: a short log's one container or a few MDF blocks of
+#: constant values compress far more than a long recording does.
+INFLATION_FLOOR_BYTES = 16 << 20
+#: Most bytes any one input may inflate to, whatever its size: a week of 100 channels at 100 Hz as float64 is 48 GB,
+#: more than a bench PC holds in memory; 8 GiB is a long run's worth.
+MAX_INFLATED_BYTES = 8 << 30
+#: Memory a foreign file's reader (asammdf, python-can) runs within, in a child process, beyond what the command
+#: already holds: this floor plus READER_MEMORY_PER_BYTE for every byte of the file and of what it declares it
+#: inflates to. A reader asking for more is stopped (a file that inflates beyond what it declares).
+READER_MEMORY_FLOOR = 512 << 20
+READER_MEMORY_PER_BYTE = 4
+#: CPU seconds a foreign file's reader gets: this floor plus READER_CPU_S_PER_MB per MB of the file and of what it
+#: declares it inflates to. The bench's own BLF log of a Table 1 run (18 MB, 129 MB of objects, 2.8 M frames)
+#: imports in 26 s, its MF4 export (13 MB, 140 MB inflated) in 26 s: 1 s per MB leaves five times that.
+READER_CPU_FLOOR_S = 30.0
+READER_CPU_S_PER_MB = 1.0

@@ -7,7 +7,8 @@ while it does (benchlab.interrupts.interrupts_held, as here around the parser). 
 are one line and exit 1; Ctrl-C, from the
 moment `main` runs (imports of the commands included), is one line and exit 130. A reader that leaves
 early (`benchlab run table1 --bench sim --dry-run | head -1`) ends the command quietly with 141, as SIGPIPE ends
-other tools.
+other tools. The console script (benchlab.console) notes SIGTERM and Ctrl-C before this module loads; main answers
+them.
 `-v` shows benchlab's log messages (logger `benchlab.*`) on stderr: INFO, and DEBUG with `-vv`; `-v` and `-q` (no
 progress bars) are taken before or after the command. A mistyped command or choice is answered with the closest one.
 """
@@ -29,7 +30,7 @@ import benchlab.commands
 from benchlab import logs
 from benchlab.errors import InputError
 from benchlab.interrupts import (TERMINATED_EXIT, RedeliverInterrupts, Terminated, interrupts_answered,
-                                 interrupts_held, terminate_as_interrupt)
+                                 interrupts_held, raise_noted, terminate_as_interrupt)
 from benchlab.outputs import OutputError, check_log, is_no_space, no_space
 
 #: Exit code when stdout's reader has gone: 128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended.
@@ -176,6 +177,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _dispatch(argv: Sequence[str] | None) -> int:
     args = None
     try:
+        raise_noted()  # SIGTERM or Ctrl-C before this module had loaded (benchlab.console): answered here
         with interrupts_held():  # imports the command modules; a Ctrl-C meanwhile comes right after
             parser = build_parser()
         args = parser.parse_args(argv)

@@ -23,6 +23,8 @@ from typing import Any
 
 
 TERMINATED_EXIT = 128 + signal.SIGTERM
+#: SIGINT and SIGTERM that arrived while note_interrupts' handler was in place (before the command line's handlers).
+_noted: list[int] = []
 
 
 class Terminated(KeyboardInterrupt):
@@ -31,6 +33,28 @@ class Terminated(KeyboardInterrupt):
 
 def _raise_terminated(signum: int, frame: Any) -> None:
     raise Terminated
+
+
+def _note(signum: int, frame: Any) -> None:
+    _noted.append(signum)
+
+
+def note_interrupts() -> None:
+    """SIGINT and SIGTERM noted from now on, not acted upon, until `raise_noted` (the console script's first act:
+    the default SIGTERM handler would kill the process before benchlab.cli has set its own)."""
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, _note)
+
+
+def raise_noted() -> None:
+    """Ctrl-C back to Python's KeyboardInterrupt if note_interrupts had it; an interrupt noted meanwhile raised
+    (Terminated for SIGTERM) to be answered as any other."""
+    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGINT) is _note:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if _noted:
+        terminated = signal.SIGTERM in _noted
+        _noted.clear()
+        raise Terminated if terminated else KeyboardInterrupt
 
 
 @contextlib.contextmanager

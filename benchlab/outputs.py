@@ -8,7 +8,8 @@
   file written into it follows the rules above.
 - Every file is written beside its destination under a hidden temporary name and renamed into place when whole
   (`replacing`): a crash or a full disk leaves the old file or none, never half a file. A full disk is one line
-  naming the file (OutputError, exit 1).
+  naming the file (OutputError, exit 1). A temporary file whose writer was killed (its process id is in the name)
+  is removed by the next write of that destination (`remove_stale_partials`).
 
 `check_output`/`check_output_dir` run before any work, so a refusal costs nothing; `replacing` checks again at
 the moment of writing (a figure inside an output directory, a file that appeared meanwhile).
@@ -17,7 +18,9 @@ the moment of writing (a figure inside an output directory, a file that appeared
 from __future__ import annotations
 
 import errno
+import glob
 import os
+import re
 import secrets
 import stat
 from collections.abc import Iterator, Sequence
@@ -33,6 +36,8 @@ NO_SPACE_TEXTS = ("No space left on device", "File too large", "Disk quota excee
 #: The HDF5 superblock's signature, at offset 0 or after a user block of 512, 1024, 2048, ... bytes.
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 HDF5_OFFSETS = (0, 512, 1024, 2048, 4096)
+#: What follows `.STEM.` in the name of a file `replacing` writes, before the destination's suffix.
+PARTIAL_NAME = re.compile(r"(?P<pid>[0-9]{1,10})-[0-9a-f]{8}\.part")
 
 
 class OutputError(Exception):
@@ -166,6 +171,7 @@ def replacing(path: "str | os.PathLike[str]", run_file: bool = False) -> Iterato
     or a run file where `run_file` is False, is never replaced. A full disk is OutputError (one line)."""
     path = Path(path)
     check_target(path, "output", force=True, run_file=run_file)
+    remove_stale_partials(path)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}-{secrets.token_hex(4)}.part{path.suffix}")
     try:
         yield tmp
@@ -176,6 +182,34 @@ def replacing(path: "str | os.PathLike[str]", run_file: bool = False) -> Iterato
         raise
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def _process_alive(pid: int) -> bool:
+    """Whether a process `pid` exists on this machine (one of another user's counts as alive)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_partials(path: "str | os.PathLike[str]") -> list[Path]:
+    """Remove the temporary files `replacing` left beside `path` (`.STEM.PID-TOKEN.partSUFFIX`) when their writer
+    was killed (SIGKILL, a power cut): those whose process no longer exists. Returns what was removed."""
+    path = Path(path)
+    removed = []
+    for partial in path.parent.glob(f".{glob.escape(path.stem)}.*.part{glob.escape(path.suffix)}"):
+        match = PARTIAL_NAME.fullmatch(partial.name[len(path.stem) + 2:-len(path.suffix) or None])
+        if match is None or _process_alive(int(match["pid"])):
+            continue
+        try:
+            partial.unlink()
+        except FileNotFoundError:  # another writer removed it first
+            continue
+        removed.append(partial)
+    return removed
 
 
 def write_text(path: "str | os.PathLike[str]", text: str) -> Path:

@@ -270,7 +270,8 @@ class SimPhysics:
         """Clutch clamped at `torque_nm` and the output braked for `duration_s`, whatever is commanded."""
         t = self.clock()
         self._cut(t)
-        self.stuck = (float(torque_nm), t + duration_s)
+        until = t + duration_s if self.stuck is None else max(self.stuck[1], t + duration_s)  # extends, never shortens
+        self.stuck = (float(torque_nm), until)
         self._apply_stuck(t)
 
     # -- DrivetrainProvider (CAN controllers) ------------------------------------------------------------

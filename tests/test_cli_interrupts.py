@@ -147,3 +147,36 @@ def test_a_signal_during_the_final_compaction_ends_the_run_aborted(tmp_path, nam
 
     assert proc.returncode == code, proc.stderr
     assert load_attrs(out)["status"] == "aborted" and not list(tmp_path.glob("*.lock"))
+
+
+_EARLY_CASE = '''
+import os, signal, sys
+import benchlab.console as console
+
+console.note_interrupts()  # as console.main does first
+os.kill(os.getpid(), signal.{signal})  # before benchlab.cli is imported
+assert "benchlab.cli" not in sys.modules
+sys.exit(console.main())
+'''
+
+
+@pytest.mark.parametrize("name, code, line", [("SIGTERM", 143, "benchlab: terminated"),
+                                              ("SIGINT", 130, "benchlab: interrupted")])
+def test_an_interrupt_before_the_command_line_has_loaded_is_answered_not_fatal(tmp_path, name, code, line):
+    """Issue 44: SIGTERM in the first part of a second (while benchlab.cli and its commands load) killed the
+    process by the default handler. The console script notes it from its first line; main answers it."""
+    (tmp_path / "early_case.py").write_text(_EARLY_CASE.format(signal=name))
+    root = str(Path(benchlab.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), root])}
+    proc = subprocess.run([sys.executable, "-m", "early_case", "run", "table1", "--bench", "sim", "--dry-run"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=WAIT_S)
+    assert proc.returncode == code, proc.stderr
+    assert proc.stderr.splitlines() == [line], proc.stderr
+    assert proc.stdout == ""  # nothing ran
+
+
+def test_the_console_script_is_the_one_that_notes_interrupts_first():
+    from importlib.metadata import entry_points
+
+    (script,) = [e for e in entry_points(group="console_scripts") if e.name == "benchlab"]
+    assert script.value == "benchlab.console:main"

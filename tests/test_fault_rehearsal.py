@@ -146,3 +146,54 @@ def test_the_readme_rehearsal_runs_as_it_says(tmp_path, capsys, monkeypatch):
     assert "interlock_cleared" in [k for _, k, _ in events]
     assert any("crc_errors 25" in d for _, k, d in events if k == "frame_errors")
     _assert_dropouts_pair_up(events)
+
+
+def test_a_silence_under_way_is_extended_by_a_later_one_never_shortened():
+    """The emulated node: a random 0.2 s drop-out 5 s into a rehearsed 30 s silence used to end the silence at
+    5.2 s (its end overwritten); the frames of the whole 30 s stay lost, and a later, longer one extends it."""
+    from sim_bench.emulators.clutch_node import ClutchNodeEmulator
+
+    now = [0.0]
+    node = ClutchNodeEmulator(clock=lambda: now[0], period_s=0.05)
+    node.radio_silence(30.0)
+    for t, silence in ((5.0, 0.2), (20.0, 1.0), (29.0, 6.0)):
+        now[0] = t
+        node.read_available()
+        node.radio_silence(silence)
+    now[0] = 34.9
+    assert node.read_available() == b"" and node.frames_sent == 0
+    now[0] = 40.0
+    assert node.read_available() and node.frames_sent == round((40.0 - 35.0) / 0.05) + 1
+
+
+def _node_frames_in(path: Path, start: float, end: float) -> int:
+    """Node frames the run file holds stamped in [start, end) (its /raw/node stream, as the PC received them)."""
+    with h5py.File(path, "r") as f:
+        t = f["raw/node/time"][:]
+    return int(((t >= start) & (t < end)).sum())
+
+
+@pytest.mark.parametrize("start, duration", [(127.0, 30.0), (40.0, 4.0)])
+def test_a_radio_silence_lasts_its_duration_on_the_bench(tmp_path, start, duration):
+    """The issue's rehearsal `radio_silence@127:duration_s=30` held 594 node frames in its 30 s: random drop-outs
+    (here one a minute) cut it short. On the bench it now lasts its length: no frame in it, frames up to it and
+    right after it at the node's rate (20 Hz)."""
+    from benchlab.runner.session import RunRequest, execute
+    from sim_bench.bench import SimulatedBench
+    from sim_bench.virtual_run import SensorConfig
+
+    out = tmp_path / "silence.h5"
+    bench = SimulatedBench(faults=[Fault(start, "radio_silence", duration_s=duration)],
+                           options={"sensors": SensorConfig(dropouts_per_hour=60.0, dropout_mean_s=0.5)})
+    code, _ = execute(RunRequest("table1", out, bench=bench, duration_s=start + duration + 30.0,
+                                 install_signals=False))
+    assert code == 0
+    with h5py.File(out, "r") as f:
+        starts = [float(t) for t, k in zip(f["events/time"][:], f["events/kind"][:]) if k == b"dropout_start"]
+    if duration >= 10:  # the case of the issue: a random drop-out started inside the silence
+        assert any(start < t < start + duration for t in starts), starts
+    rate = 20.0
+    assert _node_frames_in(out, start + 0.3, start + duration) == 0  # 0.3 s: frames sent before, received late
+    before, after = (_node_frames_in(out, start - 5.0, start), _node_frames_in(out, start + duration + 1.0,
+                                                                                 start + duration + 6.0))
+    assert after >= 0.8 * 5.0 * rate and before >= 0.8 * 5.0 * rate, (before, after)

@@ -267,3 +267,22 @@ def test_cooldown_refuses_parameters_of_a_model_that_is_not_the_clutch(tmp_path,
     assert main(["cooldown", str(run_file), "--params", str(tmp_path / "one.json"), "--no-store"]) == 2
     err = capsys.readouterr().err
     assert "one.json: params.C_P" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_run_channel_named_like_a_parameter_is_the_runs_fault_unless_the_contract_named_it(short_run):
+    """Issue 44: a channel an import's mapping added under a parameter's name (C_P) made diagnose blame the
+    built-in model file. The run's channel is named as the fault; a model whose parameter takes a contract
+    channel's name (load_torque) is the model file's."""
+    from benchlab.errors import InputError
+    from benchlab.model.runs import check_run
+
+    model = builtin("linear")
+    run = short_run.iloc[:200].copy()
+    run.attrs = {"source": "imported.h5"}
+    run["C_P"] = 1.0
+    with pytest.raises(InputError, match=r"^imported\.h5: /aligned/C_P: a channel name other than a parameter"):
+        check_run(model, run)
+    text = Path(model.source).read_text().replace("C_A", "load_torque")
+    renamed = parse_model(tomllib.loads(text), "renamed.toml")
+    with pytest.raises(InputError, match=r"^renamed\.toml: parameters\.load_torque: a name no channel"):
+        check_run(renamed, short_run.iloc[:200])

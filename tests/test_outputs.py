@@ -249,3 +249,24 @@ def test_a_resumed_runs_log_goes_on_and_a_new_one_needs_force(tmp_path):
         logs.stop_file(log)
     assert handler.stream.closed
     assert log.read_text().startswith("the first part\n") and "the second part" in log.read_text()
+
+
+def test_a_partial_file_of_a_killed_writer_is_removed_by_the_next_write(tmp_path):
+    """Issue 44: `import` or `export` killed mid-write left a hidden `.NAME.PID-TOKEN.part.EXT` for good. The next
+    write of that destination removes those of writers that no longer exist; a live writer's stays."""
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "table.csv"
+    code = (f"import os, signal\nfrom benchlab.outputs import replacing\nwith replacing({str(out)!r}) as tmp:\n"
+            "    tmp.write_text('half')\n    os.kill(os.getpid(), signal.SIGKILL)\n")
+    proc = subprocess.run([sys.executable, "-c", code], timeout=120)
+    assert proc.returncode == -signal.SIGKILL
+    (left,) = tmp_path.glob(".table.*.part.csv")
+    live = tmp_path / f".table.{os.getpid()}-0123abcd.part.csv"  # this process: a writer still at work
+    live.write_text("being written")
+    other = tmp_path / ".table.notes.part.csv"  # not a name replacing makes
+    other.write_text("")
+    write_text(out, "whole")
+    assert out.read_text() == "whole" and not left.exists() and live.exists() and other.exists()

@@ -121,6 +121,32 @@ def test_a_lock_file_left_by_a_killed_run_is_taken_over(tmp_path):
     assert not stale.exists() and lock.lock_path == stale
 
 
+def _killed_holder(tmp_path: Path, out: Path) -> None:
+    """A process that took the lock of `out` and was killed (SIGKILL) before it made the run file."""
+    import signal
+    import subprocess
+    import sys
+
+    code = (f"import os, signal\nfrom benchlab.acquire.lock import RunFileLock\nRunFileLock({str(out)!r}).acquire()\n"
+            "os.kill(os.getpid(), signal.SIGKILL)\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, timeout=120)
+    assert proc.returncode == -signal.SIGKILL and out.with_name(out.name + ".lock").exists() and not out.exists()
+
+
+def test_a_lock_left_before_its_run_file_existed_is_removed_by_the_next_run_in_the_directory(tmp_path):
+    """Issue 44: a run killed (SIGKILL) before it made its file left RUN.h5.lock for good. The next run in that
+    directory removes it; a lock a live run holds, one whose run file exists, and another tool's are kept."""
+    _killed_holder(tmp_path, tmp_path / "killed.h5")
+    (tmp_path / "resumable.h5").write_bytes(b"")  # its run file is there: the next run on it takes the lock over
+    (tmp_path / "resumable.h5.lock").write_text("999999\n")
+    (tmp_path / "other.h5.lock").write_text("held by another tool\n")
+    with RunFileLock(tmp_path / "live.h5"):
+        with RunFileLock(tmp_path / "next.h5"):
+            assert sorted(p.name for p in tmp_path.glob("*.lock")) == ["live.h5.lock", "next.h5.lock",
+                                                                       "other.h5.lock", "resumable.h5.lock"]
+    assert sorted(p.name for p in tmp_path.glob("*.lock")) == ["other.h5.lock", "resumable.h5.lock"]
+
+
 class _RaisesInFinaliser:
     """An object whose finaliser is hit by Ctrl-C: Python can only report that as unraisable."""
 

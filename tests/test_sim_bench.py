@@ -66,3 +66,19 @@ def test_same_seed_same_sensor_noise():
         readings.append((phys.get_resistances(), phys.node_inputs(2.95),
                          [getattr(actuals, f).tolist() for f in actuals.__dataclass_fields__]))
     assert readings[0] == readings[1]
+
+
+def test_a_stuck_clutch_during_one_under_way_extends_it_never_shortens_it():
+    """Issue 44 (the radio silence's overwrite, checked for every fault with a duration): a second, shorter
+    stuck_clutch at 10 s does not end the 60 s one at 15 s; a longer one extends it."""
+    clock = SimClock()
+    phys = SimPhysics(SimBenchConfig(seed=1), clock)
+    phys.stick_clutch(100.0, 60.0)
+    clock.sleep_until(10.0)
+    phys.advance(10.0)
+    phys.stick_clutch(80.0, 5.0)
+    assert phys.stuck == (80.0, 60.0)
+    clock.sleep_until(50.0)
+    phys.advance(50.0)
+    phys.stick_clutch(80.0, 30.0)
+    assert phys.stuck == (80.0, 80.0)

@@ -250,9 +250,8 @@ def _read_inputs(args: argparse.Namespace, required: tuple[str, ...] | None) -> 
     """Every input (MDF, CAN log, CSV) read and merged on the grid --dt, with the required channels (default: the
     clutch channels)."""
     from benchlab.drivetrain import DrivetrainFacts
-    from benchlab.importing.canlog import derive_bench_channels, is_can_log, read_can_log
+    from benchlab.importing.canlog import derive_bench_channels, read_foreign
     from benchlab.importing.mapping import read_mapping
-    from benchlab.importing.mdf import read_mdf
     from benchlab.importing.sources import merge
     from benchlab.runfile import REQUIRED
     from drivers.can_signals import BENCH_DBC
@@ -270,10 +269,8 @@ def _read_inputs(args: argparse.Namespace, required: tuple[str, ...] | None) -> 
     inputs = []
     for name in args.inputs:
         path = Path(name)
-        if path.suffix.lower() in CAN_SUFFIXES and is_can_log(path):
-            inputs.append(read_can_log(path, args.dbc or BENCH_DBC, mapped, DrivetrainFacts().gear_ratio))
-        elif path.suffix.lower() in MDF_SUFFIXES:
-            inputs.append(read_mdf(path, mapped))
+        if path.suffix.lower() in MDF_SUFFIXES + CAN_SUFFIXES:
+            inputs.append(read_foreign(path, mapped, args.dbc or BENCH_DBC, DrivetrainFacts().gear_ratio))
         else:
             inputs.append(_csv_input(args, path))
     found = {c.raw_name for i in inputs for c in i.channels} | {c.channel for i in inputs for c in i.channels}

@@ -8,12 +8,18 @@ ratio), clutch and load torque, and the actuator's clamp state, from which `clut
 are derived on the grid (derive_bench_channels). Every frame is decoded by the compiled codecs the drivers use
 (drivers/can_codec.py). Error frames, remote frames, frames of ids the DBC does not know and frames shorter than
 their message are counted and skipped; a file that stops being readable part-way keeps the frames before.
+
+python-can inflates a BLF log's containers whole, whatever they hold: before it reads one, `blf_inflated_size` sums
+what the log's containers declare they inflate to (the objects' headers alone), and more than the bound is refused
+(benchlab.importing.child.ReaderLimits, which also runs the reader in a child process within memory and CPU limits).
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import struct
+import zlib
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -21,7 +27,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from benchlab.bounds import MAX_BLF_INFLATION
 from benchlab.errors import InputError
+from benchlab.importing.child import ReaderLimits, read_in_child
 from benchlab.importing.mapping import Mapped
 from benchlab.importing.sources import Input, SourceChannel
 from benchlab.runfile.schema import ALIGNED_UNITS, unmeasurable_sample
@@ -35,6 +43,18 @@ UNIX_TIME_S = 1e8
 #: The internal channel of the actuator's clamp state (0 open, 1 slipping, 2 clamped) on the grid, as the bench's
 #: layout names it (benchlab.runner.devices.CAN_ALIGNED).
 CLAMP_STATE = "_clamp_state"
+#: A BLF file's header starts with "LOGG" and its own size (python-can's blf.FILE_HEADER_STRUCT); each object with
+#: "LOBJ", its header's size and version, its size and its type (OBJ_HEADER_BASE_STRUCT), padded to 4 bytes; a log
+#: container (type 10) then with its compression method and uncompressed size (LOG_CONTAINER_STRUCT).
+BLF_FILE_START = struct.Struct("<4sL")
+BLF_OBJECT = struct.Struct("<4sHHLL")
+BLF_CONTAINER = struct.Struct("<H6xL4x")
+BLF_LOG_CONTAINER = 10
+BLF_ZLIB = 2
+#: Frames read from a log kept as python-can's tuples before they become one array of FRAME records.
+FRAMES_PER_PART = 1 << 16
+#: Bytes inflated at a time when a container's declared size is checked.
+INFLATE_PIECE = 1 << 20
 
 
 def bench_entries(gear_ratio: float) -> list[Mapped]:
@@ -67,26 +87,98 @@ def is_can_log(path: Path) -> bool:
         mdf.close()
 
 
+def blf_inflated_size(path: Path) -> int:
+    """The bytes a BLF log's containers declare they inflate to, from the objects' headers (0 where the file is
+    not a BLF log: python-can says so); the walk stops where the objects do, as python-can's reader does.
+    InputError where a container inflates to more than it declares (inflated piecewise, never held whole)."""
+    size, total = path.stat().st_size, 0
+    with open(path, "rb") as f:
+        head = f.read(BLF_FILE_START.size)
+        if len(head) < BLF_FILE_START.size or head[:4] != b"LOGG":
+            return 0
+        at = BLF_FILE_START.unpack(head)[1]
+        while at + BLF_OBJECT.size + BLF_CONTAINER.size <= size:
+            f.seek(at)
+            block = f.read(BLF_OBJECT.size + BLF_CONTAINER.size)
+            signature, _, _, object_size, object_type = BLF_OBJECT.unpack_from(block)
+            if signature != b"LOBJ" or object_size < BLF_OBJECT.size:
+                break
+            if object_type == BLF_LOG_CONTAINER:
+                method, declared = BLF_CONTAINER.unpack_from(block, BLF_OBJECT.size)
+                total += declared
+                if method == BLF_ZLIB and _inflates_beyond(f.read(object_size - len(block)), declared):
+                    raise InputError(path, f"log container at byte {at}", f"at most the {declared} bytes it "
+                                                                          "declares uncompressed (it inflates to "
+                                                                          "more: a compression bomb)")
+            at += object_size + object_size % 4
+    return total
+
+
+def _inflates_beyond(data: bytes, declared: int) -> bool:
+    """Whether zlib data inflate to more than `declared` bytes, inflated a piece at a time and counted."""
+    inflater, produced = zlib.decompressobj(), 0
+    try:
+        while produced <= declared and data:
+            produced += len(inflater.decompress(data, INFLATE_PIECE))
+            data = inflater.unconsumed_tail
+    except zlib.error:  # damaged data: python-can's reader says so, with the frames before
+        return False
+    return produced > declared
+
+
+def _read_log_or_mdf(path: Path, mapped: list[Mapped], dbc: "str | os.PathLike[str]", gear_ratio: float) -> Input:
+    """The file as a CAN log (is_can_log) or else as an MDF file of signals."""
+    from benchlab.importing.mdf import read_mdf
+
+    return read_can_log(path, dbc, mapped, gear_ratio) if is_can_log(path) else read_mdf(path, mapped)
+
+
+def read_foreign(path: Path, mapped: list[Mapped], dbc: "str | os.PathLike[str]", gear_ratio: float) -> Input:
+    """An MDF file or a CAN log (by its suffix, and for `.mf4` by what it holds), read in a child process within
+    the limits its declared sizes give (benchlab.importing.child): a crash, a compression bomb or a reader that
+    does not end is one line naming the file."""
+    from benchlab.importing.mdf import inflated_size
+
+    if not path.is_file():
+        raise InputError(path, "file", "an existing file (not found)" if not path.exists() else "a file, not a "
+                                                                                             "directory")
+    suffix = path.suffix.lower()
+    if suffix == ".blf":
+        limits = ReaderLimits.for_input(path, blf_inflated_size(path), "log containers", MAX_BLF_INFLATION)
+    elif suffix in CAN_LOG_SUFFIXES and suffix != ".mf4":
+        limits = ReaderLimits.for_input(path)
+    else:
+        limits = ReaderLimits.for_input(path, inflated_size(path), "compressed blocks (##DZ)")
+    what = "an MDF file asammdf reads" if suffix in (".mdf", ".dat") else \
+        "a CAN log python-can reads" if suffix != ".mf4" else "an MF4 file asammdf reads"
+    return read_in_child(path, what, limits, _read_log_or_mdf, path, mapped, dbc, gear_ratio)
+
+
 def _frames(path: Path) -> tuple[np.ndarray, int, str | None]:
     """Every frame of the log as FRAME records, the count of unreadable ends (0 or 1), and why."""
     import can
 
-    from drivers.can_frames import frames_from_records, record
+    from drivers.can_frames import frames_from_records, join, record
 
     try:
         reader = can.LogReader(path)
     except (ValueError, OSError, EOFError) as exc:
         raise InputError(path, "file", f"a CAN log python-can reads ({type(exc).__name__}: {exc})") from None
-    records, broken = [], None
+    parts, records, broken = [], [], None
     try:
         with reader:
             for msg in reader:
                 records.append(record(msg))
+                if len(records) == FRAMES_PER_PART:  # as FRAME records: a third of the memory of the tuples
+                    parts.append(frames_from_records(records))
+                    records = []
     except Exception as exc:  # a truncated or corrupt container, a line no reader parses: the frames before stay
         broken = f"{type(exc).__name__}: {exc}"
-    if not records:
+    parts.append(frames_from_records(records))
+    frames = join(parts)
+    if not len(frames):
         raise InputError(path, "file", "a CAN log with frames" + (f" ({broken})" if broken else " (it holds none)"))
-    return frames_from_records(records), int(broken is not None), broken
+    return frames, int(broken is not None), broken
 
 
 def _signal(path: Path, db: Any, entry: Mapped) -> tuple[Any, Any] | None:
@@ -104,7 +196,7 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
                  gear_ratio: float) -> Input:
     """The log's frames decoded with `dbc`: the signals the mapping names and, for the bench's DBC, the bench's
     contract channels (module docstring), each at its frames' time stamps."""
-    from benchlab.runner.devices import load_dbc
+    from benchlab.runner.devices import duplicate_message, load_dbc
     from drivers.can_codec import compile_codecs
     from drivers.can_frames import ERROR, EXTENDED, REMOTE
 
@@ -113,6 +205,8 @@ def read_can_log(path: "str | os.PathLike[str]", dbc: "str | os.PathLike[str]", 
         db = load_dbc(str(dbc))
     except Exception as exc:  # cantools raises its own errors, and OSError, for a file it cannot parse
         raise InputError(dbc, "file", f"a CAN database (DBC) cantools reads ({type(exc).__name__})") from None
+    if (twice := duplicate_message(db)) is not None:
+        raise InputError(dbc, "messages", f"each message defined once (the {twice})")
     frames, broken, why = _frames(path)
     if broken:
         log.warning("%s: unreadable from frame %d on (%s); the frames before are imported", path, len(frames), why)

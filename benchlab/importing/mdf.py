@@ -5,11 +5,19 @@ names the MDF holds (what `benchlab export --to X.mf4` writes). Each is read wit
 its invalidation bits as NaN, scaled as the mapping says and converted to the contract's unit (benchlab.units);
 benchlab.importing.sources puts it on the grid `--dt` by its rule, from the header's start time, and keeps it as
 the file held it under /raw/<file>.<group>. The header comment becomes `source_comment`.
+
+asammdf trusts the sizes an MF4 file declares: before it opens one, `inflated_size` walks the file's blocks (MDF 4:
+every block reachable from the header by any link, so data lists ##DL, header lists ##HL and signal data too) and
+sums what its compressed blocks ##DZ declare they inflate to; more than the bound (benchlab.bounds MAX_INFLATION)
+is refused, and the reader runs in a child process within memory and CPU limits (benchlab.importing.child,
+through benchlab.importing.canlog.read_foreign, which also tells an MF4 of CAN bus logging from one of signals).
 """
 
 from __future__ import annotations
 
+import mmap
 import os
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +28,69 @@ from benchlab.importing.mapping import Mapped
 from benchlab.importing.sources import Input, SourceChannel
 from benchlab.runfile.schema import ALIGNED_UNITS, unmeasurable_sample
 from benchlab.units import to_stored
+
+
+#: An MDF 4 block's header (id "##XX", 4 reserved bytes, length, link count), then its links (file offsets, 0 none).
+BLOCK_HEADER = struct.Struct("<4s4xQQ")
+#: A ##DZ block after its header: original block type, zip type, reserved, zip parameter, original size, compressed
+#: size (ASAM MDF 4.2, DZBLOCK; asammdf's v4_constants.DZ_COMMON_INFO reads the last four).
+DZ_FIELDS = struct.Struct("<2sBxIQQ")
+#: The identification block before the header block (MDF 4: "MDF     " and the version, e.g. "4.10").
+HEADER_BLOCK_AT = 64
+LINK = struct.Struct("<Q")
+#: Blocks whose first link is the next block of their kind (ASAM MDF 4: data groups, channel groups, channels, data
+#: lists, attachments, events, channel hierarchies, file histories, sample reductions): readers follow it to its end.
+CHAINED_BLOCKS = frozenset({b"##DG", b"##CG", b"##CN", b"##DL", b"##AT", b"##EV", b"##CH", b"##FH", b"##SR"})
+
+
+def inflated_size(path: Path) -> int:
+    """The bytes an MDF 4 file's ##DZ blocks declare they inflate to, read from the block headers alone; 0 for an
+    older MDF (no compressed blocks). InputError where the blocks overlap (more of them than the file can hold) or
+    a chain of them loops back (a reader following it would never end)."""
+    size = path.stat().st_size
+    if size < HEADER_BLOCK_AT + BLOCK_HEADER.size:
+        return 0
+    with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        if data[:3] != b"MDF" or data[8:9] != b"4":
+            return 0
+        pending, seen, total, chained, kinds = [HEADER_BLOCK_AT], set(), 0, {}, {}
+        while pending:
+            at = pending.pop()
+            if at in seen or not 0 < at <= size - BLOCK_HEADER.size:
+                continue
+            seen.add(at)
+            if len(seen) > size // BLOCK_HEADER.size:
+                raise InputError(path, "blocks", "MDF blocks that do not overlap (more blocks than the file holds)")
+            block_id, _, links = BLOCK_HEADER.unpack_from(data, at)
+            if block_id[:2] != b"##":
+                continue
+            first = at + BLOCK_HEADER.size
+            count = min(links, (size - first) // LINK.size)
+            links = struct.unpack_from(f"<{count}Q", data, first)
+            pending.extend(links)
+            if block_id in CHAINED_BLOCKS and links:
+                chained[at], kinds[at] = links[0], block_id.decode(errors="replace")
+            if block_id == b"##DZ" and first + DZ_FIELDS.size <= size:
+                total += DZ_FIELDS.unpack_from(data, first)[3]
+    if (looped := _loop(chained)) is not None:
+        raise InputError(path, "blocks", f"chains of MDF blocks that end (the {kinds[looped]} block at byte {looped} "
+                                         "is reached again from its own next links)")
+    return total
+
+
+def _loop(following: dict[int, int]) -> int | None:
+    """A block whose chain of next links (`following`: block -> next block) comes back to it, None if none does."""
+    done: set[int] = set()
+    for start in following:
+        path: dict[int, None] = {}
+        at = start
+        while at in following and at not in done:
+            if at in path:
+                return at
+            path[at] = None
+            at = following[at]
+        done.update(path)
+    return None
 
 
 def _open(path: Path) -> Any:

@@ -88,11 +88,9 @@ def merge(inputs: list[Input], dt: float, offsets: dict[Path, float] | None = No
         raise InputError(where, "channels", "channels with the contract's names, or a mapping file (--mapping)")
     finite = [c.stamps[np.isfinite(c.stamps)] + s for c, s, _ in chosen.values()]
     finite = [t for t in finite if len(t)]
+    _check_one_run(where, inputs, shifts)
     t0 = min(float(t.min()) for t in finite) if finite else 0.0
     span = max(float(t.max()) for t in finite) - t0 if finite else 0.0
-    if span > MAX_RUN_DURATION_S:
-        raise InputError(where, "time stamps", f"a run of at most {MAX_RUN_DURATION_S:g} s, got {span:g} s (do "
-                                               "the inputs' clocks agree? --offset FILE=S)")
     rows = int(np.floor(span / dt + 1e-9)) + 1
     if rows > MAX_IMPORT_ROWS:
         raise InputError(where, "--dt", f"a grid of at most {MAX_IMPORT_ROWS} rows over the inputs' {span:g} s, "
@@ -113,6 +111,24 @@ def merge(inputs: list[Input], dt: float, offsets: dict[Path, float] | None = No
         attrs["import_skipped"] = json.dumps(skipped)
     sources = {name: {"from": c.origin} for name, (c, _, _) in chosen.items()}
     return Merged(frame, units, attrs, sources, _raw(inputs, shifts, t0))
+
+
+def _check_one_run(where: "str | Path", inputs: list[Input], shifts: list[float]) -> None:
+    """InputError where the inputs' samples on the common clock (every channel, the ones another input gives too)
+    span more than a run lasts: clocks that far apart are not one run."""
+    ends = [(float(t.min()) + shift, float(t.max()) + shift, source.path)
+            for shift, source in zip(shifts, inputs) for c in source.channels
+            if len(t := c.stamps[np.isfinite(c.stamps)])]
+    if not ends:
+        return
+    first, last = min(ends, key=lambda e: e[0]), max(ends, key=lambda e: e[1])
+    span = last[1] - first[0]
+    if span > MAX_RUN_DURATION_S:
+        apart = (f"{span:g} s from the start of {first[2].name} to the end of {last[2].name}"
+                 if first[2] != last[2] else f"{span:g} s")
+        raise InputError(where, "time stamps", f"one run of at most {MAX_RUN_DURATION_S:g} s, got {apart} (clocks "
+                                               "that far apart are not one run: --offset FILE=S if a logger's clock "
+                                               "was wrong)")
 
 
 def _raw(inputs: list[Input], shifts: list[float], t0: float) -> tuple[RawStream, ...]:

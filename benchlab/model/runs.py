@@ -20,7 +20,8 @@ from benchlab.runfile import ALIGNED_UNITS, load_run
 
 def check_run(model: ModelDefinition, run: pd.DataFrame, params: Mapping[str, float] | None = None,
               params_source: str = "") -> None:
-    """Bad input where the run lacks what the model reads, a channel shares a parameter's name, or a law is no number
+    """Bad input where the run lacks what the model reads, a channel shares a parameter's name (the model's fault for
+    a contract channel, the run's for one its maker added), or a law is no number
     the solver can use on the run (check_laws; at `params`, read from `params_source`, where given)."""
     source = str(run.attrs.get("source", "<run>"))
     usable = {c for c in run.columns if not np.isnan(run[c].to_numpy(np.float64)).all()}
@@ -37,8 +38,12 @@ def check_run(model: ModelDefinition, run: pd.DataFrame, params: Mapping[str, fl
             raise InputError(source, f"/aligned/{channels[-1]}",
                              f"at least one valid sample (boundary {boundary} of model {model.label})")
     for name in model.parameters:
-        if name in run.columns:
+        if name in run.columns and name in ALIGNED_UNITS:  # the contract's channel: the model chose the name
             raise InputError(model.source, f"parameters.{name}", f"a name no channel of {source} has")
+        if name in run.columns:  # a channel the run's maker added (an import's mapping): the run's name is at fault
+            raise InputError(source, f"/aligned/{name}", f"a channel name other than a parameter's of model "
+                                                         f"{model.label} (rename the channel where the run was made, "
+                                                         "e.g. in the import's mapping file)")
     check_laws(model, run, params, params_source)
 
 

@@ -18,7 +18,7 @@ import cantools
 from benchlab.bounds import BENCH_NUMBER_RANGES
 from benchlab.drivetrain import DrivetrainFacts
 from benchlab.errors import InputError, read_document
-from benchlab.runner.devices import BenchConfig, load_dbc, status_cycle_s
+from benchlab.runner.devices import BenchConfig, duplicate_message, load_dbc, status_cycle_s
 from benchlab.runner.opening import check_address
 from benchlab.values import check_keys, finite_number, positive_number
 from drivers import cvd
@@ -95,6 +95,8 @@ def _check_dbc(dbc_path: Path, src: str) -> Any:
     except (cantools.database.Error, ValueError, OSError, UnicodeDecodeError) as exc:
         detail = (str(exc).splitlines() or [""])[0][:120].encode("ascii", "backslashreplace").decode()
         raise InputError(src, "can.dbc", f"a DBC file cantools can load ({dbc_path}: {detail})") from None
+    if (twice := duplicate_message(db)) is not None:
+        raise InputError(src, "can.dbc", f"a DBC defining each message once ({dbc_path} has the {twice})")
     names = {m.name: {s.name for s in m.signals} for m in db.messages}
     for message, signal in BENCH_SIGNALS.values():
         if signal not in names.get(message, ()):

@@ -273,6 +273,19 @@ def load_dbc(path: str) -> Any:
     return cantools.database.load_file(path)
 
 
+def duplicate_message(db: Any) -> str | None:
+    """What a CAN database defines twice (a frame id or a message name held by two messages), in words; None where
+    each is defined once (a decoder keyed by either would silently keep one of the two)."""
+    seen: dict[object, str] = {}
+    for message in db.messages:
+        frame = (message.frame_id, message.is_extended_frame)
+        for key, what in ((frame, f"frame id {message.frame_id:#x}"), (message.name, "message name")):
+            if key in seen:
+                return f"{what} of both {seen[key]} and {message.name}"
+            seen[key] = message.name
+    return None
+
+
 def bench_dbc(config: BenchConfig) -> Any:
     """The bench's CAN database (the configured DBC or drivers/bench.dbc), parsed once per file."""
     return load_dbc(config.dbc or str(BENCH_DBC))

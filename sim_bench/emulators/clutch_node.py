@@ -70,14 +70,15 @@ class ClutchNodeEmulator:
 
     # -- fault hooks ---------------------------------------------------------------------------------
     def radio_silence(self, duration_s: float) -> None:
-        """Frames sent in the next `duration_s` are lost on the radio (the node keeps counting)."""
-        self._silent_until = self.clock() + duration_s
+        """Frames sent in the next `duration_s` are lost on the radio (the node keeps counting). A silence extends
+        one under way, never shortens it: a short random drop-out during a rehearsed 30 s silence ends nothing."""
+        self._silent_until = max(self._silent_until, self.clock() + duration_s)
 
     def power_loss(self, duration_s: float) -> None:
-        """The inductive supply fails for `duration_s`: no frames, then the node reboots."""
-        now = self.clock()
-        self._off_until = now + duration_s
-        self._boot(now + duration_s)
+        """The inductive supply fails for `duration_s`: no frames, then the node reboots (a loss during one under
+        way extends it, never shortens it)."""
+        self._off_until = max(self._off_until, self.clock() + duration_s)
+        self._boot(self._off_until)
 
     def restart(self) -> None:
         """The node reboots now: seq 0, node clock 0, NODE_RESET on the first frame."""
