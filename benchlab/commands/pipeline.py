@@ -265,6 +265,9 @@ def run(args: argparse.Namespace) -> int:
     write_text(out / "wear.json", json.dumps(wear, indent=2, default=float))
     plot_wear(wear_report, out / "wear.png")
     print(f"wear      {wear['engagements']} engagements, {wear['friction_energy_J'] / 1e6:.2f} MJ -> {out / 'wear.json'}")
+    for side, values in wear.get("from_observer", {}).items():
+        print(f"          {side} side at the observer's estimate {1000 * values['estimate']:.4f} µm, over its ±2σ band "
+              f"{1000 * values['low']:.4f}-{1000 * values['high']:.4f} µm; at the truth {1000 * values['truth']:.4f} µm")
     compared = [("linear", linear), ("nonlinear", nonlinear)]
     if comparison.sweep_model is not None:
         compared.append((SWEEP_MODEL, load_params(out / f"{SWEEP_MODEL}.json")))
