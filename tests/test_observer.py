@@ -109,14 +109,17 @@ def test_wrong_r0_corrected_online_with_t_air(validation, identified):
 
 
 def test_a_right_model_keeps_a_calibrated_band_when_widened(validation, identified):
-    """The model-form spread shrinks when the model is right: the paper's plant, parameters identified from it."""
+    """The model-form spread shrinks when the model is right: the paper's plant, parameters identified from it. The
+    filter alone is too sure of the identified parameters (measured: its band held the plate 32 % of the time)."""
     run, truth, _ = validation
     observed = observe(run, identified, ["T_flywheel", "T_air", "T_housing"])
     wide = widened(observed, model_spread(run, identified, [PLATE])).estimate
     error = np.abs(wide[PLATE].to_numpy() - truth[PLATE].to_numpy())
-    std, filtered = wide[PLATE + "_std"].to_numpy(), observed.estimate[PLATE + "_std"].to_numpy()
+    std = wide[PLATE + "_std"].to_numpy()
     assert np.mean(error <= 2 * std) >= 0.9
-    assert np.mean(std) <= 2 * np.mean(filtered), (np.mean(std), np.mean(filtered))  # not blown up
+    calibrated = 2 * np.sqrt(np.mean(error ** 2))  # the half-width a calibrated ±2σ band would have
+    assert np.mean(2 * std) <= 2 * calibrated, (np.mean(2 * std), calibrated)  # not blown up: at most twice that
+    assert np.mean(2 * std) < 1.0  # a right model's band stays within the sensors' class, not the reference's 10 K
 
 
 @pytest.mark.parametrize("adapt", [(), ("R_PA",)])

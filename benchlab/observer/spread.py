@@ -78,21 +78,23 @@ def parameter_draws(params: ModelParams, draws: int = DRAWS, seed: int = SEED) -
 def model_spread(run: pd.DataFrame, params: ModelParams, channels: Sequence[str], draws: int = DRAWS
                  ) -> pd.DataFrame:
     """Per channel the standard deviation (K) of the open-loop prediction across `parameter_draws`, on the run's
-    grid; zeros when the parameter file states no uncertainty."""
+    grid (the channels the model simulates); zeros when the parameter file states no uncertainty."""
     sets = parameter_draws(params, draws)
     if not sets:
         return pd.DataFrame({c: np.zeros(len(run)) for c in channels}, index=run.index)
-    predictions = [simulate(run, p, params.network)[list(channels)].to_numpy() for p in sets]
-    return pd.DataFrame(np.std(predictions, axis=0, ddof=1), columns=list(channels), index=run.index)
+    predictions = [simulate(run, p, params.network) for p in sets]
+    named = [c for c in channels if c in predictions[0].columns]
+    spread = np.std([prediction[named].to_numpy() for prediction in predictions], axis=0, ddof=1)
+    return pd.DataFrame(spread, columns=named, index=run.index)
 
 
 def widened(observation: Observation, spread: pd.DataFrame) -> Observation:
     """The observation with each state no sensor reads given σ = √(σ²_filter + spread²) (module doc); the
-    filter's own σ kept as `<name>_filter_std`."""
+    filter's own σ kept as `<name>_filter_std`. A state without spread (no uncertainty stated) is left as it is."""
     estimate = observation.estimate.copy()
     model = observation.model
     for name in (model.names[s] for s in model.states):
-        if name in spread.columns and name not in model.sensors:
+        if name in spread.columns and name not in model.sensors and spread[name].to_numpy().any():
             filtered = estimate[name + STD_SUFFIX].to_numpy()
             estimate[name + FILTER_STD_SUFFIX] = filtered
             estimate[name + STD_SUFFIX] = np.sqrt(filtered ** 2 + spread[name].to_numpy() ** 2)
