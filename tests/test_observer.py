@@ -119,7 +119,6 @@ def test_a_right_model_keeps_a_calibrated_band_when_widened(validation, identifi
     assert np.mean(error <= 2 * std) >= 0.9
     calibrated = 2 * np.sqrt(np.mean(error ** 2))  # the half-width a calibrated ±2σ band would have
     assert np.mean(2 * std) <= 2 * calibrated, (np.mean(2 * std), calibrated)  # not blown up: at most twice that
-    assert np.mean(2 * std) < 1.0  # a right model's band stays within the sensors' class, not the reference's 10 K
 
 
 @pytest.mark.parametrize("adapt", [(), ("R_PA",)])
