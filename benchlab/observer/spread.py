@@ -45,10 +45,12 @@ SEED = 0
 
 
 def _coordinate(spec: ParamSpec, value: float) -> float:
+    """A value in the coordinate the fit moves it in: log for positive parameters, the value itself otherwise."""
     return float(np.log(value)) if spec.log else value
 
 
 def _value(spec: ParamSpec, coordinate: float) -> float:
+    """A coordinate back to a value, kept within the parameter's search bounds."""
     value = float(np.exp(coordinate)) if spec.log else coordinate
     return float(np.clip(value, spec.lower, spec.upper))
 
