@@ -99,6 +99,11 @@ class PlateCheck:
     hotter_model_k: float
     band: "PlateBand | None" = None
 
+    @property
+    def band_coverage(self) -> float:
+        """The share of samples the observer's ±2σ band holds the truth's plate (NaN without a band)."""
+        return self.band.plate_band_coverage if self.band is not None else float("nan")
+
 
 @dataclass(frozen=True)
 class PlateBand:
