@@ -142,3 +142,22 @@ def test_the_output_is_a_run_file_export_and_watch_take(files, tmp_path):
         assert mdf.get("estimated.T_pressure_plate").unit == "degC"
     finally:
         mdf.close()
+
+
+def test_the_unmeasured_states_band_carries_the_identifications_uncertainty(files, capsys):
+    """A parameter file with standard errors widens the band of the states no sensor reads, keeps the filter's
+    beside it, and leaves the measured ones alone; without them (the paper's values) it says there is none."""
+    assert _observe(files, "--sensors", "T_air", "--out", str(files / "bare.h5")) == 0
+    assert "states no uncertainty" in capsys.readouterr().out
+    params = paper_params()
+    save_params(files / "se.json", params, {"uncertainty": {name: 0.1 * abs(v) for name, v in params.items()}})
+    out = files / "spread.h5"
+    assert main(["observe", str(files / "run.h5"), "--params", str(files / "se.json"), "--sensors", "T_air",
+                 "--out", str(out)]) == 0
+    assert "model-form spread" in capsys.readouterr().out
+    with h5py.File(out, "r") as f:
+        group = f["estimated"]
+        assert group["T_pressure_plate_filter_std"].attrs["units"] == "K" and "T_air_filter_std" not in group
+        assert np.all(group["T_pressure_plate_std"][()] >= group["T_pressure_plate_filter_std"][()])
+        assert np.mean(group["T_pressure_plate_std"][()] > group["T_pressure_plate_filter_std"][()]) > 0.5
+        assert json.loads(f.attrs["model_spread"])["draws"] > 0

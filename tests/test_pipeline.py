@@ -114,6 +114,11 @@ def _check_index(out):
     # the paper's plate: hotter than the flywheel while slipping, more so in the plant than the model assumes
     hotter = re.search(r"the plate is ([\d.]+) K hotter than the flywheel in truth, (-?[\d.]+) K by the model", text)
     assert hotter and float(hotter.group(1)) > float(hotter.group(2)), hotter
+    # the plate's band with what the model cannot explain, and the wear per side it carries, against the truth
+    covered = re.search(r"covers the truth ([\d.]+) % of the samples \(target ≥ 85 %\), mean half-width ([\d.]+) K; "
+                        r"the filter's band alone ([\d.]+) K", text)
+    assert covered and float(covered.group(2)) > float(covered.group(3)), covered
+    assert "within the band" in text and "at the truth" in text
 
 
 _IMAGES = "Array.from(document.images).map(i => [i.getAttribute('src'), i.complete, i.naturalWidth])"

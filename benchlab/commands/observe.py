@@ -85,6 +85,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="W", help="heat-flow noise density on every node (default: from the residuals)")
     parser.add_argument("--sensor-noise", type=_sensor_noise, action="append", default=[], metavar="CHANNEL=K",
                         help="reading noise of a sensor (default: its residual RMS); repeatable")
+    parser.add_argument("--no-model-spread", action="store_true",
+                        help="the filter's band alone for the states no sensor reads (default: widened by the spread "
+                             "of their prediction across the parameter sets the identification holds plausible)")
     parser.add_argument("--clutch", help="clutch file (TOML) for the online wear; default: documented assumptions")
     parser.add_argument("--out", required=True, type=cliargs.output_file, help="file to write: the run's root attributes and /aligned plus "
                                                                           "/estimated (a run file)")
@@ -102,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.observer.batch import STD_SUFFIX, WEAR_UNITS, estimated_wear, observe
         from benchlab.observer.consistency import WINDOW_S
         from benchlab.observer.noise import tune_noise, with_overrides
+        from benchlab.observer.spread import DRAWS, FILTER_STD_SUFFIX, model_spread, widened
         from benchlab.runfile import load_truth, write_beside_run
         from benchlab.wear.clutchfile import default_clutch, load_clutch
     inputs = [args.run, args.params, *([args.clutch] if args.clutch else [])]
@@ -120,6 +124,11 @@ def run(args: argparse.Namespace) -> int:
     noise = with_overrides(tune_noise(network, params, channels, args.initial_offset), args.process_noise,
                            dict(args.sensor_noise), args.initial_std)
     result = observe(measured, params, args.sensors, network, args.reinit, args.initial_offset, noise, args.adapt)
+    unmeasured = [result.model.names[s] for s in result.model.states
+                  if result.model.names[s] not in result.model.sensors]
+    spread = None if args.no_model_spread else model_spread(measured, params, unmeasured)
+    if spread is not None:
+        result = widened(result, spread)
     truth = load_truth(args.run)
     units = {name: ("K/W" if name in result.model.adapted else "degC") for name in result.estimate.columns
              if not name.endswith(STD_SUFFIX)}
@@ -128,6 +137,10 @@ def run(args: argparse.Namespace) -> int:
         columns[name] = (result.estimate[name].to_numpy(), unit, f"observer estimate of {name}")
         columns[name + STD_SUFFIX] = (result.estimate[name + STD_SUFFIX].to_numpy(), "K/W" if unit == "K/W" else "K",
                                       f"standard deviation of the estimate of {name}")
+        if name + FILTER_STD_SUFFIX in result.estimate:
+            columns[name + FILTER_STD_SUFFIX] = (result.estimate[name + FILTER_STD_SUFFIX].to_numpy(), "K",
+                                                 f"standard deviation of the estimate of {name} given the parameter "
+                                                 f"file (the filter's alone, without the model-form spread)")
     wear = estimated_wear(measured, result, params, clutch)
     for name, values in (wear or {}).items():
         columns[name] = (values, WEAR_UNITS[name], "wear at the estimated temperatures, cumulative")
@@ -138,7 +151,9 @@ def run(args: argparse.Namespace) -> int:
         "reinit": json.dumps([[r.channel, r.time_s] for r in args.reinit]), "adapt": json.dumps(result.model.adapted),
         "initial_offset_K": float(args.initial_offset), "noise": json.dumps(noise.as_dict()),
         "observability": json.dumps(seen.as_dict()),
-        "consistency": json.dumps([c.as_dict() for c in result.consistency])})
+        "consistency": json.dumps([c.as_dict() for c in result.consistency]),
+        "model_spread": json.dumps({"states": [] if spread is None else list(spread.columns),
+                                    "draws": 0 if spread is None or not spread.to_numpy().any() else DRAWS})})
     print(f"{args.out}: {len(measured)} samples, {params.model} model, sensors "
           f"{', '.join(result.model.sensors) or 'none (open loop)'}, noise from {noise.origin}")
     observable = [s for s in seen.states if seen.observable[s]]
@@ -154,6 +169,13 @@ def run(args: argparse.Namespace) -> int:
     if wrong:
         print(f"warning: the ±2σ band is not to be trusted: the innovations of {', '.join(wrong)} exceed the "
               f"filter's stated spread (the model or its noise is wrong; unmeasured states' bands are too narrow)")
+    if spread is not None and spread.to_numpy().any():
+        widths = ", ".join(f"{name} mean 2σ {np.mean(2 * result.estimate[name + STD_SUFFIX]):.3g} K (filter alone "
+                           f"{np.mean(2 * result.estimate[name + FILTER_STD_SUFFIX]):.3g} K)" for name in spread.columns)
+        print(f"model-form spread of the states no sensor reads, over {DRAWS} parameter sets the identification "
+              f"holds plausible (docs/observer.md): {widths}")
+    elif spread is not None:
+        print("the parameter file states no uncertainty: the bands are the filter's alone, given its parameters")
     time = measured["time"].to_numpy()
     for name, unit in units.items():
         value, spread = result.estimate[name].to_numpy(), result.estimate[name + STD_SUFFIX].to_numpy()

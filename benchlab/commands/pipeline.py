@@ -119,21 +119,25 @@ def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
     return summary
 
 
-def _plate(validation: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame):
-    """The unmeasured plate on the validation run: the model's simulation and the observer's estimate (flywheel, air
-    and housing sensors) against /truth; None where the run has no truth."""
+def _plate(run: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame):
+    """The unmeasured plate on a run: the model's simulation and the observer's estimate (flywheel, air and housing
+    sensors; its band widened by the model-form spread, benchlab.observer.spread) against /truth, with the wear per
+    side over the band; None where the run has no truth."""
     with interrupts_held():
         from benchlab.observer.batch import observe
-        from benchlab.report.showcase import plate_check
+        from benchlab.observer.spread import model_spread, widened
+        from benchlab.report.showcase import PLATE, plate_band, plate_check
         from benchlab.runfile import load_truth
+        from benchlab.wear import default_clutch
 
     truth = load_truth(path)
     if truth is None:
         return None
-    observed = observe(validation, nonlinear, ["T_flywheel", "T_air", "T_housing"])
-    estimates = {"model": model["T_pressure_plate"].to_numpy(),
-                 "observer": observed.estimate["T_pressure_plate"].to_numpy()}
-    return plate_check(validation, truth, estimates, model)
+    observed = widened(observe(run, nonlinear, ["T_flywheel", "T_air", "T_housing"]),
+                       model_spread(run, nonlinear, [PLATE]))
+    estimates = {"model": model[PLATE].to_numpy(), "observer": observed.estimate[PLATE].to_numpy()}
+    return plate_check(run, truth, estimates, model, plate_band(run, truth, observed, model, nonlinear,
+                                                                default_clutch()))
 
 
 def _sweep_comparison(fitting: pd.DataFrame, validation: pd.DataFrame, nonlinear, out: Path, figures: dict,
@@ -243,6 +247,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"plate     against /truth: model RMSE {plate.rmse_k['model']:.2f} K, observer "
               f"{plate.rmse_k['observer']:.2f} K; plate hotter than the flywheel while slipping by "
               f"{plate.hotter_truth_k:.2f} K (truth), {plate.hotter_model_k:.2f} K (model)")
+        print(f"          observer's ±2σ band (model-form spread included) covers the truth "
+              f"{100 * plate.band.plate_band_coverage:.1f} % of the samples, mean half-width "
+              f"{plate.band.half_width_k:.2f} K (filter alone {plate.band.filter_half_width_k:.2f} K)")
+        if plate.band.observer_note:
+            print(f"          note: {plate.band.observer_note}")
     page = write_report(fitting, nonlinear, out / "report", compare=linear, validation=[validation],
                         sweep=out / "sweep.h5", progress=progress)
     print(f"report    nonlinear against linear, validated on {out / 'validation.h5'}, Fig. 3 measured on "
@@ -250,9 +259,15 @@ def run(args: argparse.Namespace) -> int:
     diagnosis = _diagnose(fitting, out, progress)
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()
+    story["wear_band"] = _plate(fitting, out / "table1.h5", nonlinear, sims["fit"]["nonlinear"])
+    if story["wear_band"] is not None:
+        wear["from_observer"] = story["wear_band"].band.as_dict()["wear_mm"]
     write_text(out / "wear.json", json.dumps(wear, indent=2, default=float))
     plot_wear(wear_report, out / "wear.png")
     print(f"wear      {wear['engagements']} engagements, {wear['friction_energy_J'] / 1e6:.2f} MJ -> {out / 'wear.json'}")
+    for side, values in wear.get("from_observer", {}).items():
+        print(f"          {side} side at the observer's estimate {1000 * values['estimate']:.4f} µm, over its ±2σ band "
+              f"{1000 * values['low']:.4f}-{1000 * values['high']:.4f} µm; at the truth {1000 * values['truth']:.4f} µm")
     compared = [("linear", linear), ("nonlinear", nonlinear)]
     if comparison.sweep_model is not None:
         compared.append((SWEEP_MODEL, load_params(out / f"{SWEEP_MODEL}.json")))

@@ -14,7 +14,7 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
@@ -27,6 +27,9 @@ from benchlab.report.html import STYLE
 from benchlab.report.page import error_cell, number
 from benchlab.report.scores import estimate
 from benchlab.runfile import event_steps, load_attrs, load_events, load_schedule
+
+if TYPE_CHECKING:
+    from benchlab.report.showcase import PlateBand
 
 PAGE = "index.html"
 #: The paper's published error figures (section 4): Table 1 identification, five validation runs, and the
@@ -203,7 +206,31 @@ def _story_sections(story: Mapping[str, Any]) -> list[str]:
                 f"<p>While slipping the plate is {_num(plate.hotter_truth_k, 2, ' K')} hotter than the flywheel in "
                 f"truth, {_num(plate.hotter_model_k, 2, ' K')} by the model (the paper: ϑ_P ≈ ϑ_F assumed, "
                 "“slightly higher” expected).</p>"]
+        if plate.band is not None:
+            out.append(_plate_band(plate.band))
     return out
+
+
+def _plate_band(band: "PlateBand") -> str:
+    """The observer's ±2σ band of the plate against the truth (benchlab.report.showcase.PlateBand)."""
+    text = (f"<p>The observer's ±2σ band, widened by the spread of the plate across the parameter sets the "
+            f"identification holds plausible (docs/observer.md), covers the truth "
+            f"{_num(100 * band.plate_band_coverage, 1, ' %')} of the samples (target ≥ 85 %), mean half-width "
+            f"{_num(band.half_width_k, 2, ' K')}; the filter's band alone {_num(band.filter_half_width_k, 2, ' K')}.")
+    if band.observer_note:
+        text += f" <b>Note:</b> {html.escape(band.observer_note)}."
+    return text + "</p>"
+
+
+def _wear_band(band: "PlateBand") -> str:
+    """Wear per side at the observer's estimate with its band against the wear at the truth's temperatures."""
+    rows = [[side, _num(1000 * e, 4, " µm"), f"{_num(1000 * lo, 4)} – {_num(1000 * hi, 4, ' µm')}",
+             _num(1000 * band.truth_wear_mm[side], 4, " µm"), "yes" if band.wear_covered(side) else "<b>no</b>"]
+            for side, (e, lo, hi) in band.wear_mm.items()]
+    return ("<p>The same wear law at the observer's estimate, over its ±2σ band (every sample at the same side of "
+            "it: a model's error lasts), against the law at the plant's true temperatures (same friction power "
+            "and heat split; Table 1 run):</p>"
+            + _table(("side", "wear at the estimate", "over the ±2σ band", "at the truth", "within the band"), rows))
 
 
 def _diagnosis_alternatives(findings: Sequence[Mapping[str, Any]]) -> str:
@@ -286,6 +313,7 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         f"P50 {_num(p50, 0) if p50 is not None else 'beyond the horizon'} engagements; "
         f"P(worn within {life['horizon_engagements']}) = {_num(life['p_fail_within_horizon'], 3)}.</p>",
         _wear_sides(wear),
+        *([_wear_band(story["wear_band"].band)] if story and story.get("wear_band") is not None else []),
         _figure(out, out / "wear.png", "Energy, lining temperatures, wear per side and remaining-life distribution"),
         '<p>All numbers: <a href="wear.json">wear.json</a>.</p>',
     ]

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from benchlab.wear.clutchfile import ClutchSpec
-from benchlab.wear.state import WearState
+from benchlab.wear.state import SIDES, WearState
 
 
 @dataclass(frozen=True)
@@ -44,3 +44,21 @@ def wear_history(spec: ClutchSpec, power_w: np.ndarray, split: float, plate_temp
     increments = {"wear_plate_mm": wear_p, "wear_flywheel_mm": wear_f, "loss_plate": loss_p, "loss_flywheel": loss_f}
     cumulative = {name: getattr(initial, name) + np.cumsum(values) for name, values in increments.items()}
     return WearHistory(increments, cumulative)
+
+
+#: The temperature paths a band is read at: estimate + k·σ for these k (both edges of ±2σ and between, so a
+#: wear-rate map that is not monotone in the temperature is still bounded over the band).
+BAND_STEPS = np.linspace(-2.0, 2.0, 9)
+
+
+def wear_over_band(spec: ClutchSpec, power_w: np.ndarray, split: float, plate_c: np.ndarray, plate_std_k: np.ndarray,
+                   flywheel_c: np.ndarray, flywheel_std_k: np.ndarray, dt: float) -> dict[str, tuple[float, float, float]]:
+    """Wear per face this run (mm) per side: (at the estimate, least, most over the ±2σ band). The band is taken
+    whole (every sample at the same k): an error that comes from the model is a bias that lasts, not noise that
+    averages out, and a wear sum over a run inherits it in full."""
+    finals: dict[str, list[float]] = {side: [] for side in SIDES}
+    for k in (0.0, *BAND_STEPS):
+        history = wear_history(spec, power_w, split, plate_c + k * plate_std_k, flywheel_c + k * flywheel_std_k, dt)
+        for side in finals:
+            finals[side].append(history.final().wear_mm(side) - spec.initial.wear_mm(side))
+    return {side: (values[0], min(values), max(values)) for side, values in finals.items()}

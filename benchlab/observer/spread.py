@@ -1,0 +1,103 @@
+"""Model-form spread of the states no sensor reads: what the identification leaves open, carried into the band.
+
+The Kalman band of a state no sensor reads (the pressure plate) is conditional on the parameter file being the
+plant: it holds the noise, not the model's doubt. The identification states that doubt itself: a covariance of
+the fitted parameters (`uncertainty` and `correlation` in the parameter file) and the parameters the runs do not
+identify (`benchlab.identify.identifiability.not_identified`). Every parameter set in that region fits the
+measured channels about as well, and each predicts its own plate. By the law of total variance the spread of the
+estimate is the filter's (given the parameters) plus the variance of the prediction across the plausible
+parameter sets:
+
+    σ² = σ²_filter + Var_θ[x̂(θ)]
+
+The second term is estimated by Monte Carlo: DRAWS parameter sets, the identified ones drawn from the normal
+law of the stated covariance in the coordinates the fit uses (log for positive parameters, so a draw stays
+positive), the not-identified ones uniformly over their search range in the same coordinate (the data say
+nothing beyond the bounds the model file sets), each simulated open loop on the run. Open loop, because the
+term is added only to states no sensor reads, which the sensors barely steer (their innovations reach them only
+through the model's couplings); a measured state keeps the filter's spread, which its readings check (NIS).
+Nothing here looks at what the band is later scored against: a right model with well-identified parameters
+draws close together and the band stays the filter's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+
+from benchlab.identify.identifiability import not_identified
+from benchlab.identify.spec import ParamSpec
+from benchlab.model.catalog import model_spec
+from benchlab.model.params import ModelParams
+from benchlab.network.simulation import simulate
+from benchlab.observer.batch import STD_SUFFIX, Observation
+from benchlab.report.resistance import correlations, standard_errors
+
+#: Parameter sets drawn: the spread's relative sampling error is about 1/√(2·DRAWS), 12 %.
+DRAWS = 32
+#: The filter's own σ of a widened state (the band given the parameter file), beside the widened `<name>_std`.
+FILTER_STD_SUFFIX = "_filter_std"
+#: The draws' seed: the same parameter file on the same run gives the same band.
+SEED = 0
+
+
+def _coordinate(spec: ParamSpec, value: float) -> float:
+    """A value in the coordinate the fit moves it in: log for positive parameters, the value itself otherwise."""
+    return float(np.log(value)) if spec.log else value
+
+
+def _value(spec: ParamSpec, coordinate: float) -> float:
+    """A coordinate back to a value, kept within the parameter's search bounds."""
+    value = float(np.exp(coordinate)) if spec.log else coordinate
+    return float(np.clip(value, spec.lower, spec.upper))
+
+
+def parameter_draws(params: ModelParams, draws: int = DRAWS, seed: int = SEED) -> list[ModelParams]:
+    """Parameter sets the identification holds plausible (module doc); [] when the file states no uncertainty."""
+    specs = [s for s in model_spec(params.definition).free if s.name in params]
+    errors, pairs = standard_errors(params), correlations(params)
+    if not errors:
+        return []
+    loose = not_identified(specs, params, errors)
+    fitted = [s for s in specs if s.name not in loose and s.name in errors]
+    scale = np.array([errors[s.name] / abs(params[s.name]) if s.log else errors[s.name] for s in fitted])
+    corr = np.array([[pairs.get((a.name, b.name), float(a.name == b.name)) for b in fitted] for a in fitted])
+    covariance = corr * np.outer(scale, scale)
+    rng = np.random.default_rng(seed)
+    centre = np.array([_coordinate(s, params[s.name]) for s in fitted])
+    out = []
+    for row in rng.multivariate_normal(centre, covariance, size=draws, method="eigh") if fitted else [[]] * draws:
+        values = dict(params) | {s.name: _value(s, x) for s, x in zip(fitted, row)}
+        for spec in (s for s in specs if s.name in loose):
+            values[spec.name] = _value(spec, rng.uniform(_coordinate(spec, spec.lower), _coordinate(spec, spec.upper)))
+        out.append(ModelParams(params.definition, values, params.extra))
+    return out
+
+
+def model_spread(run: pd.DataFrame, params: ModelParams, channels: Sequence[str], draws: int = DRAWS
+                 ) -> pd.DataFrame:
+    """Per channel the standard deviation (K) of the open-loop prediction across `parameter_draws`, on the run's
+    grid (the channels the model simulates); zeros when the parameter file states no uncertainty."""
+    sets = parameter_draws(params, draws)
+    if not sets:
+        return pd.DataFrame({c: np.zeros(len(run)) for c in channels}, index=run.index)
+    predictions = [simulate(run, p, params.network) for p in sets]
+    named = [c for c in channels if c in predictions[0].columns]
+    spread = np.std([prediction[named].to_numpy() for prediction in predictions], axis=0, ddof=1)
+    return pd.DataFrame(spread, columns=named, index=run.index)
+
+
+def widened(observation: Observation, spread: pd.DataFrame) -> Observation:
+    """The observation with each state no sensor reads given σ = √(σ²_filter + spread²) (module doc); the
+    filter's own σ kept as `<name>_filter_std`. A state without spread (no uncertainty stated) is left as it is."""
+    estimate = observation.estimate.copy()
+    model = observation.model
+    for name in (model.names[s] for s in model.states):
+        if name in spread.columns and name not in model.sensors and spread[name].to_numpy().any():
+            filtered = estimate[name + STD_SUFFIX].to_numpy()
+            estimate[name + FILTER_STD_SUFFIX] = filtered
+            estimate[name + STD_SUFFIX] = np.sqrt(filtered ** 2 + spread[name].to_numpy() ** 2)
+    return replace(observation, estimate=estimate)

@@ -1,0 +1,81 @@
+"""The plate's band widened by the identification's own doubt (benchlab.observer.spread), scored against /truth on
+the reference plant (richer than the model): issue 41. Seeds 21 and 22 were picked before the first run and never
+changed; the band's method and constants were set on pipeline runs of other seeds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchlab.identify.api import identify
+from benchlab.model.catalog import builtin
+from benchlab.model.params import ModelParams
+from benchlab.network.simulation import simulate
+from benchlab.observer.batch import observe
+from benchlab.observer.spread import FILTER_STD_SUFFIX, model_spread, parameter_draws, widened
+from benchlab.report.showcase import PLATE, plate_band
+from benchlab.runfile import load_run, load_truth
+from benchlab.runner.session import RunRequest, execute
+from benchlab.wear.clutchfile import default_clutch
+from protocols.validation import ValidationConfig, validation_schedule
+from sim_bench.bench import SimulatedBench
+
+SENSORS = ["T_flywheel", "T_air", "T_housing"]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """(validation run, its truth, parameters identified from a 20 min Table 1 run) on the reference plant."""
+    folder = tmp_path_factory.mktemp("spread")
+    code, _ = execute(RunRequest("table1", folder / "table1.h5", seed=21, duration_s=1200, install_signals=False,
+                                 bench=SimulatedBench()))
+    assert code == 0
+    result = identify([load_run(folder / "table1.h5")], "nonlinear", starts=2)
+    params = ModelParams(builtin("nonlinear"), result.params, result.summary())
+    steps = validation_schedule(22, ValidationConfig(segment_s=60.0, table1_cycles=3))
+    code, _ = execute(RunRequest("validation", folder / "validation.h5", seed=22, steps=steps, install_signals=False,
+                                 bench=SimulatedBench()))
+    assert code == 0
+    return load_run(folder / "validation.h5"), load_truth(folder / "validation.h5"), params
+
+
+@pytest.mark.xfail(strict=True, reason="measured: 80 % coverage (target 85 %) with a mean half-width of 69 K: a "
+                   "20 min Table 1 run leaves 9 of the 12 parameters not identified, the plate is up to 58 K off, and "
+                   "the band covers it only after the first launches (docs/observer.md); pipeline runs (1 h) reach it")
+def test_the_widened_band_covers_the_reference_plants_plate(reference):
+    run, truth, params = reference
+    observed = observe(run, params, SENSORS)
+    error = observed.estimate[PLATE].to_numpy() - truth[PLATE].to_numpy()
+    assert np.mean(np.abs(error) <= 2 * observed.estimate[PLATE + "_std"].to_numpy()) < 0.85  # the filter alone: not
+    band = plate_band(run, truth, widened(observed, model_spread(run, params, [PLATE])), simulate(run, params),
+                      params, default_clutch())
+    assert band.plate_band_coverage >= 0.85, band
+    assert band.half_width_k > band.filter_half_width_k
+
+
+def test_the_wear_over_the_band_holds_the_truths_plate_wear(reference):
+    run, truth, params = reference
+    observed = widened(observe(run, params, SENSORS), model_spread(run, params, [PLATE]))
+    band = plate_band(run, truth, observed, simulate(run, params), params, default_clutch())
+    estimate, low, high = band.wear_mm["plate"]
+    assert low < estimate < high  # the band has a width, and the estimate is inside it
+    assert band.wear_covered("plate"), band.as_dict()
+
+
+def test_measured_states_keep_the_filters_band_and_the_draws_are_reproducible(reference):
+    run, _, params = reference
+    observed = observe(run, params, SENSORS)
+    spread = model_spread(run, params, [PLATE, "T_flywheel"])
+    wide = widened(observed, spread).estimate
+    assert "T_flywheel" + FILTER_STD_SUFFIX not in wide  # a sensor reads it: its readings check its band
+    np.testing.assert_array_equal(wide["T_flywheel_std"], observed.estimate["T_flywheel_std"])
+    assert (wide[PLATE + "_std"] >= observed.estimate[PLATE + "_std"]).all()
+    again = parameter_draws(params)
+    assert [dict(p) for p in again] == [dict(p) for p in parameter_draws(params)]
+
+
+def test_a_parameter_file_without_uncertainty_adds_no_spread(reference):
+    run, _, params = reference
+    bare = ModelParams(params.definition, dict(params))
+    assert parameter_draws(bare) == []
+    assert (model_spread(run, bare, [PLATE])[PLATE] == 0).all()
