@@ -10,10 +10,11 @@ makes them. Each Table 1 run is diagnosed with the nonlinear baseline, its valid
 (`diagnose_runs(..., validate=[...])`), one diagnosis at a time; the summary is written to DIR/diagnose_N.json.
 
 Printed per seed: duration, the causes named (each with the alternatives it ties with: `a|b`), the leads with
-their reasons' first words, the best model's held-out and unseen gain. Then the stability: the share of runs whose
-first cause is the most common one, where a cause matches another when their ties share a candidate (alternatives
-the data cannot separate are one answer, not two). "accepted in-run" lists what the engine accepted before the cause
-rule (findings and leads together): what diagnose named before issue 41.
+their unseen gain and reasons, the best model's held-out and unseen gain, and what the engine accepted in-run before
+the cause rule (findings and leads together, by round: what diagnose named before issue 41). Then the stability,
+twice: of the first cause, and of the round-1 extension accepted in-run (with its tie); the share of runs whose one
+is the most common, where one matches another when their ties share a candidate (alternatives the data cannot
+separate are one answer, not two).
 """
 
 from __future__ import annotations
@@ -71,10 +72,23 @@ def diagnosed(directory: Path, seed: int, duration: float) -> dict:
     return summary
 
 
+def first_round(summary: dict) -> dict | None:
+    """The extension accepted in round 1 (the baseline's largest error), cause or lead."""
+    return next((f for f in summary["findings"] + summary["leads"] if f["round"] == 1), None)
+
+
+def lead_text(lead: dict) -> str:
+    unseen = f"unseen {lead['unseen_gain_pct']:.1f} % p {lead['unseen']['p_value']:.2g}" if lead["unseen"] else ""
+    reasons = ", ".join("not identified: " + r.split(" not identified")[0] if " not identified" in r else "no carry"
+                        for r in lead["reasons"])
+    return f"{lead['candidate']} ({unseen}; {reasons})"
+
+
 def row(seed: int, summary: dict) -> str:
-    causes = "; ".join(described(f) for f in summary["findings"]) or "none"
-    leads = "; ".join(f"{f['candidate']} ({f['reasons'][0].split(':')[0]})" for f in summary["leads"]) or "-"
-    accepted = "; ".join(f["candidate"] for f in summary["findings"] + summary["leads"]) or "none"
+    causes = "; ".join(f"{described(f)} (unseen {f['unseen_gain_pct']:.1f} %)" for f in summary["findings"]) or "none"
+    leads = "; ".join(lead_text(f) for f in summary["leads"]) or "-"
+    accepted = "; ".join(f"{f['round']}: {described(f)} {f['gain_pct']:.0f} %"
+                         for f in sorted(summary["findings"] + summary["leads"], key=lambda f: f["round"])) or "none"
     base, best = summary["baseline"], summary["best"]
     unseen = best["unseen"]
     return (f"| {seed} | {summary['duration_h']:.2f} | {causes} | {leads} | "
@@ -91,18 +105,18 @@ def main() -> None:
     seeds = args.only or list(RUNS)
     print("| seed | h | causes (ties) | leads (why) | held-out gain % | unseen RMSE K (gain %) | accepted in-run | "
           "diagnose s |\n|---|---|---|---|---|---|---|---|")
-    firsts = {}
+    firsts, rounds = {}, {}
     for seed in seeds:
         summary = diagnosed(args.dir, seed, RUNS[seed])
         run = load_run(args.dir / f"t1_{seed}.h5", only=("time",))
         summary["duration_h"] = float(run["time"].iloc[-1] - run["time"].iloc[0]) / 3600
         print(row(seed, summary), flush=True)
-        firsts[seed] = tie(summary["findings"][0]) if summary["findings"] else frozenset()
-    counts = Counter(name for first in firsts.values() for name in first)
-    if counts:
-        common = counts.most_common(1)[0][0]
-        same = [seed for seed, first in firsts.items() if common in first]
-        print(f"first cause matching {common} (its tie): {len(same)} of {len(firsts)} runs ({', '.join(map(str, same))})")
+        firsts[seed] = tie(summary["findings"][0]) if summary["findings"] else frozenset(["none"])
+        rounds[seed] = tie(first_round(summary)) if first_round(summary) else frozenset(["none"])
+    for what, ties in (("first cause", firsts), ("round-1 extension accepted in-run", rounds)):
+        common = Counter(name for answer in ties.values() for name in answer).most_common(1)[0][0]
+        same = [seed for seed, answer in ties.items() if common in answer]
+        print(f"{what}: {common} (or a tie holding it) in {len(same)} of {len(ties)} runs ({', '.join(map(str, same))})")
 
 
 if __name__ == "__main__":

@@ -22,7 +22,9 @@ the simplest is. Where another candidate is not significantly worse than the nam
 finding lists it as an alternative. After each acceptance the whole model is
 refitted with multistart (warm, neutral and spread starts), so the next round starts from a fresh global fit,
 not from the parameters the previous round bent. With several findings, each is measured again against the
-combination without it and dropped if it no longer passes; no finding is reported that did not pass.
+combination without it and dropped if it no longer passes; no finding is reported that did not pass. Last, a
+finding is named as a cause only where the final fit identifies the parameters it adds and, with runs no fit saw
+(`validate`), its gain carries to them by the same rule; any other is a lead, taken out one at a time (_causes).
 """
 
 from __future__ import annotations
@@ -169,7 +171,7 @@ class Finding:
 
     @property
     def gain_pct(self) -> float:
-        return 100.0 * (1.0 - self.after.rmse / self.before.rmse)
+        return gain_pct(self.before, self.after)
 
     @property
     def unseen_gain_pct(self) -> float | None:
@@ -510,7 +512,7 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
                 params, cost, residuals, predictions, fold_params = values
                 held = HeldOut(datasets, predictions, fold_params)
                 tried.append(Tried(cand, spec, params, cost, residuals, held, block_test(current_held, held),
-                                   100.0 * (1.0 - held.rmse / current_held.rmse)))
+                                   gain_pct(current_held, held)))
 
     offered = list(scored[:MAX_VALIDATED])
     while offered and len(explained) < CROSS_VALIDATED:
@@ -689,18 +691,29 @@ def _judge(findings: Sequence[Finding], final: FitResult, datasets: Sequence[Fit
             f.unseen_before, f.unseen_after = on_unseen(*f.parent, unseen), on_unseen(final.spec, final.params, unseen)
 
 
+def _worst_lead(findings: Sequence[Finding]) -> Finding | None:
+    """The finding to take out first: one with a parameter not identified, else the lowest unseen gain of those whose
+    gain does not carry; None where every finding is a cause."""
+    leads = [f for f in findings if f.lead_reasons]
+    if not leads:
+        return None
+    return min(leads, key=lambda f: (not f.not_identified, f.unseen_gain_pct if f.unseen_gain_pct is not None else 0.0))
+
+
 def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, base: FitResult, base_held: HeldOut,
             datasets: Sequence[FitData], channels: dict[str, np.ndarray], unseen: Sequence[FitData]
             ) -> tuple[list[Finding], list[Finding], FitResult, HeldOut]:
-    """The accepted findings split into causes and leads (Finding.lead_reasons): the leads are taken out, the rest
-    refitted together, re-checked drop-one (_accept) and judged again, until every one left is a cause."""
+    """The accepted findings split into causes and leads (Finding.lead_reasons), one lead at a time (_worst_lead: the
+    findings were measured together, and a spurious one can drag another's unseen gain down): it is taken out, the
+    rest refitted together, re-checked drop-one (_accept) and judged again, until every one left is a cause."""
     leads: list[Finding] = []
     while findings:
         _judge(findings, current, datasets, unseen)
-        kept = [f for f in findings if not f.lead_reasons]
-        leads += [f for f in findings if f.lead_reasons]
-        if len(kept) == len(findings):
+        worst = _worst_lead(findings)
+        if worst is None:
             return findings, leads, current, current_held
+        leads.append(worst)
+        kept = [f for f in findings if f is not worst]
         if not kept:
             break
         spec = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
