@@ -12,9 +12,9 @@ makes them. Each Table 1 run is diagnosed with the nonlinear baseline, its valid
 Printed per seed: duration, the causes named (each with the alternatives it ties with: `a|b`), the leads with
 their unseen gain and reasons, the best model's held-out and unseen gain, and what the engine accepted in-run before
 the cause rule (findings and leads together, by round: what diagnose named before issue 41). Then the stability,
-twice: of the first cause, and of the round-1 extension accepted in-run (with its tie); the share of runs whose one
-is the most common, where one matches another when their ties share a candidate (alternatives the data cannot
-separate are one answer, not two).
+twice: of the first cause, and of the round-1 extension accepted in-run (with its tie): the largest group of runs
+whose answers are joined by shared candidates (a tie shares one with another run's tie, directly or through a third
+run's: alternatives the data cannot separate are one answer, not two).
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from collections import Counter
 from pathlib import Path
 
 from benchlab.diagnose.engine import diagnose_runs
@@ -114,9 +113,19 @@ def main() -> None:
         firsts[seed] = tie(summary["findings"][0]) if summary["findings"] else frozenset(["none"])
         rounds[seed] = tie(first_round(summary)) if first_round(summary) else frozenset(["none"])
     for what, ties in (("first cause", firsts), ("round-1 extension accepted in-run", rounds)):
-        common = Counter(name for answer in ties.values() for name in answer).most_common(1)[0][0]
-        same = [seed for seed, answer in ties.items() if common in answer]
-        print(f"{what}: {common} (or a tie holding it) in {len(same)} of {len(ties)} runs ({', '.join(map(str, same))})")
+        group = largest_group(ties)
+        names = sorted(set().union(*(ties[seed] for seed in group)))
+        print(f"{what}: {'|'.join(names)} in {len(group)} of {len(ties)} runs ({', '.join(map(str, group))})")
+
+
+def largest_group(ties: dict[int, frozenset[str]]) -> list[int]:
+    """The largest set of runs whose answers are joined by shared candidates (directly or through other runs)."""
+    groups: list[tuple[set[int], set[str]]] = []
+    for seed, answer in ties.items():
+        joined = [g for g in groups if g[1] & answer]
+        runs, names = {seed}.union(*(g[0] for g in joined)), set(answer).union(*(g[1] for g in joined))
+        groups = [g for g in groups if g not in joined] + [(runs, names)]
+    return sorted(max(groups, key=lambda g: len(g[0]))[0])
 
 
 if __name__ == "__main__":

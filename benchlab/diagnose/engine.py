@@ -700,13 +700,41 @@ def _worst_lead(findings: Sequence[Finding]) -> Finding | None:
     return min(leads, key=lambda f: (not f.not_identified, f.unseen_gain_pct if f.unseen_gain_pct is not None else 0.0))
 
 
+def _simpler_form(lead: Finding, kept: Sequence[Finding], current: FitResult, base: FitResult,
+                  datasets: Sequence[FitData], channels: dict[str, np.ndarray],
+                  forms: Sequence[Candidate]) -> Finding | None:
+    """For a lead whose added parameters are not all identified, the best-fitting of its simpler forms in `forms` (the
+    same mechanism on a subset of its nodes, reading no more signals: a node bridging P and F whose link to P the runs
+    cannot pin is a mass hung on F) fitted beside the findings `kept`, with none of its own parameters on a bound; None
+    where it has none. Its held-out figures are measured by the drop-one re-check (_recheck) that follows."""
+    cands = [c for c in forms if c.mechanism == lead.candidate.mechanism and set(c.nodes) < set(lead.candidate.nodes)
+             and set(c.reads) <= set(lead.candidate.reads)]
+    parent = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
+    fitted = []
+    for cand in cands:
+        spec = extended_spec(parent, cand, channels, datasets)
+        starts = _starts(cand, spec, current)
+        screened = min((fit(spec, datasets, max_nfev=SCREEN_NFEV, start=start) for start in starts),
+                       key=lambda r: r.cost)
+        result, _ = _polished(spec, screened.params, current, datasets)
+        if result is not None:
+            fitted.append((result, cand, spec))
+    if not fitted:
+        return None
+    result, cand, spec = min(fitted, key=lambda item: item[0].cost)
+    added = tuple(p.name for p in spec.free if p.name not in {q.name for q in parent.free})
+    return Finding(cand, spec, result.params, added, lead.before, lead.after, 1.0, 0.0, round=lead.round)
+
+
 def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, base: FitResult, base_held: HeldOut,
-            datasets: Sequence[FitData], channels: dict[str, np.ndarray], unseen: Sequence[FitData]
-            ) -> tuple[list[Finding], list[Finding], FitResult, HeldOut]:
+            datasets: Sequence[FitData], channels: dict[str, np.ndarray], unseen: Sequence[FitData],
+            forms: Sequence[Candidate] = ()) -> tuple[list[Finding], list[Finding], FitResult, HeldOut]:
     """The accepted findings split into causes and leads (Finding.lead_reasons), one lead at a time (_worst_lead: the
-    findings were measured together, and a spurious one can drag another's unseen gain down): it is taken out, the
-    rest refitted together, re-checked drop-one (_accept) and judged again, until every one left is a cause."""
+    findings were measured together, and a spurious one can drag another's unseen gain down): it is taken out (a lead
+    for parameters not identified replaced by its simpler form among `forms`, _simpler_form, once), the rest refitted
+    together, re-checked drop-one (_accept) and judged again, until every one left is a cause."""
     leads: list[Finding] = []
+    tried = {f.candidate.key for f in findings}
     while findings:
         _judge(findings, current, datasets, unseen)
         worst = _worst_lead(findings)
@@ -714,10 +742,17 @@ def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, 
             return findings, leads, current, current_held
         leads.append(worst)
         kept = [f for f in findings if f is not worst]
+        if worst.not_identified:
+            simpler = _simpler_form(worst, kept, current, base, datasets, channels,
+                                    [c for c in forms if c.key not in tried])
+            if simpler is not None:
+                tried.add(simpler.candidate.key)
+                kept.append(simpler)
         if not kept:
             break
         spec = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
-        current = fit(spec, datasets, start={p.name: current.params[p.name] for p in spec.free})
+        values = {**{k: v for f in kept for k, v in f.params.items()}, **current.params}  # a simpler form's own too
+        current = fit(spec, datasets, start={p.name: values[p.name] for p in spec.free})
         current_held = _held_out(spec, current.params, datasets)
         findings, current, current_held = _accept(
             _recheck(base, base_held, kept, current, current_held, datasets, channels), current, current_held, base,
@@ -780,7 +815,7 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
         current_held = held
     findings, current, current_held = _accept(findings, current, current_held, base, base_held, datasets, channels)
     findings, leads, current, current_held = _causes(findings, current, current_held, base, base_held, datasets,
-                                                     channels, unseen)
+                                                     channels, unseen, library)
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held,
                      baseline_at_bound=bound_sides(base), failed_fits=failed, noise_floor=noise_floor(datasets),
                      not_carried=not_carried, leads=leads, unseen_baseline=on_unseen(base.spec, base.params, unseen),
