@@ -50,6 +50,7 @@ def test_pipeline_runs_end_to_end_and_writes_every_product(job):
     diagnosis = json.loads((tmp_path / "diagnose.json").read_text())
     assert {"baseline", "findings", "best"} <= diagnosis.keys()
     assert diagnosis["best"]["rmse_K"] <= diagnosis["baseline"]["rmse_K"]
+    assert diagnosis["best"]["unseen"]["runs"][0]["run"] == 0 and "leads" in diagnosis  # the validation run, unseen
     for page in ("report/report.md", "diagnose/diagnose.md", "report/report.html", "diagnose/diagnose.html"):
         assert (tmp_path / page).stat().st_size > 0
     assert json.loads((tmp_path / "wear.json").read_text())["engagements"] > 0

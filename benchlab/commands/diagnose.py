@@ -1,5 +1,5 @@
-"""`benchlab diagnose RUN.h5 [RUN2.h5 …] [--model FILE.toml|linear|nonlinear] [--json] [--report DIR]
-[--save-model OUT.toml]`."""
+"""`benchlab diagnose RUN.h5 [RUN2.h5 …] [--model FILE.toml|linear|nonlinear] [--validate V.h5 …] [--json]
+[--report DIR] [--save-model OUT.toml]`."""
 
 from __future__ import annotations
 
@@ -29,6 +29,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", help="run files")
     parser.add_argument("--baseline", "--model", dest="baseline", default="linear", metavar="MODEL",
                        help=f"the model to start from: {MODEL_HELP} (default linear, the paper's starting point)")
+    parser.add_argument("--validate", metavar="V.h5", action="append", default=[],
+                        help="repeatable: a run no fit sees; each finding's gain is measured on it as well (unseen "
+                             "gain), and one whose gain does not carry to it is a lead, not a cause")
     parser.add_argument("--json", action="store_true", help="print the JSON object of docs/contract.md §3 on stdout")
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="seed of the baseline's starting points")
     parser.add_argument("--report", metavar="DIR", help="write the page into DIR: diagnose.md, the same page as diagnose.html for a browser, "
@@ -43,8 +46,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                              "of an existing --report directory (never a run file)")
 
 
+def unseen_text(entry: dict) -> str:
+    """A finding's or the best model's gain on the unseen runs, first on its line (empty without --validate)."""
+    unseen = entry.get("unseen")
+    if not unseen:
+        return ""
+    return (f"unseen runs {unseen['rmse_before_K']:.3f} -> {unseen['rmse_after_K']:.3f} K, gain "
+            f"{unseen['gain_pct']:.1f} % (p = {unseen['p_value']:.2g}); ")
+
+
 def print_report(result: dict) -> None:
-    """The human-readable summary: baseline, worst held-out regime, strongest evidence, each finding, the best model."""
+    """The human-readable summary: baseline, worst held-out regime, strongest evidence, each finding (its gain on
+    unseen runs first), the leads, the best model."""
     with interrupts_held():  # see benchlab.cli
         from benchlab.diagnose.regimes import worst_regimes
 
@@ -65,14 +78,17 @@ def print_report(result: dict) -> None:
         print("no finding: no extension lowers the held-out error significantly; the model is kept as it is")
     for f in result["findings"]:
         print(f"finding: {f['summary']}\n  signal {f['signal']}, mechanism {f['mechanism']}, extension "
-              f"{f['extension']}\n  held-out RMSE {f['rmse_before_K']:.3f} -> {f['rmse_after_K']:.3f} K, "
+              f"{f['extension']}\n  {unseen_text(f)}held-out RMSE {f['rmse_before_K']:.3f} -> {f['rmse_after_K']:.3f} K, "
               f"gain {f['gain_pct']:.1f} % (p = {f['p_value']:.2g})"
               + (f", {f['run_gain_pct']:.1f} % on runs it was not fitted on" if f["run_gain_pct"] is not None else ""))
         for g in f.get("per_group", []):
             print(f"  {g['parameter']} for {g['group']} (runs {', '.join(map(str, g['runs']))}): {g['value']:.6g} "
                   f"± {g['standard_error']:.2g} {g['unit']}")
+    for lead in result["leads"]:
+        print(f"lead (not a cause): {lead['candidate']} ({lead['signal']}/{lead['mechanism']}), {unseen_text(lead)}"
+              f"held-out gain {lead['gain_pct']:.1f} %: {'; '.join(lead['reasons'])}")
     best, floor = result["best"], result["floor"]
-    print(f"best {best['model']}: held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
+    print(f"best {best['model']}: {unseen_text(best)}held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
     print(f"noise floor of the measurements {floor['noise_K']:.4f} K: baseline {floor['baseline_ratio']:.1f}x, "
           f"best {floor['best_ratio']:.1f}x; {floor['verdict']}")
 
@@ -105,7 +121,7 @@ def best_model(diagnosis: Diagnosis) -> ModelDefinition:
 
 def run(args: argparse.Namespace) -> int:
     if args.save_model:
-        check_output(args.save_model, "--save-model", args.force, inputs=args.runs)
+        check_output(args.save_model, "--save-model", args.force, inputs=args.runs + args.validate)
     out = check_output_dir(args.report, "--report", args.force) if args.report else None
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
         from benchlab.diagnose.engine import diagnose_runs
@@ -114,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.model.definition import to_toml
     model = resolve_model(args.baseline, "--model")
     runs = load_diagnosed_runs(args.runs, model)
+    unseen = load_diagnosed_runs(args.validate, model) if args.validate else []
     if args.group_by:
         with interrupts_held():
             from benchlab.runfile import load_attrs
@@ -122,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
             if args.group_by not in attrs:
                 raise InputError(path, args.group_by, f"a root attribute {args.group_by!r} (--group-by)")
             frame.attrs[args.group_by] = attrs[args.group_by]
-    diagnosis = diagnose_runs(runs, model, seed=args.seed, progress=for_terminal(args.quiet), group_by=args.group_by)
+    diagnosis = diagnose_runs(runs, model, seed=args.seed, progress=for_terminal(args.quiet), group_by=args.group_by,
+                              validate=unseen)
     result = summarise(diagnosis, model.label)
     if args.save_model:
         write_text(args.save_model, to_toml(best_model(diagnosis)))

@@ -95,23 +95,27 @@ def validation_steps(seed: int) -> tuple:
     return tuple(steps)
 
 
-def _diagnose(fitting: pd.DataFrame, out: Path, progress: Progress) -> dict:
-    """Diagnose the nonlinear model on the fitting run: JSON, page with figures, two labelled lines; the summary."""
+def _diagnose(fitting: pd.DataFrame, validation: pd.DataFrame, out: Path, progress: Progress) -> dict:
+    """Diagnose the nonlinear model on the fitting run, the validation run unseen: JSON, page with figures, two
+    labelled lines (the unseen gain first); the summary."""
     with interrupts_held():  # the diagnosis and its page (matplotlib; see benchlab.cli)
         from benchlab.diagnose.engine import diagnose_runs
         from benchlab.diagnose.page import write_page
         from benchlab.diagnose.regimes import worst_regimes
         from benchlab.diagnose.report import summarise
 
-    diagnosis = diagnose_runs([fitting], "nonlinear", progress=progress)
+    diagnosis = diagnose_runs([fitting], "nonlinear", progress=progress, validate=[validation])
     summary = summarise(diagnosis, "nonlinear")
     write_text(out / "diagnose.json", json.dumps(summary, indent=2, default=float))
     page = write_page(diagnosis, summary, [fitting], out / "diagnose").with_suffix(".html")
     base, best = summary["baseline"], summary["best"]
-    found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, gain {f['gain_pct']:.0f} %)"
-                      for f in summary["findings"]) or "none"
-    print(f"diagnose  nonlinear baseline: held-out RMSE {base['rmse_K']:.3f} K -> best {best['model']} "
-          f"{best['rmse_K']:.3f} K; findings: {found}")
+    found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, unseen gain {f['unseen_gain_pct']:.0f} %, "
+                      f"held-out {f['gain_pct']:.0f} %)" for f in summary["findings"]) or "none"
+    leads = "".join(f"; lead {f['candidate']}: {'; '.join(f['reasons'])}" for f in summary["leads"])
+    unseen = best["unseen"]
+    print(f"diagnose  nonlinear baseline -> best {best['model']}: validation run (unseen) {unseen['rmse_before_K']:.3f} "
+          f"-> {unseen['rmse_after_K']:.3f} K, held-out {base['rmse_K']:.3f} -> {best['rmse_K']:.3f} K; "
+          f"findings: {found}{leads}")
     worst = worst_regimes(summary["regimes"]["baseline"], 1)
     if worst:
         group, label, channel, rmse, _ = worst[0]
@@ -181,7 +185,8 @@ def job_figures(nonlinear: dict, story: dict, cooldowns, comparison, diagnosis: 
     flywheel = {m: mean_cooldown_nrmse(cooldowns, m, flywheel=True) for m in by_model}
     best_cooling = min(by_model, key=by_model.get) if by_model else None
     best = diagnosis.get("best", {})
-    return {"unseen_gain_pct": float(best.get("unseen_gain_pct", math.nan)),
+    unseen_gain = best.get("unseen_gain_pct")
+    return {"unseen_gain_pct": float(unseen_gain) if unseen_gain is not None else math.nan,
             "in_run_gain_pct": float(diagnosis["findings"][0]["gain_pct"]) if diagnosis.get("findings") else math.nan,
             "fit_nrmse_pct": float(nonlinear["fit"]["nrmse_pct"]),
             "validation_nrmse_pct": float(nonlinear["validation"]["nrmse_pct"]),
@@ -256,7 +261,7 @@ def run(args: argparse.Namespace) -> int:
                         sweep=out / "sweep.h5", progress=progress)
     print(f"report    nonlinear against linear, validated on {out / 'validation.h5'}, Fig. 3 measured on "
           f"{out / 'sweep.h5'} -> {page.with_suffix('.html')}")
-    diagnosis = _diagnose(fitting, out, progress)
+    diagnosis = _diagnose(fitting, validation, out, progress)
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()
     story["wear_band"] = _plate(fitting, out / "table1.h5", nonlinear, sims["fit"]["nonlinear"])

@@ -22,7 +22,9 @@ the simplest is. Where another candidate is not significantly worse than the nam
 finding lists it as an alternative. After each acceptance the whole model is
 refitted with multistart (warm, neutral and spread starts), so the next round starts from a fresh global fit,
 not from the parameters the previous round bent. With several findings, each is measured again against the
-combination without it and dropped if it no longer passes; no finding is reported that did not pass.
+combination without it and dropped if it no longer passes; no finding is reported that did not pass. Last, a
+finding is named as a cause only where the final fit identifies the parameters it adds and, with runs no fit saw
+(`validate`), its gain carries to them by the same rule; any other is a lead, taken out one at a time (_causes).
 """
 
 from __future__ import annotations
@@ -40,11 +42,12 @@ from benchlab.diagnose.library import Candidate, candidates, per_group_candidate
 from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
-from benchlab.identify.fit import (FitResult, fit, fit_multistart, from_coordinates, residual_vector,
+from benchlab.identify.identifiability import not_identified, on_bound
+from benchlab.identify.fit import (FitResult, coordinate_bounds, fit, fit_multistart, from_coordinates, residual_vector,
                                    simulate_outputs, to_coordinates)
-from benchlab.identify.identifiability import on_bound
 from benchlab.identify.spec import ModelSpec, ParamSpec
 from benchlab.identify.metrics import difference_noise, nrmse_pct, residual
+from benchlab.identify.uncertainty import estimate_uncertainty
 from benchlab.model.build import build_spec
 from benchlab.model.catalog import resolve_model
 from benchlab.model.definition import ModelDefinition
@@ -159,15 +162,52 @@ class Finding:
     at_bound: tuple[str, ...] = ()  # parameters of the refit with this extension left on a bound (a failed fit)
     run_gain_pct: float | None = None  # leave-one-run-out gain when it was named (several runs only)
     round: int = 0  # the greedy round that named it (1: the largest error the baseline had; findings list by gain)
+    #: the model without this extension fitted on all diagnosed runs (spec, values): `before` on unseen runs
+    parent: tuple[ModelSpec, dict[str, float]] | None = None
+    unseen_before: "HeldOut | None" = None  # the parent simulated on the unseen runs (--validate)
+    unseen_after: "HeldOut | None" = None  # the model with it simulated on the unseen runs
+    not_identified: dict[str, str] = field(default_factory=dict)  # its added parameters the runs do not pin down, why
 
     @property
     def gain_pct(self) -> float:
-        return 100.0 * (1.0 - self.after.rmse / self.before.rmse)
+        return gain_pct(self.before, self.after)
+
+    @property
+    def unseen_gain_pct(self) -> float | None:
+        """RMSE gain on runs no fit saw (None without unseen runs, or for a split per run group, which an unseen run
+        has no value of)."""
+        return None if self.unseen_after is None else gain_pct(self.unseen_before, self.unseen_after)
+
+    @property
+    def unseen_p_value(self) -> float | None:
+        """The block test of the gain on the unseen runs (the in-run test, on their blocks)."""
+        return None if self.unseen_after is None else block_test(self.unseen_before, self.unseen_after)
+
+    @property
+    def lead_reasons(self) -> list[str]:
+        """Why the extension is a lead and not a cause: added parameters the runs do not identify, a gain that does
+        not carry to the unseen runs (the in-run acceptance rule applied to them). Empty for a cause."""
+        reasons = [f"{name} not identified: {why}" for name, why in self.not_identified.items()]
+        if self.unseen_after is not None and not significant(self.unseen_gain_pct, self.unseen_p_value):
+            reasons.append(f"its gain does not carry to the unseen runs: {self.unseen_gain_pct:.1f} % "
+                           f"(p = {self.unseen_p_value:.2g}; a cause needs >= {MIN_GAIN_PCT:g} % at p < {ALPHA:g})")
+        return reasons
 
     @property
     def significant(self) -> bool:
         """Held-out gain of at least MIN_GAIN_PCT, and "no gain" rejected at ALPHA."""
-        return self.gain_pct >= MIN_GAIN_PCT and self.p_value < ALPHA
+        return significant(self.gain_pct, self.p_value)
+
+
+def significant(gain: float, p_value: float) -> bool:
+    """The acceptance rule, in-run and on unseen runs: a gain of at least MIN_GAIN_PCT and "no gain" rejected at
+    ALPHA by the block test."""
+    return gain >= MIN_GAIN_PCT and p_value < ALPHA
+
+
+def gain_pct(before: "HeldOut", after: "HeldOut") -> float:
+    """How much lower the RMSE of `after` is than that of `before`, %."""
+    return 100.0 * (1.0 - after.rmse / before.rmse)
 
 
 @dataclass(frozen=True)
@@ -195,6 +235,9 @@ class Diagnosis:
     failed_fits: list[tuple[str, tuple[str, ...]]] = field(default_factory=list)  # candidate, parameters on a bound
     not_carried: list[tuple[str, float]] = field(default_factory=list)  # candidate, its leave-one-run-out gain (%)
     noise_floor: float = float("nan")  # K: the measurements' own noise at the fitting step (noise_floor)
+    leads: list[Finding] = field(default_factory=list)  # passed in-run but not a cause (Finding.lead_reasons)
+    unseen_baseline: HeldOut | None = None  # the baseline simulated on the unseen runs (--validate)
+    unseen_final: HeldOut | None = None  # the final model simulated on them
 
 
 def noise_floor(datasets: Sequence[FitData]) -> float:
@@ -258,7 +301,7 @@ def _bic_delta(cost_before: float, cost_after: float, residuals_after: np.ndarra
     return float(n_eff * np.log(cost_after / cost_before) + added * np.log(n_eff))
 
 
-def _block_test(before: HeldOut, after: HeldOut) -> float:
+def block_test(before: HeldOut, after: HeldOut) -> float:
     """One-sided p-value that the extension does not lower the held-out error, blocks as units.
 
     The t-test is on each block's log ratio of mean squared errors: scale-free, so a few blocks
@@ -467,8 +510,8 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
             if values:
                 params, cost, residuals, predictions, fold_params = values
                 held = HeldOut(datasets, predictions, fold_params)
-                tried.append(Tried(cand, spec, params, cost, residuals, held, _block_test(current_held, held),
-                                   100.0 * (1.0 - held.rmse / current_held.rmse)))
+                tried.append(Tried(cand, spec, params, cost, residuals, held, block_test(current_held, held),
+                                   gain_pct(current_held, held)))
 
     offered = list(scored[:MAX_VALIDATED])
     while offered and len(explained) < CROSS_VALIDATED:
@@ -504,7 +547,7 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
             named = _named(tried, current)
         if named is None:
             return None
-    alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, _block_test(t.held, named.held),
+    alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, block_test(t.held, named.held),
                                 len(_added(t.spec, current)))
                     for t in _passing(tried) if _explains(t.candidate) != _explains(named.candidate)]
     return _finding(named.candidate, named.spec, named.params, named.cost, named.residuals, current, current_held,
@@ -545,7 +588,7 @@ def _simplest_equal(best: Tried, passing: Sequence[Tried], current: FitResult) -
     larger gain among equally simple ones: a parameter or a signal more is named only where the data ask for it.
     Only other explanations compete (_explains): among the laws of one explanation the best fitting one is kept."""
     equal = [t for t in passing if t is best or (_explains(t.candidate) != _explains(best.candidate)
-                                                 and _block_test(t.held, best.held) >= ALPHA)]
+                                                 and block_test(t.held, best.held) >= ALPHA)]
     return min(equal, key=lambda t: (_complexity(t, current), -t.gain_pct))
 
 
@@ -560,7 +603,7 @@ def _finding(cand: Candidate, spec: ModelSpec, params: dict[str, float], cost: f
              run_gain_pct: float | None = None) -> Finding:
     """The finding of an extension fitted to `params` (in-sample cost and residuals) on top of `current`."""
     added = _added(spec, current)
-    return Finding(cand, spec, params, added, current_held, held, _block_test(current_held, held),
+    return Finding(cand, spec, params, added, current_held, held, block_test(current_held, held),
                    _bic_delta(current.cost, cost, residuals, len(added)), alternatives, run_gain_pct=run_gain_pct)
 
 
@@ -591,18 +634,21 @@ def _recheck(base: FitResult, base_held: HeldOut, findings: Sequence[Finding], f
     The greedy steps measured each gain on top of the ones found before it; with several findings
     the fair figure is what the combined model loses without it.
     """
-    def without(i: int) -> tuple[float, HeldOut]:
+    def spec_without(i: int) -> ModelSpec:
         others = [g.candidate for g in findings if g is not findings[i]]
-        if not others:
-            return base.cost, base_held
-        spec = _combined(base.spec, others, channels, datasets)
-        refit = fit(spec, datasets, max_nfev=HELD_OUT_NFEV, start={p.name: final.params[p.name] for p in spec.free})
-        return refit.cost, _held_out(spec, refit.params, datasets)
+        return _combined(base.spec, others, channels, datasets) if others else base.spec
 
-    return [Finding(f.candidate, final.spec, final.params, f.added, held, final_held, _block_test(held, final_held),
+    def without(i: int) -> tuple[float, HeldOut, dict[str, float]]:  # plain values: a worker's result is pickled
+        if len(findings) == 1:
+            return base.cost, base_held, base.params
+        spec = spec_without(i)
+        refit = fit(spec, datasets, max_nfev=HELD_OUT_NFEV, start={p.name: final.params[p.name] for p in spec.free})
+        return refit.cost, _held_out(spec, refit.params, datasets), refit.params
+
+    return [Finding(f.candidate, final.spec, final.params, f.added, held, final_held, block_test(held, final_held),
                     _bic_delta(cost, final.cost, final.residuals, len(f.added)), f.alternatives, f.at_bound,
-                    f.run_gain_pct, f.round)
-            for f, (cost, held) in zip(findings, map_indices(without, len(findings)))]
+                    f.run_gain_pct, f.round, parent=(spec_without(i), params))
+            for i, (f, (cost, held, params)) in enumerate(zip(findings, map_indices(without, len(findings))))]
 
 
 def _accept(findings: list[Finding], current: FitResult, current_held: HeldOut, base: FitResult, base_held: HeldOut,
@@ -623,16 +669,109 @@ def _accept(findings: list[Finding], current: FitResult, current_held: HeldOut, 
     return [], base, base_held
 
 
+def on_unseen(spec: ModelSpec, params: dict[str, float], unseen: Sequence[FitData]) -> HeldOut | None:
+    """A model fitted on the diagnosed runs simulated on runs none of its fits saw, each from its own first readings
+    (the diagnosed runs' fitted start temperatures are theirs); None for a model with a parameter split per run
+    group, which an unseen run has no value of."""
+    if not unseen or spec.per_group:
+        return None
+    shared = {name: value for name, value in params.items() if "@" not in name}
+    return HeldOut(unseen, [simulate_outputs(spec.network, shared, d) for d in unseen], [shared])
+
+
+def _judge(findings: Sequence[Finding], final: FitResult, datasets: Sequence[FitData],
+           unseen: Sequence[FitData]) -> None:
+    """Each finding's identifiability in the final fit (its added parameters, by the residuals' sandwich standard
+    errors, benchlab.identify.identifiability) and its parent and final model on the unseen runs."""
+    errors = estimate_uncertainty(final, datasets, [{} for _ in datasets]).standard_errors
+    for f in findings:
+        f.not_identified = not_identified([p for p in final.spec.free if p.name in f.added], final.params, errors)
+        if f.parent is not None and not f.candidate.splits:
+            f.unseen_before, f.unseen_after = on_unseen(*f.parent, unseen), on_unseen(final.spec, final.params, unseen)
+
+
+def _worst_lead(findings: Sequence[Finding]) -> Finding | None:
+    """The finding to take out first: one with a parameter not identified, else the lowest unseen gain of those whose
+    gain does not carry; None where every finding is a cause."""
+    leads = [f for f in findings if f.lead_reasons]
+    if not leads:
+        return None
+    return min(leads, key=lambda f: (not f.not_identified, f.unseen_gain_pct if f.unseen_gain_pct is not None else 0.0))
+
+
+def _simpler_form(lead: Finding, kept: Sequence[Finding], current: FitResult, base: FitResult,
+                  datasets: Sequence[FitData], channels: dict[str, np.ndarray],
+                  forms: Sequence[Candidate]) -> Finding | None:
+    """For a lead whose added parameters are not all identified, the best-fitting of its simpler forms in `forms` (the
+    same mechanism on a subset of its nodes, reading no more signals: a node bridging P and F whose link to P the runs
+    cannot pin is a mass hung on F) fitted beside the findings `kept`, with none of its own parameters on a bound; None
+    where it has none. Its held-out figures are measured by the drop-one re-check (_recheck) that follows."""
+    cands = [c for c in forms if c.mechanism == lead.candidate.mechanism and set(c.nodes) < set(lead.candidate.nodes)
+             and set(c.reads) <= set(lead.candidate.reads)]
+    parent = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
+    fitted = []
+    for cand in cands:
+        spec = extended_spec(parent, cand, channels, datasets)
+        starts = _starts(cand, spec, current)
+        screened = min((fit(spec, datasets, max_nfev=SCREEN_NFEV, start=start) for start in starts),
+                       key=lambda r: r.cost)
+        result, _ = _polished(spec, screened.params, current, datasets)
+        if result is not None:
+            fitted.append((result, cand, spec))
+    if not fitted:
+        return None
+    result, cand, spec = min(fitted, key=lambda item: item[0].cost)
+    added = tuple(p.name for p in spec.free if p.name not in {q.name for q in parent.free})
+    return Finding(cand, spec, result.params, added, lead.before, lead.after, 1.0, 0.0, round=lead.round)
+
+
+def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, base: FitResult, base_held: HeldOut,
+            datasets: Sequence[FitData], channels: dict[str, np.ndarray], unseen: Sequence[FitData],
+            forms: Sequence[Candidate] = ()) -> tuple[list[Finding], list[Finding], FitResult, HeldOut]:
+    """The accepted findings split into causes and leads (Finding.lead_reasons), one lead at a time (_worst_lead: the
+    findings were measured together, and a spurious one can drag another's unseen gain down): it is taken out (a lead
+    for parameters not identified replaced by its simpler form among `forms`, _simpler_form, once), the rest refitted
+    together, re-checked drop-one (_accept) and judged again, until every one left is a cause."""
+    leads: list[Finding] = []
+    tried = {f.candidate.key for f in findings}
+    while findings:
+        _judge(findings, current, datasets, unseen)
+        worst = _worst_lead(findings)
+        if worst is None:
+            return findings, leads, current, current_held
+        leads.append(worst)
+        kept = [f for f in findings if f is not worst]
+        if worst.not_identified:
+            simpler = _simpler_form(worst, kept, current, base, datasets, channels,
+                                    [c for c in forms if c.key not in tried])
+            if simpler is not None:
+                tried.add(simpler.candidate.key)
+                kept.append(simpler)
+        if not kept:
+            break
+        spec = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
+        values = {**{k: v for f in kept for k, v in f.params.items()}, **current.params}  # a simpler form's own too
+        current = fit(spec, datasets, start={p.name: values[p.name] for p in spec.free})
+        current_held = _held_out(spec, current.params, datasets)
+        findings, current, current_held = _accept(
+            _recheck(base, base_held, kept, current, current_held, datasets, channels), current, current_held, base,
+            base_held, datasets, channels)
+    return [], leads, base, base_held
+
+
 @single_threaded_blas
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", starts: int = 4,
-                  seed: int = 0, progress: Progress = SILENT, group_by: str | None = None) -> Diagnosis:
+                  seed: int = 0, progress: Progress = SILENT, group_by: str | None = None,
+                  validate: Sequence[pd.DataFrame] = ()) -> Diagnosis:
     """Baseline fit, greedy accepted extensions with a global refit after each, then a drop-one re-check of each
     against the combination.
 
     `baseline`: a built-in name, a model file or a checked model; every extension is an edit of it.
     `progress` gets a task for the baseline's multistart and one per screening of candidates. `group_by`: the run
     attribute (`bench`, `batch`, ...) whose values group the runs for "the runs disagree on a parameter"; each run is
-    its own group where it is None. With one group there is no such candidate.
+    its own group where it is None. With one group there is no such candidate. `validate`: runs no fit sees; each
+    finding's model and its parent are simulated on them (Finding.unseen_gain_pct), and a finding whose gain does
+    not carry to them is a lead, as is one whose added parameters the runs do not identify (Diagnosis.leads).
     """
     duration = sum(float(run["time"].iloc[-1] - run["time"].iloc[0]) for run in runs)
     if duration < MIN_DURATION_S:
@@ -644,6 +783,7 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
                         group=str(run.attrs[group_by]) if group_by else "") for i, run in enumerate(runs)]
     shared = set.intersection(*(set(d.channels) for d in datasets))
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels if k in shared}
+    unseen = [prepare(run, STEP_S, name=f"unseen{i}", network=network) for i, run in enumerate(validate)]
     units = {**ALIGNED_UNITS, **runs[0].attrs.get("units", {})}
     with progress.task(f"diagnose: {model.label} baseline", starts + 1, unit="fit") as task:
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
@@ -669,10 +809,13 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
         held = _held_out(current.spec, current.params, datasets)
         finding = _finding(finding.candidate, current.spec, current.params, current.cost, current.residuals, parent,
                            current_held, held, finding.alternatives, finding.run_gain_pct)
-        finding.at_bound, finding.round = at_bound(current), round_
+        finding.at_bound, finding.round, finding.parent = at_bound(current), round_, (parent.spec, parent.params)
         findings.append(finding)
         current_held = held
     findings, current, current_held = _accept(findings, current, current_held, base, base_held, datasets, channels)
+    findings, leads, current, current_held = _causes(findings, current, current_held, base, base_held, datasets,
+                                                     channels, unseen, library)
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held,
                      baseline_at_bound=bound_sides(base), failed_fits=failed, noise_floor=noise_floor(datasets),
-                     not_carried=not_carried)
+                     not_carried=not_carried, leads=leads, unseen_baseline=on_unseen(base.spec, base.params, unseen),
+                     unseen_final=on_unseen(current.spec, current.params, unseen))

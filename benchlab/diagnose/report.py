@@ -8,7 +8,8 @@ from collections.abc import Sequence
 import pandas as pd
 
 from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT, SCORED_FITS,
-                                     STEP_S, STRUCTURAL_FITS, Diagnosis, Finding, diagnose_runs, run_groups)
+                                     STEP_S, STRUCTURAL_FITS, Diagnosis, Finding, HeldOut, block_test, diagnose_runs,
+                                     gain_pct, run_groups)
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.library import telling_apart
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
@@ -44,17 +45,30 @@ def per_group_values(f: Finding, result: Diagnosis, errors: dict[str, float]) ->
     return out
 
 
+def unseen_json(before: HeldOut | None, after: HeldOut | None) -> dict | None:
+    """A model and the one it improves on, both fitted on the diagnosed runs, scored on the unseen runs: RMSE
+    before/after over all of them (with the block test's p-value) and per unseen run (in --validate order)."""
+    if before is None or after is None:
+        return None
+    runs = [{"run": i, "rmse_before_K": HeldOut([d], [b], []).rmse, "rmse_after_K": HeldOut([d], [a], []).rmse}
+            for i, (d, b, a) in enumerate(zip(before.datasets, before.predictions, after.predictions))]
+    return {"rmse_before_K": before.rmse, "rmse_after_K": after.rmse, "gain_pct": gain_pct(before, after),
+            "p_value": block_test(before, after), "runs": runs}
+
+
 def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors: dict[str, float]) -> dict:
-    """Contract §3 keys, then the test figures, the fitted extension, and the alternatives the data cannot rule out
-    with the measurement that would; for runs that disagree, each group's value."""
+    """Contract §3 keys, the gain on unseen runs, then the test figures, the fitted extension, and the alternatives
+    the data cannot rule out with the measurement that would; for runs that disagree, each group's value; for a lead,
+    why it is not a cause."""
     c = f.candidate
     out = {"signal": c.signal, "mechanism": c.mechanism, "summary": c.summary, "extension": c.extension,
-           "signals": list(c.reads),
+           "signals": list(c.reads), "unseen_gain_pct": f.unseen_gain_pct,
+           "unseen": unseen_json(f.unseen_before, f.unseen_after),
            "rmse_before_K": f.before.rmse, "rmse_after_K": f.after.rmse, "gain_pct": f.gain_pct,
            "p_value": f.p_value, "bic_delta": f.bic_delta, "candidate": c.key,
            "params": {name: f.params[name] for name in f.added},
            "units": {name: _unit(f, name) for name in f.added}, "at_bound": list(f.at_bound),
-           "run_gain_pct": f.run_gain_pct, "round": f.round,
+           "run_gain_pct": f.run_gain_pct, "round": f.round, "not_identified": dict(f.not_identified),
            "ambiguous": bool(f.alternatives),
            "alternatives": [{"candidate": a.candidate.key, "signal": a.candidate.signal,
                              "mechanism": a.candidate.mechanism, "extension": a.candidate.extension,
@@ -63,6 +77,8 @@ def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors:
                              "tell_apart_by": telling_apart(model, c, a.candidate)} for a in f.alternatives]}
     if c.splits:
         out["per_group"] = per_group_values(f, result, errors)
+    if f.lead_reasons:
+        out["reasons"] = f.lead_reasons
     return out
 
 
@@ -100,11 +116,14 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
     """Contract JSON of a diagnosis: baseline held-out error, findings by gain, best model, regimes, evidence."""
     final = result.final
     errors = final_standard_errors(result) if any(f.candidate.splits for f in result.findings) else {}
+    unseen = unseen_json(result.unseen_baseline, result.unseen_final)
     return {
         "baseline": {"model": baseline, "rmse_K": result.baseline_held.rmse,
                      "nrmse_pct": result.baseline_held.nrmse_pct},
         "findings": [_finding_json(f, result.baseline.spec.definition, result, errors) for f in result.findings],
-        "best": {"model": final.spec.name, "rmse_K": result.final_held.rmse,
+        "leads": [_finding_json(f, result.baseline.spec.definition, result, errors) for f in result.leads],
+        "best": {"model": final.spec.name, "unseen_gain_pct": unseen["gain_pct"] if unseen else None,
+                 "unseen": unseen, "rmse_K": result.final_held.rmse,
                  "nrmse_pct": result.final_held.nrmse_pct, "params": final.params},
         "floor": floor_json(result),
         "regimes": {"baseline": regime_errors(result.baseline_held), "best": regime_errors(result.final_held)},
@@ -136,6 +155,14 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                                    "that would tell them apart",
                    "gain": "held-out RMSE without the extension vs with it; with several findings, "
                            "the combined model without it (drop-one) vs the combined model",
+                   "unseen": "with --validate runs: the same two models fitted on all of the diagnosed runs, "
+                             "simulated on the unseen runs from their first readings (unseen_gain_pct, p_value: the "
+                             "block test on their blocks); the best model against the baseline likewise",
+                   "causes": "a finding is a cause when the final fit identifies its added parameters (none on a "
+                             "bound, none with a sandwich standard error above its value: "
+                             "benchlab.identify.identifiability) and, with --validate runs, its unseen gain passes "
+                             f"the in-run rule (>= {MIN_GAIN_PCT:g} %, p < {ALPHA:g}); otherwise it is a lead "
+                             "(reasons), taken out of the model, the rest refitted and re-checked",
                    "floor": "noise_K: the fitting targets' white noise from their second differences "
                             "(median absolute deviation / sqrt(6), pooled), what a perfect model scores; ratios are "
                             f"held-out RMSE / noise_K; beyond_library where the final model stays >= {BEYOND_FLOOR:g}x",
@@ -155,8 +182,9 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
 
 
 def diagnose(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", seed: int = 0,
-             group_by: str | None = None) -> dict:
-    """Contract JSON: baseline held-out error, findings ordered by gain, best combined model, regimes, evidence.
-    `group_by`: the run attribute that groups runs for "the runs disagree on a parameter" (default: every run)."""
-    result = diagnose_runs(runs, baseline, seed=seed, group_by=group_by)
+             group_by: str | None = None, validate: Sequence[pd.DataFrame] = ()) -> dict:
+    """Contract JSON: baseline held-out error, findings ordered by gain, leads, best combined model, regimes, evidence.
+    `group_by`: the run attribute that groups runs for "the runs disagree on a parameter" (default: every run);
+    `validate`: runs no fit sees, where each finding's gain must carry."""
+    result = diagnose_runs(runs, baseline, seed=seed, group_by=group_by, validate=validate)
     return summarise(result, result.baseline.spec.name)

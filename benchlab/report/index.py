@@ -233,6 +233,12 @@ def _wear_band(band: "PlateBand") -> str:
             + _table(("side", "wear at the estimate", "over the ±2σ band", "at the truth", "within the band"), rows))
 
 
+def _unseen_gain(finding: Mapping[str, Any]) -> str:
+    """A finding's gain on the validation run, first in its line (empty where the diagnosis had no unseen run)."""
+    gain = finding.get("unseen_gain_pct")
+    return "" if gain is None else f"gain on the validation run (unseen) {_num(gain, 0, ' %')}, "
+
+
 def _diagnosis_alternatives(findings: Sequence[Mapping[str, Any]]) -> str:
     """What the data cannot tell apart from each finding, and the measurement that would."""
     items = [f"<li>{html.escape(f['candidate'])} or {html.escape(a['candidate'])} (gain "
@@ -263,9 +269,14 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
     simulated = attrs.get("bench") == SIMULATED
     findings = diagnosis.get("findings", [])
     found = "".join(f"<li><b>{html.escape(f['candidate'])}</b> ({html.escape(str(f['signal']))} / "
-                    f"{html.escape(str(f['mechanism']))}): held-out gain {_num(f['gain_pct'], 0, ' %')}, "
-                    f"p = {f.get('p_value', math.nan):.2g}</li>" for f in findings) or "<li>none</li>"
+                    f"{html.escape(str(f['mechanism']))}): {_unseen_gain(f)}held-out gain "
+                    f"{_num(f['gain_pct'], 0, ' %')}, p = {f.get('p_value', math.nan):.2g}</li>"
+                    for f in findings) or "<li>none</li>"
+    found += "".join(f"<li>lead, not a cause: {html.escape(f['candidate'])} ({html.escape(str(f['signal']))} / "
+                     f"{html.escape(str(f['mechanism']))}): {html.escape('; '.join(f['reasons']))}</li>"
+                     for f in diagnosis.get("leads", []))
     base, best = diagnosis["baseline"], diagnosis["best"]
+    unseen = best.get("unseen")
     life, health = wear["life"], wear["health"]
     p50 = life["engagements"].get("p50")
     reference = truth is not None and truth.get("plant", "paper") != "paper"
@@ -302,8 +313,11 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         "<p>The full report with parameters, residual tests and error tables: <a href='report/report.html'>"
         "report/report.html</a> (as Markdown: <a href='report/report.md'>report/report.md</a>).</p>",
         f"<h2>3. What diagnose found ({html.escape(str(base.get('model', '')))} baseline)</h2>",
-        f"<p>Held-out RMSE {_num(base['rmse_K'], 3, ' K')} → best model <b>{html.escape(str(best['model']))}</b> "
-        f"{_num(best['rmse_K'], 3, ' K')}.</p><ul>{found}</ul>", _diagnosis_alternatives(findings),
+        f"<p>Best model <b>{html.escape(str(best['model']))}</b>: "
+        + (f"on the validation run (unseen) {_num(unseen['rmse_before_K'], 3, ' K')} → "
+           f"{_num(unseen['rmse_after_K'], 3, ' K')}; " if unseen else "")
+        + f"held-out RMSE {_num(base['rmse_K'], 3, ' K')} → {_num(best['rmse_K'], 3, ' K')}.</p><ul>{found}</ul>",
+        _diagnosis_alternatives(findings),
         '<p>Evidence, regimes and figures: <a href="diagnose/diagnose.html">diagnose/diagnose.html</a> (as '
         'Markdown: <a href="diagnose/diagnose.md">diagnose/diagnose.md</a>), JSON: '
         '<a href="diagnose.json">diagnose.json</a>.</p>',
