@@ -186,7 +186,9 @@ def job_figures(nonlinear: dict, story: dict, cooldowns, comparison, diagnosis: 
     best_cooling = min(by_model, key=by_model.get) if by_model else None
     best = diagnosis.get("best", {})
     unseen_gain = best.get("unseen_gain_pct")
-    return {"unseen_gain_pct": float(unseen_gain) if unseen_gain is not None else math.nan,
+    return {"causes": [f["candidate"] for f in diagnosis.get("findings", [])],
+            "leads": [f["candidate"] for f in diagnosis.get("leads", [])],
+            "unseen_gain_pct": float(unseen_gain) if unseen_gain is not None else math.nan,
             "in_run_gain_pct": float(diagnosis["findings"][0]["gain_pct"]) if diagnosis.get("findings") else math.nan,
             "fit_nrmse_pct": float(nonlinear["fit"]["nrmse_pct"]),
             "validation_nrmse_pct": float(nonlinear["validation"]["nrmse_pct"]),

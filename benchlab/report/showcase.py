@@ -198,8 +198,12 @@ def verdict(figures: Mapping[str, Any]) -> str:
     largest misses against the paper's figures, then the plate that wear needs (against /truth where known)."""
     parts = []
     gain = figures.get("unseen_gain_pct", np.nan)
-    if np.isfinite(gain):
-        parts.append(f"diagnose's extension gains {gain:.0f} % on the validation run it never saw")
+    causes, leads = figures.get("causes") or [], figures.get("leads") or []
+    if causes and np.isfinite(gain):
+        parts.append(f"diagnose's extension ({', '.join(causes)}) gains {gain:.0f} % on the validation run it never saw")
+    elif "causes" in figures:
+        parts.append("diagnose names no cause whose gain carries to the validation run"
+                     + (f" (leads: {', '.join(leads)})" if leads else ""))
     misses = largest_misses(figures)
     parts.append("the nonlinear model's largest misses: " + "; ".join(misses) if misses
                  else "the nonlinear model meets the paper's figures on this plant")
