@@ -5,7 +5,7 @@ fit saw? (issue 41)
 
 Per seed N: a Table 1 run of the reference plant (`benchlab run table1 --bench sim --seed N --duration S`, S from
 the table below, 1-2 h) and a validation run (`benchlab run validation --bench sim --seed N+1000`), made once into
-DIR (default /work/h41-runs; reused when there) through the runner, the drivers and the emulated devices as a user
+DIR (default stability-runs/ under the working directory; reused when there) through the runner, the drivers and the emulated devices as a user
 makes them. Each Table 1 run is diagnosed with the nonlinear baseline, its validation run unseen
 (`diagnose_runs(..., validate=[...])`), one diagnosis at a time; the summary is written to DIR/diagnose_N.json.
 
@@ -97,7 +97,7 @@ def row(seed: int, summary: dict) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dir", type=Path, default=Path("/work/h41-runs"))
+    parser.add_argument("--dir", type=Path, default=Path("stability-runs"))
     parser.add_argument("--only", type=int, nargs="*", help="these seeds of RUNS only")
     args = parser.parse_args()
     args.dir.mkdir(parents=True, exist_ok=True)
