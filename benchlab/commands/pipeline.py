@@ -198,7 +198,7 @@ def job_figures(nonlinear: dict, story: dict, cooldowns, comparison, diagnosis: 
             "peak_pct": max(story["peaks"][k]["nonlinear"].max_pct for k in story["peaks"]),
             "eq11_rel_error": comparison.rel_error, "eq11_rel_error_pct": 100.0 * comparison.rel_error,
             "plate_rmse_k": plate.rmse_k["observer"] if plate is not None else math.nan,
-            "plate_band_coverage": getattr(plate, "band_coverage", math.nan) if plate is not None else math.nan}
+            "plate_band_coverage": plate.band_coverage if plate is not None else math.nan}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -277,7 +277,7 @@ def run(args: argparse.Namespace) -> int:
               f"{1000 * values['low']:.4f}-{1000 * values['high']:.4f} µm; at the truth {1000 * values['truth']:.4f} µm")
     compared = [("linear", linear), ("nonlinear", nonlinear)]
     if comparison.sweep_model is not None:
-        compared.append((SWEEP_MODEL, load_params(out / f"{SWEEP_MODEL}.json")))
+        compared.append((SWEEP_MODEL, comparison.sweep_model.params))
     cooldowns = cooldown_scores(validation, out / "validation.h5", compared)
     for label, _ in compared:
         print(f"cool-down {label:9s}: long cool-downs of the validation run, mean NRMSE "

@@ -43,13 +43,6 @@ class SweepComparison:
     rel_error: float
     sweep_model: Identification | None
 
-    def as_dict(self) -> dict:
-        """summary.json's view: each point with both models' R, the errors, eq. (11) from the sweep."""
-        rows = [{"engine_speed_rpm": c.engine_speed, "clutch_state": c.clutch_state, "R_sweep_K_per_W": c.R,
-                 "R_sweep_u_K_per_W": c.R_u} for c in self.points]
-        return {"points": rows, "eq11_from_sweep": self.eq11, "eq11_rel_error": self.rel_error,
-                "compared_rpm": list(COMPARED_RPM)}
-
 
 def resistance_at(params: "dict[str, float]", points: Sequence[CooldownResult]) -> np.ndarray:
     """The model's R(ω_e, S) of eq. (11) at each cool-down's operating point."""
