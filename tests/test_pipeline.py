@@ -63,18 +63,23 @@ def test_summary_holds_the_figures_the_verdict_names_and_they_agree_with_the_fil
     for key in ("unseen_gain_pct", "plate_band_coverage", "eq11_rel_error", "cooldown_nrmse_pct", "verdict"):
         assert key in summary, key
     # eq. (11) against the sweep, re-derived through the command a user runs: `benchlab cooldown` on the job's sweep
-    # with the job's nonlinear parameters, then the parameter file's law at the points of 1000 and 2500 rpm
+    # with a parameter file, then that file's law at the points of 1000 and 2500 rpm; the model identified with the
+    # sweep (diagnosed.json, an extended model: the points read with its own links) is the summary's figure
     from benchlab.model.clutch import convection_resistance
     from benchlab.runfile import load_analysis
 
-    assert main(["cooldown", str(out / "sweep.h5"), "--params", str(out / "nonlinear.json"),
-                 "--out", str(tmp_path / "analysis.h5")]) == 0
-    rows = load_analysis(tmp_path / "analysis.h5").cooldowns
-    params = load_params(out / "nonlinear.json")
-    errors = [abs(float(np.ravel(convection_resistance(params, {"engine_speed": np.array([row["engine_speed"]]),
-                                                                "clutch_state": np.array([row["clutch_state"]])}))[0])
-                  / row["R"] - 1) for row in rows if row["engine_speed"] in (1000, 2500)]
-    assert len(errors) == 4 and summary["eq11_rel_error"] == pytest.approx(max(errors), rel=1e-6)
+    assert summary["eq11_model"] == "diagnosed" and summary["diagnosed_runs"] == ["table1", "sweep"]
+    for model, figure in (("nonlinear", summary["eq11_rel_error_by_model"]["nonlinear"]),
+                          ("diagnosed", summary["eq11_rel_error"])):
+        analysis = tmp_path / f"analysis-{model}.h5"
+        assert main(["cooldown", str(out / "sweep.h5"), "--params", str(out / f"{model}.json"),
+                     "--out", str(analysis)]) == 0
+        rows = load_analysis(analysis).cooldowns
+        params = load_params(out / f"{model}.json")
+        errors = [abs(float(np.ravel(convection_resistance(params, {
+            "engine_speed": np.array([row["engine_speed"]]), "clutch_state": np.array([row["clutch_state"]])}))[0])
+            / row["R"] - 1) for row in rows if row["engine_speed"] in (1000, 2500)]
+        assert len(errors) == 4 and figure == pytest.approx(max(errors), rel=1e-6), model
     # the long cool-downs beside the paper's 3.8 %, each model's figure printed and the best one in the summary
     printed_nrmse = [float(x) for x in re.findall(r"long cool-downs of the validation run, mean NRMSE ([\d.]+) % "
                                                   r"\(paper: nonlinear 3.8 %", printed)]

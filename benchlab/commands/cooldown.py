@@ -16,6 +16,7 @@ from benchlab.errors import InputError
 from benchlab.interrupts import interrupts_held
 from benchlab.outputs import check_output
 
+
 NAME = "cooldown"
 HELP = "fit R_FA = R_PA for every cool-down of a cooldown-sweep run, then eq. (11); /analysis to --out or --store"
 
@@ -37,7 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="nothing is written into the run file (the default since --store; kept for scripts)")
 
 
-def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
+def load_analysis_params(spec: str, run: Path) -> "dict[str, float]":
+    """The parameters every segment's fit holds: a parameter file (ModelParams, with its model) or the simulated
+    paper plant's truth."""
     if spec == "sim-truth":
         from benchlab.runfile import load_attrs
 
@@ -52,7 +55,7 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
     from benchlab.model.catalog import builtin
     from benchlab.model.params import load_params
 
-    params = dict(load_params(spec))
+    params = load_params(spec)
     missing = [name for name in builtin("linear").parameters if name != "R0" and name not in params]
     if missing:
         raise InputError(spec, f"params.{missing[0]}", "a clutch model's parameters (the cool-downs are fitted with "
@@ -62,7 +65,7 @@ def load_analysis_params(spec: str, run: Path) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
-        from benchlab.identify.cooldown import analyse, fit_eq11, store, table_lines
+        from benchlab.identify.cooldown import analyse, fit_eq11, segment_model, store, table_lines
         from benchlab.progress import for_terminal
         from benchlab.runfile import load_run
 
@@ -73,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.out, "--out", args.force, inputs=[path, args.params])
     load_run(path)  # checks the file (InputError on a bad one)
     params = load_analysis_params(args.params, path)
-    results = analyse(path, params, args.sample, progress=for_terminal(args.quiet))
+    results = analyse(path, params, args.sample, progress=for_terminal(args.quiet), model=segment_model(params))
     try:
         eq11 = fit_eq11(results)
     except ValueError:

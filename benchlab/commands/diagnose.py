@@ -110,13 +110,19 @@ def load_diagnosed_runs(paths: list[str], model: ModelDefinition) -> list[pd.Dat
     return runs
 
 
-def best_model(diagnosis: Diagnosis) -> ModelDefinition:
-    """The best model found, as a model file: the baseline's file with the accepted extensions, fitted values as starts
-    (a parameter the runs disagree on starts from the median of its groups' values: a model file has one value)."""
+def best_values(diagnosis: Diagnosis) -> dict[str, float]:
+    """The best model's fitted values, one per parameter (a parameter the runs disagree on: the median of its groups'
+    values, as a model file and a parameter file have one value), without the runs' own start temperatures."""
     final = diagnosis.final
     split = {name: statistics.median([v for k, v in final.params.items() if k.split("@")[0] == name and "@" in k])
              for name in final.spec.per_group}
-    return final.spec.definition.with_starts({**final.params, **split}, name=final.spec.name)
+    return {k: v for k, v in {**final.params, **split}.items() if "@" not in k}
+
+
+def best_model(diagnosis: Diagnosis) -> ModelDefinition:
+    """The best model found, as a model file: the baseline's file with the accepted extensions, fitted values as starts
+    (best_values)."""
+    return diagnosis.final.spec.definition.with_starts(best_values(diagnosis), name=diagnosis.final.spec.name)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -32,6 +32,8 @@ from benchlab.provenance import bench_text
 if TYPE_CHECKING:
     import pandas as pd
 
+    from benchlab.model.params import ModelParams
+
 NAME = "pipeline"
 HELP = ("run Table 1, the validation protocol and the Fig. 3 sweep on the simulated bench, identify, report, diagnose, "
         "estimate wear")
@@ -44,6 +46,8 @@ EXTRAPOLATION_LABEL = "extrapolation"
 #: beside its shared R0 (benchlab.identify.cooldown.fit_eq11), and the comparison's 1000 and 2500 rpm among them
 SWEEP_GRID = "500:1,1000:1,1500:1,2500:1,500:0,1000:0,1500:0,2500:0"
 SWEEP_MODEL = "nonlinear-sweep"  # the paper's procedure: eq. (11) from the sweep held, the rest from Table 1
+#: diagnose's best model, the nonlinear model fitted on Table 1 and the sweep together with the causes it named
+DIAGNOSED_MODEL = "diagnosed"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -95,19 +99,29 @@ def validation_steps(seed: int) -> tuple:
     return tuple(steps)
 
 
-def _diagnose(fitting: pd.DataFrame, validation: pd.DataFrame, out: Path, progress: Progress) -> dict:
-    """Diagnose the nonlinear model on the fitting run, the validation run unseen: JSON, page with figures, two
-    labelled lines (the unseen gain first); the summary."""
+def _diagnose(fitting: pd.DataFrame, sweep: pd.DataFrame, validation: pd.DataFrame, out: Path,
+              progress: Progress) -> tuple[dict, ModelParams]:
+    """Diagnose the nonlinear model on the Table 1 run and the sweep together (the runs that carry eq. (11), as the
+    paper identified it), the validation run unseen: JSON, page with figures, the best model as a model file and a
+    parameter file (DIAGNOSED_MODEL), two labelled lines (the unseen gain first); the summary and the best model."""
     with interrupts_held():  # the diagnosis and its page (matplotlib; see benchlab.cli)
+        from benchlab.commands.diagnose import best_model, best_values
         from benchlab.diagnose.engine import diagnose_runs
         from benchlab.diagnose.page import write_page
         from benchlab.diagnose.regimes import worst_regimes
         from benchlab.diagnose.report import summarise
+        from benchlab.model.definition import to_toml
+        from benchlab.model.params import ModelParams, save_params
 
-    diagnosis = diagnose_runs([fitting], "nonlinear", progress=progress, validate=[validation])
+    diagnosis = diagnose_runs([fitting, sweep], "nonlinear", progress=progress, validate=[validation])
     summary = summarise(diagnosis, "nonlinear")
     write_text(out / "diagnose.json", json.dumps(summary, indent=2, default=float))
-    page = write_page(diagnosis, summary, [fitting], out / "diagnose").with_suffix(".html")
+    page = write_page(diagnosis, summary, [fitting, sweep], out / "diagnose").with_suffix(".html")
+    model = best_model(diagnosis)
+    write_text(out / f"{DIAGNOSED_MODEL}.toml", to_toml(model))
+    diagnosed = ModelParams(model, best_values(diagnosis))
+    save_params(out / f"{DIAGNOSED_MODEL}.json", diagnosed,
+                {"fitted_on": ["table1.h5", "sweep.h5"], "diagnosis": "diagnose.json"})
     base, best = summary["baseline"], summary["best"]
     found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, unseen gain {f['unseen_gain_pct']:.0f} %, "
                       f"held-out {f['gain_pct']:.0f} %)" for f in summary["findings"]) or "none"
@@ -120,7 +134,9 @@ def _diagnose(fitting: pd.DataFrame, validation: pd.DataFrame, out: Path, progre
     if worst:
         group, label, channel, rmse, _ = worst[0]
         print(f"          worst regime (held-out): {group} = {label}, {channel} {rmse:.3f} K -> {page}")
-    return summary
+    print(f"          the best model, fitted on Table 1 and the sweep -> {out / (DIAGNOSED_MODEL + '.json')} "
+          f"(model file {out / (DIAGNOSED_MODEL + '.toml')})")
+    return summary, diagnosed
 
 
 def _plate(run: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame):
@@ -166,6 +182,24 @@ def _sweep_comparison(fitting: pd.DataFrame, validation: pd.DataFrame, nonlinear
     return comparison
 
 
+def _eq11_errors(comparison, diagnosed: "ModelParams", sweep: Path, progress: Progress) -> dict[str, float]:
+    """Each model's eq. (11) against the sweep's points: the Table 1 model and the paper's procedure against the
+    points read with the Table 1 model, the model identified with the sweep (DIAGNOSED_MODEL) against the points read
+    with its own structure and values (benchlab.identify.staged.own_points_error)."""
+    with interrupts_held():
+        from benchlab.identify.staged import COMPARED_RPM, eq11_rel_error, own_points_error
+
+    errors = {"nonlinear": comparison.rel_error}
+    if comparison.sweep_model is not None:
+        errors[SWEEP_MODEL] = eq11_rel_error(comparison.sweep_model.params, comparison.points)
+    errors[DIAGNOSED_MODEL] = own_points_error(sweep, diagnosed, progress)[1]
+    speeds = " and ".join(f"{s:.0f}" for s in COMPARED_RPM)
+    print(f"eq. (11)  the model identified with the sweep ({DIAGNOSED_MODEL}) lies up to "
+          f"{100 * errors[DIAGNOSED_MODEL]:.0f} % from the sweep's points as it reads them, at {speeds} rpm "
+          f"(the Table 1 model {100 * errors['nonlinear']:.0f} %)")
+    return errors
+
+
 def finite_or_null(value: object) -> object:
     """JSON-safe: a figure the job could not measure (NaN) becomes null, recursively."""
     if isinstance(value, dict):
@@ -175,9 +209,16 @@ def finite_or_null(value: object) -> object:
     return value
 
 
-def job_figures(nonlinear: dict, story: dict, cooldowns, comparison, diagnosis: dict) -> dict:
+def _unseen_rmse(best: dict, key: str) -> float:
+    """The diagnosis's RMSE on the validation run (its baseline's or its best model's), NaN without one."""
+    unseen = best.get("unseen") or {}
+    return float(unseen[key]) if key in unseen else math.nan
+
+
+def job_figures(nonlinear: dict, story: dict, cooldowns, eq11_errors: dict[str, float], diagnosis: dict) -> dict:
     """DIR/summary.json: the figures the verdict holds against the paper's and the issue's references, NaN where
-    the job could not measure one (no truth, no finding); the long cool-downs' figure is the best model's."""
+    the job could not measure one (no truth, no finding); the long cool-downs' figure is the best model's, eq. (11)'s
+    that of the model identified with the sweep (DIAGNOSED_MODEL), each model's beside it."""
     from benchlab.report.index import mean_cooldown_nrmse
 
     plate = story["plate"]
@@ -189,6 +230,10 @@ def job_figures(nonlinear: dict, story: dict, cooldowns, comparison, diagnosis: 
     return {"causes": [f["candidate"] for f in diagnosis.get("findings", [])],
             "leads": [f["candidate"] for f in diagnosis.get("leads", [])],
             "unseen_gain_pct": float(unseen_gain) if unseen_gain is not None else math.nan,
+            "diagnosed_runs": ["table1", "sweep"],
+            "validation_rmse_k_by_model": {"nonlinear": float(nonlinear["validation"]["rmse_K"]),
+                                           "nonlinear (Table 1 and sweep)": _unseen_rmse(best, "rmse_before_K"),
+                                           DIAGNOSED_MODEL: _unseen_rmse(best, "rmse_after_K")},
             "in_run_gain_pct": float(diagnosis["findings"][0]["gain_pct"]) if diagnosis.get("findings") else math.nan,
             "fit_nrmse_pct": float(nonlinear["fit"]["nrmse_pct"]),
             "validation_nrmse_pct": float(nonlinear["validation"]["nrmse_pct"]),
@@ -196,7 +241,8 @@ def job_figures(nonlinear: dict, story: dict, cooldowns, comparison, diagnosis: 
             "cooldown_best_model": best_cooling, "cooldown_nrmse_pct_by_model": by_model,
             "cooldown_flywheel_nrmse_pct": flywheel[best_cooling] if best_cooling else math.nan,
             "peak_pct": max(story["peaks"][k]["nonlinear"].max_pct for k in story["peaks"]),
-            "eq11_rel_error": comparison.rel_error, "eq11_rel_error_pct": 100.0 * comparison.rel_error,
+            "eq11_rel_error": eq11_errors[DIAGNOSED_MODEL], "eq11_rel_error_pct": 100.0 * eq11_errors[DIAGNOSED_MODEL],
+            "eq11_model": DIAGNOSED_MODEL, "eq11_rel_error_by_model": eq11_errors,
             "plate_rmse_k": plate.rmse_k["observer"] if plate is not None else math.nan,
             "plate_band_coverage": plate.band_coverage if plate is not None else math.nan}
 
@@ -263,7 +309,8 @@ def run(args: argparse.Namespace) -> int:
                         sweep=out / "sweep.h5", progress=progress)
     print(f"report    nonlinear against linear, validated on {out / 'validation.h5'}, Fig. 3 measured on "
           f"{out / 'sweep.h5'} -> {page.with_suffix('.html')}")
-    diagnosis = _diagnose(fitting, validation, out, progress)
+    diagnosis, diagnosed = _diagnose(fitting, sweep, validation, out, progress)
+    eq11_errors = _eq11_errors(comparison, diagnosed, out / "sweep.h5", progress)
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()
     story["wear_band"] = _plate(fitting, out / "table1.h5", nonlinear, sims["fit"]["nonlinear"])
@@ -278,12 +325,13 @@ def run(args: argparse.Namespace) -> int:
     compared = [("linear", linear), ("nonlinear", nonlinear)]
     if comparison.sweep_model is not None:
         compared.append((SWEEP_MODEL, comparison.sweep_model.params))
+    compared.append((DIAGNOSED_MODEL, diagnosed))
     cooldowns = cooldown_scores(validation, out / "validation.h5", compared)
     for label, _ in compared:
         print(f"cool-down {label:9s}: long cool-downs of the validation run, mean NRMSE "
               f"{mean_cooldown_nrmse(cooldowns, label):.1f} % (paper: nonlinear 3.8 %, linear 8.4 %), the flywheel "
               f"alone {mean_cooldown_nrmse(cooldowns, label, flywheel=True):.1f} %")
-    figures_held = job_figures(figures["nonlinear"], story, cooldowns, comparison, diagnosis)
+    figures_held = job_figures(figures["nonlinear"], story, cooldowns, eq11_errors, diagnosis)
     figures_held["not_identified"] = recorded(nonlinear)
     story["verdict"] = figures_held["verdict"] = verdict(figures_held)
     print(f"verdict   {story['verdict']}")

@@ -37,7 +37,9 @@ import numpy as np
 import pandas as pd
 import scipy.optimize
 
+from benchlab.model.build import build_network
 from benchlab.model.clutch import clutch_network, convection_resistance
+from benchlab.model.definition import ModelDefinition
 from benchlab.errors import InputError
 from benchlab.identify.metrics import robust_sigma
 from benchlab.progress import SILENT, Progress, Task
@@ -133,11 +135,13 @@ def _noise(values: np.ndarray) -> float:
 
 def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, t_end: float,
                 sample_s: float = 1.0, channels: Sequence[str] = FIT_CHANNELS,
-                engine_speed: float | None = None) -> dict[str, float]:
+                engine_speed: float | None = None, model: ModelDefinition | None = None) -> dict[str, float]:
     """Fit R and ϑ_P(0) of the 4-state model on [t_start, t_end] of `run` (the /aligned frame).
 
     The segment starts once no friction power is left from a preceding launch or heat pulse and, if
-    `engine_speed` is given, once the engine runs at it (within 2 %).
+    `engine_speed` is given, once the engine runs at it (within 2 %). With `model` (a clutch model extended by
+    diagnose, say), the segment is fitted with that model's own structure, eq. (11)'s speed terms off (a1 = a2 = 0:
+    R = R0 at the segment's fixed operating point), so its points are read as that model reads the sweep.
     """
     dt = float(run.attrs["dt"])
     time = run["time"].to_numpy()
@@ -152,7 +156,7 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
     seg.attrs.update(run.attrs)
     if len(seg) < 100:
         raise ValueError(f"cool-down [{t_start:g}, {t_end:g}] s too short")
-    network = clutch_network("linear")
+    network = clutch_network("linear") if model is None else build_network(model)
     inputs = input_channels(seg)
     x0 = initial_state(network, inputs, str(run.attrs.get("source", "<run>")))
     names = network.state_names
@@ -169,7 +173,7 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
     sigma = {c: _noise(seg[c].to_numpy()) for c in channels}
     sigma = {c: (s if np.isfinite(s) and s > 0 else 0.05) for c, s in sigma.items()}
     out_index = {c: names.index(network.outputs[c]) for c in channels}
-    base = dict(params)
+    base = dict(params) if model is None else {**params, "a1": 0.0, "a2": 0.0}
 
     free = ["P"] + [s for s in ("F", "A", "T") if s in names]
     # what the first seconds of readings say about the measured initial states (a prior, not a constraint)
@@ -229,10 +233,18 @@ def no_cooldowns(path: "str | os.PathLike[str]") -> InputError:
                                         "has no completed cool-down to fit")
 
 
+def segment_model(params: Mapping[str, float]) -> ModelDefinition | None:
+    """The structure each cool-down is fitted with: a clutch model extended beyond the built-in ones (diagnose's
+    best model, a user's model file) reads the sweep with its own links; the built-in ones with the linear model."""
+    definition = getattr(params, "definition", None)
+    return definition if definition is not None and definition.alias is None else None
+
+
 def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_s: float = 1.0,
-            progress: Progress = SILENT) -> list[CooldownResult]:
-    """Every cool-down of a cooldown-sweep run, fitted (one progress step each); R_true filled in for a simulated bench.
-    A run without completed cool-downs (or without /events at all: another tool's file) is no_cooldowns' InputError."""
+            progress: Progress = SILENT, model: ModelDefinition | None = None) -> list[CooldownResult]:
+    """Every cool-down of a cooldown-sweep run, fitted (one progress step each; with `model`'s structure where given:
+    fit_segment); R_true filled in for a simulated bench. A run without completed cool-downs (or without /events at
+    all: another tool's file) is no_cooldowns' InputError."""
     path = Path(path)
     run = load_run(path)
     sim_truth = load_attrs(path).get("sim_truth")
@@ -248,14 +260,15 @@ def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_
     if not found:
         raise no_cooldowns(path)
     with progress.task("cool-downs", len(found), unit="fit") as task:
-        return [_fit_cooldown(run, params, sample_s, truth, *segment, task) for segment in found]
+        return [_fit_cooldown(run, params, sample_s, truth, model, *segment, task) for segment in found]
 
 
 def _fit_cooldown(run: pd.DataFrame, params: Mapping[str, float], sample_s: float, truth: Mapping[str, float] | None,
+                  model: ModelDefinition | None,
                   cycle: int, t0: float, t1: float, point: Mapping[str, float], task: Task) -> CooldownResult:
     """One cool-down's fit, with the plant's true resistance at its operating point where known."""
     rpm, state = point.get("engine_speed", math.nan), int(point.get("clutch_state", 0))
-    fit = fit_segment(run, params, t0, t1, sample_s, engine_speed=rpm if math.isfinite(rpm) else None)
+    fit = fit_segment(run, params, t0, t1, sample_s, engine_speed=rpm if math.isfinite(rpm) else None, model=model)
     r_true = math.nan
     if truth is not None:
         r_true = float(np.asarray(convection_resistance(truth, {"engine_speed": np.array([rpm]),

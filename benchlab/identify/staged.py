@@ -10,6 +10,10 @@ points do not depend on eq. (11)'s own parameters), and two things are measured:
 * how far the Table 1 model's R(ω_e, S) lies from those points (`eq11_rel_error`): the sweep's verdict on eq. (11);
 * the paper's procedure: eq. (11) fitted to the points and held, every other parameter fitted to the runs again
   (`sweep_model`); whether it predicts unseen runs better than the Table 1 model is for the caller to measure.
+
+A model identified with the sweep among its runs (the main job's diagnosis of Table 1 and the sweep together) is
+measured against the points as it reads them itself (`own_points_error`): its own structure and values in each
+segment's fit, so that eq. (11)'s R is not held against points that another model's links made.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from benchlab.identify.api import Identification, identify
-from benchlab.identify.cooldown import CooldownResult, analyse, fit_eq11
+from benchlab.identify.cooldown import CooldownResult, analyse, fit_eq11, segment_model
 from benchlab.model.clutch import convection_resistance
 from benchlab.model.params import ModelParams
 from benchlab.progress import SILENT, Progress
@@ -59,6 +63,14 @@ def eq11_rel_error(params: "dict[str, float]", points: Sequence[CooldownResult],
         return float("nan")
     measured = np.array([c.R for c in chosen], float)
     return float(np.max(np.abs(resistance_at(params, chosen) / measured - 1.0)))
+
+
+def own_points_error(sweep: "str | Path", params: ModelParams,
+                     progress: Progress = SILENT) -> tuple[list[CooldownResult], float]:
+    """The sweep's points read with `params`' own model (benchlab.identify.cooldown.segment_model) and the largest
+    relative error of that model's eq. (11) against them (eq11_rel_error)."""
+    points = analyse(sweep, params, progress=progress, model=segment_model(params))
+    return points, eq11_rel_error(params, points)
 
 
 def compare_with_sweep(runs: Sequence[pd.DataFrame], params: ModelParams, sweep: "str | Path",
