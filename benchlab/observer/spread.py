@@ -18,6 +18,11 @@ term is added only to states no sensor reads, which the sensors barely steer (th
 through the model's couplings); a measured state keeps the filter's spread, which its readings check (NIS).
 Nothing here looks at what the band is later scored against: a right model with well-identified parameters
 draws close together and the band stays the filter's.
+
+The parameter draws stay inside one model's structure. Where other structures fit the same measured channels
+about as well (diagnose's best model beside the model it extends), their predictions of the unread state are a
+second, structural doubt: `form_spread` is the spread across those models' open-loop predictions (two models:
+half their difference), added in quadrature (`combined`) as the law of total variance adds a further level.
 """
 
 from __future__ import annotations
@@ -88,6 +93,22 @@ def model_spread(run: pd.DataFrame, params: ModelParams, channels: Sequence[str]
     named = [c for c in channels if c in predictions[0].columns]
     spread = np.std([prediction[named].to_numpy() for prediction in predictions], axis=0, ddof=1)
     return pd.DataFrame(spread, columns=named, index=run.index)
+
+
+def form_spread(run: pd.DataFrame, models: Sequence[ModelParams], channels: Sequence[str]) -> pd.DataFrame:
+    """Per channel the standard deviation (K, population) across the open-loop predictions of `models`, structures
+    that fit the measured channels about as well (module doc); the channels every model simulates."""
+    predictions = [simulate(run, p, p.network) for p in models]
+    named = [c for c in channels if all(c in prediction.columns for prediction in predictions)]
+    spread = np.std([prediction[named].to_numpy() for prediction in predictions], axis=0)
+    return pd.DataFrame(spread, columns=named, index=run.index)
+
+
+def combined(*spreads: pd.DataFrame) -> pd.DataFrame:
+    """Independent spreads of the same channels added in quadrature (a channel missing from one counts as 0)."""
+    names = list(dict.fromkeys(c for spread in spreads for c in spread.columns))
+    total = sum(spread.reindex(columns=names, fill_value=0.0).to_numpy() ** 2 for spread in spreads)
+    return pd.DataFrame(np.sqrt(total), columns=names, index=spreads[0].index)
 
 
 def widened(observation: Observation, spread: pd.DataFrame) -> Observation:
