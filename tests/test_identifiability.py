@@ -223,3 +223,38 @@ def test_a_table1_run_identifies_the_open_law():
     assert result.uncertainty.not_identified == {}  # the model is exact and the run excites every parameter
     assert result.summary()["not_identified"] == result.uncertainty.not_identified
     assert not any("inf" in w for w in result.uncertainty.warnings)
+
+
+def test_identified_by_runs_names_the_run_that_carries_each_parameter():
+    """Two runs of a linear problem y = J θ + noise: `a` and `b` enter run 1 only as a + b and run 2 only as a − b
+    (neither run alone separates them, both together do), `c` is seen by run 1 alone, `d` by neither run."""
+    from types import SimpleNamespace
+
+    from benchlab.identify.spec import ParamSpec
+    from benchlab.identify.uncertainty import identified_by_runs
+
+    rng = np.random.default_rng(3)
+    steps = 400
+    t = np.linspace(0.0, 1.0, steps)
+    rows = {0: np.column_stack([np.ones(steps), np.ones(steps), np.sin(7 * t), np.zeros(steps)]),
+            1: np.column_stack([np.ones(steps), -np.ones(steps), np.zeros(steps), np.zeros(steps)])}
+    jacobian = np.vstack([rows[0], rows[1]])
+    residuals = 0.1 * rng.standard_normal(2 * steps)
+    names = ("a", "b", "c", "d")
+    specs = [ParamSpec(n, 1.0, 1e-3, 1e3) for n in names]
+    result = SimpleNamespace(jacobian=jacobian, residuals=residuals, free_names=list(names),
+                             params=dict.fromkeys(names, 1.0), spec=SimpleNamespace(free=specs))
+    datasets = [_Run(steps) for _ in range(2)]
+    pinned = identified_by_runs(result, datasets, ["run1", "run2"])
+    assert pinned == {"a": ["together"], "b": ["together"], "c": ["run1"], "d": []}
+
+
+class _Run:
+    """The part of a FitData that the run split reads: its fitting steps and which step each residual belongs to."""
+
+    def __init__(self, steps: int) -> None:
+        self.steps = steps
+        self.fitted = {"T": (np.arange(steps), None)}
+
+    def __len__(self) -> int:
+        return self.steps

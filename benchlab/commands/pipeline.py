@@ -48,6 +48,7 @@ SWEEP_GRID = "500:1,1000:1,1500:1,2500:1,500:0,1000:0,1500:0,2500:0"
 SWEEP_MODEL = "nonlinear-sweep"  # the paper's procedure: eq. (11) from the sweep held, the rest from Table 1
 #: diagnose's best model, the nonlinear model fitted on Table 1 and the sweep together with the causes it named
 DIAGNOSED_MODEL = "diagnosed"
+DIAGNOSED_RUNS = ("table1", "sweep")  # the runs diagnose fits, in its order
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -110,6 +111,7 @@ def _diagnose(fitting: pd.DataFrame, sweep: pd.DataFrame, validation: pd.DataFra
         from benchlab.diagnose.page import write_page
         from benchlab.diagnose.regimes import worst_regimes
         from benchlab.diagnose.report import summarise
+        from benchlab.identify.uncertainty import identified_by_runs
         from benchlab.model.definition import to_toml
         from benchlab.model.params import ModelParams, save_params
 
@@ -119,9 +121,10 @@ def _diagnose(fitting: pd.DataFrame, sweep: pd.DataFrame, validation: pd.DataFra
     page = write_page(diagnosis, summary, [fitting, sweep], out / "diagnose").with_suffix(".html")
     model = best_model(diagnosis)
     write_text(out / f"{DIAGNOSED_MODEL}.toml", to_toml(model))
-    diagnosed = ModelParams(model, best_values(diagnosis))
+    pinned = identified_by_runs(diagnosis.final, diagnosis.final_held.datasets, DIAGNOSED_RUNS)
+    diagnosed = ModelParams(model, best_values(diagnosis), {"identified_by": pinned})
     save_params(out / f"{DIAGNOSED_MODEL}.json", diagnosed,
-                {"fitted_on": ["table1.h5", "sweep.h5"], "diagnosis": "diagnose.json"})
+                {"fitted_on": [f"{run}.h5" for run in DIAGNOSED_RUNS], "diagnosis": "diagnose.json"})
     base, best = summary["baseline"], summary["best"]
     found = ", ".join(f"{f['candidate']} ({f['signal']}/{f['mechanism']}, unseen gain {f['unseen_gain_pct']:.0f} %, "
                       f"held-out {f['gain_pct']:.0f} %)" for f in summary["findings"]) or "none"
@@ -136,6 +139,10 @@ def _diagnose(fitting: pd.DataFrame, sweep: pd.DataFrame, validation: pd.DataFra
         print(f"          worst regime (held-out): {group} = {label}, {channel} {rmse:.3f} K -> {page}")
     print(f"          the best model, fitted on Table 1 and the sweep -> {out / (DIAGNOSED_MODEL + '.json')} "
           f"(model file {out / (DIAGNOSED_MODEL + '.toml')})")
+    groups: dict[str, list[str]] = {}
+    for name, runs in pinned.items():
+        groups.setdefault(" and ".join(runs) if runs else "none of the runs", []).append(name)
+    print("          identified by: " + "; ".join(f"{runs}: {', '.join(names)}" for runs, names in groups.items()))
     return summary, diagnosed
 
 
@@ -226,7 +233,8 @@ def _unseen_rmse(best: dict, key: str) -> float:
     return float(unseen[key]) if key in unseen else math.nan
 
 
-def job_figures(nonlinear: dict, story: dict, cooldowns, eq11_errors: dict[str, float], diagnosis: dict) -> dict:
+def job_figures(nonlinear: dict, story: dict, cooldowns, eq11_errors: dict[str, float], diagnosis: dict,
+                diagnosed: "ModelParams") -> dict:
     """DIR/summary.json: the figures the verdict holds against the paper's and the issue's references, NaN where
     the job could not measure one (no truth, no finding); the long cool-downs' figure is the best model's, eq. (11)'s
     that of the model identified with the sweep (DIAGNOSED_MODEL), each model's beside it."""
@@ -241,7 +249,7 @@ def job_figures(nonlinear: dict, story: dict, cooldowns, eq11_errors: dict[str, 
     return {"causes": [f["candidate"] for f in diagnosis.get("findings", [])],
             "leads": [f["candidate"] for f in diagnosis.get("leads", [])],
             "unseen_gain_pct": float(unseen_gain) if unseen_gain is not None else math.nan,
-            "diagnosed_runs": ["table1", "sweep"],
+            "diagnosed_runs": list(DIAGNOSED_RUNS), "identified_by": diagnosed.extra["identified_by"],
             "validation_rmse_k_by_model": {"nonlinear": float(nonlinear["validation"]["rmse_K"]),
                                            "nonlinear (Table 1 and sweep)": _unseen_rmse(best, "rmse_before_K"),
                                            DIAGNOSED_MODEL: _unseen_rmse(best, "rmse_after_K")},
@@ -345,7 +353,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"cool-down {label:9s}: long cool-downs of the validation run, mean NRMSE "
               f"{mean_cooldown_nrmse(cooldowns, label):.1f} % (paper: nonlinear 3.8 %, linear 8.4 %), the flywheel "
               f"alone {mean_cooldown_nrmse(cooldowns, label, flywheel=True):.1f} %")
-    figures_held = job_figures(figures["nonlinear"], story, cooldowns, eq11_errors, diagnosis)
+    figures_held = job_figures(figures["nonlinear"], story, cooldowns, eq11_errors, diagnosis, diagnosed)
     figures_held["not_identified"] = recorded(nonlinear)
     story["verdict"] = figures_held["verdict"] = verdict(figures_held)
     print(f"verdict   {story['verdict']}")

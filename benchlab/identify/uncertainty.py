@@ -324,3 +324,44 @@ def estimate_uncertainty(result: FitResult, datasets: Sequence[FitData], noise: 
                             f"{100 * se[i] / result.params[node.capacity]:.1f} % and its temperature is an "
                             f"estimate, not a measurement")
     return Uncertainty(names, dict(zip(names, map(float, se))), corr, sources, bandwidths, warnings, reasons)
+
+
+#: An eigenvalue of the unit-diagonal information matrix below this share of the largest is a direction the runs do
+#: not see at all (float64 round-off is ~1e-16; a weakly seen direction is far above it and gets a large SE instead).
+NULL_EIGENVALUE = 1e-12
+
+
+def _in_null_directions(information: np.ndarray) -> np.ndarray:
+    """Per parameter: whether it moves along a direction of zero information (collinear with others on these runs)."""
+    d = np.sqrt(np.clip(np.diag(information), 0, None))
+    d[d == 0] = 1.0
+    values, vectors = np.linalg.eigh(information / np.outer(d, d))
+    null = vectors[:, values <= NULL_EIGENVALUE * max(values.max(), 0.0)]
+    return np.abs(null).max(axis=1, initial=0.0) > 1e-6
+
+
+def identified_by_runs(result: FitResult, datasets: Sequence[FitData], labels: Sequence[str]) -> dict[str, list[str]]:
+    """Which runs pin each model parameter of a fit to several runs: the labels of the runs that identify it alone
+    (`not_identified` on the sandwich covariance from that run's rows of the Jacobian and its own scores), else
+    ["together"] where only all of them do, else [] (the runs do not identify it). Tells which experiment carried
+    which parameter (Table 1 the capacities, the sweep eq. (11), say)."""
+    J, names = result.jacobian, result.free_names
+    offsets = np.cumsum([0, *(len(index) for index in residual_index(datasets))])
+    middles = [prewhitened_long_run_covariance(s)[0] for s in run_scores(result, datasets)]
+    specs = [s for s in result.spec.free if "@" not in s.name]
+
+    def errors(runs: Sequence[int]) -> dict[str, float]:
+        rows = np.concatenate([np.arange(offsets[r], offsets[r + 1]) for r in runs])
+        information = J[rows].T @ J[rows]
+        se = _errors(scaled_inverse(information), sum(middles[r] for r in runs))
+        se[_in_null_directions(information)] = np.inf  # the pseudo-inverse would call a blind direction known
+        return dict(zip(names, map(float, se)))
+
+    alone = [not_identified(specs, result.params, errors([r])) for r in range(len(datasets))]
+    together = not_identified(specs, result.params, errors(range(len(datasets))))
+    out = {}
+    for spec in specs:
+        runs = [label for label, reasons in zip(labels, alone) if spec.name not in reasons]
+        out[spec.name] = runs or ([] if spec.name in together else ["together"])
+    return out
+

@@ -218,7 +218,9 @@ def verdict(figures: Mapping[str, Any]) -> str:
                  else "the models meet the paper's figures on this plant")
     unidentified = figures.get("not_identified") or {}
     if unidentified:
-        parts.append(f"not identified by the Table 1 run alone: {', '.join(sorted(unidentified))}")
+        by_sweep = sorted(k for k in unidentified if "sweep" in (figures.get("identified_by") or {}).get(k, ()))
+        parts.append(f"not identified by the Table 1 run alone: {', '.join(sorted(unidentified))}"
+                     + (f" (the sweep identifies {', '.join(by_sweep)} in the diagnosed model)" if by_sweep else ""))
     plate = figures.get("plate_rmse_k", np.nan)
     if np.isfinite(plate):
         coverage = figures.get("plate_band_coverage", np.nan)
