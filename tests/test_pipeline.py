@@ -69,6 +69,11 @@ def test_summary_holds_the_figures_the_verdict_names_and_they_agree_with_the_fil
     from benchlab.runfile import load_analysis
 
     assert summary["eq11_model"] == "diagnosed" and summary["diagnosed_runs"] == ["table1", "sweep"]
+    diagnosed = load_params(out / "diagnosed.json")  # the best model as a parameter file any command reads
+    assert set(summary["identified_by"]) == set(diagnosed.definition.parameters) - {
+        n for n, p in diagnosed.definition.parameters.items() if p.fixed is not None}
+    assert all(set(runs) <= {"table1", "sweep", "together"} for runs in summary["identified_by"].values())
+    assert diagnosed.extra["identified_by"] == summary["identified_by"]
     for model, figure in (("nonlinear", summary["eq11_rel_error_by_model"]["nonlinear"]),
                           ("diagnosed", summary["eq11_rel_error"])):
         analysis = tmp_path / f"analysis-{model}.h5"
@@ -125,6 +130,7 @@ def _check_index(out):
                         r"the filter's band alone ([\d.]+) K", text)
     assert covered and float(covered.group(2)) > float(covered.group(3)), covered
     assert "within the band" in text and "at the truth" in text
+    assert "fitted on table1 and sweep together" in text and "Which run identifies each parameter" in text
 
 
 _IMAGES = "Array.from(document.images).map(i => [i.getAttribute('src'), i.complete, i.naturalWidth])"

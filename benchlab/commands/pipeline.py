@@ -355,6 +355,7 @@ def run(args: argparse.Namespace) -> int:
               f"alone {mean_cooldown_nrmse(cooldowns, label, flywheel=True):.1f} %")
     figures_held = job_figures(figures["nonlinear"], story, cooldowns, eq11_errors, diagnosis, diagnosed)
     figures_held["not_identified"] = recorded(nonlinear)
+    story["diagnosed_runs"], story["identified_by"] = figures_held["diagnosed_runs"], figures_held["identified_by"]
     story["verdict"] = figures_held["verdict"] = verdict(figures_held)
     print(f"verdict   {story['verdict']}")
     write_text(out / "summary.json", json.dumps(finite_or_null(figures_held), indent=2))

@@ -248,6 +248,16 @@ def _diagnosis_alternatives(findings: Sequence[Mapping[str, Any]]) -> str:
         "<p>No alternative explains the data as well as a finding.</p>"
 
 
+def _identified_by(pinned: Mapping[str, Sequence[str]]) -> str:
+    """Which runs identify each parameter of the diagnosed model (benchlab.identify.uncertainty.identified_by_runs)."""
+    groups: dict[str, list[str]] = {}
+    for name, runs in pinned.items():
+        groups.setdefault(" and ".join(runs) if runs else "none of the runs (not identified)", []).append(name)
+    rows = [[html.escape(runs), html.escape(", ".join(names))] for runs, names in groups.items()]
+    return ("<p>Which run identifies each parameter of the best model (alone, by the fit's covariance from that "
+            "run's part):</p>" + _table(("identified by", "parameters"), rows))
+
+
 def _wear_sides(wear: Mapping[str, Any]) -> str:
     rows = [[side, _num(v["energy_J"] / 1e6, 3, " MJ"), _num(v["mean_lining_temperature_C"], 1, " °C"),
              _num(v["max_lining_temperature_C"], 1, " °C"), _num(1000 * v["wear_run_mm"], 3, " µm")]
@@ -312,7 +322,10 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
     sections += [
         "<p>The full report with parameters, residual tests and error tables: <a href='report/report.html'>"
         "report/report.html</a> (as Markdown: <a href='report/report.md'>report/report.md</a>).</p>",
-        f"<h2>3. What diagnose found ({html.escape(str(base.get('model', '')))} baseline)</h2>",
+        f"<h2>3. What diagnose found ({html.escape(str(base.get('model', '')))} baseline"
+        + (f", fitted on {html.escape(' and '.join(story['diagnosed_runs']))} together" if story and
+           story.get("diagnosed_runs") else "") + ")</h2>",
+        *([_identified_by(story["identified_by"])] if story and story.get("identified_by") else []),
         f"<p>Best model <b>{html.escape(str(best['model']))}</b>: "
         + (f"on the validation run (unseen) {_num(unseen['rmse_before_K'], 3, ' K')} → "
            f"{_num(unseen['rmse_after_K'], 3, ' K')}; " if unseen else "")
