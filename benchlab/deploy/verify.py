@@ -129,11 +129,14 @@ def reference(plan: Plan, run: pd.DataFrame) -> dict[str, np.ndarray]:
     return {"temperature": temperature, "std": std, "wear": wear, "x0": x0}
 
 
-def run_module(built: Built, plan: Plan, run: pd.DataFrame, x0: np.ndarray, real: str) -> dict[str, Any]:
-    """The compiled module over the run: temperatures, σ, wear and energy per side, state bytes, µs per step."""
+def run_module(built: Built, plan: Plan, run: pd.DataFrame, x0: np.ndarray, real: str,
+               inputs: np.ndarray | None = None, readings: np.ndarray | None = None) -> dict[str, Any]:
+    """The compiled module over the run (or over `inputs` and `readings` given as they are, drop-outs and all):
+    temperatures, σ, wear and energy per side, state bytes, µs per step."""
     dtype = np.float32 if real == "float" else np.float64
-    inputs = np.ascontiguousarray(run_inputs(plan, run)[0], dtype=dtype)
-    readings = np.ascontiguousarray(fresh(sensor_readings(run, plan.sensors)), dtype=dtype)
+    inputs = np.ascontiguousarray(run_inputs(plan, run)[0] if inputs is None else inputs, dtype=dtype)
+    readings = np.ascontiguousarray(fresh(sensor_readings(run, plan.sensors)) if readings is None else readings,
+                                    dtype=dtype)
     n = len(run)
     temperature, std, wear = (np.zeros((n, plan.n), dtype), np.zeros((n, plan.n), dtype), np.zeros((n, 4), dtype))
     library = ctypes.CDLL(str(built.library))
