@@ -77,7 +77,7 @@ def header(plan: Plan, real: str) -> str:
     return "\n".join(lines)
 
 
-def _law_texts(plan: Plan) -> tuple[list[str], list[str], list[tuple[int, int, str]]]:
+def _law_texts(plan: Plan) -> tuple[list[str], list[str], list[tuple[int, int]]]:
     """C text of each link's resistance, each source's heat (of channels `c`, node temperatures `t`), and the
     temperature terms (source, node index) to take from them."""
     model, params = plan.params.definition, plan.params
@@ -96,7 +96,7 @@ def _law_texts(plan: Plan) -> tuple[list[str], list[str], list[tuple[int, int, s
         return name
     resistances = [to_c(l.resistance, namer(l.resistance)) for l in model.links]
     heats = [to_c(s.heat, namer(s.heat)) for s in model.sources]
-    terms = [(k, nodes[name], "") for k, s in enumerate(model.sources) for name in sorted(s.heat.names)
+    terms = [(k, nodes[name]) for k, s in enumerate(model.sources) for name in sorted(s.heat.names)
              if name in model.nodes]
     return resistances, heats, terms
 
@@ -164,7 +164,7 @@ def source(plan: Plan, real: str) -> str:
             body.append(f"    {target} += g * inverse_capacity[{i}];")
     for k, src in enumerate(network.sources):
         body.append(f"    B[{states[src.node]}][{k}] = inverse_capacity[{states[src.node]}];")
-    for k, node, _ in terms:
+    for k, node in terms:
         i = states[model.sources[k].node]
         body += [f"    t[{node}] = BL_R(1.0); g = heat_{k}(c, t); t[{node}] = BL_R(0.0);",
                  f"    A[{i}][{node}] += (g - heat_{k}(c, t)) * inverse_capacity[{i}];"]
