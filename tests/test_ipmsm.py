@@ -10,6 +10,7 @@ of all but 6, 14 and 15 at 2 s with three starts; the full split, its comparison
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -84,3 +85,29 @@ def test_a_unit_that_contradicts_the_contract_or_a_missing_unit_is_bad_input(tmp
                  "--model", str(MODEL)]) == 2
     err = capsys.readouterr().err
     assert "column rotor" in err and "--unit" in err and len(err.strip().splitlines()) == 1
+
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc) on this machine: the module cannot be "
+                                                        "compiled here")
+def test_the_motor_deployed_as_c_computes_what_the_observer_computes(imported, identified, tmp_path):
+    """The motor's model file as a C module (copper loss affine in the winding temperature, the currents moving the
+    operating point every second), on the first 2000 s of a held-out profile of the real data (docs/deploy.md):
+    float within 0.05 K and 1 % of σ, double within 1e-6 K, beside benchlab's observer run once."""
+    from benchlab.deploy import verify
+    from benchlab.deploy.module import write_module
+    from benchlab.deploy.plan import make_plan
+    from benchlab.model.params import load_params
+    from benchlab.model.runs import load_runs
+
+    params = load_params(identified)
+    run = load_runs([imported / "id_6.h5"], params.definition, params)[0].iloc[:2000]
+    plan = make_plan(params, ["slotbottom"], 1.0, None)
+    theirs = verify.reference(plan, run)
+    for real, tolerance_k, sigma in (("float", 0.05, 0.01), ("double", 1e-6, 1e-6)):
+        write_module(tmp_path / real, plan, real)
+        ours = verify.run_module(verify.build(tmp_path / real, plan), plan, run, theirs["x0"], real)
+        proof = verify.compare(plan, ours, theirs)
+        assert set(proof["max_abs_dev_K"]) == {"activewind_1", "slotbottom", "outer_yoke", "rotor"}
+        assert max(proof["max_abs_dev_K"].values()) <= tolerance_k and proof["wear_rel_dev"] is None, proof
+        assert max(proof["sigma_rel_dev"].values()) <= sigma, proof

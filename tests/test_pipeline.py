@@ -8,6 +8,7 @@ import io
 import json
 import os
 import re
+import shutil
 import time
 from html.parser import HTMLParser
 from pathlib import Path
@@ -131,6 +132,9 @@ def _check_index(out):
     assert covered and float(covered.group(2)) > float(covered.group(3)), covered
     assert "within the band" in text and "at the truth" in text
     assert "fitted on table1 and sweep together" in text and "Which run identifies each parameter" in text
+    if shutil.which("cc") is not None:  # the module and its proof on the validation run, linked
+        assert {"deploy/verify.json", "deploy/README.md"} <= set(page.targets)
+        assert max(json.loads((out / "deploy" / "verify.json").read_text())["max_abs_dev_K"].values()) <= 0.05
 
 
 _IMAGES = "Array.from(document.images).map(i => [i.getAttribute('src'), i.complete, i.naturalWidth])"

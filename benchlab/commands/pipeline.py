@@ -218,6 +218,29 @@ def _eq11_errors(comparison, diagnosed: "ModelParams", sweep: Path, progress: Pr
     return errors
 
 
+def _deploy(validation: pd.DataFrame, nonlinear: "ModelParams", out: Path) -> dict | None:
+    """The nonlinear model's observer and wear as a float C module in `out/deploy`, proven on the validation run
+    (docs/deploy.md); None, said in one line, where the machine has no C compiler."""
+    import shutil
+
+    from benchlab.deploy.module import prove, write_module
+    from benchlab.deploy.plan import make_plan
+    from benchlab.wear import default_clutch
+
+    if shutil.which("cc") is None:
+        print("deploy    skipped: no C compiler (cc) on this machine")
+        return None
+    plan = make_plan(nonlinear, ["T_air"], float(validation.attrs["dt"]), default_clutch())
+    proof = prove(plan, [validation], "float")
+    write_module(out / "deploy", plan, "float", proof)
+    write_text(out / "deploy" / "verify.json", json.dumps(proof, indent=1) + "\n")
+    print(f"deploy    {plan.name} (float C): largest deviation from the observer over the validation run "
+          f"{max(proof['max_abs_dev_K'].values()):.2g} K, plate σ {proof['plate_sigma_rel_dev']:.2g}, wear "
+          f"{proof['wear_rel_dev']:.2g} (relative); state {proof['state_bytes']} B, code {proof['code_bytes']} B, "
+          f"{proof['step_us']:.2f} µs per step -> {out / 'deploy' / 'README.md'}")
+    return {"module": plan.name, **proof}
+
+
 def finite_or_null(value: object) -> object:
     """JSON-safe: a figure the job could not measure (NaN) becomes null, recursively."""
     if isinstance(value, dict):
@@ -344,6 +367,7 @@ def run(args: argparse.Namespace) -> int:
     for side, values in wear.get("from_observer", {}).items():
         print(f"          {side} side at the observer's estimate {1000 * values['estimate']:.4f} µm, over its ±2σ band "
               f"{1000 * values['low']:.4f}-{1000 * values['high']:.4f} µm; at the truth {1000 * values['truth']:.4f} µm")
+    story["deploy"] = _deploy(validation, nonlinear, out)
     compared = [("linear", linear), ("nonlinear", nonlinear)]
     if comparison.sweep_model is not None:
         compared.append((SWEEP_MODEL, comparison.sweep_model.params))

@@ -223,3 +223,41 @@ def _affine(node: ast.expr, kinds: Mapping[str, str], nodes: frozenset[str]) -> 
         return {k: (lambda a, b: lambda p, c, t: np.where(cond(p, c, t), a(p, c, t), b(p, c, t)))(
             yes.get(k, zero), no.get(k, zero)) for k in dict.fromkeys([*yes, *no])}
     raise NotAffine(f"a heat flow affine in the node temperatures, not {ast.unparse(node)[:60]!r}")
+
+
+#: The whitelist's functions in C (`benchlab deploy`): macros the generated module defines for its precision.
+C_FUNCTIONS = {"exp": "BL_EXP", "log": "BL_LOG", "sqrt": "BL_SQRT", "abs": "BL_ABS", "minimum": "BL_MIN",
+               "maximum": "BL_MAX"}
+_C_BINARY = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/"}
+_C_COMPARE = {ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">=", ast.Eq: "=="}
+
+
+def to_c(expr: Expression, name: Callable[[str], str]) -> str:
+    """The expression as one C expression of the module's real type (`benchlab deploy`): `name` gives the C text of
+    each name read (a parameter's value as a literal, a channel's or node's variable); numbers as `BL_R(…)`, a
+    comparison as 1 or 0 like the numpy functions, `**` as BL_POW. The tree is the checked one: nothing else."""
+    return _c(expr.tree, name)
+
+
+def _c(node: ast.expr, name: Callable[[str], str]) -> str:
+    if isinstance(node, ast.Constant):
+        return f"BL_R({float(node.value)!r})"
+    if isinstance(node, ast.Name):
+        return name(node.id)
+    if isinstance(node, ast.BinOp):
+        left, right = _c(node.left, name), _c(node.right, name)
+        if isinstance(node.op, ast.Pow):
+            return f"BL_POW({left}, {right})"
+        return f"({left} {_C_BINARY[type(node.op)]} {right})"
+    if isinstance(node, ast.UnaryOp):
+        return f"({'-' if isinstance(node.op, ast.USub) else '+'}{_c(node.operand, name)})"
+    if isinstance(node, ast.Compare):
+        test = f"{_c(node.left, name)} {_C_COMPARE[type(node.ops[0])]} {_c(node.comparators[0], name)}"
+        return f"(({test}) ? BL_R(1.0) : BL_R(0.0))"
+    args = [_c(a, name) for a in node.args]  # ast.Call: _check let nothing else through
+    if node.func.id == "where":
+        test = node.args[0]
+        condition = (f"{_c(test.left, name)} {_C_COMPARE[type(test.ops[0])]} {_c(test.comparators[0], name)}"
+                     if isinstance(test, ast.Compare) else f"{args[0]} != BL_R(0.0)")
+        return f"(({condition}) ? {args[1]} : {args[2]})"
+    return f"{C_FUNCTIONS[node.func.id]}({', '.join(args)})"

@@ -3,7 +3,7 @@
 `step(inputs, measurement)` takes this sample's input channels (the operating point and the heat input) and
 readings (NaN where a sensor has none), updates, hands back the estimate at this sample, and predicts the next.
 The discrete matrices of an operating point are made the first time it is met and kept: the point is the
-values of the channels the network's resistance laws read (found by watching the laws), each rounded to a
+values of the channels the network's resistance laws and temperature terms read (found by watching the laws), each rounded to a
 quantum (engine speed to 1 rpm: at most 0.1 % of the paper's convection resistance, far below what the sensors
 resolve). The filter arithmetic is the compiled step of `benchlab.observer.kalman`, the same as the batch
 filter's; the wear is `benchlab.wear.online.LiningWear`, fed with the estimated plate and flywheel temperatures.
@@ -34,6 +34,13 @@ QUANTUM_BY_UNIT = {"rpm": 1.0, "1": 1.0, "W": 1.0, "N*m": 0.1, "degC": 0.01}
 DEFAULT_QUANTUM = 1e-3
 #: The channels that carry the wear: plate and flywheel temperatures, friction power.
 WEAR_CHANNELS = ("T_pressure_plate", "T_flywheel", "friction_power")
+
+
+def quantum_of(channel: str, quantum: Mapping[str, float] | None = None) -> float:
+    """The operating-point quantum of a channel: the caller's, else by its unit in the contract (QUANTUM_BY_UNIT)."""
+    given = (quantum or {}).get(channel)
+    return float(given if given is not None else
+                 QUANTUM_BY_UNIT.get(ALIGNED_UNITS.get(channel, ""), DEFAULT_QUANTUM))
 
 
 class Estimate(NamedTuple):
@@ -74,9 +81,7 @@ class OnlineObserver:
         self.sensors = self.model.sensors
         self.inputs = tuple(inputs)
         self.dt = float(dt)
-        quantum = dict(quantum or {})
-        self._quantum = {c: float(quantum.get(c, QUANTUM_BY_UNIT.get(ALIGNED_UNITS.get(c, ""), DEFAULT_QUANTUM)))
-                         for c in self.inputs}
+        self._quantum = {c: quantum_of(c, quantum) for c in self.inputs}
         n, na = len(self.states), len(self.model.adapted)
         if len(x0) != n:
             raise InputError("x0", "initial state", f"{n} temperatures ({', '.join(self.states)}), got {len(x0)}")
@@ -122,6 +127,9 @@ class OnlineObserver:
         try:
             for link in self.model.network.links:
                 link.resistance(self.model.params, watched)
+            for source in self.model.network.sources:  # a temperature term's W/K goes into Ad too (copper loss)
+                for _, law in source.coefficients:
+                    law(self.model.params, watched)
         except KeyError as exc:
             raise InputError("inputs", str(exc.args[0]), "an input channel the model's laws need") from None
         new = tuple(sorted(watched.read - set(self._key_channels)))

@@ -258,6 +258,21 @@ def _identified_by(pinned: Mapping[str, Sequence[str]]) -> str:
             "run's part):</p>" + _table(("identified by", "parameters"), rows))
 
 
+def _deployed(proof: Mapping[str, Any]) -> str:
+    """Section 5: the nonlinear model's observer and wear as C (benchlab deploy) and its proof on the validation run."""
+    name = html.escape(proof["module"])
+    worst = max(proof["max_abs_dev_K"].values())
+    return ("<h2>5. The observer and the wear as C for a control unit</h2>"
+            f"<p>The nonlinear model, its observer (T_air) and the wear per side as a C99 module in float "
+            f"(<a href='deploy/{name}.c'>{name}.c</a>, <a href='deploy/{name}.h'>{name}.h</a>, "
+            f"<a href='deploy/README.md'>README</a>), run over the validation run sample by sample beside benchlab's "
+            f"observer: largest temperature deviation {_num(worst * 1000, 3, ' mK')}, plate σ "
+            f"{_num(proof['plate_sigma_rel_dev'] * 100, 4, ' %')}, wear "
+            f"{_num((proof['wear_rel_dev'] or 0.0) * 100, 4, ' %')} relative; {proof['state_bytes']} bytes of state, "
+            f"{proof['code_bytes']} bytes of code, {_num(proof['step_us'], 2, ' µs')} per 10 ms step on this machine "
+            f"(<a href='deploy/verify.json'>verify.json</a>; benchlab's docs/deploy.md).</p>")
+
+
 def _wear_sides(wear: Mapping[str, Any]) -> str:
     rows = [[side, _num(v["energy_J"] / 1e6, 3, " MJ"), _num(v["mean_lining_temperature_C"], 1, " °C"),
              _num(v["max_lining_temperature_C"], 1, " °C"), _num(1000 * v["wear_run_mm"], 3, " µm")]
@@ -343,6 +358,7 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         *([_wear_band(story["wear_band"].band)] if story and story.get("wear_band") is not None else []),
         _figure(out, out / "wear.png", "Energy, lining temperatures, wear per side and remaining-life distribution"),
         '<p>All numbers: <a href="wear.json">wear.json</a>.</p>',
+        *([_deployed(story["deploy"])] if story and story.get("deploy") else []),
     ]
     page = out / PAGE
     write_text(page, "<!DOCTYPE html><html><head><meta charset='utf-8'><title>benchlab: the whole job</title>"
