@@ -1,0 +1,58 @@
+"""What `benchlab design` does once its command line is read: runs and parameter file in, plan file out."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from benchlab.design.blocks import candidate_blocks
+from benchlab.design.precision import design_precision
+from benchlab.errors import InputError
+from benchlab.identify.data import prepare
+from benchlab.identify.defaults import FIT_STEP_S
+from benchlab.model.catalog import model_spec
+from benchlab.model.params import load_params
+from benchlab.model.runs import load_runs
+from benchlab.outputs import write_text
+from benchlab.runner.session import RunRequest, bench_config
+
+
+def design(args: argparse.Namespace, schema: str) -> int:
+    """Read, check, design, print the expected outcome, write the plan (docs/design.md)."""
+    params = load_params(args.params)
+    spec = model_spec(params.definition)
+    names = [p.name for p in spec.free]
+    open_ = params.extra.get("not_identified") or {}
+    if not isinstance(open_, dict):
+        raise InputError(args.params, "not_identified", "an object of parameter -> reason")
+    interest = [n for n in names if n in open_]
+    if not interest:
+        raise InputError(args.params, "not_identified", "at least one parameter of the model the runs leave open "
+                                                        "(every parameter is identified: nothing to design for)")
+    limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
+    budget_s = args.budget * 60.0
+    shortest = min((b.expected_s for b in candidate_blocks(limits)), default=np.inf)
+    if budget_s < shortest:
+        raise InputError("command line", "--budget", f"at least {np.ceil(shortest / 60):g} min: the shortest block "
+                                                     f"(heat, then a cool-down) lasts {shortest / 60:.1f} min on "
+                                                     f"this bench, got {args.budget:g}")
+    runs = load_runs(args.runs, params.definition, params, str(args.params))
+    data = [prepare(run, FIT_STEP_S, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
+    ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
+    reported = params.extra.get("uncertainty") or {}
+    plan = design_precision(spec.network, params, names, interest, data, reported, limits, ambient, budget_s)
+    print("\n".join(plan.lines(params)))
+    doc = {"schema": schema, "kind": "precision", "model": params.definition.label,
+           "params_file": str(args.params), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
+           "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
+           "blocks": [b.name for b in plan.blocks],
+           "expected": {n: {"value": params[n], "relative_error_now": plan.before[n],
+                            "relative_error_expected": plan.expected[n]} for n in interest},
+           "calibration": plan.calibration, "ambient_C": ambient,
+           "schedule": [s.as_dict() for s in plan.steps]}
+    write_text(args.out, json.dumps(doc, indent=1) + "\n")
+    print(f"plan       {args.out}")
+    return 0
