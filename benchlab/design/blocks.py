@@ -17,9 +17,9 @@ from protocols.schedule import Step
 #: Engine speeds a cool-down is offered at (rpm), as far as the bench's limit allows: the cool-down sweep's grid.
 COOLDOWN_SPEEDS_RPM = (500.0, 1000.0, 1500.0, 2000.0, 2500.0)
 #: Cool-down lengths offered (s): long against the flywheel's time constant at the fastest convection.
-COOLDOWN_LENGTHS_S = (300.0, 600.0)
+COOLDOWN_LENGTHS_S = (300.0, 600.0, 900.0)
 #: Heating launches before each cool-down, their speed and the time the shaft is given to stop after each.
-HEAT_LAUNCHES = 4
+HEAT_LAUNCHES = 6
 HEAT_SPEED_RPM = 2500.0
 STOP_S = 10.0
 #: Clutch torque that brings a shaft without load to the engine's speed for a clamped cool-down.

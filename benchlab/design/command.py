@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -14,10 +15,17 @@ from benchlab.errors import InputError
 from benchlab.identify.data import prepare
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.model.catalog import model_spec
-from benchlab.model.params import load_params
+from benchlab.model.params import ModelParams, load_params
 from benchlab.model.runs import load_runs
 from benchlab.outputs import write_text
 from benchlab.runner.session import RunRequest, bench_config
+
+
+def nominal_values(params: ModelParams, open_: Mapping[str, str]) -> dict[str, float]:
+    """The values the design predicts with: the fitted ones, and for each parameter the runs leave open the model
+    file's start value (a fit's value of it is arbitrary: often on a bound, where it has no effect to design for)."""
+    starts = {p.name: p.start for p in params.definition.free_parameters()}
+    return {n: (starts[n] if n in open_ and n in starts else v) for n, v in params.items()}
 
 
 def design(args: argparse.Namespace, schema: str) -> int:
@@ -32,6 +40,14 @@ def design(args: argparse.Namespace, schema: str) -> int:
     if not interest:
         raise InputError(args.params, "not_identified", "at least one parameter of the model the runs leave open "
                                                         "(every parameter is identified: nothing to design for)")
+    if args.parameters:
+        asked = [n.strip() for n in args.parameters.split(",") if n.strip()]
+        unknown = [n for n in asked if n not in interest]
+        if unknown or not asked:
+            raise InputError("command line", "--parameters", f"names among the file's not identified parameters "
+                                                             f"({', '.join(interest)}), got {args.parameters!r}")
+        interest = asked
+    nominal = nominal_values(params, open_)
     limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
     budget_s = args.budget * 60.0
     shortest = min((b.expected_s for b in candidate_blocks(limits)), default=np.inf)
@@ -39,17 +55,21 @@ def design(args: argparse.Namespace, schema: str) -> int:
         raise InputError("command line", "--budget", f"at least {np.ceil(shortest / 60):g} min: the shortest block "
                                                      f"(heat, then a cool-down) lasts {shortest / 60:.1f} min on "
                                                      f"this bench, got {args.budget:g}")
-    runs = load_runs(args.runs, params.definition, params, str(args.params))
+    runs = load_runs(args.runs, params.definition, nominal, str(args.params))
     data = [prepare(run, FIT_STEP_S, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
     reported = params.extra.get("uncertainty") or {}
-    plan = design_precision(spec.network, params, names, interest, data, reported, limits, ambient, budget_s)
-    print("\n".join(plan.lines(params)))
+    identified = [n for n in names if n not in open_]
+    plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits, ambient,
+                            budget_s)
+    moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_)
+    print(f"not identified, taken at the model file's start values: {moved}")
+    print("\n".join(plan.lines(nominal)))
     doc = {"schema": schema, "kind": "precision", "model": params.definition.label,
            "params_file": str(args.params), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
            "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
            "blocks": [b.name for b in plan.blocks],
-           "expected": {n: {"value": params[n], "relative_error_now": plan.before[n],
+           "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
            "calibration": plan.calibration, "ambient_C": ambient,
            "schedule": [s.as_dict() for s in plan.steps]}

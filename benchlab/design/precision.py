@@ -1,8 +1,8 @@
 """Parameter precision: the blocks that most shrink what the runs so far leave open.
 
 Greedy D-optimal selection: starting from the information the runs already hold, add the candidate block
-(`benchlab.design.blocks`) that raises log det of the information on the not-identified parameters most (every
-other parameter a nuisance, `fisher.schur`), until the time budget is spent. Each candidate's information is
+(`benchlab.design.blocks`) that raises log det of the information on the not-identified parameters most per
+second of bench time (every other parameter a nuisance, `fisher.schur`), until no block fits the time budget. Each candidate's information is
 predicted on its own from a bench at rest; the chosen plan is then predicted whole, and its expected standard
 errors come from that.
 
@@ -62,16 +62,18 @@ def calibration(info: np.ndarray, names: Sequence[str], params: Mapping[str, flo
 
 
 def design_precision(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
-                     interest: Sequence[str], runs: Sequence[FitData], reported: Mapping[str, float],
-                     limits: BenchLimits, ambient_c: float, budget_s: float) -> PrecisionDesign:
-    """Greedy D-optimal blocks within `budget_s` for `interest`, the runs' information the prior; ValueError when
-    no block fits the budget."""
+                     interest: Sequence[str], identified: Sequence[str], runs: Sequence[FitData],
+                     reported: Mapping[str, float], limits: BenchLimits, ambient_c: float,
+                     budget_s: float) -> PrecisionDesign:
+    """Greedy D-optimal blocks within `budget_s` for `interest` (the most log det gained per second of bench time
+    first), the runs' information the prior; the `identified` parameters calibrate the white-noise information
+    against the parameter file's `reported` standard errors. ValueError when no block fits the budget."""
     blocks = [b for b in candidate_blocks(limits) if b.expected_s <= budget_s]
     if not blocks:
         raise ValueError("no block fits")
     noise = fisher.channel_noise(runs)
     prior = fisher.information(network, params, names, runs, noise)
-    scale = calibration(prior, names, params, reported, [n for n in names if n not in interest])
+    scale = calibration(prior, names, params, reported, identified)
     gains = [fisher.information(network, params, names,
                                 [fisher.predicted_data(b.steps, params, network, ambient_c, limits.drivetrain)], noise)
              for b in blocks]
@@ -81,7 +83,8 @@ def design_precision(network: ThermalNetwork, params: Mapping[str, float], names
         fits = [i for i, b in enumerate(blocks) if spent + b.expected_s <= budget_s]
         if not fits:
             break
-        best = max(fits, key=lambda i: fisher.log_det(total + gains[i], names, interest))
+        now = fisher.log_det(total, names, interest)
+        best = max(fits, key=lambda i: (fisher.log_det(total + gains[i], names, interest) - now) / blocks[i].expected_s)
         chosen.append(best)
         total, spent = total + gains[best], spent + blocks[best].expected_s
     steps = numbered([blocks[i] for i in chosen])
