@@ -1,6 +1,6 @@
 """A designed run against a Table 1 run of the same length, on the reference plant (docs/design.md).
 
-    .venv/bin/python benchmarks/bench_design.py [--seeds 101 102 103] [--minutes 30] [--hours 1] [--out DIR]
+    .venv/bin/python benchmarks/bench_design.py [--seeds 101 102 103] [--minutes 30] [--hours 1] [--only] [--out DIR]
 
 Per seed (seeds the tests do not use): the main job's Table 1 run (`--hours`, default 1 h as `benchlab pipeline`)
 on the simulated bench's reference plant, identified with the nonlinear model (4 starts, as the main job); then
@@ -43,15 +43,15 @@ def shares(params_file: Path) -> dict[str, float]:
     return {n: doc["uncertainty"].get(n, float("inf")) / abs(doc["params"][n]) for n in PARAMETERS}
 
 
-def one_seed(seed: int, minutes: float, hours: float, folder: Path) -> dict[str, dict[str, float]]:
+def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool) -> dict[str, dict[str, float]]:
     """The figures of one seed: share before, expected, delivered (designed) and peer, per parameter."""
     table1, first = folder / "table1.h5", folder / "table1.params.json"
     step(["run", "table1", "--bench", "sim", "--seed", str(seed), "--duration", str(hours * 3600), "--out",
           str(table1), "--force"])
     step(["identify", str(table1), "--model", "nonlinear", "--starts", "4", "--out", str(first), "--force"])
     plan = folder / "plan.json"
-    step(["design", str(table1), "--params", str(first), "--parameters", ",".join(PARAMETERS), "--budget",
-          str(minutes), "--out", str(plan), "--force"])
+    aim = ["--parameters", ",".join(PARAMETERS)] if only else []
+    step(["design", str(table1), "--params", str(first), *aim, "--budget", str(minutes), "--out", str(plan), "--force"])
     doc = json.loads(plan.read_text())
     designed, peer = folder / "designed.h5", folder / "peer.h5"
     step(["run", str(plan), "--bench", "sim", "--seed", str(seed + 100), "--out", str(designed), "--force"])
@@ -79,6 +79,8 @@ def main_(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[101, 102, 103])
     parser.add_argument("--minutes", type=float, default=30.0)
     parser.add_argument("--hours", type=float, default=1.0)
+    parser.add_argument("--only", action="store_true", help="design for a2 and b2 alone (default: for every "
+                        "parameter the Table 1 run leaves open, a2 and b2 among them)")
     parser.add_argument("--out", type=Path, help="keep the runs and files here (default: a temporary directory)")
     args = parser.parse_args(argv)
     print(f"load average at start {os.getloadavg()[0]:.1f}")
@@ -89,7 +91,7 @@ def main_(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             folder = args.out / f"seed{seed}" if args.out else Path(tmp)
             folder.mkdir(parents=True, exist_ok=True)
-            rows = one_seed(seed, args.minutes, args.hours, folder)
+            rows = one_seed(seed, args.minutes, args.hours, folder, args.only)
         for name, row in rows.items():
             ok = agrees(row)
             missed |= not ok or not row["delivered"] <= TARGET_SHARE

@@ -19,7 +19,12 @@ COOLDOWN_SPEEDS_RPM = (500.0, 1000.0, 1500.0, 2000.0, 2500.0)
 #: Cool-down lengths offered (s): long against the flywheel's time constant at the fastest convection.
 COOLDOWN_LENGTHS_S = (300.0, 600.0, 900.0)
 #: Heating launches before each cool-down, their speed and the time the shaft is given to stop after each.
-HEAT_LAUNCHES = 6
+HEAT_LAUNCHES = 4
+#: A heating launch must be expected to synchronise within this share of its maximum slip time: the bench's
+#: actuator builds its torque up over a few tenths of a second and the load's reaction is not exact, and a launch
+#: planned at 8.2 of 10 s (2500 rpm, 50 N*m against 600 N*m) slipped to the time limit on the simulated bench in
+#: 10 of 24 launches, then tripped the over-temperature interlocks.
+SYNC_SHARE = 1 / 3
 HEAT_SPEED_RPM = 2500.0
 STOP_S = 10.0
 #: Clutch torque that brings a shaft without load to the engine's speed for a clamped cool-down.
@@ -40,8 +45,9 @@ class Block:
 
 
 def heating_launch(limits: BenchLimits, speed_rpm: float = HEAT_SPEED_RPM) -> Step | None:
-    """The launch that puts the most slip energy into the clutch within the bench's limits (largest load the clutch
-    still synchronises against, energy and slip time within the interlocks), or None where no launch can."""
+    """The launch that puts the most slip energy into the clutch within the bench's limits (the largest load the
+    clutch still synchronises against well within its slip time, SYNC_SHARE; energy within the interlock), or None
+    where no launch can."""
     speed = min(speed_rpm, limits.max_engine_speed_rpm)
     best: Step | None = None
     best_energy = 0.0
@@ -54,8 +60,9 @@ def heating_launch(limits: BenchLimits, speed_rpm: float = HEAT_SPEED_RPM) -> St
             if load > limits.max_load_torque_nm:
                 continue
             step = Step("launch", min(10.0, limits.max_slip_time_s), speed, torque, load, 0, label="heat")
-            _, energy, _ = launch_estimate(step, limits)
-            if launch_problem(step, limits) is None and energy <= 0.9 * limits.max_slip_energy_j and energy > best_energy:
+            t_sync, energy, _ = launch_estimate(step, limits)
+            robust = t_sync <= SYNC_SHARE * step.duration_s and energy <= 0.9 * limits.max_slip_energy_j
+            if launch_problem(step, limits) is None and robust and energy > best_energy:
                 best, best_energy = step, energy
     return best
 

@@ -5,12 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Mapping
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from benchlab.design.blocks import candidate_blocks
+from benchlab.design.fisher import predicted_run
 from benchlab.design.precision import design_precision
+from benchlab.design.sensors import rank_sensors
 from benchlab.errors import InputError
 from benchlab.identify.data import prepare
 from benchlab.identify.defaults import FIT_STEP_S
@@ -65,6 +68,11 @@ def design(args: argparse.Namespace, schema: str) -> int:
     moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_)
     print(f"not identified, taken at the model file's start values: {moved}")
     print("\n".join(plan.lines(nominal)))
+    predicted = predicted_run(plan.steps, nominal, spec.network, ambient, limits.drivetrain)
+    sensors = rank_sensors(predicted, nominal, spec.network, names, interest, plan.prior, plan.noise)
+    print("a sensor at each place, on the designed run (what it removes of the plate's estimate variance, what it "
+          "adds to the information):")
+    print("\n".join(s.line() for s in sensors))
     doc = {"schema": schema, "kind": "precision", "model": params.definition.label,
            "params_file": str(args.params), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
            "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
@@ -72,6 +80,7 @@ def design(args: argparse.Namespace, schema: str) -> int:
            "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
            "calibration": plan.calibration, "ambient_C": ambient,
+           "sensors": [asdict(s) for s in sensors],
            "schedule": [s.as_dict() for s in plan.steps]}
     write_text(args.out, json.dumps(doc, indent=1) + "\n")
     print(f"plan       {args.out}")

@@ -92,7 +92,7 @@ def predicted_run(steps: Sequence[Step], params, network: ThermalNetwork, ambien
                   drivetrain: DrivetrainFacts, dt: float = PREDICTION_DT_S, name: str = "design") -> pd.DataFrame:
     """The run `steps` would give on a bench with this drivetrain and the model at `params`, noise-free: the
     drivetrain's channels (`sim_bench.drivetrain`, the bench's own dynamics), the ambient held, every state
-    starting at the ambient (a bench at rest), the measured temperatures the model's."""
+    starting at the ambient (a bench at rest), every temperature the model outputs (measured or not) the model's."""
     from benchlab.network.simulation import simulate
     from sim_bench.virtual_run import drive_schedule
 
@@ -103,7 +103,7 @@ def predicted_run(steps: Sequence[Step], params, network: ThermalNetwork, ambien
         frame[channel] = ambient_c
     frame.attrs.update(dt=dt, source=name)
     simulated = simulate(frame, params, network, initial={s: ambient_c for s in network.state_names})
-    for channel in network.measured:
+    for channel in network.outputs:
         frame[channel] = simulated[channel].to_numpy()
     return frame
 

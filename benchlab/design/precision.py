@@ -37,6 +37,8 @@ class PrecisionDesign:
     before: dict[str, float]
     expected: dict[str, float]
     calibration: float
+    prior: np.ndarray  # the runs' information (ln θ of every free parameter), for what a sensor would add
+    noise: dict[str, float]  # each measured channel's noise at the fitting step, K
 
     def lines(self, params: Mapping[str, float]) -> list[str]:
         """The expected outcome, one line per parameter, for the terminal before the run."""
@@ -59,6 +61,13 @@ def calibration(info: np.ndarray, names: Sequence[str], params: Mapping[str, flo
               for n in identified if n in reported and params[n] != 0 and cov[names.index(n), names.index(n)] > 0]
     ratios = [r for r in ratios if np.isfinite(r) and r > 0]
     return float(np.median(ratios)) if ratios else 1.0
+
+
+def too_hot(data: FitData, limits: BenchLimits) -> bool:
+    """Whether the predicted run comes within the interlocks' clear margin of an over-temperature limit."""
+    peaks = {c: float(np.nanmax(v)) for c, v in data.targets.items()}
+    return (peaks.get("T_flywheel", -np.inf) > limits.max_flywheel_c - limits.clear_margin_k
+            or peaks.get("T_air", -np.inf) > limits.max_air_c - limits.clear_margin_k)
 
 
 def design_precision(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
@@ -87,9 +96,16 @@ def design_precision(network: ThermalNetwork, params: Mapping[str, float], names
         best = max(fits, key=lambda i: (fisher.log_det(total + gains[i], names, interest) - now) / blocks[i].expected_s)
         chosen.append(best)
         total, spent = total + gains[best], spent + blocks[best].expected_s
-    steps = numbered([blocks[i] for i in chosen])
-    whole = fisher.information(network, params, names,
-                               [fisher.predicted_data(steps, params, network, ambient_c, limits.drivetrain)], noise)
+    while True:  # the blocks' heat adds up: the plan as a whole must stay clear of the over-temperature interlocks
+        steps = numbered([blocks[i] for i in chosen])
+        predicted = fisher.predicted_data(steps, params, network, ambient_c, limits.drivetrain)
+        if len(chosen) == 1 or not too_hot(predicted, limits):
+            break
+        chosen.pop()
+    if too_hot(predicted, limits):
+        raise ValueError("every block heats the clutch beyond the over-temperature interlocks")
+    whole = fisher.information(network, params, names, [predicted], noise)
     before = {k: v * scale for k, v in fisher.relative_errors(prior, names, interest).items()}
     expected = {k: v * scale for k, v in fisher.relative_errors(prior + whole, names, interest).items()}
-    return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), before, expected, scale)
+    return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), before, expected, scale, prior,
+                           noise)
