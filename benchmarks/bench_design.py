@@ -1,6 +1,6 @@
 """A designed run against a Table 1 run of the same length, on the reference plant (docs/design.md).
 
-    .venv/bin/python benchmarks/bench_design.py [--seeds 101 102 103] [--minutes 30] [--hours 1] [--only] [--out DIR]
+    .venv/bin/python benchmarks/bench_design.py [--seeds 101 102 103] [--minutes 30] [--hours 1] [--only] [--plant reference|paper] [--out DIR]
 
 Per seed (seeds the tests do not use): the main job's Table 1 run (`--hours`, default 1 h as `benchlab pipeline`)
 on the simulated bench's reference plant, identified with the nonlinear model (4 starts, as the main job); then
@@ -43,10 +43,12 @@ def shares(params_file: Path) -> dict[str, float]:
     return {n: doc["uncertainty"].get(n, float("inf")) / abs(doc["params"][n]) for n in PARAMETERS}
 
 
-def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool) -> dict[str, dict[str, float]]:
+def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool,
+             plant: str) -> dict[str, dict[str, float]]:
     """The figures of one seed: share before, expected, delivered (designed) and peer, per parameter."""
+    on = ["--bench", "sim", "--plant", plant]
     table1, first = folder / "table1.h5", folder / "table1.params.json"
-    step(["run", "table1", "--bench", "sim", "--seed", str(seed), "--duration", str(hours * 3600), "--out",
+    step(["run", "table1", *on, "--seed", str(seed), "--duration", str(hours * 3600), "--out",
           str(table1), "--force"])
     step(["identify", str(table1), "--model", "nonlinear", "--starts", "4", "--out", str(first), "--force"])
     plan = folder / "plan.json"
@@ -54,8 +56,8 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool) 
     step(["design", str(table1), "--params", str(first), *aim, "--budget", str(minutes), "--out", str(plan), "--force"])
     doc = json.loads(plan.read_text())
     designed, peer = folder / "designed.h5", folder / "peer.h5"
-    step(["run", str(plan), "--bench", "sim", "--seed", str(seed + 100), "--out", str(designed), "--force"])
-    step(["run", "table1", "--bench", "sim", "--seed", str(seed + 200), "--duration", str(doc["planned_min"] * 60),
+    step(["run", str(plan), *on, "--seed", str(seed + 100), "--out", str(designed), "--force"])
+    step(["run", "table1", *on, "--seed", str(seed + 200), "--duration", str(doc["planned_min"] * 60),
           "--out", str(peer), "--force"])
     after, with_peer = folder / "designed.params.json", folder / "peer.params.json"
     step(["identify", str(table1), str(designed), "--model", "nonlinear", "--starts", "4", "--out", str(after),
@@ -79,6 +81,9 @@ def main_(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[101, 102, 103])
     parser.add_argument("--minutes", type=float, default=30.0)
     parser.add_argument("--hours", type=float, default=1.0)
+    parser.add_argument("--plant", choices=("reference", "paper"), default="reference",
+                        help="the simulated clutch (the paper's network: the model's own structure, a check that the "
+                             "design works where its assumptions hold)")
     parser.add_argument("--only", action="store_true", help="design for a2 and b2 alone (default: for every "
                         "parameter the Table 1 run leaves open, a2 and b2 among them)")
     parser.add_argument("--out", type=Path, help="keep the runs and files here (default: a temporary directory)")
@@ -91,7 +96,7 @@ def main_(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             folder = args.out / f"seed{seed}" if args.out else Path(tmp)
             folder.mkdir(parents=True, exist_ok=True)
-            rows = one_seed(seed, args.minutes, args.hours, folder, args.only)
+            rows = one_seed(seed, args.minutes, args.hours, folder, args.only, args.plant)
         for name, row in rows.items():
             ok = agrees(row)
             missed |= not ok or not row["delivered"] <= TARGET_SHARE

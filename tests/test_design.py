@@ -71,6 +71,9 @@ def test_design_prints_the_expected_outcome_and_run_reads_the_plan(run_file, ope
         assert expected["relative_error_expected"] < expected["relative_error_now"]
         assert f"{name}: " in printed and f"{100 * expected['relative_error_expected']:.1f} %" in printed
     assert any("clutch open" in block for block in doc["blocks"])
+    # a sensor on the plate itself removes the most of the plate's estimate variance (it reads that state)
+    assert doc["sensors"][0]["channel"] == "T_pressure_plate" and not doc["sensors"][0]["measured"]
+    assert "T_pressure_plate (node P, no sensor now)" in printed
     scheduled, recorded = design_plan(str(out))
     steps, config, options = plan(RunRequest(protocol="design", out=tmp_path / "r.h5", steps=scheduled,
                                              options=recorded))

@@ -24,8 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                                    "identified on)")
     parser.add_argument("--params", required=True, help="parameter file of `benchlab identify` on those runs: its "
                         "not_identified parameters are designed for, the others are nuisance")
-    parser.add_argument("--parameters", metavar="NAME,…", help="design for these of the not identified parameters "
-                        "only (default: all of them); the others are nuisance")
+    parser.add_argument("--parameters", metavar="NAME,…", help="design for these free parameters (default: those the "
+                        "parameter file records as not identified); the others are nuisance")
     parser.add_argument("--out", required=True, type=cliargs.output_file, metavar="PLAN.json",
                         help="the plan: a schedule `benchlab run PLAN.json --bench …` runs, and the expected outcome")
     parser.add_argument("--budget", type=cliargs.positive_float("a duration in min", MAX_RUN_DURATION_S / 60),

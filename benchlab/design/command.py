@@ -40,16 +40,15 @@ def design(args: argparse.Namespace, schema: str) -> int:
     if not isinstance(open_, dict):
         raise InputError(args.params, "not_identified", "an object of parameter -> reason")
     interest = [n for n in names if n in open_]
+    if args.parameters:
+        interest = [n.strip() for n in args.parameters.split(",") if n.strip()]
+        unknown = [n for n in interest if n not in names]
+        if unknown or not interest:
+            raise InputError("command line", "--parameters", f"free parameters of the model ({', '.join(names)}), "
+                                                             f"got {args.parameters!r}")
     if not interest:
         raise InputError(args.params, "not_identified", "at least one parameter of the model the runs leave open "
-                                                        "(every parameter is identified: nothing to design for)")
-    if args.parameters:
-        asked = [n.strip() for n in args.parameters.split(",") if n.strip()]
-        unknown = [n for n in asked if n not in interest]
-        if unknown or not asked:
-            raise InputError("command line", "--parameters", f"names among the file's not identified parameters "
-                                                             f"({', '.join(interest)}), got {args.parameters!r}")
-        interest = asked
+                                                        "(every parameter is identified: name some with --parameters)")
     nominal = nominal_values(params, open_)
     limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
     budget_s = args.budget * 60.0
