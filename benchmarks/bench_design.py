@@ -100,8 +100,8 @@ def main_(argv: list[str] | None = None) -> int:
         for name, row in rows.items():
             ok = agrees(row)
             missed |= not ok or not row["delivered"] <= TARGET_SHARE
-            print(f"| {seed} | {name} | {100 * row['before']:.1f} % | {100 * row['expected']:.1f} % | "
-                  f"{100 * row['delivered']:.1f} % | {100 * row['peer']:.1f} % | {'yes' if ok else 'no'} |", flush=True)
+            print(f"| {seed} | {name} | {100 * row['before']:.3g} % | {100 * row['expected']:.3g} % | "
+                  f"{100 * row['delivered']:.3g} % | {100 * row['peer']:.3g} % | {'yes' if ok else 'no'} |", flush=True)
     print(f"load average at end {os.getloadavg()[0]:.1f}")
     return 1 if missed else 0
 

@@ -81,3 +81,13 @@ def test_design_prints_the_expected_outcome_and_run_reads_the_plan(run_file, ope
     assert not schedule_problems(steps, config.limits)
     assert main(["run", str(out), "--bench", "sim", "--dry-run"]) == 0
     assert "design" in capsys.readouterr().out
+
+
+def test_residual_structure_is_said_against_the_expected_outcome():
+    from benchlab.design.command import model_error_warnings
+
+    white = {"white": True, "structure_K": 0.001}
+    assert model_error_warnings({"residuals": {"r.h5": {"T_air": white}}}) == []
+    lines = model_error_warnings({"residuals": {"r.h5": {"T_air": white,
+                                                         "T_flywheel": {"white": False, "structure_K": 0.186}}}})
+    assert len(lines) == 1 and "0.186 K" in lines[0] and "T_flywheel of r.h5" in lines[0]

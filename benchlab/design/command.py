@@ -31,6 +31,24 @@ def nominal_values(params: ModelParams, open_: Mapping[str, str]) -> dict[str, f
     return {n: (starts[n] if n in open_ and n in starts else v) for n, v in params.items()}
 
 
+def model_error_warnings(fit: object) -> list[str]:
+    """What the parameter file's residual tests say against the design's first assumption (the model is right):
+    one line where a run's residuals hold structure beyond the tests' effect size."""
+    residuals = fit.get("residuals") if isinstance(fit, dict) else None
+    if not isinstance(residuals, dict):
+        return []
+    found = [(float(tests["structure_K"]), run, channel) for run, channels in residuals.items()
+             if isinstance(channels, dict) for channel, tests in channels.items()
+             if isinstance(tests, dict) and tests.get("white") is False and isinstance(tests.get("structure_K"),
+                                                                                       (int, float))]
+    if not found:
+        return []
+    structure, run, channel = max(found)
+    return [f"the model leaves {structure:.3f} K of structure in the residuals ({channel} of {run}; "
+            f"{len(found)} channel(s) not white): the expected errors assume the model is right, and a fit of the "
+            "designed run may bend other parameters instead (benchlab diagnose says what the model misses)"]
+
+
 def design(args: argparse.Namespace, schema: str) -> int:
     """Read, check, design, print the expected outcome, write the plan (docs/design.md)."""
     params = load_params(args.params)
@@ -67,6 +85,9 @@ def design(args: argparse.Namespace, schema: str) -> int:
     moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_)
     print(f"not identified, taken at the model file's start values: {moved}")
     print("\n".join(plan.lines(nominal)))
+    warnings = model_error_warnings(params.extra.get("fit"))
+    for line in warnings:
+        print(f"warning: {line}")
     predicted = predicted_run(plan.steps, nominal, spec.network, ambient, limits.drivetrain)
     sensors = rank_sensors(predicted, nominal, spec.network, names, interest, plan.prior, plan.noise)
     print("a sensor at each place, on the designed run (what it removes of the plate's estimate variance, what it "
@@ -79,7 +100,7 @@ def design(args: argparse.Namespace, schema: str) -> int:
            "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
            "calibration": plan.calibration, "ambient_C": ambient,
-           "sensors": [asdict(s) for s in sensors],
+           "sensors": [asdict(s) for s in sensors], "warnings": warnings,
            "schedule": [s.as_dict() for s in plan.steps]}
     write_text(args.out, json.dumps(doc, indent=1) + "\n")
     print(f"plan       {args.out}")
