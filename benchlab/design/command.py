@@ -80,8 +80,11 @@ def design(args: argparse.Namespace, schema: str) -> int:
     ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
     reported = params.extra.get("uncertainty") or {}
     identified = [n for n in names if n not in open_]
-    plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits, ambient,
-                            budget_s)
+    try:
+        plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits, ambient,
+                                budget_s)
+    except ValueError as exc:  # no block the bench's interlocks allow: the bench's limits are the input at fault
+        raise InputError(args.bench, "limits", f"room for one block of heating and cooling ({exc})") from None
     moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_)
     print(f"not identified, taken at the model file's start values: {moved}")
     print("\n".join(plan.lines(nominal)))
