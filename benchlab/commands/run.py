@@ -26,7 +26,8 @@ HELP = "run a protocol (table1, cooldown-sweep, validation) on the simulated ben
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("protocol", nargs="?", help=f"protocol: {', '.join(NAMES)} (taken from the file with --resume)")
+    parser.add_argument("protocol", nargs="?", help=f"protocol: {', '.join(NAMES)}, or a PLAN.json of `benchlab design` "
+                        "(taken from the file with --resume)")
     parser.add_argument("--bench", help="required: 'sim' for the simulated bench (emulated devices, a model plant) "
                                          "or a hardware bench's BENCH.toml")
     parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the simulated bench")
@@ -104,6 +105,23 @@ def run(args: argparse.Namespace) -> int:
             return _run(args, out)
 
 
+def design_plan(protocol: str | None) -> "tuple[tuple, dict] | None":
+    """A plan file of `benchlab design` (its schedule and what the run file records of it), or None where PROTOCOL
+    names no .json file; InputError naming the plan's field that is not as docs/contract.md §3 says."""
+    if protocol is None or not protocol.endswith(".json") or not Path(protocol).is_file():
+        return None
+    from benchlab.commands.design import PLAN_SCHEMA
+    from benchlab.errors import read_document
+    from protocols.schedule import steps_from_rows
+
+    doc = read_document(protocol, "plan file", json.loads, (ValueError,), "a JSON object")
+    if not isinstance(doc, dict) or doc.get("schema") != PLAN_SCHEMA:
+        raise InputError(protocol, "schema", f"{PLAN_SCHEMA!r} (a plan of `benchlab design`)")
+    steps = steps_from_rows(doc.get("schedule"), protocol)
+    return steps, {"plan": str(protocol), "kind": doc.get("kind"), "blocks": doc.get("blocks"),
+                   "expected": doc.get("expected")}
+
+
 def _plant(args: argparse.Namespace, out: Path) -> str:
     """The simulated bench's plant: --plant, else the reference; a resumed run's own (its `sim_truth`; the paper's
     in files written before the reference plant), and --plant must agree with it."""
@@ -121,8 +139,9 @@ def _plant(args: argparse.Namespace, out: Path) -> str:
 
 def _run(args: argparse.Namespace, out: Path) -> int:
     """Check the rest of the command line, run (or dry-run) the protocol, print the summary."""
-    if not args.resume and args.protocol not in NAMES:
-        raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)}, got {args.protocol!r}")
+    plan = design_plan(args.protocol) if not args.resume and args.protocol not in NAMES else None
+    if not args.resume and args.protocol not in NAMES and plan is None:
+        raise InputError("command line", "PROTOCOL", f"one of {', '.join(NAMES)} or a PLAN.json, got {args.protocol!r}")
     if args.bench != "sim" and not Path(args.bench).is_file():
         found = "a directory" if Path(args.bench).is_dir() else "not found"
         raise InputError(args.bench, "--bench", f"'sim' or an existing BENCH.toml ({found})")
@@ -143,9 +162,10 @@ def _run(args: argparse.Namespace, out: Path) -> int:
             from sim_bench.reference_plant import plant_named
 
         bench = SimulatedBench(plant_named(plant), faults=tuple(args.fault), realtime=realtime)
-    request = RunRequest(protocol=args.protocol or "", out=out, bench=bench, seed=args.seed, cycles=args.cycles,
+    request = RunRequest(protocol="design" if plan else args.protocol or "", out=out, bench=bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
-                         progress=for_terminal(args.quiet))
+                         progress=for_terminal(args.quiet), steps=plan[0] if plan else None,
+                         options=plan[1] if plan else None)
     code, summary = execute(request)
     if summary is not None:
         print("\n".join(summary.lines()))

@@ -56,7 +56,8 @@ class RunRequest:
     resume: bool = False
     progress: Progress = SILENT  # a bar over the planned bench time (benchlab.progress.for_terminal in commands)
     install_signals: bool = True
-    steps: tuple[Step, ...] | None = None  # a custom schedule instead of the named protocol's (tests, scripts)
+    steps: tuple[Step, ...] | None = None  # a custom schedule instead of the named protocol's (tests, scripts, plans)
+    options: dict[str, Any] | None = None  # what the run file records of a custom schedule (a plan's source)
 
 
 def software_version() -> str:
@@ -104,7 +105,7 @@ def plan(request: RunRequest) -> tuple[tuple[Step, ...], BenchConfig, dict[str, 
     config = bench_config(request)
     if request.steps is not None:
         protocol = catalog.Protocol(request.protocol, with_launch_estimates(request.steps, config.limits),
-                                    {"custom": True})
+                                    request.options or {"custom": True})
     else:
         try:
             protocol = catalog.build(request.protocol, request.seed, request.cycles, request.duration_s, request.grid,

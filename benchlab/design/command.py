@@ -1,0 +1,110 @@
+"""What `benchlab design` does once its command line is read: runs and parameter file in, plan file out."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Mapping
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from benchlab.design.blocks import candidate_blocks
+from benchlab.design.fisher import predicted_run
+from benchlab.design.precision import design_precision
+from benchlab.design.sensors import rank_sensors
+from benchlab.errors import InputError
+from benchlab.identify.data import prepare
+from benchlab.identify.defaults import FIT_STEP_S
+from benchlab.model.catalog import model_spec
+from benchlab.model.params import ModelParams, load_params
+from benchlab.model.runs import load_runs
+from benchlab.outputs import write_text
+from benchlab.runner.session import RunRequest, bench_config
+
+
+def nominal_values(params: ModelParams, open_: Mapping[str, str]) -> dict[str, float]:
+    """The values the design predicts with: the fitted ones, and for each parameter the runs leave open the model
+    file's start value (a fit's value of it is arbitrary: often on a bound, where it has no effect to design for)."""
+    starts = {p.name: p.start for p in params.definition.free_parameters()}
+    return {n: (starts[n] if n in open_ and n in starts else v) for n, v in params.items()}
+
+
+def model_error_warnings(fit: object) -> list[str]:
+    """What the parameter file's residual tests say against the design's first assumption (the model is right):
+    one line where a run's residuals hold structure beyond the tests' effect size."""
+    residuals = fit.get("residuals") if isinstance(fit, dict) else None
+    if not isinstance(residuals, dict):
+        return []
+    found = [(float(tests["structure_K"]), run, channel) for run, channels in residuals.items()
+             if isinstance(channels, dict) for channel, tests in channels.items()
+             if isinstance(tests, dict) and tests.get("white") is False and isinstance(tests.get("structure_K"),
+                                                                                       (int, float))]
+    if not found:
+        return []
+    structure, run, channel = max(found)
+    return [f"the model leaves {structure:.3f} K of structure in the residuals ({channel} of {run}; "
+            f"{len(found)} channel(s) not white): the expected errors assume the model is right, and a fit of the "
+            "designed run may bend other parameters instead (benchlab diagnose says what the model misses)"]
+
+
+def design(args: argparse.Namespace, schema: str) -> int:
+    """Read, check, design, print the expected outcome, write the plan (docs/design.md)."""
+    params = load_params(args.params)
+    spec = model_spec(params.definition)
+    names = [p.name for p in spec.free]
+    open_ = params.extra.get("not_identified") or {}
+    if not isinstance(open_, dict):
+        raise InputError(args.params, "not_identified", "an object of parameter -> reason")
+    interest = [n for n in names if n in open_]
+    if args.parameters:
+        interest = [n.strip() for n in args.parameters.split(",") if n.strip()]
+        unknown = [n for n in interest if n not in names]
+        if unknown or not interest:
+            raise InputError("command line", "--parameters", f"free parameters of the model ({', '.join(names)}), "
+                                                             f"got {args.parameters!r}")
+    if not interest:
+        raise InputError(args.params, "not_identified", "at least one parameter of the model the runs leave open "
+                                                        "(every parameter is identified: name some with --parameters)")
+    nominal = nominal_values(params, open_)
+    limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
+    budget_s = args.budget * 60.0
+    shortest = min((b.expected_s for b in candidate_blocks(limits)), default=np.inf)
+    if budget_s < shortest:
+        raise InputError("command line", "--budget", f"at least {np.ceil(shortest / 60):g} min: the shortest block "
+                                                     f"(heat, then a cool-down) lasts {shortest / 60:.1f} min on "
+                                                     f"this bench, got {args.budget:g}")
+    runs = load_runs(args.runs, params.definition, nominal, str(args.params))
+    data = [prepare(run, FIT_STEP_S, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
+    ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
+    reported = params.extra.get("uncertainty") or {}
+    identified = [n for n in names if n not in open_]
+    try:
+        plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits, ambient,
+                                budget_s)
+    except ValueError as exc:  # no block the bench's interlocks allow: the bench's limits are the input at fault
+        raise InputError(args.bench, "limits", f"room for one block of heating and cooling ({exc})") from None
+    moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_)
+    print(f"not identified, taken at the model file's start values: {moved}")
+    print("\n".join(plan.lines(nominal)))
+    warnings = model_error_warnings(params.extra.get("fit"))
+    for line in warnings:
+        print(f"warning: {line}")
+    predicted = predicted_run(plan.steps, nominal, spec.network, ambient, limits.drivetrain)
+    sensors = rank_sensors(predicted, nominal, spec.network, names, interest, plan.prior, plan.noise)
+    print("a sensor at each place, on the designed run (what it removes of the plate's estimate variance, what it "
+          "adds to the information):")
+    print("\n".join(s.line() for s in sensors))
+    doc = {"schema": schema, "kind": "precision", "model": params.definition.label,
+           "params_file": str(args.params), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
+           "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
+           "blocks": [b.name for b in plan.blocks],
+           "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
+                            "relative_error_expected": plan.expected[n]} for n in interest},
+           "calibration": plan.calibration, "ambient_C": ambient,
+           "sensors": [asdict(s) for s in sensors], "warnings": warnings,
+           "schedule": [s.as_dict() for s in plan.steps]}
+    write_text(args.out, json.dumps(doc, indent=1) + "\n")
+    print(f"plan       {args.out}")
+    return 0

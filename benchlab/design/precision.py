@@ -1,0 +1,111 @@
+"""Parameter precision: the blocks that most shrink what the runs so far leave open.
+
+Greedy D-optimal selection: starting from the information the runs already hold, add the candidate block
+(`benchlab.design.blocks`) that raises log det of the information on the not-identified parameters most per
+second of bench time (every other parameter a nuisance, `fisher.schur`), until no block fits the time budget. Each candidate's information is
+predicted on its own from a bench at rest; the chosen plan is then predicted whole, and its expected standard
+errors come from that.
+
+The white-noise information understates a fit's standard errors (the input noise the thermal masses integrate,
+coloured residuals: `benchlab.identify.uncertainty`); the expected errors are scaled by how much the parameter
+file's own standard errors exceed the white-noise ones on the runs so far (the median ratio over the identified
+parameters), which is printed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from benchlab.design import fisher
+from benchlab.design.blocks import Block, candidate_blocks, numbered
+from benchlab.identify.data import FitData
+from benchlab.network import ThermalNetwork
+from protocols.limits import BenchLimits
+from protocols.schedule import Step
+
+
+@dataclass(frozen=True)
+class PrecisionDesign:
+    """The chosen blocks, their schedule, and the standard errors (share of the value) before and expected after."""
+
+    blocks: tuple[Block, ...]
+    steps: tuple[Step, ...]
+    interest: tuple[str, ...]
+    before: dict[str, float]
+    expected: dict[str, float]
+    calibration: float
+    prior: np.ndarray  # the runs' information (ln θ of every free parameter), for what a sensor would add
+    noise: dict[str, float]  # each measured channel's noise at the fitting step, K
+
+    def lines(self, params: Mapping[str, float]) -> list[str]:
+        """The expected outcome, one line per parameter, for the terminal before the run."""
+        out = [f"designed run: {len(self.blocks)} blocks, {sum(s.expected_s for s in self.steps) / 60:.1f} min",
+               *(f"  block {i}: {b.name}" for i, b in enumerate(self.blocks)),
+               f"expected standard errors (white-noise information x {self.calibration:.2f}, the runs' own ratio):"]
+        for name in self.interest:
+            value = abs(params[name])
+            out.append(f"  {name}: {100 * self.before[name]:.0f} % of {params[name]:.4g} now -> "
+                       f"{100 * self.expected[name]:.1f} % ({self.expected[name] * value:.3g}) after the run")
+        return out
+
+
+def calibration(info: np.ndarray, names: Sequence[str], params: Mapping[str, float],
+                reported: Mapping[str, float], identified: Sequence[str]) -> float:
+    """How much the parameter file's standard errors exceed the white-noise information's on the same runs: the
+    median ratio over the identified parameters (1 where the file reports none)."""
+    cov = np.linalg.inv(info + fisher.RIDGE * np.eye(len(names)))
+    ratios = [reported[n] / abs(params[n]) / np.sqrt(cov[names.index(n), names.index(n)])
+              for n in identified if n in reported and params[n] != 0 and cov[names.index(n), names.index(n)] > 0]
+    ratios = [r for r in ratios if np.isfinite(r) and r > 0]
+    return float(np.median(ratios)) if ratios else 1.0
+
+
+def too_hot(data: FitData, limits: BenchLimits) -> bool:
+    """Whether the predicted run comes within the interlocks' clear margin of an over-temperature limit."""
+    peaks = {c: float(np.nanmax(v)) for c, v in data.targets.items()}
+    return (peaks.get("T_flywheel", -np.inf) > limits.max_flywheel_c - limits.clear_margin_k
+            or peaks.get("T_air", -np.inf) > limits.max_air_c - limits.clear_margin_k)
+
+
+def design_precision(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
+                     interest: Sequence[str], identified: Sequence[str], runs: Sequence[FitData],
+                     reported: Mapping[str, float], limits: BenchLimits, ambient_c: float,
+                     budget_s: float) -> PrecisionDesign:
+    """Greedy D-optimal blocks within `budget_s` for `interest` (the most log det gained per second of bench time
+    first), the runs' information the prior; the `identified` parameters calibrate the white-noise information
+    against the parameter file's `reported` standard errors. ValueError when no block fits the budget."""
+    blocks = [b for b in candidate_blocks(limits) if b.expected_s <= budget_s]
+    if not blocks:
+        raise ValueError("no block fits")
+    noise = fisher.channel_noise(runs)
+    prior = fisher.information(network, params, names, runs, noise)
+    scale = calibration(prior, names, params, reported, identified)
+    gains = [fisher.information(network, params, names,
+                                [fisher.predicted_data(b.steps, params, network, ambient_c, limits.drivetrain)], noise)
+             for b in blocks]
+    chosen: list[int] = []
+    total, spent = prior.copy(), 0.0
+    while True:
+        fits = [i for i, b in enumerate(blocks) if spent + b.expected_s <= budget_s]
+        if not fits:
+            break
+        now = fisher.log_det(total, names, interest)
+        best = max(fits, key=lambda i: (fisher.log_det(total + gains[i], names, interest) - now) / blocks[i].expected_s)
+        chosen.append(best)
+        total, spent = total + gains[best], spent + blocks[best].expected_s
+    while True:  # the blocks' heat adds up: the plan as a whole must stay clear of the over-temperature interlocks
+        steps = numbered([blocks[i] for i in chosen])
+        predicted = fisher.predicted_data(steps, params, network, ambient_c, limits.drivetrain)
+        if len(chosen) == 1 or not too_hot(predicted, limits):
+            break
+        chosen.pop()
+    if too_hot(predicted, limits):
+        raise ValueError("every block heats the clutch beyond the over-temperature interlocks")
+    whole = fisher.information(network, params, names, [predicted], noise)
+    before = {k: v * scale for k, v in fisher.relative_errors(prior, names, interest).items()}
+    expected = {k: v * scale for k, v in fisher.relative_errors(prior + whole, names, interest).items()}
+    return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), before, expected, scale, prior,
+                           noise)

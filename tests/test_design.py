@@ -1,0 +1,93 @@
+"""`benchlab design`: plans within the bench's limits and budget, Fisher ranking where the answer is known, the
+expected outcome printed, `benchlab run PLAN.json` reading the plan. Uses the session's 20-min Table 1 run."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from benchlab.cli import main
+from benchlab.commands.run import design_plan
+from benchlab.design import fisher
+from benchlab.design.blocks import candidate_blocks
+from benchlab.model.catalog import model_spec
+from benchlab.model.params import paper_params, save_params
+from benchlab.runner.session import RunRequest, plan
+from protocols.limits import BenchLimits, schedule_problems
+
+
+@pytest.fixture()
+def open_params(tmp_path):
+    """The paper's parameters, with a2 and b2 (the open clutch's law, eq. 11) recorded as not identified."""
+    path = tmp_path / "p.json"
+    params = paper_params("nonlinear")
+    save_params(path, params, {"not_identified": {"a2": "no effect", "b2": "no effect"},
+                               "uncertainty": {k: 0.02 * abs(v) for k, v in params.items()}})
+    return path
+
+
+def test_budget_too_short_is_one_line(refused, run_file, open_params, tmp_path):
+    refused(["design", str(run_file), "--params", str(open_params), "--out", str(tmp_path / "plan.json"),
+             "--budget", "2"], "--budget", "shortest block")
+
+
+def test_every_block_passes_the_limits_and_a_tighter_bench_is_kept():
+    tight = BenchLimits(max_engine_speed_rpm=1800.0, max_slip_energy_j=40e3)
+    for limits in (BenchLimits(), tight):
+        blocks = candidate_blocks(limits)
+        assert blocks
+        for block in blocks:
+            assert not schedule_problems(block.steps, limits), block.name
+            assert max(s.engine_speed_rpm for s in block.steps) <= limits.max_engine_speed_rpm
+
+
+def test_open_clutch_law_is_informed_by_open_clutch_cooldowns_only():
+    """a2 enters R_FA and R_PA only while the clutch is open: a clamped cool-down carries no information on it, an
+    open one does (analytically zero against positive)."""
+    params = paper_params("nonlinear")
+    spec = model_spec(params.definition)
+    names = [p.name for p in spec.free]
+    limits = BenchLimits()
+    noise = {"T_flywheel": 0.02, "T_air": 0.01, "T_housing": 0.01}
+    by_name = {b.name: b for b in candidate_blocks(limits)}
+    info = {}
+    for state in ("open", "clamped"):
+        block = by_name[f"heat, cool 600 s at 1500 rpm clutch {state}"]
+        data = fisher.predicted_data(block.steps, params, spec.network, 22.0, limits.drivetrain)
+        info[state] = fisher.information(spec.network, params, ["a2", "a1"], [data], noise)
+    assert info["open"][0, 0] > 100 * info["clamped"][0, 0]
+    assert info["clamped"][1, 1] > info["open"][1, 1]
+
+
+def test_design_prints_the_expected_outcome_and_run_reads_the_plan(run_file, open_params, tmp_path, capsys):
+    out = tmp_path / "plan.json"
+    assert main(["design", str(run_file), "--params", str(open_params), "--out", str(out), "--budget", "15"]) == 0
+    printed = capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["schema"] == "benchlab-plan/1" and doc["planned_min"] <= 15
+    for name in ("a2", "b2"):
+        expected = doc["expected"][name]
+        assert expected["relative_error_expected"] < expected["relative_error_now"]
+        assert f"{name}: " in printed and f"{100 * expected['relative_error_expected']:.1f} %" in printed
+    assert any("clutch open" in block for block in doc["blocks"])
+    # a sensor on the plate itself removes the most of the plate's estimate variance (it reads that state)
+    assert doc["sensors"][0]["channel"] == "T_pressure_plate" and not doc["sensors"][0]["measured"]
+    assert "T_pressure_plate (node P, no sensor now)" in printed
+    scheduled, recorded = design_plan(str(out))
+    steps, config, options = plan(RunRequest(protocol="design", out=tmp_path / "r.h5", steps=scheduled,
+                                             options=recorded))
+    assert options["expected"] == doc["expected"]
+    assert not schedule_problems(steps, config.limits)
+    assert main(["run", str(out), "--bench", "sim", "--dry-run"]) == 0
+    assert "design" in capsys.readouterr().out
+
+
+def test_residual_structure_is_said_against_the_expected_outcome():
+    from benchlab.design.command import model_error_warnings
+
+    white = {"white": True, "structure_K": 0.001}
+    assert model_error_warnings({"residuals": {"r.h5": {"T_air": white}}}) == []
+    lines = model_error_warnings({"residuals": {"r.h5": {"T_air": white,
+                                                         "T_flywheel": {"white": False, "structure_K": 0.186}}}})
+    assert len(lines) == 1 and "0.186 K" in lines[0] and "T_flywheel of r.h5" in lines[0]
