@@ -36,14 +36,23 @@ def pytest_configure(config: pytest.Config) -> None:
     os.sched_setaffinity(0, share)
 
 
-#: Files of long diagnoses on runs simulated without the drivers, collected first. The longest tests first balance
-#: best across workers (an idle worker takes queued tests from the end of a busy one's queue), and at start-up
-#: only the other worker compiles the drivers' and emulators' kernels (≈ 40 s of numba on a fresh clone).
-FIRST = ("test_diagnose.py", "test_diagnose_unseen.py")
+#: Files whose tests are long and share nothing (each a diagnosis of its own simulated run): dealt one test at a time
+#: to whichever worker is free, after the main job's file (the longest unit: its fixture runs the job once). Every
+#: other file goes to one worker whole (`--dist loadgroup` in pyproject.toml), so a module's fixtures (runs simulated,
+#: models identified) are computed once, not once per worker. Collected first, longest first: a free worker takes
+#: the next unit in this order (list scheduling), so the short files fill the end; and at start-up only the other
+#: worker compiles the drivers' and emulators' kernels (≈ 40 s of numba on a fresh clone).
+FIRST = ("test_pipeline.py", "test_diagnose.py", "test_diagnose_unseen.py", "test_diagnose_structure.py",
+         "test_diagnose_runs.py", "test_diagnose_validate.py")
+SPREAD = FIRST[1:]
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    items.sort(key=lambda item: item.path.name not in FIRST)  # stable: the order within each part is kept
+    rank = {name: i for i, name in enumerate(FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(FIRST)))  # stable: the order within each part is kept
+    for item in items:
+        if item.path.name not in SPREAD and not item.get_closest_marker("xdist_group"):
+            item.add_marker(pytest.mark.xdist_group(item.path.name))
 
 
 @pytest.fixture(scope="session")
