@@ -36,14 +36,25 @@ def pytest_configure(config: pytest.Config) -> None:
     os.sched_setaffinity(0, share)
 
 
-#: Files of long diagnoses on runs simulated without the drivers, collected first. The longest tests first balance
-#: best across workers (an idle worker takes queued tests from the end of a busy one's queue), and at start-up
-#: only the other worker compiles the drivers' and emulators' kernels (≈ 40 s of numba on a fresh clone).
+#: Files of long diagnoses on runs simulated without the drivers, collected first, after the main job's first test
+#: (its fixture runs the job once for the session, ≈ 70 s). xdist hands the tests out one at a time in this order to
+#: whichever worker has at most two queued (`--dist loadgroup --no-loadscope-reorder` in pyproject.toml, with no
+#: groups: pytest 9 ignores xdist 3.8's xdist_group), so the longest go first and the short files fill the end; and
+#: at start-up only the other worker compiles the drivers' and emulators' kernels (≈ 40 s of numba on a fresh clone).
+#: The main job's other tests come after the diagnoses: by then the job is written, and no worker waits on its lock
+#: (measured: 144 s of waiting with the job's three tests first).
 FIRST = ("test_diagnose.py", "test_diagnose_unseen.py")
+JOB = "test_pipeline.py"
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    items.sort(key=lambda item: item.path.name not in FIRST)  # stable: the order within each part is kept
+    job = [item for item in items if item.path.name == JOB]
+
+    def rank(item: pytest.Item) -> int:
+        if item.path.name == JOB:
+            return 0 if item is job[0] else 2
+        return 1 if item.path.name in FIRST else 3
+    items.sort(key=rank)  # stable: the order within each part is kept
 
 
 @pytest.fixture(scope="session")

@@ -99,3 +99,35 @@ def test_building_the_parser_imports_no_heavy_library() -> None:
     module, heavy = subprocess.run([sys.executable, "-c", code], env=_clean_env(), capture_output=True, text=True,
                                    check=True).stdout.splitlines()[:2]
     assert module == "benchlab.commands.watch" and heavy == "[]"
+
+
+#: A command line run as the `benchlab` console script runs it, then the exit code and whether pandas and pyarrow
+#: were loaded (issue 47: pandas loads pyarrow whenever it is installed, though only Parquet needs it).
+AS_CONSOLE = ("import sys\nfrom benchlab.console import main\n"
+              "sys.argv = ['benchlab', *sys.argv[1:]]\ncode = main()\n"
+              "print(code, 'pandas' in sys.modules, any(m.split('.')[0] == 'pyarrow' for m in sys.modules))")
+
+
+def _as_console(*argv: object, code: int = 0) -> list[str]:
+    done = subprocess.run([sys.executable, "-c", AS_CONSOLE, *map(str, argv)], env=_clean_env(), capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    printed = done.stdout.splitlines()[-1].split()
+    assert printed[0] == str(code), done.stderr[-2000:]
+    return printed[1:]
+
+
+@pytest.mark.parametrize("command", ["run", "simulate", "identify", "diagnose"])
+def test_commands_without_parquet_load_no_pyarrow(command, run_file, params_file, tmp_path) -> None:
+    """Each command does its work on pandas without pyarrow loaded; `export --to OUT.parquet` has it. diagnose is
+    asked for a run too short to diagnose: refused (exit 2) after its implementation is imported and the run loaded,
+    not after the ≈ 20 s of a diagnosis (the main job runs one through the console script)."""
+    argv, code = {"run": (["run", "table1", "--bench", "sim", "--duration", "120", "--out", tmp_path / "r.h5", "-q"], 0),
+                  "simulate": (["simulate", run_file, "--params", params_file, "--out", tmp_path / "sim.h5"], 0),
+                  "identify": (["identify", run_file, "--model", "linear", "--out", tmp_path / "fit.json", "-q"], 0),
+                  "diagnose": (["diagnose", run_file, "--json", "-q"], 2)}[command]
+    assert _as_console(*argv, code=code) == ["True", "False"]  # pandas loaded, pyarrow not
+
+
+def test_parquet_export_loads_pyarrow(run_file, tmp_path) -> None:
+    assert _as_console("export", run_file, "--to", tmp_path / "run.parquet") == ["True", "True"]

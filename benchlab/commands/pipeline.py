@@ -353,7 +353,7 @@ def run(args: argparse.Namespace) -> int:
         if plate.band.observer_note:
             print(f"          note: {plate.band.observer_note}")
     page = write_report(fitting, nonlinear, out / "report", compare=linear, validation=[validation],
-                        sweep=out / "sweep.h5", progress=progress)
+                        sweep=out / "sweep.h5", progress=progress, sweep_fitted=comparison.points)
     print(f"report    nonlinear against linear, validated on {out / 'validation.h5'}, Fig. 3 measured on "
           f"{out / 'sweep.h5'} -> {page.with_suffix('.html')}")
     wear_report = analyse_wear(fitting, nonlinear)

@@ -37,29 +37,32 @@ def model_labels(params: ModelParams, compare: ModelParams | None) -> list[tuple
     return [(params.model, params), (compare.model, compare)]
 
 
-def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams,
-                    progress: Progress = SILENT) -> tuple[list[CooldownResult], str]:
+def sweep_cooldowns(sweep: "str | os.PathLike[str]", params: ModelParams, progress: Progress = SILENT,
+                    fitted: Sequence[CooldownResult] | None = None) -> tuple[list[CooldownResult], str]:
     """Every cool-down of a cooldown-sweep run and where the page says they come from: the run file's /analysis
-    as `benchlab cooldown` stored it, else fitted here by benchlab.identify.cooldown with the other parameters of `params`."""
+    as `benchlab cooldown` stored it, else fitted with the other parameters of `params` (`fitted`: the caller's own
+    benchlab.identify.cooldown.analyse(sweep, params), not fitted a second time)."""
     analysed = stored(sweep)
     if analysed is not None and analysed.results:
         source = (literal(analysed.params_source) if analysed.params_source
                   else "a parameter file not named in the run")
         return analysed.results, (f"Cool-downs of the sweep as `benchlab cooldown` stored them in the run file's "
                                   f"`/analysis` (fitted with the other parameters of {source}):")
-    results = analyse(sweep, params, progress=progress)
+    results = list(fitted) if fitted is not None else analyse(sweep, params, progress=progress)
     return results, ("Cool-downs of the sweep, fitted here with the other parameters of the first model (the run "
                      "file has no `/analysis`: `benchlab cooldown` stores one):")
 
 
 def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.PathLike[str]",
                  compare: ModelParams | None = None, validation: Sequence[pd.DataFrame] = (),
-                 sweep: "str | os.PathLike[str] | None" = None, progress: Progress = SILENT) -> Path:
+                 sweep: "str | os.PathLike[str] | None" = None, progress: Progress = SILENT,
+                 sweep_fitted: Sequence[CooldownResult] | None = None) -> Path:
     """Write Fig. 4, Fig. 5 (per validation run, else on `run`), Fig. 3, the residual figure, report.md and the same
     page as report.html.
 
     `run` and `validation` are loaded run files (benchlab.load_run), `sweep` the path of a cooldown-sweep
-    run file (its events mark the cool-downs). Returns the page's path.
+    run file (its events mark the cool-downs), `sweep_fitted` its cool-downs where the caller already fitted them
+    with `params` (sweep_cooldowns). Returns the page's path.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -67,7 +70,8 @@ def write_report(run: pd.DataFrame, params: ModelParams, out_dir: "str | os.Path
     convection = all(has_convection_law(p) for _, p in models)
     if sweep is not None and not convection:
         raise InputError(sweep, "--sweep", "a report of clutch models (eq. 11): the cool-down sweep fits R_FA = R_PA")
-    cooldowns, cooldowns_source = sweep_cooldowns(sweep, params, progress) if sweep is not None else ([], "")
+    cooldowns, cooldowns_source = (sweep_cooldowns(sweep, params, progress, sweep_fitted) if sweep is not None
+                                   else ([], ""))
     with progress.task("report", len(models) * (1 + len(validation)) + 2 + convection + max(len(validation), 1),
                        unit="step") as task:
         def step(value: T) -> T:
