@@ -358,13 +358,17 @@ class SimPhysics:
 
     def true_states(self, rows: int) -> dict[str, np.ndarray]:
         """The plant's true temperatures (degC) on grid rows [first recorded, `rows`), named by
-        `state_channels` of the plant's network; NaN where not computed (yet)."""
+        `state_channels` of the plant's network; NaN where not computed (yet). Views of the recording where it holds
+        every row (not to be changed)."""
         from benchlab.network import state_channels
 
         n = max(rows - self._truth_k0, 0)
         valid = min(n, self._end - self._truth_k0, len(self._truth))
-        out = np.full((n, self._truth.shape[1]), np.nan)
-        out[:valid] = self._truth[:valid]
+        if valid == n:  # the usual case: views of the recording, no second run-sized copy
+            out = self._truth[:n]
+        else:
+            out = np.full((n, self._truth.shape[1]), np.nan)
+            out[:valid] = self._truth[:valid]
         names = state_channels(self.plant.network)
         return {names[s]: out[:, i] for i, s in enumerate(self.plant.state_names)}
 

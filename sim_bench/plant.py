@@ -16,7 +16,8 @@ import numpy as np
 from benchlab.model.clutch import clutch_network, convection_resistance
 from benchlab.network import Lag, Link, Node, Source, ThermalNetwork
 from benchlab.model.params import paper_params
-from benchlab.network.solver import run_network
+from benchlab.network.solver import DEFAULT_RESOLUTION, run_network
+from benchlab.network.stream import NetworkStream
 
 STEFAN_BOLTZMANN = 5.670374419e-8
 KELVIN = 273.15
@@ -169,6 +170,7 @@ class ThermalPlant:
         self.friction = friction
         self.name = name
         self._iterative = reads_states or any(e.reads_states for e in effects)
+        self._stream: NetworkStream | None = None
 
     def with_effects(self, effects: Sequence[Effect]) -> "ThermalPlant":
         """The same plant (network, parameters, friction) with `effects` added to its own."""
@@ -209,13 +211,23 @@ class ThermalPlant:
         if self.state is None:
             raise RuntimeError("reset() the plant before advancing it")
         channels = dict(channels)
-        states = run_network(self.network, self.params, self._with_states(channels, None), dt, self.state)
+        states = self._run(self._with_states(channels, None), dt)
         for _ in range(self.RADIATION_ITERATIONS if self._iterative else 0):
             previous = states
-            states = run_network(self.network, self.params, self._with_states(channels, states), dt, self.state)
+            states = self._run(self._with_states(channels, states), dt)
+            if states.base is not None and states.base is previous.base:  # the stream's last states again
+                break  # the laws gave what they gave before: a fixed point, every further pass the same
             if self.reads_states and np.max(np.abs(states - previous)) < self.TOLERANCE_K:
                 break  # the reference plant's laws: converged (the paper's effects keep their fixed count)
         return states
+
+    def _run(self, channels: Mapping[str, np.ndarray], dt: float) -> np.ndarray:
+        """States (N + 1, n) of one pass from the current state, through the plant's own stream of the network
+        (what repeats from pass to pass and chunk to chunk is not computed again), the solver where it cannot."""
+        if self._stream is None or self._stream.dt != dt:
+            self._stream = NetworkStream(self.network, self.params, dt, DEFAULT_RESOLUTION)
+        states = self._stream.run(channels, self.state)
+        return states.T if states is not None else run_network(self.network, self.params, channels, dt, self.state)
 
     def _with_states(self, channels: dict[str, np.ndarray], states: np.ndarray | None) -> dict[str, np.ndarray]:
         if not self._iterative:

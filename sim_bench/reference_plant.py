@@ -15,6 +15,7 @@ import math
 from collections.abc import Mapping
 
 import numpy as np
+from numba import njit
 
 from benchlab.network import Boundary, Lag, Link, Node, Source, ThermalNetwork
 from sim_bench.plant import KELVIN, STEFAN_BOLTZMANN, ThermalPlant
@@ -97,54 +98,132 @@ def reference_params() -> dict[str, float]:
 
 
 # -- laws ---------------------------------------------------------------------------------------------------------
+# Each law that reads a speed or a temperature is one compiled loop over its samples (numpy's dozen small array
+# operations per law cost 15-40 µs on a 2 s chunk of the bench, several times per chunk), which reuses the previous
+# sample's value where the inputs repeat it (a speed held, the first pass's held temperatures). The formulas are
+# numpy's, in the same order, on each sample; only the last bit of an exp, log or power may differ from numpy's
+# vectorised ones, and it does not reach the solver, which keys each 0.5 % bin (tests/test_reference_plant.py
+# compares the plant with states stored from the numpy laws).
 _BIN = 0.005  # laws are evaluated to 0.5 % (far below their own uncertainty) so the solver sees few operating points
+_R_OUT_SQUARED, _AIR_NU, _AIR_K, _AIR_RHO, _AIR_C = R_OUT ** 2, AIR["nu"], AIR["k"], AIR["rho"], AIR["c"]
 
 
-def _binned(r: np.ndarray) -> np.ndarray:
-    return np.exp(np.round(np.log(r) / _BIN) * _BIN)
+@njit(cache=True, nogil=True)
+def _binned(r: float) -> float:  # pragma: no cover - compiled
+    return math.exp(np.rint(math.log(r) / _BIN) * _BIN)
 
 
-def rotating_h(rpm: np.ndarray) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def rotating_h(rpm: float) -> float:  # pragma: no cover - compiled
     """Mean heat-transfer coefficient (W/m²K) of a disc of radius R_OUT rotating at `rpm` in air: Cobb & Saunders,
     laminar Nu = 0.36 Re^0.5, turbulent Nu = 0.015 Re^0.8, the larger of the two (Re = ω r²/ν): bolts, cover windows
     and spring fingers trip the boundary layer, so the turbulent law holds from well below the smooth disc's Re 2.4e5."""
-    re = np.abs(rpm) * math.pi / 30.0 * R_OUT ** 2 / AIR["nu"]
-    nu = np.maximum(0.36 * np.sqrt(re), 0.015 * re ** 0.8)
-    return nu * AIR["k"] / R_OUT
+    re = abs(rpm) * math.pi / 30.0 * _R_OUT_SQUARED / _AIR_NU
+    nu = max(0.36 * math.sqrt(re), 0.015 * re ** 0.8)
+    return nu * _AIR_K / R_OUT
 
 
-def natural_h(difference_k: np.ndarray, length_m: float) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def natural_h(difference_k: float, length_m: float) -> float:  # pragma: no cover - compiled
     """Laminar natural convection of a vertical surface in air, h = 1.42 (ΔT/L)^0.25 (W/m²K), ΔT at least 0.5 K."""
-    return 1.42 * (np.maximum(np.abs(difference_k), 0.5) / length_m) ** 0.25
+    return 1.42 * (max(abs(difference_k), 0.5) / length_m) ** 0.25
 
 
-def radiation_h(eps_area: float, hot: np.ndarray, cold: np.ndarray) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def radiation_h(eps_area: float, hot: float, cold: float) -> float:  # pragma: no cover - compiled
     """Linearised radiation conductance εAσ(T1² + T2²)(T1 + T2) (W/K) between two temperatures (degC)."""
     t1, t2 = hot + KELVIN, cold + KELVIN
     return eps_area * STEFAN_BOLTZMANN * (t1 ** 2 + t2 ** 2) * (t1 + t2)
+
+
+@njit(cache=True, nogil=True)
+def _convection_r(rpm, node_c, air_c, wall_c, area, eps_area, length):  # pragma: no cover - compiled
+    """Forced (engine speed) + natural (own ΔT to the air) + radiation to the housing wall, as one resistance per
+    sample (the chamber air is transparent: radiation goes to the wall, which the air follows closely)."""
+    out = np.empty(rpm.shape[0])
+    forced = 0.0
+    for k in range(rpm.shape[0]):
+        if k > 0 and node_c[k] == node_c[k - 1] and air_c[k] == air_c[k - 1] and wall_c[k] == wall_c[k - 1] \
+                and rpm[k] == rpm[k - 1]:
+            out[k] = out[k - 1]
+            continue
+        if k == 0 or rpm[k] != rpm[k - 1]:
+            forced = rotating_h(rpm[k])
+        g = (forced + natural_h(node_c[k] - air_c[k], length)) * area
+        out[k] = _binned(1.0 / (g + radiation_h(eps_area, node_c[k], wall_c[k])))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _open_face_r(speed, clutch_state, area):  # pragma: no cover - compiled
+    """A friction face to the chamber air per sample: 1e6 K/W while clamped, else the rotating face with a still-air
+    floor of 3 W/m²K (a face in a 1 mm gap)."""
+    out = np.empty(speed.shape[0])
+    for k in range(speed.shape[0]):
+        if k > 0 and speed[k] == speed[k - 1] and clutch_state[k] == clutch_state[k - 1]:
+            out[k] = out[k - 1]
+            continue
+        out[k] = _binned(1e6 if clutch_state[k] >= 0.5 else 1.0 / ((rotating_h(speed[k]) + 3.0) * area))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _air_housing_r(rpm, air_c, wall_c, area):  # pragma: no cover - compiled
+    """Chamber air to the bell housing's inside per sample: half the disc's forced convection plus natural."""
+    out = np.empty(rpm.shape[0])
+    forced = 0.0
+    for k in range(rpm.shape[0]):
+        if k > 0 and air_c[k] == air_c[k - 1] and wall_c[k] == wall_c[k - 1] and rpm[k] == rpm[k - 1]:
+            out[k] = out[k - 1]
+            continue
+        if k == 0 or rpm[k] != rpm[k - 1]:
+            forced = rotating_h(rpm[k])
+        out[k] = _binned(1.0 / ((0.5 * forced + natural_h(air_c[k] - wall_c[k], 0.3)) * area))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _ventilation_r(rpm, leak_l_per_s, l_per_s_per_krpm):  # pragma: no cover - compiled
+    """Air exchanged through the vent openings, pumped by the rotating clutch, as a resistance per sample."""
+    out = np.empty(rpm.shape[0])
+    for k in range(rpm.shape[0]):
+        if k > 0 and rpm[k] == rpm[k - 1]:
+            out[k] = out[k - 1]
+            continue
+        litres = leak_l_per_s + l_per_s_per_krpm * abs(rpm[k]) / 1000.0
+        out[k] = _binned(1.0 / (litres * 1e-3 * _AIR_RHO * _AIR_C))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _outside_r(node_c, ambient_c, area, eps_area, length):  # pragma: no cover - compiled
+    """A housing's outside to the room per sample: natural convection plus radiation."""
+    out = np.empty(node_c.shape[0])
+    for k in range(node_c.shape[0]):
+        if k > 0 and node_c[k] == node_c[k - 1] and ambient_c[k] == ambient_c[k - 1]:
+            out[k] = out[k - 1]
+            continue
+        g = natural_h(node_c[k] - ambient_c[k], length) * area
+        out[k] = _binned(1.0 / (g + radiation_h(eps_area, node_c[k], ambient_c[k])))
+    return out
 
 
 def _state(ch: Mapping[str, np.ndarray], node: str) -> np.ndarray:
     return ch[f"_state_{node}"]
 
 
-def _convection(node: str, area: str, eps_area: str | None = None, length: float = 0.24):
-    """Engine-side part to chamber air: forced (engine speed) + natural (own ΔT) + radiation to the housing wall,
-    as one resistance from the previous iterate's temperatures."""
+def _convection(node: str, area: str, eps_area: str, length: float = 0.24):
+    """Engine-side part to chamber air, from the previous iterate's temperatures."""
     def law(p, ch):
-        h = rotating_h(ch["engine_speed"]) + natural_h(_state(ch, node) - _state(ch, "A"), length)
-        g = h * p[area]
-        if eps_area is not None:  # the chamber air is transparent: radiation goes to the wall, which A follows closely
-            g = g + radiation_h(p[eps_area], _state(ch, node), _state(ch, "T"))
-        return _binned(1.0 / g)
+        return _convection_r(ch["engine_speed"], _state(ch, node), _state(ch, "A"), _state(ch, "T"), p[area],
+                             p[eps_area], length)
     return law
 
 
 def _open_face(area: float, speed: str):
     """A friction face exposed to the chamber air only while the clutch is open."""
     def law(p, ch):
-        h = rotating_h(ch[speed]) + 3.0  # 3 W/m²K: still-air floor of a face in a 1 mm gap
-        return _binned(np.where(ch["clutch_state"] >= 0.5, 1e6, 1.0 / (h * area)))
+        return _open_face_r(ch[speed], ch["clutch_state"], area)
     return law
 
 
@@ -155,20 +234,16 @@ def _clamped(closed: str, open_: str):
 
 
 def _air_housing(p, ch):
-    h = 0.5 * rotating_h(ch["engine_speed"]) + natural_h(_state(ch, "A") - _state(ch, "T"), 0.3)
-    return _binned(1.0 / (h * p["A_bell_in"]))
+    return _air_housing_r(ch["engine_speed"], _state(ch, "A"), _state(ch, "T"), p["A_bell_in"])
 
 
 def _ventilation(p, ch):
-    litres = p["vent_leak_l_per_s"] + p["vent_l_per_s_per_krpm"] * np.abs(ch["engine_speed"]) / 1000.0
-    return _binned(1.0 / (litres * 1e-3 * AIR["rho"] * AIR["c"]))
+    return _ventilation_r(ch["engine_speed"], p["vent_leak_l_per_s"], p["vent_l_per_s_per_krpm"])
 
 
 def _outside(node: str, area: str, eps_area: str, length: float):
     def law(p, ch):
-        g = natural_h(_state(ch, node) - ch["T_ambient"], length) * p[area]
-        g = g + radiation_h(p[eps_area], _state(ch, node), ch["T_ambient"])
-        return _binned(1.0 / g)
+        return _outside_r(_state(ch, node), ch["T_ambient"], p[area], p[eps_area], length)
     return law
 
 

@@ -4,6 +4,7 @@ and the simulated bench's default with `--plant paper` keeping the paper's netwo
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -71,3 +72,35 @@ def test_run_records_which_plant_and_every_node(tmp_path, capsys):
     # a resumed run keeps its plant: another one asked for is refused in one line
     assert main(["run", "--resume", str(tmp_path / "paper.h5"), "--bench", "sim", "--plant", "reference", "--quiet"]) == 2
     assert "sim_truth" in capsys.readouterr().err
+
+
+def test_the_plant_keeps_the_states_of_its_numpy_laws():
+    """Issue 47: the plant's compiled laws and its stream of the network (sim_bench/plant.py) keep the true states
+    that the numpy laws and a fresh solver call per pass gave (tests/data/reference_plant_states.json, stored from
+    that implementation): a hot lining, two launches with μ(ϑ), set-point changes that cut computed chunks."""
+    from sim_bench.bench import SimPhysics
+    from sim_bench.clock import SimClock
+
+    stored = json.loads((Path(__file__).parent / "data" / "reference_plant_states.json").read_text())
+    clock = SimClock(0.0)
+    physics = SimPhysics(SimBenchConfig(seed=3, dropouts=False, initial_c={"F": 90.0, "L": 95.0, "P": 80.0, "A": 30.0,
+                                                                           "SA": 30.0, "T": 24.0, "G": 23.0}),
+                         clock, reference_plant())
+    script = [(0.0, 2000.0, None, 0.0), (3.3, 2000.0, 90.0, 120.0), (9.71, 2000.0, None, 0.0),
+              (14.05, 1500.0, None, 0.0), (21.0, 1500.0, 70.0, 80.0), (26.37, 800.0, None, 0.0)]
+    for i, (t, rpm, torque, load) in enumerate(script):  # (time, engine rpm, clutch torque or None: open, load)
+        clock.t = t
+        physics.advance(t)
+        physics.set_drive_speed(rpm)
+        physics.set_clutch(torque or 0.0, torque is None)
+        physics.set_load_torque(load)
+        for s in np.arange(t, script[i + 1][0] if i + 1 < len(script) else 40.0, 0.5):  # the devices ask as it goes
+            clock.t = float(s)
+            physics.advance(float(s))
+    clock.t = 40.0
+    physics.advance(40.0)
+    truth = physics.true_states(4000)
+    worst = max(float(np.max(np.abs(truth[name][::stored["every_rows"]] - np.array(values))))
+                for name, values in stored["states"].items())
+    assert worst <= 1e-3, worst  # within 1 mK; bit for bit where numpy's and the compiled exp/log agree
+    assert max(stored["states"]["T_clutch_disc"]) > 95.5 and min(stored["states"]["T_chamber_air"]) < 31.0

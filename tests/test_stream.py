@@ -62,3 +62,30 @@ def test_simulate_keeps_its_columns_and_values():
     assert list(sim.columns) == list(network.outputs)
     for name, state in network.outputs.items():
         assert np.array_equal(sim[name].to_numpy(), states[:, network.state_names.index(state)])
+
+
+def test_a_stream_kept_across_runs_gives_each_run_s_fresh_states():
+    """NetworkStream (the simulated bench's plant): operating points, law values and a repeated run's states kept
+    from run to run change no bit of any run's states, whether a channel is the same array, a new array with the
+    same values, or new values."""
+    from benchlab.network.stream import NetworkStream
+    from sim_bench.reference_plant import reference_network, reference_params
+
+    network, params = reference_network(), reference_params()
+    rng = np.random.default_rng(2)
+    n = 300
+    base = {"engine_speed": np.full(n, 1500.0), "clutch_speed": np.linspace(0, 1500, n),
+            "clutch_state": (np.arange(n) > 100).astype(float), "friction_power": rng.uniform(0, 4000, n),
+            "T_ambient": 22 + rng.normal(0, 0.01, n)}
+    stream = NetworkStream(network, params, 0.01, 1e-6)
+    x0 = np.linspace(30, 60, len(network.state_names))
+    runs = []
+    for temperature in (40.0, 40.0, 41.3, 41.3):  # the states' channels: repeated, then new values
+        channels = dict(base)
+        channels.update({f"_state_{s}": np.full(n, temperature + i) for i, s in enumerate(network.state_names)})
+        runs.append(channels)
+    runs.append(dict(runs[-1], engine_speed=base["engine_speed"] + 200.0))  # one channel changed, the rest kept
+    runs.append(runs[-1])  # the very same channels: the last run's states again
+    for channels in runs:
+        want = stream_network(network, params, channels, 0.01, x0, 1e-6)
+        assert np.array_equal(stream.run(channels, x0), want)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import mmap
 import os
 import struct
 from collections.abc import Callable, Mapping, Sequence
@@ -49,6 +50,10 @@ _EPS = 1e-9
 RUNNING_ON_DISK = struct.pack("<Q", 7) + b"running"
 #: How far into the file the attributes' heap objects are searched for it.
 STATUS_SEARCH_BYTES = 1 << 20
+#: Every this many flushes the mapping's pages leave the process (madvise DONTNEED): a shared file mapping keeps
+#: every page written in the process's resident memory until then, which grows with the run (issue 47); the bytes
+#: stay in the page cache and the file, dirty ones written back by the kernel, so a killed process loses nothing.
+RELEASE_EVERY_FLUSHES = 60
 
 
 @dataclass(frozen=True)
@@ -383,6 +388,8 @@ class RunWriter:
             os.fsync(self._fd)
         self._last_flush_t = now
         self.flushes += 1
+        if self.flushes % RELEASE_EVERY_FLUSHES == 0:
+            self._mm._mmap.madvise(mmap.MADV_DONTNEED)  # noqa: SLF001 - see RELEASE_EVERY_FLUSHES
         log.debug("flush %d: %.3f s, %d grid rows, %d events in the file", self.flushes, now, self.builder.rows,
                   self._event_rows)
 
@@ -653,11 +660,11 @@ class RunWriter:
         data: dict[str, np.ndarray] = {}
         rows = int(progress["aligned_rows"])
         for name in ["time", *self.layout.aligned_units]:
-            data[f"aligned/{name}"] = src["aligned"][name][:rows]
+            data[f"aligned/{name}"] = _Rows(src["aligned"][name], rows)
         for s in self.layout.streams:
             n = int(progress.get(f"rows/{s.name}", 0))
             for col in ("time", *s.names):
-                data[f"raw/{s.name}/{col}"] = src["raw"][s.name][col][:n]
+                data[f"raw/{s.name}/{col}"] = _Rows(src["raw"][s.name][col], n)
         n_ev = int(progress["event_rows"])
         stored = {name: ds[:n_ev] for name, ds in src["events"].items() if name in EVENT_FIELDS}
         data.update({f"events/{name}": column for name, column in complete_events(stored, n_ev).items()})
@@ -725,14 +732,30 @@ COMPRESS_FROM = 1024  # values: smaller datasets of the compact file stay contig
 CHUNK = 65536  # values per compressed chunk
 
 
-def _dataset(parent: h5py.Group, name: str, arr: np.ndarray, compact: bool) -> h5py.Dataset:
+class _Rows:
+    """The first `rows` values of a stored dataset, read a slice at a time: a rebuild copies a run chunk by chunk
+    instead of holding it whole (the closing compaction of a long run, issue 47)."""
+
+    def __init__(self, dataset: h5py.Dataset, rows: int) -> None:
+        self.dataset, self.rows = dataset, min(int(rows), dataset.shape[0])
+        self.dtype, self.shape, self.size = dataset.dtype, (self.rows,), self.rows
+
+    def __len__(self) -> int:
+        return self.rows
+
+    def __getitem__(self, part: slice) -> np.ndarray:
+        start, stop, _ = part.indices(self.rows)
+        return self.dataset[start:max(start, stop)]
+
+
+def _dataset(parent: h5py.Group, name: str, arr: "np.ndarray | _Rows", compact: bool) -> h5py.Dataset:
     """`arr` as dataset `name`: contiguous, or in the compact file (if large enough) chunked, shuffled and gzipped.
 
     The chunks are shuffled and deflated here (ISA-L, several times faster than HDF5's zlib filter at level 1)
     and written as they are: HDF5's own shuffle and gzip filters read them, as any HDF5 reader does.
     """
     if not compact or arr.size < COMPRESS_FROM:
-        return parent.create_dataset(name, data=arr, track_times=False)
+        return parent.create_dataset(name, data=arr[:], track_times=False)
     chunk = min(arr.size, CHUNK)
     ds = parent.create_dataset(name, shape=arr.shape, dtype=arr.dtype, chunks=(chunk,), compression="gzip",
                                compression_opts=1, shuffle=True, track_times=False)

@@ -68,18 +68,20 @@ def _all_positive_finite(values: np.ndarray) -> bool:  # pragma: no cover - comp
 
 def _system_matrices(network: ThermalNetwork, params: Params, conductances: list[np.ndarray | float],
                      coefficients: list[np.ndarray], n_ops: int,
-                     assembly: tuple[np.ndarray, list[tuple[int, str]]] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     assembly: tuple[np.ndarray, list[tuple[int, str]]] | None = None,
+                     factors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Continuous A (n_ops, n, n) and B (n_ops, n, m) for each operating point.
 
     `conductances`: per link, its value at each point (or one for all). `coefficients`: per (source, node) term of
     `_coefficient_terms`, the heat flow per kelvin of that node
     (an affine source, e.g. copper loss rising with winding temperature), which goes into A.
     The entries are written as a list of steps (`_assembly`) applied in one compiled pass, in the order and with
-    the operations of writing them one by one; `assembly`: the network's, where the caller keeps it.
+    the operations of writing them one by one; `assembly`: the network's, and `factors` its `_factors`, where the
+    caller keeps them.
     """
     steps, recipe = assembly or _assembly(network)
     n, m = len(network.state_names), len(network.sources) + len(network.boundaries)
-    factors = np.array([_FACTOR[kind](params[name]) if name else 0.0 for kind, name in recipe], dtype=np.float64)
+    factors = _factors(recipe, params) if factors is None else factors
     laws = np.empty((len(conductances) + len(coefficients), n_ops))
     for row, g in enumerate(list(conductances) + list(coefficients)):
         laws[row] = g
@@ -87,6 +89,11 @@ def _system_matrices(network: ThermalNetwork, params: Params, conductances: list
     B = np.zeros((n_ops, n, m))
     _assemble(steps, factors, laws, A, B)
     return A, B
+
+
+def _factors(recipe: list[tuple[str, str]], params: Params) -> np.ndarray:
+    """The factor of each step of an `_assembly` recipe (1/C, ∓1/tau) from the parameters."""
+    return np.array([_FACTOR[kind](params[name]) if name else 0.0 for kind, name in recipe], dtype=np.float64)
 
 
 _FACTOR = {"1/C": lambda c: 1.0 / c, "-1/tau": lambda tau: -1.0 / tau, "1/tau": lambda tau: 1.0 / tau}

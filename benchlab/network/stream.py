@@ -18,8 +18,9 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
-from benchlab.network.solver import (_assembly, _coefficient_terms, _conductances, _quantised, _system_matrices, _zoh,
+from benchlab.network.solver import (_assembly, _coefficient_terms, _conductance, _factors, _quantised, _system_matrices, _zoh,
                                      _propagate_combined44, propagate_into)
+from benchlab.network.memo import float_bits
 from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
 
 BLOCK = 1 << 14  # samples per block: a block's float64 column is 128 KiB, inside the core's L2 cache (16,384 measured best of 4,096..131,072)
@@ -152,42 +153,162 @@ def stream_network(network: ThermalNetwork, params: Params, channels: Channels, 
     """States state-major (n, N + 1), column k at time k*dt from x0, as `solver.run_network` without a memo gives
     them (transposed); None where the network has temperature-affine sources (their keys are scaled by the whole
     run's largest value, so the whole-run solver keys them)."""
-    if _coefficient_terms(network):
-        return None
-    n = samples(channels)
-    x0 = np.asarray(x0, dtype=np.float64)
-    states = len(network.state_names)
-    inputs = len(network.sources) + len(network.boundaries)
-    assembly = _assembly(network)
-    out = np.empty((states, n + 1))
-    out[:, 0] = x0
-    points: _Points | None = None
-    varying: tuple[int, ...] = ()
-    decode = None
-    for start, stop in _blocks(n, block or BLOCK):
-        part = window(channels, start, stop)
-        size = stop - start
-        laws = _conductances(network, params, part, size)
-        pattern = tuple(i for i, g in enumerate(laws) if isinstance(g, np.ndarray))
-        columns = _key_columns(laws, pattern)
-        if points is None:
-            varying, points = pattern, _Points(max(len(columns), 1), states, inputs)
-        elif pattern != varying:
-            return None  # a law constant on one block and not on another: key the run as a whole
-        keys = np.empty((size, max(len(columns), 1)), dtype=np.int64)
-        if columns:
-            for c, (column, _) in enumerate(columns):
-                keys[:, c], decode = _quantised(column, True, resolution)
-        else:
-            keys[:] = 0
-        known = points.count
-        op_index = points.number(keys)
-        if points.count > known:
-            _discretise_points(network, params, laws, columns, points, known, decode, dt, assembly)
-        flows = [as_samples(s.heat_flow(params, part), size) for s in network.sources]
-        flows += [as_samples(b.temperature(part), size) for b in network.boundaries]
-        points.propagate(op_index, sample_matrix(flows, size), out, start)
-    return out
+    return NetworkStream(network, params, dt, resolution).run(channels, x0, block)
+
+
+MAX_POINTS = 1 << 13  # operating points a NetworkStream keeps between runs (13 states, 8 inputs: 1.7 KiB each)
+_ABSENT = object()  # a channel a law asked for that the channels do not hold
+
+
+class _Reading(Mapping):
+    """The channels as a law sees them, noting each channel it reads (or asks about) and the array it got."""
+
+    def __init__(self, channels: Channels) -> None:
+        self.channels = channels
+        self.read: dict[str, object] = {}
+        self.whole = False  # the law went through all channels: what it depends on is not known
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        value = self.channels.get(name, _ABSENT)
+        self.read[name] = value
+        if value is _ABSENT:
+            raise KeyError(name)
+        return value
+
+    def __contains__(self, name: object) -> bool:
+        return self.get(name, _ABSENT) is not _ABSENT
+
+    def __iter__(self) -> Iterator[str]:
+        self.whole = True
+        return iter(self.channels)
+
+    def __len__(self) -> int:
+        self.whole = True
+        return len(self.channels)
+
+
+class NetworkStream:
+    """One network with its parameters and step run over channels after channels (`run`): a whole run block by
+    block (`stream_network`), or the simulated bench's plant chunk after chunk and pass after pass of its
+    fixed-point iteration, where most of each run repeats the one before.
+
+    Kept from run to run, none changing a result bit (tests/test_stream.py): the matrix assembly and its factors;
+    the operating points met so far with their discrete matrices (a point's matrices depend on its key and the
+    constant laws alone; started over past MAX_POINTS, or when the constant laws change); each law's value while
+    every channel it read is the very array it read before (a caller hands a changed channel as a new array, never
+    changes one in place); and a run of one block whose laws, inputs and start equal the previous run's gets that
+    run's states again.
+    """
+
+    def __init__(self, network: ThermalNetwork, params: Params, dt: float, resolution: float) -> None:
+        self.network, self.params, self.dt, self.resolution = network, params, dt, resolution
+        self.affine = bool(_coefficient_terms(network))  # temperature-affine sources: keyed by the whole run
+        self.assembly = _assembly(network)
+        self.factors = _factors(self.assembly[1], params)
+        self.states = len(network.state_names)
+        self.inputs = len(network.sources) + len(network.boundaries)
+        self.points: _Points | None = None
+        self.keyed_by: tuple = ()  # which laws vary, and the constant laws' values, the points were made with
+        self._values: dict[int, tuple[object, tuple | None, object]] = {}  # id(law) -> (law, reads, value)
+        self._last: tuple | None = None  # (samples, laws, inputs, x0, states) of the last run of one block
+
+    def run(self, channels: Channels, x0: np.ndarray, block: int | None = None) -> np.ndarray | None:
+        """States state-major (n, N + 1) over the channels from x0 (see `stream_network`); the caller does not
+        change them (a repeated run hands back the same array)."""
+        if self.affine:
+            return None
+        n = samples(channels)
+        x0 = np.asarray(x0, dtype=np.float64)
+        if self.points is not None and self.points.count > MAX_POINTS:
+            self.points = None
+        out: np.ndarray | None = None
+        run_pattern = None
+        decode = None
+        for start, stop in _blocks(n, block or BLOCK):
+            part = channels if stop - start == n else window(channels, start, stop)  # one block: the very arrays
+            size = stop - start
+            laws = self._conductances(part)
+            flows = [self._value(s.heat_flow, lambda ch, s=s: as_samples(s.heat_flow(self.params, ch), size), part)
+                     for s in self.network.sources]
+            flows += [self._value(b.temperature, lambda ch, b=b: as_samples(b.temperature(ch), size), part)
+                      for b in self.network.boundaries]
+            if size == n and self._repeats(n, laws, flows, x0):
+                return self._last[-1]
+            if out is None:
+                out = np.empty((self.states, n + 1))
+                out[:, 0] = x0
+            pattern = tuple(i for i, g in enumerate(laws) if isinstance(g, np.ndarray))
+            if run_pattern is None:
+                run_pattern = pattern
+            elif pattern != run_pattern:
+                return None  # a law constant on one block and not on another: key the run as a whole
+            keyed_by = (pattern, tuple(g for g in laws if not isinstance(g, np.ndarray)))
+            columns = _key_columns(laws, pattern)
+            if self.points is None or keyed_by != self.keyed_by:
+                self.points, self.keyed_by = _Points(max(len(columns), 1), self.states, self.inputs), keyed_by
+            keys = np.empty((size, max(len(columns), 1)), dtype=np.int64)
+            if columns:
+                for c, (column, _) in enumerate(columns):
+                    keys[:, c], decode = _quantised(column, True, self.resolution)
+            else:
+                keys[:] = 0
+            known = self.points.count
+            op_index = self.points.number(keys)
+            if self.points.count > known:
+                _discretise_points(self.network, self.params, laws, columns, self.points, known, decode, self.dt,
+                                   self.assembly, self.factors)
+            self.points.propagate(op_index, sample_matrix(flows, size), out, start)
+        if out is None:  # no sample
+            out = np.empty((self.states, 1))
+            out[:, 0] = x0
+        self._last = (n, laws, flows, x0.copy(), out) if 0 < n <= (block or BLOCK) else None
+        return out
+
+    def _conductances(self, channels: Channels) -> list[np.ndarray | float]:
+        """1/R of every link (`solver._conductances`), each law's value reused while what it read is unchanged."""
+        out: list[np.ndarray | float] = []
+        by_law: dict[int, np.ndarray | float] = {}
+        for link in self.network.links:
+            if id(link.resistance) not in by_law:
+                by_law[id(link.resistance)] = self._value(
+                    link.resistance, lambda ch, link=link: _conductance(link, self.params, ch), channels)
+            out.append(by_law[id(link.resistance)])
+        return out
+
+    def _value(self, law: object, compute, channels: Channels):
+        """compute(channels) of a law, or its value from before where every channel it read is the array it read."""
+        entry = self._values.get(id(law))
+        if entry is not None and entry[0] is law and entry[1] is not None:
+            get = channels.get
+            for name, before in entry[1]:
+                if get(name, _ABSENT) is not before:
+                    break
+            else:
+                return entry[2]
+        reading = _Reading(channels)
+        value = compute(reading)
+        self._values[id(law)] = (law, None if reading.whole else tuple(reading.read.items()), value)
+        return value
+
+    def _repeats(self, n: int, laws: list, flows: list, x0: np.ndarray) -> bool:
+        """Whether a run of one block of n samples with these laws, inputs and start is the last one's again."""
+        if self._last is None:
+            return False
+        last_n, last_laws, last_flows, last_x0, _ = self._last
+        return (n == last_n and _identical(x0, last_x0) and all(_identical(a, b) for a, b in zip(laws, last_laws))
+                and all(_identical(a, b) for a, b in zip(flows, last_flows)))
+
+
+def _identical(a: object, b: object) -> bool:
+    """Whether two values (float64 arrays, numbers, or absent) are the same bits (-0.0 and 0.0 apart)."""
+    if a is b:
+        return True
+    if isinstance(a, np.ndarray) and isinstance(b, np.ndarray):
+        return (a.dtype == b.dtype == np.float64 and a.shape == b.shape
+                and bool((a.view(np.uint64) == b.view(np.uint64)).all()))
+    if isinstance(a, float) and isinstance(b, float):
+        return float_bits((a,)) == float_bits((b,))
+    return False
 
 
 def _key_columns(laws: list, varying: tuple[int, ...]) -> list[tuple[np.ndarray, list[int]]]:
@@ -205,7 +326,7 @@ def _key_columns(laws: list, varying: tuple[int, ...]) -> list[tuple[np.ndarray,
 
 
 def _discretise_points(network: ThermalNetwork, params: Params, laws: list, columns: list, points: _Points,
-                       known: int, decode, dt: float, assembly: tuple) -> None:
+                       known: int, decode, dt: float, assembly: tuple, factors: np.ndarray) -> None:
     """Discrete matrices of the points numbered known..count: each varying law at its key, the rest as they are."""
     new = points.count - known
     per_point: list = [g if not isinstance(g, np.ndarray) else None for g in laws]  # a constant law stays a scalar
@@ -213,7 +334,7 @@ def _discretise_points(network: ThermalNetwork, params: Params, laws: list, colu
         values = decode(points.keys[known:points.count, c])
         for i in keyed:
             per_point[i] = values
-    A, B = _system_matrices(network, params, per_point, [], new, assembly)
+    A, B = _system_matrices(network, params, per_point, [], new, assembly, factors)
     points.add_matrices(known, *_zoh(A, B, dt))
 
 

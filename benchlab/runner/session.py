@@ -308,6 +308,9 @@ def _truth_groups(sim: "SimBench | None", writer: RunWriter, resume_state: dict[
     before = resume_state["truth"] if resume_state else {}
     columns = {"time": (np.arange(rows) * writer.layout.dt, "s")}
     for name, values in sim.true_states(rows).items():
+        if len(values) == rows:  # nothing before this bench's rows (no resume): the values as they are, not copied
+            columns[name] = (values, "degC")
+            continue
         head = np.full(rows - len(values), np.nan)
         kept = before.get(name, head)[:len(head)]
         head[:len(kept)] = kept
