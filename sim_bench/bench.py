@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from drivers import cvd
 from drivers.can_signals import CLAMP_CLAMPED, CLAMP_OPEN, CLAMP_SLIPPING

@@ -8,7 +8,7 @@ integration steps. Speeds in rpm outside, rad/s inside.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from benchlab.drivetrain import RPM, DrivetrainFacts
 

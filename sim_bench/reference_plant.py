@@ -15,7 +15,7 @@ import math
 from collections.abc import Mapping
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from benchlab.network import Boundary, Lag, Link, Node, Source, ThermalNetwork
 from sim_bench.plant import KELVIN, STEFAN_BOLTZMANN, ThermalPlant

@@ -93,3 +93,23 @@ def test_a_disk_too_full_for_the_run_file_is_one_line_and_no_file(tmp_path):
     assert done.returncode == 1, done.stderr
     _one_line(done.stderr, out)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_compiled_function_whose_cache_cannot_be_written_still_runs(tmp_path):
+    """numba writes a function's cache file on its first call and raised that write's OSError into the command
+    (identify died on a full disk before its own output, on a cold cache); benchlab.jit logs it instead."""
+    (tmp_path / "kernel.py").write_text(textwrap.dedent("""
+        from benchlab.jit import njit
+
+        @njit(cache=True)
+        def twice(x):
+            return 2.0 * x
+        """))
+    done = _child("""
+        sys.path.insert(0, ".")
+        import kernel
+        limit(1_000)  # no cache file fits
+        print(kernel.twice(21.0))
+        """, tmp_path)
+    assert done.returncode == 0 and done.stdout.strip() == "42.0", done.stderr
+    assert not list((tmp_path / "__pycache__").glob("*.nbc"))  # the cache was indeed not written

@@ -35,7 +35,7 @@ from typing import Any
 import h5py
 import numpy as np
 from isal import isal_zlib
-from numba import njit
+from benchlab.jit import njit
 
 from benchlab.outputs import OutputError, is_no_space, no_space
 from benchlab.runfile.read import complete_events, read_progress, text

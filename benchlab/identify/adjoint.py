@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping, Sequence
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from benchlab.identify.data import FitData
 from benchlab.identify.fit import KEY_RESOLUTION, run_values

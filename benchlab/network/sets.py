@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
 from benchlab.network.solver import (_coefficient, _coefficient_terms, _coefficients, _conductance, _conductances, _per_point,

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from benchlab.network.structure import Channels, Link, Params, Source, ThermalNetwork, as_samples, sample_matrix
 from benchlab.network.memo import NO_MEMO, LawMemo, float_bits, parameter_bits

@@ -16,7 +16,7 @@ from collections.abc import Iterator, Mapping
 
 import numpy as np
 import pandas as pd
-from numba import njit
+from benchlab.jit import njit
 
 from benchlab.network.solver import (_assembly, _coefficient_terms, _conductance, _factors, _quantised, _system_matrices, _zoh,
                                      _propagate_combined44, propagate_into)

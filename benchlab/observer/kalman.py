@@ -21,7 +21,7 @@ resolution) and linearised at the estimate. With no law adapted both coincide wi
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 
 @njit(cache=True, nogil=True)

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from benchlab.acquire import AlignedSource, Layout, StreamSpec
 from benchlab.acquire import writer as acquire_writer

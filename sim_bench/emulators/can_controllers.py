@@ -22,7 +22,7 @@ from pathlib import Path
 import can
 import cantools
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, compile_codecs, decode_row, encode_rows

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from drivers import cobs, node_frame
 from drivers.node_frame import NodeFrame

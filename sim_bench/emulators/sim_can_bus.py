@@ -22,7 +22,7 @@ from typing import Any
 
 import can
 import numpy as np
-from numba import njit
+from benchlab.jit import njit
 
 from drivers.can_frames import FRAME, frames_from_messages, join, messages_from_frames, recv_each
 
