@@ -117,7 +117,9 @@ class ClutchNodeEmulator:
         the line at once), the rest encoded together and returned."""
         inputs = self.provider.node_inputs_at(times)
         n = len(times)
-        ohm, link = np.asarray(inputs.resistances_ohm, dtype=float), self._link_rows(inputs, n)
+        # a fresh C-contiguous writable copy: the provider's view (read-only, strided) would be a second signature
+        # of the compiled kernels, compiled at the first frame in a real-time run instead of by prime()
+        ohm, link = np.array(inputs.resistances_ohm, dtype=float, order="C"), self._link_rows(inputs, n)
         args = (self._node_time(times), ohm, link, self._t_boot, self._seq, self._reset_flag, self.short_ohm,
                 self.low_supply_mv)
         self._seq = (self._seq + n) & 0xFFFF
