@@ -218,6 +218,15 @@ def _take_status_frames(index0: np.ndarray, t0: np.ndarray, values0: np.ndarray,
         held[4] = 0.0 if np.isnan(power) else power  # unknown (NaN) counts as no power
 
 
+def prime_drivers() -> None:
+    """Compile (or load from numba's cache) every kernel the drivers' loop calls: the CAN bench's, the node
+    gateway's, the PT1000 conversion's and the status frames' (`prime`)."""
+    from drivers import can_bench, clutch_node
+
+    for module_prime in (can_bench.prime, clutch_node.prime, cvd.prime, prime):
+        module_prime()
+
+
 def prime() -> None:
     """Compile (or load from numba's cache) the status kernel before a control loop calls it (a first-call compile
     there stalls the loop), on no frames and a scratch `held` (`_derived` is primed with the writer's layout)."""
@@ -361,7 +370,6 @@ class DriverBench:
                  service: Callable[[], None] | None = None, can_log: "str | os.PathLike[str] | None" = None,
                  companion: Any = None) -> None:
         from benchlab.runner import opening
-        from drivers import can_bench, clutch_node
         from drivers.can_bench import CanBench
 
         self.config, self.clock, self.service = config, clock, service
@@ -369,8 +377,7 @@ class DriverBench:
         self.layout = bench_layout(config)
         # every kernel the loop calls compiled (or loaded from numba's cache) before a device is opened or commanded:
         # a first-call compile inside the loop stops polling and interlocks for seconds
-        for module_prime in (can_bench.prime, clutch_node.prime, cvd.prime, prime):
-            module_prime()
+        prime_drivers()
         acquire_writer.prime(self.layout)
         self.status = BenchStatus()
         self.events: list[BenchEvent] = []

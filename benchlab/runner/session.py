@@ -29,7 +29,7 @@ from benchlab.runfile.read import load_stopped_run
 from benchlab.runfile.schema import SCHEDULE_UNITS
 from benchlab.runner import opening
 from benchlab.runner.clock import Clock, RealClock
-from benchlab.runner.devices import BenchConfig, DriverBench
+from benchlab.runner.devices import BenchConfig, DriverBench, prime_drivers
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
 from drivers.errors import CanLogError
 from protocols import catalog
@@ -158,6 +158,18 @@ def can_log_path(run_path: Path, resumes: int = 0) -> Path:
     return run_path.with_suffix(f".resume{resumes}.blf" if resumes else ".blf")
 
 
+def prime_real_time(simulated_devices: bool) -> None:
+    """Compile (or load from numba's cache) every kernel the drivers' loop calls, and the emulators' where the
+    bench has `sim://` devices, before the run's real clock starts (DriverBench primes them again: cache hits)."""
+    prime_drivers()
+    if simulated_devices:
+        from sim_bench.emulators import can_controllers, sim_can_bus
+        from sim_bench.emulators import clutch_node as node_emulator
+
+        for module in (can_controllers, node_emulator, sim_can_bus):
+            module.prime()
+
+
 def open_bench(bench_choice: BenchChoice, config: BenchConfig, can_log: Path, t0: float, seed: int,
                initial_c: Any = None) -> "tuple[DriverBench, Clock, SimBench | None, BenchConfig]":
     """The drivers on the bench, with its clock: the hardware of BENCH.toml on real time, or the simulated bench
@@ -171,6 +183,8 @@ def open_bench(bench_choice: BenchChoice, config: BenchConfig, can_log: Path, t0
     spec = simulated(bench_choice)
     if spec is not None:
         sim, config = spec.open(config, seed, t0, initial_c)
+    else:  # on the real clock, compiled before it starts: a cold cache's compile (15 s) is not run time lost
+        prime_real_time(opening.has_simulated_devices(config))
     clock: Clock = sim.clock if sim is not None else RealClock(t0)
     devices = None
     if sim is None and opening.has_simulated_devices(config):
