@@ -241,3 +241,20 @@ def test_mixed_bench_runs_with_can_on_python_can_virtual(tmp_path, capsys) -> No
             flywheel = flywheel[np.isfinite(flywheel)]
             rise = flywheel.max() - flywheel[0]
         assert rise > 0.2, rise  # the plant's launch (sensor noise: 0.05 K)
+
+
+def test_a_partly_simulated_bench_names_its_simulated_devices(tmp_path, capsys) -> None:
+    from benchlab.provenance import bench_text
+    from benchlab.runner.config import load_bench_config
+    from benchlab.runner.opening import simulated_devices
+
+    bench = _bench(tmp_path, "TCPIP0::127.0.0.1::5025::SOCKET", "sim://rig-node", 'url = "sim://rig-can"')
+    named = simulated_devices(load_bench_config(bench))
+    assert named == "node sim://rig-node, CAN sim://rig-can"
+    assert bench_text(str(bench), simulated=named) == f"the hardware bench {bench} (simulated: {named})"
+    assert main(["run", "table1", "--bench", str(bench), "--dry-run", "--cycles", "1"]) == 0
+    assert f"(simulated: {named})" in capsys.readouterr().out
+    hardware = _bench(tmp_path, "TCPIP0::127.0.0.1::5025::SOCKET", "socket://127.0.0.1:9",
+                      'interface = "virtual"\nchannel = "rig"',
+                      name="hardware.toml")
+    assert simulated_devices(load_bench_config(hardware)) == ""

@@ -341,3 +341,14 @@ def test_progress_bar_moves_forward_through_the_steps_in_order(tmp_path, monkeyp
     index = np.cumsum([i > 0 and p != shown[i - 1] for i, p in enumerate(shown)])  # the step each note shows
     done = np.cumsum(task.advances[:len(task.notes)])  # a note follows each advance but the final one
     assert np.all(planned_before[index] - 1e-9 <= done) and np.all(done <= planned_before[index + 1] + 1e-9)
+
+
+def test_a_run_whose_every_cycle_was_skipped_is_not_complete(tmp_path):
+    steps = (Step("open", 40.0, 2000.0, 0.0, 0.0, 0),)  # one cycle; the silence holds it, then it is skipped
+    lim = BenchLimits(on_interlock="hold", resume_after_s=5.0)
+    sim = SimulatedBench(faults=[Fault(3.0, "radio_silence", duration_s=15.0)], options={"dropouts": False}, limits=lim)
+    code, summary = execute(RunRequest("custom", tmp_path / "run.h5", steps=steps, bench=sim, install_signals=False))
+    kinds = [k for _, k, _ in _events(tmp_path / "run.h5")]
+    assert "cycle_skipped" in kinds and "run_aborted" in kinds and "run_complete" not in kinds
+    assert code == 1 and summary.status == "aborted" and "every cycle skipped" in summary.reason
+    assert load_run(tmp_path / "run.h5").attrs["status"] == "aborted"

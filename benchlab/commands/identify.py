@@ -75,10 +75,8 @@ def run(args: argparse.Namespace) -> int:
     for path, channels in result.residuals.items():
         for channel, tests in channels.items():
             signal, corr = max(tests["input_correlation"].items(), key=lambda item: abs(item[1]), default=("-", 0.0))
-            print(f"  residuals  {path} {channel}: {'white' if tests['white'] else 'not white'} "
-                  f"({tests['decimation_s']:.0f} s means: Ljung-Box p {_p_value(tests['ljung_box_p'])}, structure "
-                  f"{tests['structure_K']:.3f} K, limit {tests['effect_threshold_K']:.2f} K; "
-                  f"{tests['whiteness_outside_pct']:.0f} % of 1-step lags outside), lag-1 autocorrelation "
+            print(f"  residuals  {path} {channel}: {whiteness_verdict(tests)}; "
+                  f"{tests['whiteness_outside_pct']:.0f} % of 1-step lags outside, lag-1 autocorrelation "
                   f"{tests['autocorrelation'][1]:+.2f}, strongest input correlation {signal} {corr:+.2f}")
     said = set(not_identified_lines(unidentified))  # printed above, with the parameters
     for warning in result.uncertainty.warnings:
@@ -87,6 +85,22 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def whiteness_verdict(tests: dict) -> str:
+    """The residual verdict of residuals.residual_tests in words that name what decided it: not white only when a
+    test rejects at alpha/2 (Ljung-Box or the excess over the white noise) and the structure exceeds the limit."""
+    level = tests["alpha"] / 2
+    rejecting = [f"{name} p {_p_value(p)}" for name, p in (("Ljung-Box", tests["ljung_box_p"]),
+                                                           ("excess over white noise", tests["excess_p"]))
+                 if p is not None and p < level]
+    structure = (f"structure {tests['structure_K']:.3f} K, limit {tests['effect_threshold_K']:.2f} K "
+                 f"on {tests['decimation_s']:.0f} s means")
+    if tests["white"]:
+        return (f"white ({structure}; Ljung-Box p {_p_value(tests['ljung_box_p'])}, excess over white noise p "
+                f"{_p_value(tests['excess_p'])}, whiteness rejected below p {level:g})")
+    because = ", ".join(rejecting) if rejecting else "too few windows for a test"
+    return f"not white ({structure}; rejected by {because}, below p {level:g})"
+
+
 def _p_value(p: float | None) -> str:
-    """A p-value to three decimals, or "—" where there were too few samples for the test."""
-    return "—" if p is None else f"{p:.3f}"
+    """A p-value to three decimals ("<0.001" below), or "—" where there were too few samples for the test."""
+    return "—" if p is None else "<0.001" if p < 0.0005 else f"{p:.3f}"

@@ -140,8 +140,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     from benchlab.units import to_stored
 
     required = REQUIRED if required is None else required
-    # a spreadsheet's byte-order mark is not part of the header (utf-8-sig)
-    text = read_document(path, "CSV file", str, (), "a CSV table", encoding="utf-8-sig")
+    text, encoding = csv_text(path)
     try:
         sep, decimal = _dialect(text, sep, decimal)
         _check_width(path, text, sep)
@@ -190,7 +189,20 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     dt = float(np.median(np.diff(time)))
     if dt <= 0 or np.max(np.abs(np.diff(time) - dt)) > time_step_tolerance(time, dt, np.dtype(np.float64)):
         raise InputError(path, "column time", "a uniform time grid in s (resample before importing)")
+    frame.attrs["encoding"] = encoding
     return frame, dt, units
+
+
+def csv_text(path: Path) -> tuple[str, str]:
+    """The CSV's text and the encoding it was read in: UTF-8 first (a byte-order mark is not part of the header),
+    else Windows-1252, what German Excel saves (`°` as the byte 0xB0)."""
+    try:
+        return read_document(path, "CSV file", str, (), "a CSV table", encoding="utf-8-sig"), "UTF-8"
+    except InputError:
+        if not path.is_file():
+            raise
+    return read_document(path, "CSV file", str, (), "a CSV table in UTF-8 or Windows-1252",
+                         encoding="cp1252"), "Windows-1252"
 
 
 def _units(path: Path, columns: list[str], given: dict[str, str]) -> dict[str, str]:
@@ -235,7 +247,7 @@ def _csv_input(args: argparse.Namespace, path: Path) -> Input:
 
     from benchlab.importing.sources import Input, SourceChannel
 
-    header = read_document(path, "CSV file", str, (), "a CSV table", encoding="utf-8-sig").partition("\n")[0]
+    header = csv_text(path)[0].partition("\n")[0]
     timed = re.search(r"(^|[,;\t])\s*time\s*(\[|[,;\t]|$)", header) is not None
     frame, _, units = read_csv(path, None if timed else args.dt, parse_units(args.unit), (), args.sep, args.decimal)
     time = frame["time"].to_numpy()
@@ -303,6 +315,8 @@ def run(args: argparse.Namespace) -> int:
                                     args.decimal)
         write_run(args.out, frame, dt, protocol="imported", units=units,
                   attrs={"source_file": Path(args.inputs[0]).name, "bench": IMPORTED})
+        if frame.attrs.get("encoding", "UTF-8") != "UTF-8":
+            print(f"{args.inputs[0]}: read as {frame.attrs['encoding']} (not UTF-8)")
     else:
         merged = _read_inputs(args, required)
         frame, dt = merged.frame, args.dt

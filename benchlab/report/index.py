@@ -127,7 +127,7 @@ def _run_section(runs: Mapping[str, tuple[Path, pd.DataFrame]], out: Path) -> st
         attrs = load_attrs(path)
         link = f'<a href="{html.escape(os.path.relpath(path, out))}">{html.escape(path.name)}</a>'
         rows.append([html.escape(label), link,
-                     html.escape(attrs.get("protocol", "")), html.escape(bench_text(attrs.get("bench"), short=True)),
+                     html.escape(attrs.get("protocol", "")), html.escape(bench_text(attrs.get("bench"), short=True, simulated=attrs.get("bench_simulated", ""))),
                      _num(duration / 3600, 2, " h"), str(len(run)),
                      _num(float(run["T_flywheel"].max()), 1, " °C"),
                      _num(float(run["friction_power"].sum()) * float(run.attrs["dt"]) / 1e6, 2, " MJ"),
@@ -316,7 +316,7 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
         *([f"<p><b>{html.escape(story['verdict'])}</b></p>"] if story and story.get("verdict") else []),
         "<p class='sim'>" + ("<b>Everything on this page comes from the simulated bench</b> (<code>sim_bench</code>): "
                              f"the drivers talked to emulated devices whose plant is {plant_text}."
-                             if simulated else f"Measured on {html.escape(bench_text(attrs.get('bench')))}.")
+                             if simulated else f"Measured on {html.escape(bench_text(attrs.get('bench'), simulated=attrs.get('bench_simulated', '')))}.")
         + "</p>",
         "<h2>1. The runs</h2>", _run_section(runs, out),
         _figure(out, out / "report" / "fig4_fit.png", "Fig. 4: the nonlinear model against the Table 1 run"),

@@ -136,7 +136,7 @@ def render(run: pd.DataFrame, models: Sequence[tuple[str, ModelParams]],
     models_text = ", ".join(f"**{text(label)}** ({literal(params.model)})" for label, params in models)
     parts = [
         f"# benchlab report – {literal(run_name(run))}",
-        f"Run {literal(run.attrs.get('source', ''))} from **{text(bench_text(run.attrs.get('bench')))}**: protocol "
+        f"Run {literal(run.attrs.get('source', ''))} from **{text(bench_text(run.attrs.get('bench'), simulated=run.attrs.get('bench_simulated', '')))}**: protocol "
         f"{literal(run.attrs.get('protocol', ''))}, {duration:.0f} s at a "
         f"step of {float(run.attrs['dt']):g} s, {len(run)} samples. Models: {models_text}. "
         f"Written by benchlab {benchlab.__version__}.",

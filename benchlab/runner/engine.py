@@ -139,7 +139,7 @@ class Runner:
         if not math.isfinite(self.summary.energy_j):
             self.summary.energy_j = 0.0
         energy0 = self.summary.energy_j
-        self.summary.cycles_done = len({s.cycle for s in self.steps[:start_step]})
+        self.summary.cycles_done = done_before = len({s.cycle for s in self.steps[:start_step]})
         self.writer.state["held"] = 0.0
         self.bench.safe_state(self._safe)
         self._tick(interlocks=False)  # the first readings; the steps' ticks watch the interlocks
@@ -162,6 +162,9 @@ class Runner:
                                       step=self.current_step)
                     self.summary.events["cycle_skipped"] += 1
                     self._in_step = False
+            if self.summary.events["cycle_skipped"] and self.summary.cycles_done == done_before:
+                raise Stopped(f"every cycle skipped after an interlock (none of "
+                              f"{self.summary.cycles_planned - done_before} ran)", 1)
             self.bench.safe_state(self._safe)
             self._tick(interlocks=False)  # already safe: nothing left to interlock
             self.writer.event(self.clock(), "run_complete", self.cycle)

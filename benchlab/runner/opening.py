@@ -264,6 +264,13 @@ def is_simulated(url: object) -> bool:
     return isinstance(url, str) and url.startswith("sim://")
 
 
+def simulated_devices(config: "BenchConfig") -> str:
+    """A BENCH.toml's `sim://` devices in words for the run's provenance, e.g. "node sim://rig, CAN sim://rig"
+    ("" for none)."""
+    named = (("instrument", config.instrument_url), ("node", config.node_url), ("CAN", config.can.get("url")))
+    return ", ".join(f"{role} {url}" for role, url in named if is_simulated(url))
+
+
 def has_simulated_devices(config: "BenchConfig") -> bool:
     """Whether any device of a BENCH.toml is `sim://NAME` (then sim_bench.mixed serves them, on one plant)."""
     return any(is_simulated(u) for u in (config.instrument_url, config.node_url, config.can.get("url")))

@@ -90,6 +90,11 @@ def bench_name(bench: BenchChoice) -> str:
     return os.fspath(bench) if isinstance(bench, (str, os.PathLike)) else bench.name
 
 
+def _simulated(request: RunRequest, config: BenchConfig) -> str:
+    """The `sim://` devices of a hardware bench, in words (opening.simulated_devices); "" for the simulated one."""
+    return "" if simulated(request.bench) is not None else opening.simulated_devices(config)
+
+
 def bench_config(request: RunRequest) -> BenchConfig:
     """The bench's configuration: the simulated bench's, or BENCH.toml checked field by field."""
     sim = simulated(request.bench)
@@ -142,7 +147,8 @@ def dry_run(request: RunRequest, out: Any = None) -> int:
     cycles = len({s.cycle for s in steps})
     for note in options.get("dropped", []):
         print(f"plan: {note}", file=out)
-    print(f"protocol {request.protocol} on {bench_text(bench_name(request.bench))}: {len(steps)} steps, {cycles} "
+    print(f"protocol {request.protocol} on {bench_text(bench_name(request.bench), simulated=_simulated(request, config))}"
+          f": {len(steps)} steps, {cycles} "
           f"cycles, estimated {total:.0f} s ({total / 3600:.2f} h)", file=out)
     if problems:
         for p in problems:
@@ -249,6 +255,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     if request.install_signals:  # before the bench opens (it makes the CAN log): a signal from then on ends the
         for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):  # run as aborted, its files whole
             previous[sig] = signal.signal(sig, lambda s, f, c=code: stop(s, c))
+    simulated_text = _simulated(request, config)  # before open_bench gives the sim:// devices their addresses
     try:
         bench, clock, sim, config = open_bench(request.bench, config, can_log, t0, seed,
                                                resume_state["initial"] if resume_state else None)
@@ -273,6 +280,8 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                      "can_log": can_log.name, "can_log_time_base": config.can_timestamps}
             if sim is not None:
                 attrs.update(sim.run_attrs())
+            if simulated_text:
+                attrs["bench_simulated"] = simulated_text
             writer = RunWriter(request.out, layout, protocol=request.protocol, attrs=attrs,
                                schedule=[s.as_dict() for s in steps], schedule_units=SCHEDULE_UNITS,
                                planned_s=duration_s(steps), flush_every_s=config.flush_every_s,
@@ -282,7 +291,7 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                                      duration_s(steps), unit="s")
         runner = Runner(bench, clock, steps, writer, config.limits, tick_s=config.tick_s,
                         fast_tick_s=config.fast_tick_s, dt=config.dt, progress=task)
-        runner.summary.bench = bench_text(bench_name(request.bench))
+        runner.summary.bench = bench_text(bench_name(request.bench), simulated=simulated_text)
         for name, code in pending:
             runner.request_stop(name, code)
         try:

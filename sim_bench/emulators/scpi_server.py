@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import selectors
 import socket
+import sys
 import threading
 from types import TracebackType
 
@@ -84,3 +85,36 @@ class ScpiSocketServer:
                         client.sendall(reply)
                     except OSError:
                         return
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m sim_bench.emulators.scpi_server [--port N]`: the SCPI emulator on 127.0.0.1 until Ctrl-C, for
+    rehearsing a bench file's VISA resource `TCPIP0::127.0.0.1::N::SOCKET`."""
+    import argparse
+
+    from sim_bench.emulators.scpi_instrument import ScpiInstrumentEmulator
+
+    parser = argparse.ArgumentParser(prog="python -m sim_bench.emulators.scpi_server",
+                                     description="Serve the SCPI instrument emulator (the dialogue of sim://) as a raw "
+                                                 "SCPI socket on 127.0.0.1 (loopback only) until Ctrl-C.")
+    parser.add_argument("--port", type=int, default=5025,
+                        help="TCP port on 127.0.0.1 (default 5025, a LAN instrument's; 0: a free port)")
+    args = parser.parse_args(argv)
+    if not 0 <= args.port <= 65535:
+        parser.error(f"--port: a TCP port 0-65535, got {args.port}")
+    try:
+        server = ScpiSocketServer(ScpiInstrumentEmulator(), args.port)
+    except OSError as exc:
+        print(f"127.0.0.1:{args.port}: a free port to serve on ({exc.strerror})", file=sys.stderr)
+        return 2
+    with server:
+        print(f"serving the SCPI emulator as {server.resource} (Ctrl-C stops)", flush=True)
+        try:
+            threading.Event().wait()
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
