@@ -34,7 +34,9 @@ def job(tmp_path_factory) -> tuple[Path, str]:
         if not printed.exists():
             text = io.StringIO()
             with contextlib.redirect_stdout(text):
-                assert main(["pipeline", "--out", str(out), "--duration", "1500"]) == 0
+                # five sweep points, the fewest eq. (11) and the 1000/2500 rpm comparison in both states need
+                assert main(["pipeline", "--out", str(out), "--duration", "1500",
+                             "--sweep-grid", "1000:1,2500:1,1000:0,1500:0,2500:0"]) == 0
             printed.write_text(text.getvalue())
     return out, printed.read_text()
 

@@ -56,6 +56,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=cliargs.seed, default=1, help="seed of the schedule and the bench's noise")
     parser.add_argument("--duration", type=cliargs.positive_float("a duration in s", MAX_RUN_DURATION_S),
                         default=3600.0, help="planned Table 1 duration in s")
+    parser.add_argument("--sweep-grid", default=SWEEP_GRID, metavar="RPM:STATE,…",
+                        help="the Fig. 3 sweep's cool-down points, as `run cooldown-sweep --grid` takes them (default "
+                             f"{SWEEP_GRID}: eq. (11) needs 5 points, 2 speeds per clutch state; the comparison "
+                             "reads 1000 and 2500 rpm)")
     parser.add_argument("--plant", choices=("reference", "paper"), default="reference",
                         help="the simulated clutch: the reference plant (default, docs/plant.md) or the paper's network")
     parser.add_argument("--force", action="store_true", help="--out may hold files already (an earlier job's): "
@@ -311,7 +315,8 @@ def run(args: argparse.Namespace) -> int:
     fitting = _bench_run("run", out / "table1.h5", "table1", args.seed, args.plant, progress, duration_s=args.duration)
     validation = _bench_run("validation", out / "validation.h5", "validation", args.seed + 1, args.plant, progress,
                             steps=validation_steps(args.seed + 1))
-    sweep = _bench_run("sweep", out / "sweep.h5", "cooldown-sweep", args.seed + 2, args.plant, progress, grid=SWEEP_GRID)
+    sweep = _bench_run("sweep", out / "sweep.h5", "cooldown-sweep", args.seed + 2, args.plant, progress,
+                       grid=args.sweep_grid)
     figures = {}
     for model in ("linear", "nonlinear"):
         result = identify([fitting], model, validate=[validation], starts=4, progress=progress)
