@@ -12,6 +12,7 @@ import logging
 import selectors
 import socket
 import sys
+import signal
 import threading
 from types import TracebackType
 
@@ -107,12 +108,11 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"127.0.0.1:{args.port}: a free port to serve on ({exc.strerror})", file=sys.stderr)
         return 2
+    stop = threading.Event()  # Ctrl-C sets it: no KeyboardInterrupt can land inside the server's close
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
     with server:
         print(f"serving the SCPI emulator as {server.resource} (Ctrl-C stops)", flush=True)
-        try:
-            threading.Event().wait()
-        except KeyboardInterrupt:
-            pass
+        stop.wait()
     return 0
 
 
