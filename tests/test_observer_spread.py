@@ -12,7 +12,7 @@ from benchlab.model.catalog import builtin
 from benchlab.model.params import ModelParams
 from benchlab.network.simulation import simulate
 from benchlab.observer.batch import observe
-from benchlab.observer.spread import FILTER_STD_SUFFIX, model_spread, parameter_draws, widened
+from benchlab.observer.spread import FILTER_STD_SUFFIX, model_spread, parameter_draws, slipping_residual, widened
 from benchlab.report.showcase import PLATE, plate_band
 from benchlab.runfile import load_run, load_truth
 from benchlab.runner.session import RunRequest, execute
@@ -60,6 +60,21 @@ def test_the_wear_over_the_band_holds_the_truths_plate_wear(reference):
     estimate, low, high = band.wear_mm["plate"]
     assert low < estimate < high  # the band has a width, and the estimate is inside it
     assert band.wear_covered("plate"), band.as_dict()
+
+
+def test_the_flywheels_wear_band_carries_the_models_miss_on_its_sensor_while_slipping(reference):
+    """The flywheel is measured, so its filter band is tight; but its sensor lags the friction face that wears, and
+    the filter follows the sensor: the wear is computed over a band widened by the model's miss on that sensor
+    while slipping, on this run, which the fit never saw (benchlab.observer.spread)."""
+    run, truth, params = reference
+    observed = widened(observe(run, params, SENSORS), model_spread(run, params, [PLATE]))
+    model = simulate(run, params)
+    miss = slipping_residual(run, model, "T_flywheel")
+    assert miss > 0.5  # a richer plant than the model: it misses while the clutch slips
+    tight = plate_band(run, truth, observed, model, params, default_clutch())
+    wide = plate_band(run, truth, observed, model, params, default_clutch(), flywheel_miss_k=miss)
+    assert wide.wear_mm["flywheel"][2] - wide.wear_mm["flywheel"][1] > tight.wear_mm["flywheel"][2] - tight.wear_mm["flywheel"][1]
+    assert wide.wear_covered("flywheel"), wide.as_dict()
 
 
 def test_measured_states_keep_the_filters_band_and_the_draws_are_reproducible(reference):

@@ -158,11 +158,13 @@ def _alternatives(diagnosis: dict, diagnosed: "ModelParams", nonlinear: dict) ->
     return (diagnosed,) if after <= nonlinear["validation"]["rmse_K"] else ()
 
 
-def _plate(run: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame, alternatives: tuple = ()):
+def _plate(run: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame, alternatives: tuple = (),
+           flywheel_miss_k: float = 0.0):
     """The unmeasured plate on a run: the model's simulation and the observer's estimate (flywheel, air and housing
     sensors; its band widened by the model-form spread, benchlab.observer.spread: the nonlinear model's parameter
     draws and the spread across it and the `alternatives`, structures that fit as well) against /truth, with the
-    wear per side over the band; None where the run has no truth."""
+    wear per side over the band (the measured flywheel's widened by `flywheel_miss_k`, the model's miss on it while
+    slipping on the unseen run); None where the run has no truth."""
     with interrupts_held():
         from benchlab.observer.batch import observe
         from benchlab.observer.spread import combined, form_spread, model_spread, widened
@@ -179,7 +181,7 @@ def _plate(run: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame, altern
     observed = widened(observe(run, nonlinear, ["T_flywheel", "T_air", "T_housing"]), spread)
     estimates = {"model": model[PLATE].to_numpy(), "observer": observed.estimate[PLATE].to_numpy()}
     return plate_check(run, truth, estimates, model, plate_band(run, truth, observed, model, nonlinear,
-                                                                default_clutch()))
+                                                                default_clutch(), flywheel_miss_k))
 
 
 def _sweep_comparison(fitting: pd.DataFrame, validation: pd.DataFrame, nonlinear, out: Path, figures: dict,
@@ -302,7 +304,8 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.report.index import cooldown_scores, mean_cooldown_nrmse, write_index
         from benchlab.report.resistance import standard_errors
         from benchlab.report.scores import estimate
-        from benchlab.report.showcase import labelled_mask, peak_misfit, scores_on, verdict
+        from benchlab.observer.spread import slipping_residual
+        from benchlab.report.showcase import FLYWHEEL, labelled_mask, peak_misfit, scores_on, verdict
         from benchlab.wear import analyse_wear
         from benchlab.wear.plot import plot_wear
 
@@ -333,6 +336,7 @@ def run(args: argparse.Namespace) -> int:
     models = {"linear": linear, "nonlinear": nonlinear}
     sims = {run_label: {m: estimate(r, p, m).simulated for m, p in models.items()}
             for run_label, r in (("fit", fitting), ("validation", validation))}
+    flywheel_miss = slipping_residual(validation, sims["validation"]["nonlinear"], FLYWHEEL)
     unseen = labelled_mask(validation, out / "validation.h5", EXTRAPOLATION_LABEL)
     table1 = labelled_mask(validation, out / "validation.h5", "table1")
     story = {"peaks": {run_label: {m: peak_misfit(r, sims[run_label][m]) for m in models}
@@ -340,7 +344,7 @@ def run(args: argparse.Namespace) -> int:
              "extrapolation": {"Table 1 cycles": scores_on(validation, table1, sims["validation"]),
                                "load scenarios not in Table 1": scores_on(validation, unseen, sims["validation"])},
              "plate": _plate(validation, out / "validation.h5", nonlinear, sims["validation"]["nonlinear"],
-                             alternatives)}
+                             alternatives, flywheel_miss)}
     for m in models:
         worst = max(story["peaks"][k][m].max_pct for k in ("fit", "validation"))
         print(f"misfit    {m:9s}: peaks up to {worst:.1f} % (paper: 5 %), unseen load scenarios "
@@ -363,12 +367,17 @@ def run(args: argparse.Namespace) -> int:
           f"{out / 'sweep.h5'} -> {page.with_suffix('.html')}")
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()
-    story["wear_band"] = _plate(fitting, out / "table1.h5", nonlinear, sims["fit"]["nonlinear"], alternatives)
+    story["wear_band"] = _plate(fitting, out / "table1.h5", nonlinear, sims["fit"]["nonlinear"], alternatives,
+                                flywheel_miss)
     if story["wear_band"] is not None:
         wear["from_observer"] = story["wear_band"].band.as_dict()["wear_mm"]
     write_text(out / "wear.json", json.dumps(wear, indent=2, default=float))
     plot_wear(wear_report, out / "wear.png")
     print(f"wear      {wear['engagements']} engagements, {wear['friction_energy_J'] / 1e6:.2f} MJ -> {out / 'wear.json'}")
+    if "from_observer" in wear:
+        wear["flywheel_miss_K"] = flywheel_miss
+        print(f"          the flywheel's band widened by the model's {flywheel_miss:.2f} K RMS miss on its sensor while "
+              f"slipping on the validation run (the sensor reads behind the friction face)")
     for side, values in wear.get("from_observer", {}).items():
         print(f"          {side} side at the observer's estimate {1000 * values['estimate']:.4f} µm, over its ±2σ band "
               f"{1000 * values['low']:.4f}-{1000 * values['high']:.4f} µm; at the truth {1000 * values['truth']:.4f} µm")

@@ -151,15 +151,17 @@ def plate_check(run: pd.DataFrame, truth: pd.DataFrame, estimates: Mapping[str, 
 
 
 def plate_band(run: pd.DataFrame, truth: pd.DataFrame, observed: Observation, model: pd.DataFrame,
-               params: ModelParams, clutch: ClutchSpec) -> PlateBand:
+               params: ModelParams, clutch: ClutchSpec, flywheel_miss_k: float = 0.0) -> PlateBand:
     """The observer's plate band (`observed`, widened by `benchlab.observer.spread`) against the truth's plate, and
-    the wear per side over the band against the wear at the truth's temperatures."""
+    the wear per side over the band against the wear at the truth's temperatures; the measured flywheel's band for
+    its wear widened in quadrature by `flywheel_miss_k`, the model's miss on it while slipping
+    (`benchlab.observer.spread.slipping_residual`)."""
     estimate, true = observed.estimate, truth[PLATE].to_numpy()
     plate, std = estimate[PLATE].to_numpy(), estimate[PLATE + STD_SUFFIX].to_numpy()
     filtered = estimate.get(PLATE + FILTER_STD_SUFFIX, estimate[PLATE + STD_SUFFIX]).to_numpy()
     power, split, dt = input_channels(run)["friction_power"], heat_split(params), float(run.attrs["dt"])
-    wear = wear_over_band(clutch, power, split, plate, std, estimate[FLYWHEEL].to_numpy(),
-                          estimate[FLYWHEEL + STD_SUFFIX].to_numpy(), dt)
+    flywheel_std = np.hypot(estimate[FLYWHEEL + STD_SUFFIX].to_numpy(), flywheel_miss_k)
+    wear = wear_over_band(clutch, power, split, plate, std, estimate[FLYWHEEL].to_numpy(), flywheel_std, dt)
     truth_final = wear_history(clutch, power, split, true, truth[FLYWHEEL].to_numpy(), dt).final()
     truth_wear = {side: truth_final.wear_mm(side) - clutch.initial.wear_mm(side) for side in SIDES}
     observer_k, model_k = (float(np.sqrt(np.nanmean((v - true) ** 2))) for v in (plate, model[PLATE].to_numpy()))
