@@ -5,6 +5,7 @@ changed; the band's method and constants were set on pipeline runs of other seed
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from benchlab.identify.api import identify
@@ -12,7 +13,9 @@ from benchlab.model.catalog import builtin
 from benchlab.model.params import ModelParams
 from benchlab.network.simulation import simulate
 from benchlab.observer.batch import observe
-from benchlab.observer.spread import FILTER_STD_SUFFIX, model_spread, parameter_draws, slipping_residual, widened
+from benchlab.identify.cooldown import CooldownResult
+from benchlab.observer.spread import (FILTER_STD_SUFFIX, discrepancy_spread, model_spread, parameter_draws,
+                                     slipping_residual, start_discrepancy, widened)
 from benchlab.report.showcase import PLATE, plate_band
 from benchlab.runfile import load_run, load_truth
 from benchlab.runner.session import RunRequest, execute
@@ -94,3 +97,24 @@ def test_a_parameter_file_without_uncertainty_adds_no_spread(reference):
     bare = ModelParams(params.definition, dict(params))
     assert parameter_draws(bare) == []
     assert (model_spread(run, bare, [PLATE])[PLATE] == 0).all()
+
+
+def _cooldown(t_start: float, plate_start_c: float) -> CooldownResult:
+    return CooldownResult(0, 1000.0, 1, 0.0, t_start, t_start + 600.0, 0.3, 0.01, 0.02, plate_start_c, 0.5, 0.1,
+                          100, 1.0)
+
+
+def test_the_sweeps_reading_of_the_plate_widens_in_proportion_to_the_models_rise():
+    """The cool-downs read the plate 50 % further above ambient than the model puts it, once 30 % nearer: r is
+    their RMS; a cool-down that read nothing is left out; σ is r times the model's distance from ambient."""
+    time = np.arange(0.0, 4000.0, 10.0)
+    model = 20.0 + 60.0 * (1.0 - np.exp(-time / 1500.0))  # the model's plate, ambient 20 °C
+    at = {t: float(np.interp(t, time, model)) for t in (500.0, 1500.0, 3000.0)}
+    points = [_cooldown(500.0, at[500.0] + 0.5 * (at[500.0] - 20.0)),
+              _cooldown(1500.0, at[1500.0] - 0.3 * (at[1500.0] - 20.0)),
+              _cooldown(3000.0, float("nan"))]
+    relative = start_discrepancy(points, time, model, 20.0)
+    assert relative == pytest.approx(np.sqrt((0.5 ** 2 + 0.3 ** 2) / 2), rel=1e-3)
+    assert start_discrepancy(points[2:], time, model, 20.0) is None
+    sigma = discrepancy_spread(pd.Series(model, name="T_pressure_plate"), 20.0, relative)["T_pressure_plate"]
+    assert sigma.iloc[0] == 0.0 and sigma.iloc[-1] == pytest.approx(relative * (model[-1] - 20.0))

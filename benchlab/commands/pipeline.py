@@ -164,15 +164,18 @@ def _alternatives(diagnosis: dict, diagnosed: "ModelParams", nonlinear: dict) ->
 
 
 def _plate(run: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame, alternatives: tuple = (),
-           flywheel_miss_k: float = 0.0):
+           flywheel_miss_k: float = 0.0, plate_relative: float | None = None):
     """The unmeasured plate on a run: the model's simulation and the observer's estimate (flywheel, air and housing
     sensors; its band widened by the model-form spread, benchlab.observer.spread: the nonlinear model's parameter
-    draws and the spread across it and the `alternatives`, structures that fit as well) against /truth, with the
+    draws, the spread across it and the `alternatives`, structures that fit as well, and `plate_relative`, the
+    sweep's reading of the plate against the model's, start_discrepancy) against /truth, with the
     wear per side over the band (the measured flywheel's widened by `flywheel_miss_k`, the model's miss on it while
     slipping on the unseen run); None where the run has no truth."""
     with interrupts_held():
+        import numpy as np
+
         from benchlab.observer.batch import observe
-        from benchlab.observer.spread import combined, form_spread, model_spread, widened
+        from benchlab.observer.spread import combined, discrepancy_spread, form_spread, model_spread, widened
         from benchlab.report.showcase import PLATE, plate_band, plate_check
         from benchlab.runfile import load_truth
         from benchlab.wear import default_clutch
@@ -183,6 +186,9 @@ def _plate(run: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame, altern
     spread = model_spread(run, nonlinear, [PLATE])
     if alternatives:
         spread = combined(spread, form_spread(run, [nonlinear, *alternatives], [PLATE]))
+    if plate_relative is not None:
+        spread = combined(spread, discrepancy_spread(model[PLATE], float(np.nanmedian(run["T_ambient"])),
+                                                     plate_relative))
     observed = widened(observe(run, nonlinear, ["T_flywheel", "T_air", "T_housing"]), spread)
     estimates = {"model": model[PLATE].to_numpy(), "observer": observed.estimate[PLATE].to_numpy()}
     return plate_check(run, truth, estimates, model, plate_band(run, truth, observed, model, nonlinear,
@@ -321,7 +327,8 @@ def job_figures(figures: dict, story: dict, cooldowns, eq11_errors: dict[str, fl
             "eq11_rel_error": eq11_errors[eq11_model], "eq11_rel_error_pct": 100.0 * eq11_errors[eq11_model],
             "eq11_model": eq11_model, "eq11_rel_error_by_model": eq11_errors,
             "plate_rmse_k": plate.rmse_k["observer"] if plate is not None else math.nan,
-            "plate_band_coverage": plate.band_coverage if plate is not None else math.nan}
+            "plate_band_coverage": plate.band_coverage if plate is not None else math.nan,
+            "plate_band_half_width_k": plate.band.half_width_k if plate is not None and plate.band else math.nan}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -333,8 +340,10 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.report.index import cooldown_scores, mean_cooldown_nrmse, write_index
         from benchlab.report.resistance import standard_errors
         from benchlab.report.scores import estimate
-        from benchlab.observer.spread import slipping_residual
-        from benchlab.report.showcase import FLYWHEEL, labelled_mask, peak_misfit, scores_on, verdict
+        import numpy as np
+
+        from benchlab.observer.spread import slipping_residual, start_discrepancy
+        from benchlab.report.showcase import FLYWHEEL, PLATE, labelled_mask, peak_misfit, scores_on, verdict
         from benchlab.wear import analyse_wear
         from benchlab.wear.plot import plot_wear
 
@@ -366,6 +375,9 @@ def run(args: argparse.Namespace) -> int:
     sims = {run_label: {m: estimate(r, p, m).simulated for m, p in models.items()}
             for run_label, r in (("fit", fitting), ("validation", validation))}
     flywheel_miss = slipping_residual(validation, sims["validation"]["nonlinear"], FLYWHEEL)
+    plate_relative = start_discrepancy(comparison.points, sweep["time"].to_numpy(),
+                                       estimate(sweep, nonlinear, "nonlinear").simulated[PLATE].to_numpy(),
+                                       float(np.nanmedian(sweep["T_ambient"])))
     unseen = labelled_mask(validation, out / "validation.h5", EXTRAPOLATION_LABEL)
     table1 = labelled_mask(validation, out / "validation.h5", "table1")
     story = {"peaks": {run_label: {m: peak_misfit(r, sims[run_label][m]) for m in models}
@@ -373,7 +385,7 @@ def run(args: argparse.Namespace) -> int:
              "extrapolation": {"Table 1 cycles": scores_on(validation, table1, sims["validation"]),
                                "load scenarios not in Table 1": scores_on(validation, unseen, sims["validation"])},
              "plate": _plate(validation, out / "validation.h5", nonlinear, sims["validation"]["nonlinear"],
-                             alternatives, flywheel_miss)}
+                             alternatives, flywheel_miss, plate_relative)}
     for m in models:
         worst = max(story["peaks"][k][m].max_pct for k in ("fit", "validation"))
         print(f"misfit    {m:9s}: peaks up to {worst:.1f} % (paper: 5 %), unseen load scenarios "
@@ -384,7 +396,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"plate     against /truth: model RMSE {plate.rmse_k['model']:.2f} K, observer "
               f"{plate.rmse_k['observer']:.2f} K; plate hotter than the flywheel while slipping by "
               f"{plate.hotter_truth_k:.2f} K (truth), {plate.hotter_model_k:.2f} K (model)")
-        spread_text = "parameter draws" + (f" and the {DIAGNOSED_MODEL} model's plate" if alternatives else "")
+        spread_text = ", ".join(["parameter draws"] + ([f"the {DIAGNOSED_MODEL} model's plate"] if alternatives else [])
+                                + ([f"the sweep's reading of the plate, {100 * plate_relative:.0f} % of the model's "
+                                    f"rise above ambient"] if plate_relative is not None else []))
         print(f"          observer's ±2σ band (model-form spread: {spread_text}) covers the truth "
               f"{100 * plate.band.plate_band_coverage:.1f} % of the samples, mean half-width "
               f"{plate.band.half_width_k:.2f} K (filter alone {plate.band.filter_half_width_k:.2f} K)")
@@ -397,7 +411,7 @@ def run(args: argparse.Namespace) -> int:
     wear_report = analyse_wear(fitting, nonlinear)
     wear = wear_report.as_dict()
     story["wear_band"] = _plate(fitting, out / "table1.h5", nonlinear, sims["fit"]["nonlinear"], alternatives,
-                                flywheel_miss)
+                                flywheel_miss, plate_relative)
     if story["wear_band"] is not None:
         wear["from_observer"] = story["wear_band"].band.as_dict()["wear_mm"]
     write_text(out / "wear.json", json.dumps(wear, indent=2, default=float))
@@ -424,6 +438,7 @@ def run(args: argparse.Namespace) -> int:
               f"alone {mean_cooldown_nrmse(cooldowns, label, flywheel=True):.1f} %")
     figures_held = job_figures(figures, story, cooldowns, eq11_errors, diagnosis, diagnosed)
     figures_held["not_identified"] = recorded(nonlinear)
+    figures_held["plate_sweep_discrepancy"] = plate_relative if plate_relative is not None else math.nan
     story["diagnosed_runs"], story["identified_by"] = figures_held["diagnosed_runs"], figures_held["identified_by"]
     story["verdict"] = figures_held["verdict"] = verdict(figures_held)
     print(f"verdict   {story['verdict']}")

@@ -24,6 +24,15 @@ about as well (diagnose's best model beside the model it extends), their predict
 second, structural doubt: `form_spread` is the spread across those models' open-loop predictions (two models:
 half their difference), added in quadrature (`combined`) as the law of total variance adds a further level.
 
+Both stay inside structures the same measured channels were fitted to. The cool-down sweep reads the unread
+plate a second way: each cool-down's fit (`benchlab.identify.cooldown`) takes the plate's start temperature from
+the measured decay (T_P0), where the model's own simulation of the sweep has its plate at that moment. Their
+disagreement, relative to the model's rise above ambient (`start_discrepancy`), is what the model cannot explain
+about that node, measured without the truth; the band carries it as σ = r·|x̂_model − ϑ_ambient|
+(`discrepancy_spread`), zero where the model's plate sits at ambient (a run's start), in proportion to how far the
+model drives it. On the reference plant the model's plate is 20–50 K low at the sweep's starts (its capacity twice
+the plant's, docs/observer.md), and r is 0.34–0.61.
+
 A measured state keeps the filter's band, which its readings check; but the temperature wear needs is the friction
 face's, which the sensor reads behind the face and through its own response, and the filter follows the sensor.
 While the clutch slips, the open-loop model and that sensor disagree by what the model's structure cannot explain
@@ -37,6 +46,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -48,6 +58,9 @@ from benchlab.model.params import ModelParams
 from benchlab.network.simulation import input_channels, simulate
 from benchlab.observer.batch import STD_SUFFIX, Observation
 from benchlab.report.resistance import correlations, standard_errors
+
+if TYPE_CHECKING:
+    from benchlab.identify.cooldown import CooldownResult
 
 #: Parameter sets drawn: the spread's relative sampling error is about 1/√(2·DRAWS), 12 %.
 DRAWS = 32
@@ -117,6 +130,22 @@ def combined(*spreads: pd.DataFrame) -> pd.DataFrame:
     names = list(dict.fromkeys(c for spread in spreads for c in spread.columns))
     total = sum(spread.reindex(columns=names, fill_value=0.0).to_numpy() ** 2 for spread in spreads)
     return pd.DataFrame(np.sqrt(total), columns=names, index=spreads[0].index)
+
+
+def start_discrepancy(points: "Sequence[CooldownResult]", time_s: np.ndarray, simulated_c: np.ndarray,
+                      ambient_c: float) -> float | None:
+    """RMS over the cool-downs of (T_P0 − the model's plate at the cool-down's start) / (that plate − ambient): how
+    far the sweep's reading of the unread plate lies from the model's, relative to the model's rise (module doc);
+    None without a cool-down that read it."""
+    rows = [(p.T_P0, simulated_c[min(np.searchsorted(time_s, p.t_start), len(time_s) - 1)]) for p in points
+            if np.isfinite(p.T_P0)]
+    relative = [(read - model) / (model - ambient_c) for read, model in rows if abs(model - ambient_c) > 1.0]
+    return float(np.sqrt(np.mean(np.square(relative)))) if relative else None
+
+
+def discrepancy_spread(simulated: pd.Series, ambient_c: float, relative: float) -> pd.DataFrame:
+    """σ = relative·|simulated − ambient| of the channel `simulated` names, on its index (module doc)."""
+    return pd.DataFrame({simulated.name: relative * np.abs(simulated.to_numpy() - ambient_c)}, index=simulated.index)
 
 
 def slipping_residual(run: pd.DataFrame, model: pd.DataFrame, channel: str) -> float:

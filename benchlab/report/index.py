@@ -214,7 +214,8 @@ def _story_sections(story: Mapping[str, Any]) -> list[str]:
 def _plate_band(band: "PlateBand") -> str:
     """The observer's ±2σ band of the plate against the truth (benchlab.report.showcase.PlateBand)."""
     text = (f"<p>The observer's ±2σ band, widened by the spread of the plate across the parameter sets the "
-            f"identification holds plausible (docs/observer.md), covers the truth "
+            f"identification holds plausible, across structures that fit as well, and by the sweep's reading of the "
+            f"plate against the model's (docs/observer.md), covers the truth "
             f"{_num(100 * band.plate_band_coverage, 1, ' %')} of the samples (target ≥ 85 %), mean half-width "
             f"{_num(band.half_width_k, 2, ' K')}; the filter's band alone {_num(band.filter_half_width_k, 2, ' K')}.")
     if band.observer_note:

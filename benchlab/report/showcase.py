@@ -226,7 +226,10 @@ def verdict(figures: Mapping[str, Any]) -> str:
     plate = figures.get("plate_rmse_k", np.nan)
     if np.isfinite(plate):
         coverage = figures.get("plate_band_coverage", np.nan)
-        band = f", its ±2σ band covering the truth {100 * coverage:.0f} % of the time" if np.isfinite(coverage) else ""
+        half = figures.get("plate_band_half_width_k", np.nan)
+        width = f" (mean ±{half:.0f} K)" if np.isfinite(half) else ""
+        band = (f", its ±2σ band{width} covering the truth {100 * coverage:.0f} % of the time"
+                if np.isfinite(coverage) else "")
         parts.append(f"the unmeasured plate is estimated to {plate:.2f} K RMS{band}")
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
