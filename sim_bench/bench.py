@@ -36,6 +36,7 @@ from protocols.limits import BenchLimits
 from sim_bench.clock import SimClock
 from benchlab.drivetrain import DrivetrainFacts
 from sim_bench.drivetrain import Drivetrain
+from sim_bench.truth_store import TruthColumn, TruthStore
 from sim_bench.emulators import can_controllers, clutch_node, registry, sim_can_bus
 from sim_bench.emulators.can_controllers import CanBenchEmulator
 from sim_bench.emulators.clutch_node import ClutchNodeEmulator
@@ -121,7 +122,7 @@ class SimPhysics:
         self.computed_s = 0.0
         self.solver_calls = 0
         self._truth_k0 = k0  # grid index of the first recorded true state
-        self._truth = np.full((0, len(self.plant.state_names)), np.nan)
+        self._truth = TruthStore(len(self.plant.state_names))
         self.prime()
 
     def prime(self) -> None:
@@ -348,29 +349,19 @@ class SimPhysics:
 
     # -- truth, for tests and analysis ----------------------------------------------------------------
     def _record_truth(self, k0: int, states: np.ndarray) -> None:
-        """Keep the true states of grid points k0 onwards; a chunk recomputed after a cut overwrites its rows."""
-        start, end = k0 - self._truth_k0, k0 - self._truth_k0 + len(states)
-        if end > len(self._truth):
-            grown = np.full((max(end, 2 * len(self._truth)), self._truth.shape[1]), np.nan)
-            grown[:len(self._truth)] = self._truth
-            self._truth = grown
-        self._truth[start:end] = states
+        """Keep the true states of grid points k0 onwards, on disk (sim_bench.truth_store); a chunk recomputed
+        after a cut overwrites its rows."""
+        self._truth.write(k0 - self._truth_k0, states)
 
-    def true_states(self, rows: int) -> dict[str, np.ndarray]:
+    def true_states(self, rows: int) -> "dict[str, TruthColumn]":
         """The plant's true temperatures (degC) on grid rows [first recorded, `rows`), named by
-        `state_channels` of the plant's network; NaN where not computed (yet). Views of the recording where it holds
-        every row (not to be changed)."""
+        `state_channels` of the plant's network; NaN where not computed (yet). Columns read from disk a slice at a
+        time (`np.asarray` reads one whole)."""
         from benchlab.network import state_channels
 
         n = max(rows - self._truth_k0, 0)
-        valid = min(n, self._end - self._truth_k0, len(self._truth))
-        if valid == n:  # the usual case: views of the recording, no second run-sized copy
-            out = self._truth[:n]
-        else:
-            out = np.full((n, self._truth.shape[1]), np.nan)
-            out[:valid] = self._truth[:valid]
         names = state_channels(self.plant.network)
-        return {names[s]: out[:, i] for i, s in enumerate(self.plant.state_names)}
+        return {names[s]: self._truth.column(i, n) for i, s in enumerate(self.plant.state_names)}
 
     def true_convection_resistance(self, engine_rpm: float, clutch_state: int) -> float:
         """R_FA = R_PA of eq. (11) at an operating point: the paper plant's own; NaN for a plant without one."""

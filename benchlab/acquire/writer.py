@@ -398,7 +398,8 @@ class RunWriter:
         """Flush, then replace the file by its compact, compressed form with root attribute `status`.
 
         `groups`: extra groups known only at the end (the simulated bench's /truth), name -> dataset ->
-        (values, units), written into the compact file before it replaces the run's: all or nothing.
+        (values, units), written into the compact file before it replaces the run's: all or nothing. Values are
+        arrays, or columns read a slice at a time (`_sliced`: the simulated bench's truth, kept on disk).
         """
         if self._fd is None:
             return
@@ -618,7 +619,7 @@ class RunWriter:
             for name, columns in self._closing_groups.items():
                 group = f.create_group(name)
                 for col, (values, units) in columns.items():
-                    arr = np.asarray(values, dtype=float)
+                    arr = values if _sliced(values) else np.asarray(values, dtype=float)
                     ds = _dataset(group, col, arr, compact)
                     ds.attrs["units"] = units
             f.flush()
@@ -746,6 +747,12 @@ class _Rows:
     def __getitem__(self, part: slice) -> np.ndarray:
         start, stop, _ = part.indices(self.rows)
         return self.dataset[start:max(start, stop)]
+
+
+def _sliced(values: Any) -> bool:
+    """Whether closing-group values are a column read a slice at a time (a dtype, slicing, no array): written
+    chunk by chunk by `_dataset`, never held whole."""
+    return hasattr(values, "dtype") and hasattr(values, "__getitem__") and not isinstance(values, np.ndarray)
 
 
 def _dataset(parent: h5py.Group, name: str, arr: "np.ndarray | _Rows", compact: bool) -> h5py.Dataset:
