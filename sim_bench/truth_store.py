@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Sequence
-
 import numpy as np
 
 ITEM = np.dtype("<f8")
@@ -47,9 +45,6 @@ class TruthStore:
     def column(self, index: int, rows: int) -> "TruthColumn":
         """The first `rows` rows of a column, read lazily."""
         return TruthColumn(self, index, rows)
-
-    def columns_of(self, rows: int) -> Sequence["TruthColumn"]:
-        return [self.column(i, rows) for i in range(self.columns)]
 
 
 class TruthColumn:
