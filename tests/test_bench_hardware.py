@@ -198,9 +198,13 @@ def test_probe_bench_reports_every_device(tmp_path, capsys) -> None:
     bench = _bench(tmp_path, "/dev/ttyUSB-benchlab-none", "sim://probe-node", 'url = "sim://probe-can"')
     assert main(["probe", "--bench", str(bench), "--timeout", "5"]) == 2  # the scanner does not open
     out = capsys.readouterr().out
-    assert f"pt1000: {bench}: [instrument] url: '/dev/ttyUSB-benchlab-none' did not open" in out
-    assert "sim://probe-node: 10 frames" in out  # the devices after it are still probed
-    assert "sim://probe-can: " in out and "LoadMachine_Status" in out
+    lines = out.splitlines()
+    assert len(lines) == 4 and "Stats(" not in out, out  # a verdict per device and the bench's, no frame dumps
+    assert lines[0].startswith(f"pt1000  FAILED   {bench}: [instrument] url: '/dev/ttyUSB-benchlab-none' did not "
+                               "open")
+    assert lines[1].startswith("node    ") and "sim://probe-node: " in lines[1]  # still probed after the failure
+    assert lines[2].split()[:2] in (["can", "OK"], ["can", "WARN"]) and "from clutch, drive, load" in lines[2]
+    assert lines[3] == f"{bench}: {sum(' OK ' in line for line in lines[:3])} of 3 devices OK (-v: every reading and frame)"
 
 
 def test_probe_can_talks_to_emulated_controllers(capsys) -> None:
