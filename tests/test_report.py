@@ -295,3 +295,14 @@ def test_hostile_run_attributes_and_findings_run_no_script_in_the_jobs_index(tmp
     finally:
         browser.close()
     headless_chromium.assert_inert(state, "benchlab: the whole job")
+
+
+def test_a_finding_without_a_signal_shows_no_none():
+    """A change of the structure (bridge_F_A) has no signal: the pages show its mechanism alone and a dash, never
+    "None" (issue 46)."""
+    from benchlab.report.index import _signal_mechanism
+    from benchlab.report.markdown import literal
+
+    structural = {"candidate": "bridge_F_A", "signal": None, "mechanism": "capacity"}
+    assert _signal_mechanism(structural) == "capacity" and literal(None) == "—"
+    assert _signal_mechanism({**structural, "signal": "engine_speed"}) == "engine_speed / capacity"
