@@ -306,3 +306,13 @@ def test_a_finding_without_a_signal_shows_no_none():
     structural = {"candidate": "bridge_F_A", "signal": None, "mechanism": "capacity"}
     assert _signal_mechanism(structural) == "capacity" and literal(None) == "—"
     assert _signal_mechanism({**structural, "signal": "engine_speed"}) == "engine_speed / capacity"
+
+
+def test_the_raw_can_log_cell_links_the_log_beside_the_run(tmp_path):
+    from benchlab.report.index import _can_log_cell
+
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / "r.blf").write_bytes(b"")
+    run, out = tmp_path / "runs" / "r.h5", tmp_path / "pages"
+    assert _can_log_cell(run, "r.blf", out) == '<a href="../runs/r.blf">r.blf</a>'
+    assert _can_log_cell(run, "gone.blf", out) == "gone.blf" and _can_log_cell(run, None, out) == "—"

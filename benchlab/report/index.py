@@ -131,9 +131,19 @@ def _run_section(runs: Mapping[str, tuple[Path, pd.DataFrame]], out: Path) -> st
                      _num(duration / 3600, 2, " h"), str(len(run)),
                      _num(float(run["T_flywheel"].max()), 1, " °C"),
                      _num(float(run["friction_power"].sum()) * float(run.attrs["dt"]) / 1e6, 2, " MJ"),
-                     html.escape(attrs.get("can_log", "—"))])
+                     _can_log_cell(path, attrs.get("can_log"), out)])
     return _table(("run", "file", "protocol", "bench", "duration", "samples", "flywheel max", "friction energy",
                    "raw CAN log"), rows)
+
+
+def _can_log_cell(run_path: Path, can_log: str | None, out: Path) -> str:
+    """The run's raw CAN log (a file name beside its run file) as a link where the file is there, else its name."""
+    if not can_log:
+        return "—"
+    log = run_path.parent / can_log
+    if not log.is_file():
+        return html.escape(can_log)
+    return f'<a href="{html.escape(os.path.relpath(log, out))}">{html.escape(can_log)}</a>'
 
 
 def _identify_section(figures: Mapping[str, Mapping[str, Mapping[str, float]]],
