@@ -74,7 +74,7 @@ _KINDS = {"degC": "temperature", "N*m": "torque", "rpm": "rotational speed", "W"
 
 
 #: How a stored unit is shown to people (figures, pages): the contract's spellings are ASCII for files and code.
-DISPLAY = {"degC": "°C", "N*m": "N·m", "um": "µm"}
+DISPLAY = {"degC": "°C", "N*m": "N·m", "um": "µm", "1": "-"}
 
 
 def display(unit: str) -> str:

@@ -13,6 +13,7 @@ from protocols.schedule import Step
 
 if TYPE_CHECKING:
     from protocols.limits import BenchLimits
+    from protocols.estimates import Plant
 
 NAMES = ("table1", "cooldown-sweep", "validation")
 DEFAULT_TABLE1_DURATION_S = 7200.0
@@ -32,11 +33,13 @@ class Protocol:
 
 
 def build(name: str, seed: int = 1, n_cycles: int | None = None, duration_s: float | None = None,
-          grid: str | None = None, limits: "BenchLimits | None" = None) -> Protocol:
+          grid: str | None = None, limits: "BenchLimits | None" = None, plant: "Plant | None" = None) -> Protocol:
     """The named protocol's schedule; ValueError for an unknown name or bad options.
 
     For a bench (`limits`): Table 1 draws whose launch cannot synchronise on its drivetrain are left out (each named
-    in the notes and the options' "dropped"), and every launch is planned at its time to synchronise."""
+    in the notes and the options' "dropped"), and every launch is planned at its time to synchronise. `plant`: the
+    thermal plant the run will use, on which a cool-down sweep's heat-ups and cool-downs are simulated for their
+    expected durations (protocols.estimates.sweep_durations)."""
     if name == "table1":
         from protocols.table1 import table1_plan
 
@@ -49,7 +52,7 @@ def build(name: str, seed: int = 1, n_cycles: int | None = None, duration_s: flo
         points = parse_grid(grid) if grid else DEFAULT_GRID
         if n_cycles is not None:
             points = points[:n_cycles]
-        return _for_bench(Protocol(name, cooldown_sweep_schedule(points, SweepConfig()),
+        return _for_bench(Protocol(name, cooldown_sweep_schedule(points, SweepConfig(), plant),
                                    {"grid": [list(p) for p in points], **SweepConfig().__dict__}), limits)
     if name == "validation":
         from protocols.validation import ValidationConfig, validation_plan

@@ -3,11 +3,17 @@
 From the paper's parameters (the plant a simulated bench runs; a hardware bench's clutch is of the same size), for
 `benchlab run --dry-run`'s estimate and a run's progress. A step still ends on its condition; these only say when
 that is expected. Measured against the simulated bench in tests/test_plans.py (within 10 % per protocol).
+
+A cool-down sweep's heat-ups and cool-downs are, where the plant the run will use is known (the simulated bench's,
+or a parameter file's), simulated on that plant (`sweep_durations`): the paper's closed forms above missed the
+reference plant's sweep by almost half (4304 s against 7881 s of bench time).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol
 
 from benchlab.drivetrain import RPM
 
@@ -51,3 +57,84 @@ def cooled_to(from_c: float, rpm: float, state: int, seconds: float) -> float:
     if from_c <= COOL_SINK_C:
         return from_c
     return COOL_SINK_C + (from_c - COOL_SINK_C) * math.exp(-seconds / cooling_time_constant_s(rpm, state))
+
+
+class Plant(Protocol):
+    """What a sweep's estimate needs of a thermal plant (sim_bench.plant.ThermalPlant): its state, advanced by the
+    drivetrain's channels, and what its flywheel sensors read."""
+
+    state: Any
+    state_names: list[str]
+
+    def reset(self, temperature_c: float | Mapping[str, float]) -> None: ...
+    def advance(self, channels: Mapping[str, Any], dt: float) -> dict[str, Any]: ...
+    def sensor_temperatures(self, true_states: Mapping[str, Any]) -> dict[str, Any]: ...
+    def friction_factor(self) -> float: ...
+
+
+#: The step of a sweep's simulated estimate (s) and the length of one cool-down piece simulated at once (s).
+ESTIMATE_DT_S = 0.5
+COOL_PIECE_S = 60.0
+
+
+def _flywheel(plant: Plant, seconds: float, rpm: float, shaft_rpm: float, state: int, torque_nm: float,
+              dt: float) -> Any:
+    """The flywheel sensors' mean over `seconds` at one operating point (friction power where the clutch slips
+    under `torque_nm`, as much as the lining's μ(ϑ) transmits); the plant's state moves to the end."""
+    import numpy as np
+
+    n = max(1, int(round(seconds / dt)))
+    power = torque_nm * plant.friction_factor() * (rpm - shaft_rpm) * RPM
+    channels = {"engine_speed": rpm, "clutch_speed": shaft_rpm, "clutch_torque": torque_nm,
+                "clutch_state": float(state), "friction_power": power, "load_torque": 0.0, "T_ambient": ROOM_C}
+    seen = plant.sensor_temperatures(plant.advance({k: np.full(n, v) for k, v in channels.items()}, dt))
+    return 0.5 * (seen["T_flywheel_1"] + seen["T_flywheel_2"])
+
+
+def _steady(history: list[float], window_n: int, target_c: float, band_k: float, drift_k: float) -> bool:
+    """The sweep's "steady" condition (protocols.schedule.Condition) on the last `window_n` samples."""
+    import numpy as np
+
+    if len(history) < window_n:
+        return False
+    window = np.asarray(history[-window_n:])
+    half = window_n // 2
+    return abs(window.mean() - target_c) <= band_k and abs(window[half:].mean() - window[:half].mean()) <= drift_k
+
+
+def sweep_durations(points: Sequence[tuple[float, int, float]], heat: Mapping[str, float], plant: Plant,
+                    dt: float = ESTIMATE_DT_S) -> list[tuple[float, float]]:
+    """(heat-up, cool-down) seconds of each sweep point, simulated on `plant` from ROOM_C in the order the run
+    goes: pulses at `heat`'s torque and speed with the runner's pulse rule (benchlab.runner.engine `_Pulses`: a
+    pulse starts while the flywheel is below the target minus half the last pulse's rise) until the flywheel is
+    steady at the target, then (ω_e, S, shaft speed) until it reads the cool-down target. `heat`: the
+    SweepConfig's fields; `points`: (engine rpm, S, shaft rpm)."""
+    import numpy as np
+
+    plant.reset(ROOM_C)
+    out = []
+    hold = (heat["heat_speed_rpm"], 0.0)
+    for rpm, state, shaft in points:
+        history = list(_flywheel(plant, 2.0, *hold, 0, 0.0, dt))  # the shaft comes to rest under the load first
+        rise, window_n = 0.0, int(round(heat["window_s"] / dt))
+        while not _steady(history, window_n, heat["heat_target_c"], heat["band_k"], heat["drift_k"]) \
+                and len(history) * dt < heat["heat_timeout_s"]:
+            before = history[-1]
+            if before < heat["heat_target_c"] - rise / 2.0:
+                pulse = _flywheel(plant, heat["pulse_s"], *hold, 1, heat["heat_torque_nm"], dt)
+                history += list(pulse)
+                rise = max(0.0, float(pulse[-1]) - before)
+            history += list(_flywheel(plant, heat["rest_s"], *hold, 0, 0.0, dt))
+        cooled = 0.0
+        while cooled < heat["cool_timeout_s"]:
+            start = plant.state.copy()
+            piece = _flywheel(plant, COOL_PIECE_S, rpm, shaft, state, 0.0, dt)
+            below = np.flatnonzero(piece <= heat["cool_target_c"])
+            if len(below):  # ends inside this piece: the plant goes back to where the step would end
+                plant.reset(dict(zip(plant.state_names, start)))
+                _flywheel(plant, (below[0] + 1) * dt, rpm, shaft, state, 0.0, dt)
+                cooled += (below[0] + 1) * dt
+                break
+            cooled += COOL_PIECE_S
+        out.append((len(history) * dt, min(cooled, heat["cool_timeout_s"])))
+    return out

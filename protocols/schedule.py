@@ -212,8 +212,10 @@ def steps_from_rows(rows: Any, source: str) -> tuple[Step, ...]:
 
 
 def describe(steps: tuple[Step, ...]) -> list[str]:
-    """One line per step, for --dry-run."""
-    lines = []
+    """One line per step, for --dry-run (units as people read them: benchlab.units.display)."""
+    from benchlab.units import display
+
+    nm, lines = display("N*m"), []
     for i, s in enumerate(steps):
         extra = ""
         if s.phase == "heat":
@@ -223,5 +225,5 @@ def describe(steps: tuple[Step, ...]) -> list[str]:
         if s.label:
             extra += f" [{s.label}]"
         lines.append(f"{i:4d} cycle {s.cycle:3d} {s.phase:6s} {s.expected_s:7.1f} s  engine {s.engine_speed_rpm:6.0f} rpm"
-                     f"  clutch {s.clutch_torque_nm:5.1f} N*m  load {s.load_torque_nm:6.1f} N*m{extra}")
+                     f"  clutch {s.clutch_torque_nm:5.1f} {nm}  load {s.load_torque_nm:6.1f} {nm}{extra}")
     return lines

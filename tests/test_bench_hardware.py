@@ -204,10 +204,14 @@ def test_probe_bench_reports_every_device(tmp_path, capsys) -> None:
         code = main(["probe", "--bench", str(bench), "--timeout", "5"])
     assert code == 2  # the scanner does not open
     out = capsys.readouterr().out
-    assert f"pt1000: {bench}: [instrument] url: '/dev/ttyUSB-benchlab-none' did not open" in out
-    with lag.judged(0.3):  # the emulated node sends on the wall clock: a host that kept it from its core costs frames
-        assert "sim://probe-node: 10 frames" in out  # the devices after it are still probed
-    assert "sim://probe-can: " in out and "LoadMachine_Status" in out
+    lines = out.splitlines()
+    assert len(lines) == 4 and "Stats(" not in out, out  # a verdict per device and the bench's, no frame dumps
+    assert lines[0].startswith(f"pt1000  FAILED   {bench}: [instrument] url: '/dev/ttyUSB-benchlab-none' did not "
+                               "open")
+    assert lines[1].startswith("node    ") and "sim://probe-node: " in lines[1]  # still probed after the failure
+    with lag.judged(0.3):  # the emulated controllers send on the wall clock: a host that kept them from a core
+        assert lines[2].split()[:2] in (["can", "OK"], ["can", "WARN"]) and "from clutch, drive, load" in lines[2]
+    assert lines[3] == f"{bench}: {sum(' OK ' in line for line in lines[:3])} of 3 devices OK (-v: every reading and frame)"
 
 
 def test_probe_can_talks_to_emulated_controllers(capsys) -> None:

@@ -108,5 +108,5 @@ def test_an_output_naming_a_run_file_says_so_in_plain_words(foreign_run, tmp_pat
 def test_cooldown_of_a_run_without_cool_downs_says_what_the_run_is(foreign_run, params_file, capsys):
     assert main(["cooldown", str(foreign_run), "--params", str(params_file)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.endswith("protocol: a cool-down sweep run (`benchlab run cooldown-sweep`): this imported run has no "
-                        "completed cool-down to fit") and len(err.splitlines()) == 1
+    assert err.endswith("protocol: a cool-down sweep run (`benchlab run cooldown-sweep`): this is not a cool-down "
+                        "sweep run (an imported run), it has no cool-down to fit") and len(err.splitlines()) == 1

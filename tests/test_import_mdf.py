@@ -159,10 +159,13 @@ def test_an_mdf_needs_dt_and_its_required_channels(tmp_path, recorder_part, refu
     src = tmp_path / "m.mf4"
     _recorder_mdf(src, recorder_part.iloc[:2000])
     refused(["import", str(src), "--out", str(tmp_path / "r.h5")], "--dt")
-    refused(["import", str(src), "--dt", "0.1", "--out", str(tmp_path / "r.h5")], "channels", "--mapping")
+    err = refused(["import", str(src), "--dt", "0.1", "--out", str(tmp_path / "r.h5")], "channel", "--mapping",
+                  "missing", "T_air", "n_Motor", "T_Luft", "U_Fremd")
+    assert err.count("T_Gehaeuse") == 1 and "time" not in err.partition("offers")[2]   # each name once, no masters
     (tmp_path / "few.toml").write_text('[channels]\nT_air = "T_Luft"')
-    refused(["import", str(src), "--mapping", str(tmp_path / "few.toml"), "--dt", "0.1", "--out",
-             str(tmp_path / "r.h5")], "channel engine_speed", "required")
+    err = refused(["import", str(src), "--mapping", str(tmp_path / "few.toml"), "--dt", "0.1", "--out",
+                   str(tmp_path / "r.h5")], "channel engine_speed", "required", "n_Motor", "M_Kupplung")
+    assert "T_air" not in err.partition("offers")[0]   # mapped, so not missing
     refused(["import", str(src), "--mapping", str(tmp_path / "few.toml"), "--dt", "1e-9", "--out",
              str(tmp_path / "r.h5")], "--dt", "rows")
     (tmp_path / "bad.mf4").write_bytes(b"not an MDF file at all" * 10)

@@ -295,3 +295,24 @@ def test_hostile_run_attributes_and_findings_run_no_script_in_the_jobs_index(tmp
     finally:
         browser.close()
     headless_chromium.assert_inert(state, "benchlab: the whole job")
+
+
+def test_a_finding_without_a_signal_shows_no_none():
+    """A change of the structure (bridge_F_A) has no signal: the pages show its mechanism alone and a dash, never
+    "None" (issue 46)."""
+    from benchlab.report.index import _signal_mechanism
+    from benchlab.report.markdown import literal
+
+    structural = {"candidate": "bridge_F_A", "signal": None, "mechanism": "capacity"}
+    assert _signal_mechanism(structural) == "capacity" and literal(None) == "—"
+    assert _signal_mechanism({**structural, "signal": "engine_speed"}) == "engine_speed / capacity"
+
+
+def test_the_raw_can_log_cell_links_the_log_beside_the_run(tmp_path):
+    from benchlab.report.index import _can_log_cell
+
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / "r.blf").write_bytes(b"")
+    run, out = tmp_path / "runs" / "r.h5", tmp_path / "pages"
+    assert _can_log_cell(run, "r.blf", out) == '<a href="../runs/r.blf">r.blf</a>'
+    assert _can_log_cell(run, "gone.blf", out) == "gone.blf" and _can_log_cell(run, None, out) == "—"

@@ -71,10 +71,18 @@ def test_example_clutch_file_is_the_default(json_result, files, capsys):
     assert doc["wear"] == json_result[1]["wear"] and doc["life"] == json_result[1]["life"]
 
 
-def test_text_summary_and_plot(files, tmp_path, capsys):
+def test_text_summary_and_plot(files, tmp_path, capsys, monkeypatch):
+    import benchlab.wear.plot as wear_plot
+
+    saved = []
+    real_save = wear_plot.save
+    monkeypatch.setattr(wear_plot, "save", lambda fig, path: (saved.append(fig), real_save(fig, path))[1])
     run, params, launches, _ = files
     png = tmp_path / "wear.png"
     assert main(["wear", str(run), "--params", str(params), "--plot", str(png), "--paths", "50"]) == 0
+    power, temperature = saved[0].axes[:2]  # each curve named in a legend, subscripts as mathtext (issue 46)
+    assert [t.get_text() for t in power.get_legend().get_texts()] == ["friction power", "cumulative energy"]
+    assert all(t.get_text().startswith(r"$\vartheta_") for t in temperature.get_legend().get_texts())
     out = capsys.readouterr().out
     assert f"in {launches} engagements" in out and "P10/P50/P90" in out
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000

@@ -13,6 +13,10 @@ the clutch channels of section 1, or with `--model` the channels that model name
 The separator is the one of `,` `;` TAB that the header line holds (or `--sep`); with `;` or TAB a decimal
 comma is read as a number when the data holds commas (German spreadsheets: `21,5;1500`), or as `--decimal`
 says.
+
+With `--mapping MAP.toml` (benchlab.importing.mapping, the format MDF files and CAN logs use) a CSV's own column
+names become the run file's: `T_air = "T_Luft"` takes the column `T_Luft [°C]` (by its name or whole title),
+its unit from the title unless the entry gives one, scaled as the entry says; `time = "Zeit"` names the time column.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from benchlab.outputs import check_output
 if TYPE_CHECKING:
     import pandas as pd
 
+    from benchlab.importing.mapping import Mapped
     from benchlab.importing.sources import Input, Merged
 
 NAME = "import"
@@ -69,9 +74,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a CSV's column separator: ',' ';' or tab (default: the one in the header)")
     parser.add_argument("--decimal", choices=(".", ","), metavar="{'.',','}",
                         help="decimal mark (default: ',' where the separator is ';' or tab and the data holds commas)")
-    parser.add_argument("--mapping", metavar="MAP.toml", help="an MDF file's channels or a CAN log's signals: "
-                                                              "run-file channel = source channel, with group, unit, "
-                                                              "scale, offset, rule (benchlab/importing/mapping.py)")
+    parser.add_argument("--mapping", metavar="MAP.toml", help="a CSV's columns, an MDF file's channels or a CAN "
+                                                              "log's signals: run-file channel = source channel, "
+                                                              "with group, unit, scale, offset, rule; time = a "
+                                                              "CSV's time column (docs/runfile.md)")
     parser.add_argument("--dbc", metavar="FILE.dbc", help="the CAN database of a CAN log (default: drivers/bench.dbc)")
     parser.add_argument("--offset", action="append", default=[], metavar="FILE=S",
                         help="add S seconds to the time stamps of the input FILE (its clock ran S s behind the "
@@ -127,15 +133,42 @@ def _channel_names(titles: list[str]) -> tuple[list[str], dict[str, str], dict[s
     return names, units, shown
 
 
+def _apply_mapping(path: Path, names: list[str], units: dict[str, str], titles: dict[str, str],
+                   mapped: list[Mapped]) -> tuple[list[str], dict[str, str], dict[str, Mapped]]:
+    """The columns renamed as the mapping says (a source matched by a column's name or whole title), their units (the entry's before the title's) and each renamed
+    column's entry; InputError naming an entry whose source is no column."""
+    renamed, units, applied = list(names), dict(units), {}
+    for entry in mapped:
+        at = next((i for i, name in enumerate(names) if entry.source in (name, titles[name])), None)
+        if at is None:
+            raise InputError(path, f"mapping channels.{entry.channel}", f"a column of the CSV (no column "
+                                                                        f"{entry.source!r})")
+        if entry.channel in renamed and renamed.index(entry.channel) != at:
+            raise InputError(path, f"channel {entry.channel} ← {entry.source}", f"one column named {entry.channel} "
+                                                                                "(the CSV holds one itself)")
+        source = names[at]
+        renamed[at] = entry.channel
+        title_unit = units.pop(source, None)
+        unit = title_unit if entry.unit is None else entry.unit
+        if unit is not None:
+            units[entry.channel] = unit
+        titles[entry.channel] = titles[source]
+        applied[entry.channel] = entry
+    return renamed, units, applied
+
+
 def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None = None,
              required: tuple[str, ...] | None = None, sep: str | None = None,
-             decimal: str | None = None) -> tuple[pd.DataFrame, float, dict[str, str]]:
-    """Read and check the CSV: required columns (default: the clutch channels, REQUIRED), a unit for every column,
-    numeric values, a uniform time grid (or `dt`); return frame, dt and the units."""
+             decimal: str | None = None,
+             mapped: list[Mapped] | None = None) -> tuple[pd.DataFrame, float, dict[str, str]]:
+    """Read and check the CSV: its columns renamed by `mapped` (a mapping file's entries), required columns
+    (default: the clutch channels, REQUIRED), a unit for every column, numeric values, a uniform time grid (or
+    `dt`); return frame, dt and the units (the frame's attrs: `encoding`, `mapped_from` channel -> source)."""
     import numpy as np
     import pandas as pd
 
-    from benchlab.runfile import ALIGNED_UNITS, REQUIRED, time_step_tolerance, unmeasurable_sample
+    from benchlab.importing.mapping import missing_channels
+    from benchlab.runfile import REQUIRED, time_step_tolerance, unmeasurable_sample
     from benchlab.runfile.schema import time_stamp_problem
     from benchlab.units import to_stored
 
@@ -148,6 +181,8 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(path, "file", f"a CSV table ({str(exc).splitlines()[0]})") from None
     names, title_units, titles = _channel_names(list(frame.columns))
+    offered = list(names)
+    names, title_units, applied = _apply_mapping(path, names, title_units, titles, mapped or [])
     frame.columns = names
     first_line = 2
     if len(frame) and not any(_is_number(v, decimal) for v in frame.iloc[0]):  # a second header line: the units
@@ -157,6 +192,10 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     else:
         header_units = {}
     units = _units(path, list(frame.columns), {**title_units, **header_units, **dict(units or {})})
+    missing = [name for name in dict.fromkeys(("time",) + tuple(required))
+               if name not in frame.columns and not (name == "time" and dt is not None)]
+    if len(missing) > 1 or (missing and missing[0] != "time"):
+        raise missing_channels(path, "column", missing, offered)
     if dt is not None and "time" in frame.columns:
         raise InputError(path, "column time", "no time column with --dt (one or the other gives the grid)")
     if dt is None and "time" not in frame.columns:
@@ -170,14 +209,11 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
         if bad.any():
             row = int(np.flatnonzero(bad.to_numpy())[0])
             raise InputError(path, f"column {name}, line {row + first_line}", f"a number, got {frame[name].iloc[row]!r}")
-        frame[name], units[name] = to_stored(path, f"column {titles[name]}", name, values.to_numpy(np.float64),
-                                             units[name])
+        entry = applied.get(name)
+        numbers = values.to_numpy(np.float64) * (entry.scale if entry else 1.0) + (entry.offset if entry else 0.0)
+        frame[name], units[name] = to_stored(path, f"column {titles[name]}", name, numbers, units[name])
         if name != "time" and (problem := unmeasurable_sample(name, units[name], frame[name].to_numpy())):
             raise InputError(path, f"column {name}, line {problem[0] + first_line}", f"{problem[1]}, got {problem[2]!r}")
-    for name in ("time",) + tuple(required):
-        if name not in frame.columns and not (name == "time" and dt is not None):
-            raise InputError(path, f"column {name}", f"a required channel in {ALIGNED_UNITS.get(name, 'its unit')} "
-                                                     "(missing)")
     if dt is not None:
         frame.insert(0, "time", np.arange(len(frame)) * dt)
         units["time"] = "s"
@@ -190,6 +226,7 @@ def read_csv(path: Path, dt: float | None = None, units: dict[str, str] | None =
     if dt <= 0 or np.max(np.abs(np.diff(time) - dt)) > time_step_tolerance(time, dt, np.dtype(np.float64)):
         raise InputError(path, "column time", "a uniform time grid in s (resample before importing)")
     frame.attrs["encoding"] = encoding
+    frame.attrs["mapped_from"] = {channel: entry.source for channel, entry in applied.items()}
     return frame, dt, units
 
 
@@ -241,21 +278,26 @@ def parse_offsets(items: list[str], inputs: list[str]) -> dict[Path, float]:
     return offsets
 
 
-def _csv_input(args: argparse.Namespace, path: Path) -> Input:
-    """A CSV among several inputs: every column at its time column's stamps (or one row per --dt)."""
-    import numpy as np
-
+def _csv_input(args: argparse.Namespace, path: Path, mapped: list[Mapped]) -> Input:
+    """A CSV among several inputs: every column (renamed as `mapped` says) at its time column's stamps (or one
+    row per --dt)."""
     from benchlab.importing.sources import Input, SourceChannel
 
-    header = csv_text(path)[0].partition("\n")[0]
-    timed = re.search(r"(^|[,;\t])\s*time\s*(\[|[,;\t]|$)", header) is not None
-    frame, _, units = read_csv(path, None if timed else args.dt, parse_units(args.unit), (), args.sep, args.decimal)
-    time = frame["time"].to_numpy()
+    text = csv_text(path)[0]
+    header = text.partition("\n")[0]
+    names, _, titles = _channel_names(header.split(_dialect(text, args.sep, args.decimal)[0]))
+    mapped = [entry for entry in mapped if entry.source in set(names) | set(titles.values())]  # the CSV's own
+    timed = "time" in names or any(entry.channel == "time" for entry in mapped)
+    frame, _, units = read_csv(path, None if timed else args.dt, parse_units(args.unit), (), args.sep, args.decimal,
+                               mapped)
+    time, sources = frame["time"].to_numpy(), frame.attrs["mapped_from"]
+    rules = {entry.channel: entry.rule for entry in mapped if entry.rule}
     return Input(path, [SourceChannel(name, time, frame[name].to_numpy(), units[name],
-                                      "hold" if name == "clutch_state" else "interpolate",
-                                      f"{path.name}: column {name}", path.stem, name, frame[name].to_numpy(),
-                                      units[name]) for name in frame.columns if name != "time"],
-                 stream_attrs={path.stem: {"source_file": path.name}})
+                                      rules.get(name, "hold" if name == "clutch_state" else "interpolate"),
+                                      f"{path.name}: column {sources.get(name, name)}", path.stem,
+                                      sources.get(name, name), frame[name].to_numpy(), units[name])
+                        for name in frame.columns if name != "time"],
+                 stream_attrs={path.stem: {"source_file": path.name}}, offered=tuple(frame.columns))
 
 
 def _read_inputs(args: argparse.Namespace, required: tuple[str, ...] | None) -> Merged:
@@ -263,7 +305,7 @@ def _read_inputs(args: argparse.Namespace, required: tuple[str, ...] | None) -> 
     clutch channels)."""
     from benchlab.drivetrain import DrivetrainFacts
     from benchlab.importing.canlog import derive_bench_channels, read_foreign
-    from benchlab.importing.mapping import read_mapping
+    from benchlab.importing.mapping import missing_channels, read_mapping
     from benchlab.importing.sources import merge
     from benchlab.runfile import REQUIRED
     from drivers.can_signals import BENCH_DBC
@@ -278,41 +320,53 @@ def _read_inputs(args: argparse.Namespace, required: tuple[str, ...] | None) -> 
         raise InputError(where, "--dt", "the grid step in s for an MDF file's channels, a CAN log's signals or "
                                         "several inputs, e.g. --dt 0.01")
     mapped = read_mapping(args.mapping) if args.mapping else []
+    timed = [entry for entry in mapped if entry.channel == "time"]
+    if timed and all(Path(i).suffix.lower() in MDF_SUFFIXES + CAN_SUFFIXES for i in args.inputs):
+        raise InputError(args.mapping, "channels.time", "a CSV's time column (an MDF file's and a CAN log's time "
+                                                        "stamps are their own)")
     inputs = []
     for name in args.inputs:
         path = Path(name)
         if path.suffix.lower() in MDF_SUFFIXES + CAN_SUFFIXES:
-            inputs.append(read_foreign(path, mapped, args.dbc or BENCH_DBC, DrivetrainFacts().gear_ratio))
+            inputs.append(read_foreign(path, [e for e in mapped if e not in timed], args.dbc or BENCH_DBC,
+                                       DrivetrainFacts().gear_ratio))
         else:
-            inputs.append(_csv_input(args, path))
+            inputs.append(_csv_input(args, path, mapped))
+    required = REQUIRED if required is None else required
+    offered = [name for i in inputs for name in i.offered]
     found = {c.raw_name for i in inputs for c in i.channels} | {c.channel for i in inputs for c in i.channels}
     for entry in mapped:
+        if entry in timed:
+            continue
         if entry.source not in found and entry.source.rpartition(".")[2] not in found:
             raise InputError(where, f"channel {entry.channel} ← {entry.source}", "a channel of the inputs (not "
                                                                                  "found)")
+    if not any(i.channels for i in inputs):
+        raise missing_channels(where, "channel", [name for name in required if name != "time"], offered)
     merged = merge(inputs, args.dt, parse_offsets(args.offset, args.inputs))
     frame = derive_bench_channels(merged.frame)
     sources = {**{name: {"from": "the clutch actuator's clamp state, as the bench derives it"}
                   for name in frame.columns if name not in merged.frame.columns}, **merged.sources}
-    for name in REQUIRED if required is None else required:
-        if name not in frame.columns:
-            raise InputError(where, f"channel {name}", "a required channel: a channel of that name, or one mapped "
-                                                       "to it in --mapping")
+    missing = [name for name in required if name not in frame.columns]
+    if missing:
+        raise missing_channels(where, "channel", missing, offered)
     return replace(merged, frame=frame, sources=sources)
 
 
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        from benchlab.importing.mapping import read_mapping
         from benchlab.model.catalog import resolve_model
         from benchlab.runfile import write_run  # and pandas, for read_csv
     required = tuple(resolve_model(args.model).required_channels()) if args.model else None
     check_output(args.out, "--out", args.force, inputs=args.inputs, run_file=True)
     if len(args.inputs) == 1 and Path(args.inputs[0]).suffix.lower() not in MDF_SUFFIXES + CAN_SUFFIXES:
-        if args.mapping or args.dbc or args.offset:
-            raise InputError(args.inputs[0], "--mapping" if args.mapping else "--dbc" if args.dbc else "--offset",
-                             "an MDF file, a CAN log or several inputs; a CSV names its channels in its header")
+        if args.dbc or args.offset:
+            raise InputError(args.inputs[0], "--dbc" if args.dbc else "--offset",
+                             "a CAN log or several inputs; a CSV's channels are its columns")
+        mapped = read_mapping(args.mapping) if args.mapping else []
         frame, dt, units = read_csv(Path(args.inputs[0]), args.dt, parse_units(args.unit), required, args.sep,
-                                    args.decimal)
+                                    args.decimal, mapped)
         write_run(args.out, frame, dt, protocol="imported", units=units,
                   attrs={"source_file": Path(args.inputs[0]).name, "bench": IMPORTED})
         if frame.attrs.get("encoding", "UTF-8") != "UTF-8":

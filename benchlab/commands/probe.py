@@ -3,7 +3,9 @@ BENCH.toml`: read a few values from one bench device, or from every device of a 
 
 Exit 0 with data from every device, 1 when one sent nothing in time, 2 for a device that does not open (one line
 naming the setting: `--url`, or BENCH.toml's `[instrument] url`, `[node] url`, `[can]`; see
-benchlab.runner.opening). With `--bench` every device is tried and reported, whichever fails. Read-only: the
+benchlab.runner.opening). With `--bench` every device is tried and reported, whichever fails, one verdict line
+each (OK, WARN with what was counted, NO DATA, FAILED with why) and the bench's line; `-v` adds every reading
+and frame, as a single device's probe prints them. Read-only: the
 PT1000 scanner is reset and configured (that is how it measures), the node and the CAN bus are only listened to.
 `sim://NAME` URLs reach the in-process emulators (sim_bench.emulators); for `can`, `sim://NAME` starts the
 emulated bench controllers on an in-process bus of that name.
@@ -15,6 +17,7 @@ import argparse
 import dataclasses
 import json
 import time
+from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
@@ -63,7 +66,14 @@ def run(args: argparse.Namespace) -> int:
         if args.bitrate is not None and args.device != "can":
             raise InputError(_SOURCE, "--bitrate", f"only with `probe can` (a CAN bus), not {args.device}")
         reports = [_probe_one(args)]
-    lines = [line for r in reports for line in r.pop("lines")]
+    detail = args.bench is None or getattr(args, "verbose", 0) > 0
+    lines = [line for r in reports for line in (r.pop("lines") if detail else [_verdict_line(r)])]
+    if args.bench is not None:
+        for r in reports:
+            r.pop("lines", None)
+        ok = sum(_verdict(r)[0] == "OK" for r in reports)
+        lines += [f"{args.bench}: {ok} of {len(reports)} devices OK" + ("" if detail else
+                                                                         " (-v: every reading and frame)")]
     document: Any = reports[0] if args.bench is None else {"bench": args.bench, "devices": reports}
     print(json.dumps(document, default=str) if args.json else "\n".join(lines))
     if any("error" in r for r in reports):  # --bench: a device that did not open (one alone raises: exit 2)
@@ -237,6 +247,39 @@ class _EmulatedControllers:
 
     def close(self) -> None:
         self.emulator_bus.shutdown()
+
+
+def _verdict(report: dict[str, Any]) -> tuple[str, str]:
+    """A device's verdict (OK, WARN, NO DATA, FAILED) and in a few words what it answered or why not."""
+    if "error" in report:
+        return "FAILED", report["error"]
+    if report["device"] == "pt1000":
+        readings = report["readings"]
+        odd = [f"{r['channel']} {r['status']}" for r in readings if r["status"] != "ok"]
+        temps = ", ".join(f"{r['channel']} {_num(r['temperature_c'], '°C')}" for r in readings[:8])
+        errors = [f"error {e['code']}" for e in report["errors"]]
+        said = f"{report['url']}: {report['idn']}; {temps}" + "".join(f"; {w}" for w in odd + errors)
+        return ("WARN" if odd or errors else "OK") if readings else "NO DATA", said
+    samples, stats, events = report["samples"], report["stats"], report["events"]
+    counted = [f"{n} {name.replace('_', ' ')}" for name, n in stats.items()
+               if n and name not in ("frames_ok", "sent")]
+    kinds = [" ".join(filter(None, (e.get("controller"), e["kind"].replace("_", " ")))) for e in events]
+    counted += [f"{n} × {kind}" for kind, n in Counter(kinds).items()]
+    if report["device"] == "node":
+        last = samples[-1] if samples else None
+        got = (f"{len(samples)} frames, T {_num(last['temperature_c'][0], '°C')} / "
+               f"{_num(last['temperature_c'][1], '°C')}" if last else "no frames")
+    else:
+        controllers = sorted({s["controller"] for s in samples})
+        got = f"{len(samples)} frames from {', '.join(controllers) or 'no controller'}"
+    said = f"{report['url']}: {got}" + "".join(f"; {c}" for c in counted)
+    return ("WARN" if counted else "OK") if samples else "NO DATA", said
+
+
+def _verdict_line(report: dict[str, Any]) -> str:
+    """One line per device for `probe --bench`."""
+    verdict, said = _verdict(report)
+    return f"{report['device']:7s} {verdict:8s} {said}"
 
 
 def _row(obj: Any) -> dict[str, Any]:

@@ -156,7 +156,7 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     if args.plant is not None and args.bench != SIMULATED:
         raise InputError("command line", "--plant", "--bench sim (a hardware bench has its own clutch)")
     plant = _plant(args, out)
-    if args.bench == SIMULATED and (args.fault or realtime is not None or plant != "reference") and not args.dry_run:
+    if args.bench == SIMULATED and (plant != "reference" or (args.fault or realtime is not None) and not args.dry_run):
         with interrupts_held():  # the simulated bench: its plant, the faults to rehearse, the pace asked for
             from sim_bench.bench import SimulatedBench
             from sim_bench.reference_plant import plant_named

@@ -153,7 +153,7 @@ def plot_binned(before: HeldOut, after: HeldOut, signal: str, path: "str | os.Pa
                 b = binned_means(values, [r[channel] for r in residuals[form]], datasets[0].dt)
                 ax.errorbar(b.centre, b.mean, CONFIDENCE_Z * b.stderr, fmt="o-", ms=3, capsize=2, color=line_colour,
                             label=model)
-            ax.set_xlabel(f"{signal} ({signal_unit(signal, datasets[0].units)})")
+            ax.set_xlabel(f"{signal} ({display(signal_unit(signal, datasets[0].units))})")
             ax.set_ylabel(f"{symbol(channel)} residual {form} ({unit})")
             ax.set_title(f"{label(channel)}: {form}", fontsize=9, color=colour(channel, col))
     axes[0][0].legend(fontsize=8)

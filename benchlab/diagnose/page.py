@@ -115,7 +115,8 @@ def _added(summary: dict) -> list[str]:
         units = f.get("units", {})  # the extended model file's (library.py writes one for each parameter it adds)
         params = [(literal(k), f"{v:.6g}", text(units[k]) if units.get(k) else unit(k))
                   for k, v in f["params"].items()]
-        parts += [f"**{text(f['candidate'])}** – {text(f['summary'])}. Signal {literal(f['signal'])}, mechanism "
+        signal = f"Signal {literal(f['signal'])}" if f["signal"] else "No signal (a change of the structure)"
+        parts += [f"**{text(f['candidate'])}** – {text(f['summary'])}. {signal}, mechanism "
                   f"{literal(f['mechanism'])}: {literal(f['extension'])}",
                   table(("parameter", "value", "unit"), params)]
     return parts
@@ -164,8 +165,8 @@ def write_page(result: Diagnosis, summary: dict, runs: Sequence[pd.DataFrame],
     names = [run_name(r) for r in runs]
     finding_pngs = []
     for i, (finding, f) in enumerate(zip(result.findings, summary["findings"]), 1):
-        signal = f["signal"] or next(r["signal"] for r in summary["evidence"] if r["kind"] != "model")
-        if has_signal(signal, finding.before.datasets[0].channels):
+        signal = f["signal"]  # none: a change of the structure, no signal to bin the residual against
+        if signal and has_signal(signal, finding.before.datasets[0].channels):
             finding_pngs.append((f, signal, plot_binned(finding.before, finding.after, signal,
                                                         out / f"finding_{i}_{signal}.png", f["summary"])))
     regimes_png = plot_regimes(summary["regimes"], out / "regimes.png")

@@ -229,8 +229,12 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
 def no_cooldowns(path: "str | os.PathLike[str]") -> InputError:
     """The refusal of a run without completed cool-downs: what the run is instead (its protocol), not a dataset."""
     protocol = load_attrs(path).get("protocol") or "unnamed"
-    return InputError(path, "protocol", f"a cool-down sweep run (`benchlab run cooldown-sweep`): this {protocol} run "
-                                        "has no completed cool-down to fit")
+    if protocol != "cooldown-sweep":
+        return InputError(path, "protocol", f"a cool-down sweep run (`benchlab run cooldown-sweep`): this is not a "
+                                            f"cool-down sweep run ({'an' if protocol[:1] in 'aeiou' else 'a'} {protocol} run), it "
+                                            "has no cool-down to fit")
+    return InputError(path, "protocol", "a cool-down sweep run with a completed cool-down: this one has none to fit "
+                                        "(stopped before its first cool-down ended)")
 
 
 def segment_model(params: Mapping[str, float]) -> ModelDefinition | None:

@@ -10,6 +10,8 @@ unit = "1/min"                                   # the source's unit where the f
 scale = 1.0                                      # value = source value * scale + offset, in `unit`
 offset = 0.0
 rule = "interpolate"                             # or "hold" (states, set-points)
+time = "Zeit"                                    # a CSV's time column (in s, or its title's unit); an MDF
+                                                 # file's and a CAN log's stamps are their own
 ```
 """
 
@@ -25,6 +27,8 @@ from benchlab.model.definition import is_name
 from benchlab.values import check_keys, finite_number
 
 RULES = ("interpolate", "hold")
+#: How many of an input's own channel names a "required channels missing" line shows.
+OFFERED_SHOWN = 20
 ENTRY_KEYS = ("source", "group", "unit", "scale", "offset", "rule")
 
 
@@ -47,8 +51,6 @@ def _entry(path: str, channel: str, value: object) -> Mapped:
     if not is_name(channel):
         raise InputError(path, "channels", f"run-file channel names of letters, digits and _ (as in a model file), "
                                            f"got {channel!r}")
-    if channel == "time":
-        raise InputError(path, field, "a channel other than time (the grid's time comes from --dt)")
     if isinstance(value, str):
         value = {"source": value}
     if not isinstance(value, dict):
@@ -84,3 +86,14 @@ def read_mapping(path: "str | os.PathLike[str]") -> list[Mapped]:
     if len(channels) > MAX_MAPPED_CHANNELS:
         raise InputError(path, "channels", f"at most {MAX_MAPPED_CHANNELS} channels, got {len(channels)}")
     return [_entry(str(path), name, value) for name, value in channels.items()]
+
+
+def missing_channels(where: "str | os.PathLike[str]", kind: str, missing: list[str], offered: list[str]) -> InputError:
+    """The one line for required channels an input lacks: which, and up to OFFERED_SHOWN of the channels it does
+    offer, so that a mapping file can be written from the message alone."""
+    shown = ", ".join(offered[:OFFERED_SHOWN]) or "none"
+    if len(offered) > OFFERED_SHOWN:
+        shown += f" and {len(offered) - OFFERED_SHOWN} more"
+    return InputError(where, f"{kind} {', '.join(missing)}",
+                      f"required channels (missing; the input offers {shown}): channels of those names, or a "
+                      "mapping file (--mapping MAP.toml: run-file channel = source channel)")

@@ -171,6 +171,8 @@ def read_mdf(path: "str | os.PathLike[str]", mapped: list[Mapped]) -> Input:
                 channels.append(_channel(path, mdf, entry, *where))
                 streams[channels[-1].stream] = {"source_file": path.name, "mdf_group": where[0]}
         start, comment = mdf.header.start_time, str(mdf.header.description or "")
+        offered = tuple(name for name, places in mdf.channels_db.items()
+                        if any(mdf.masters_db.get(group) != index for group, index in places))
     finally:
         mdf.close()
-    return Input(path, channels, start, {"source_comment": comment} if comment else {}, streams)
+    return Input(path, channels, start, {"source_comment": comment} if comment else {}, streams, offered=offered)

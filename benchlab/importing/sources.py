@@ -45,7 +45,8 @@ class SourceChannel:
 @dataclass(frozen=True)
 class Input:
     """One input file read: its channels, when its time 0 was (None: unknown), the root attributes it carries
-    (comment, start), per raw stream its attributes (rate, bus, message, node), and what was counted and skipped."""
+    (comment, start), per raw stream its attributes (rate, bus, message, node), what was counted and skipped, and
+    the channel names the file offers (what a mapping may name; shown when required channels are missing)."""
 
     path: Path
     channels: list[SourceChannel]
@@ -53,6 +54,7 @@ class Input:
     attrs: dict[str, str] = field(default_factory=dict)
     stream_attrs: dict[str, dict[str, object]] = field(default_factory=dict)
     skipped: dict[str, int] = field(default_factory=dict)
+    offered: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -131,9 +131,19 @@ def _run_section(runs: Mapping[str, tuple[Path, pd.DataFrame]], out: Path) -> st
                      _num(duration / 3600, 2, " h"), str(len(run)),
                      _num(float(run["T_flywheel"].max()), 1, " °C"),
                      _num(float(run["friction_power"].sum()) * float(run.attrs["dt"]) / 1e6, 2, " MJ"),
-                     html.escape(attrs.get("can_log", "—"))])
+                     _can_log_cell(path, attrs.get("can_log"), out)])
     return _table(("run", "file", "protocol", "bench", "duration", "samples", "flywheel max", "friction energy",
                    "raw CAN log"), rows)
+
+
+def _can_log_cell(run_path: Path, can_log: str | None, out: Path) -> str:
+    """The run's raw CAN log (a file name beside its run file) as a link where the file is there, else its name."""
+    if not can_log:
+        return "—"
+    log = run_path.parent / can_log
+    if not log.is_file():
+        return html.escape(can_log)
+    return f'<a href="{html.escape(os.path.relpath(log, out))}">{html.escape(can_log)}</a>'
 
 
 def _identify_section(figures: Mapping[str, Mapping[str, Mapping[str, float]]],
@@ -234,6 +244,13 @@ def _wear_band(band: "PlateBand") -> str:
             + _table(("side", "wear at the estimate", "over the ±2σ band", "at the truth", "within the band"), rows))
 
 
+def _signal_mechanism(finding: dict) -> str:
+    """A finding's signal and mechanism as the index shows them, HTML-escaped; the mechanism alone where it has no
+    signal (a change of the structure)."""
+    mechanism = html.escape(str(finding["mechanism"]))
+    return f"{html.escape(str(finding['signal']))} / {mechanism}" if finding.get("signal") else mechanism
+
+
 def _unseen_gain(finding: Mapping[str, Any]) -> str:
     """A finding's gain on the validation run, first in its line (empty where the diagnosis had no unseen run)."""
     gain = finding.get("unseen_gain_pct")
@@ -294,12 +311,11 @@ def write_index(out: "str | os.PathLike[str]", runs: Mapping[str, tuple[Path, pd
     truth = json.loads(attrs["sim_truth"]) if "sim_truth" in attrs else None
     simulated = attrs.get("bench") == SIMULATED
     findings = diagnosis.get("findings", [])
-    found = "".join(f"<li><b>{html.escape(f['candidate'])}</b> ({html.escape(str(f['signal']))} / "
-                    f"{html.escape(str(f['mechanism']))}): {_unseen_gain(f)}held-out gain "
+    found = "".join(f"<li><b>{html.escape(f['candidate'])}</b> ({_signal_mechanism(f)}): {_unseen_gain(f)}held-out gain "
                     f"{_num(f['gain_pct'], 0, ' %')}, p = {f.get('p_value', math.nan):.2g}</li>"
                     for f in findings) or "<li>none</li>"
-    found += "".join(f"<li>lead, not a cause: {html.escape(f['candidate'])} ({html.escape(str(f['signal']))} / "
-                     f"{html.escape(str(f['mechanism']))}): {html.escape('; '.join(f['reasons']))}</li>"
+    found += "".join(f"<li>lead, not a cause: {html.escape(f['candidate'])} ({_signal_mechanism(f)}): "
+                     f"{html.escape('; '.join(f['reasons']))}</li>"
                      for f in diagnosis.get("leads", []))
     base, best = diagnosis["baseline"], diagnosis["best"]
     unseen = best.get("unseen")

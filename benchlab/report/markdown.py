@@ -31,8 +31,9 @@ def text(value: object) -> str:
 
 def literal(value: object) -> str:
     """A stranger's value as a code span (a name, a file, a unit as written); plain escaped text where it holds a
-    backtick or a pipe, which no code span of the subset can carry."""
-    line = one_line(value)
+    backtick or a pipe, which no code span of the subset can carry; None (no value: a finding without a signal)
+    is a dash."""
+    line = one_line(value) if value is not None else ""
     if not line or "`" in line or "|" in line:
         return text(line) or "—"
     return f"`{line}`"

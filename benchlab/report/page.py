@@ -21,6 +21,7 @@ from benchlab.report.plotting import run_name
 from benchlab.report.resistance import resistance, standard_errors
 from benchlab.report.residuals import Residuals
 from benchlab.report.scores import Estimate
+from benchlab.units import display
 
 SYMBOLS = {"T_flywheel": "ϑ_F", "T_air": "ϑ_A", "T_housing": "ϑ_T"}
 
@@ -55,7 +56,7 @@ def unit(name: str, models: Sequence[tuple[str, ModelParams]] = ()) -> str:
     """The unit of a parameter (as Markdown text): as its model file gives it, else the contract's (section 2)."""
     given = next((p.definition.parameters[name].unit for _, p in models if name in p.definition.parameters), "")
     if given:
-        return text(given)
+        return text(display(given))
     if name.startswith("C_"):
         return "J/K"
     if name.startswith("R") or name in ("a1", "a2"):

@@ -79,8 +79,8 @@ def plot_comparison(run: pd.DataFrame, estimates: Sequence[Estimate], path: "str
         _operating_point(axes[-1], run, t, k)
     overall = "; ".join(f"{e.label} RMSE {e.scores.rmse_k:.2f} K ({e.scores.nrmse_pct:.1f} %)" for e in estimates)
     shown = ", ".join(symbol(c) for c in channels)
-    fig.suptitle(f"Fig. 5 – {shown}: models compared on {run_name(run)}; RMSE over all measured temperatures: "
-                 f"{overall}")
+    fig.suptitle(f"Fig. 5 – {shown}: models compared on {run_name(run)}\nRMSE over all measured temperatures: "
+                 f"{overall}", fontsize=10)  # two lines: one would be cut at the figure's edges
     return save(fig, path)
 
 

@@ -38,6 +38,7 @@ from protocols.schedule import Step, describe, duration_s
 
 if TYPE_CHECKING:
     from sim_bench.bench import SimBench, SimulatedBench
+    from sim_bench.plant import ThermalPlant
 
 # what a run asks for: a BENCH.toml path, "sim" (the default simulated bench) or a simulated bench of its own
 BenchChoice = Union[str, "os.PathLike[str]", "SimulatedBench"]
@@ -95,6 +96,17 @@ def _simulated(request: RunRequest, config: BenchConfig) -> str:
     return "" if simulated(request.bench) is not None else opening.simulated_devices(config)
 
 
+def estimate_plant(request: RunRequest) -> "ThermalPlant | None":
+    """A fresh copy of the thermal plant a simulated cool-down sweep will run on, for its expected durations
+    (protocols.estimates.sweep_durations); None for other protocols and on hardware (the paper's closed forms)."""
+    sim = simulated(request.bench)
+    if sim is None or request.protocol != "cooldown-sweep":
+        return None
+    from sim_bench.reference_plant import DEFAULT_PLANT, plant_named
+
+    return sim.plant.with_effects(()) if sim.plant is not None else plant_named(DEFAULT_PLANT)
+
+
 def bench_config(request: RunRequest) -> BenchConfig:
     """The bench's configuration: the simulated bench's, or BENCH.toml checked field by field."""
     sim = simulated(request.bench)
@@ -114,7 +126,7 @@ def plan(request: RunRequest) -> tuple[tuple[Step, ...], BenchConfig, dict[str, 
     else:
         try:
             protocol = catalog.build(request.protocol, request.seed, request.cycles, request.duration_s, request.grid,
-                                     config.limits)
+                                     config.limits, estimate_plant(request))
         except ValueError as exc:
             field = "--grid" if request.grid and "grid" in str(exc) else "protocol"
             raise InputError(request.protocol, field, str(exc)) from None

@@ -24,11 +24,13 @@ def plot_wear(report: WearReport, path: "str | os.PathLike[str]") -> None:
     energy = ax.twinx()
     energy.plot(minutes, np.cumsum(report.power_w) * report.dt / 1e3, color="tab:red", label="cumulative energy")
     energy.set_ylabel("E (kJ)")
+    lines = ax.get_lines() + energy.get_lines()  # one legend for both axes of the panel
+    ax.legend(lines, [line.get_label() for line in lines], loc="upper left", fontsize=8)
     ax.set_title(f"{len(report.engagements)} engagements, {report.friction_energy_j / 1e3:.1f} kJ")
     ax = axes[1]
-    ax.plot(minutes, report.temperatures["T_pressure_plate"], label="ϑ_P model (plate side)")
-    ax.plot(minutes, report.temperatures["T_flywheel"], label="ϑ_F model (flywheel side)")
-    ax.plot(minutes, report.measured_flywheel_c, lw=0.6, color="k", alpha=0.5, label="ϑ_F measured")
+    ax.plot(minutes, report.temperatures["T_pressure_plate"], label=r"$\vartheta_P$ model (plate side)")
+    ax.plot(minutes, report.temperatures["T_flywheel"], label=r"$\vartheta_F$ model (flywheel side)")
+    ax.plot(minutes, report.measured_flywheel_c, lw=0.6, color="k", alpha=0.5, label=r"$\vartheta_F$ measured")
     ax.set_ylabel("temperature (°C)")
     ax.legend(loc="upper left", fontsize=8)
     ax = axes[2]
