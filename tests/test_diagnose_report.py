@@ -243,3 +243,26 @@ def test_no_json_names_a_cause_beside_beyond_library(churn):
         assert not (f["label"] == "cause" and summary["floor"]["beyond_library"])
         if f["label"] == "cause":
             assert not f["not_identified"] and not f.get("reasons")
+
+
+def test_a_source_on_top_of_the_measured_friction_power_creates_energy(churn):
+    """The library's friction-power source at the plate, at +50 W at the signal's maximum, adds net heat to what the
+    model already injects: energy created; at 0 W it adds none; the churning source (clutch speed) reads no
+    measured power and is not judged by this rule."""
+    from types import SimpleNamespace
+
+    from benchlab.diagnose.library import channel_source, source_name
+    from benchlab.diagnose.report import energy_reasons
+
+    _, diagnosis, _ = churn
+    assert all(energy_reasons(f, diagnosis) == [] for f in diagnosis.findings)
+    base = diagnosis.baseline.spec.definition
+    channels = {k: np.concatenate([d.channels[k] for d in diagnosis.final_held.datasets])
+                for k in diagnosis.final_held.datasets[0].channels}
+    extended = channel_source(("friction_power",), "P", (None,))(base, channels)
+    tag = source_name(("friction_power",), "P", (None,)).removeprefix("source_")
+
+    def finding(q: float):
+        return SimpleNamespace(spec=SimpleNamespace(definition=extended), params={f"q_{tag}": q, f"n_{tag}": 1.0})
+    assert energy_reasons(finding(50.0), diagnosis) and "creates energy" in energy_reasons(finding(50.0), diagnosis)[0]
+    assert energy_reasons(finding(0.0), diagnosis) == []

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
 import pandas as pd
 
 from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT, SCORED_FITS,
@@ -13,9 +14,11 @@ from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, CROSS_VALIDATED, FOLD
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.library import telling_apart
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
+from benchlab.identify.data import SLIP_POWER
 from benchlab.identify.metrics import RESIDUAL_LABEL
 from benchlab.identify.uncertainty import estimate_uncertainty
 from benchlab.model.definition import ModelDefinition
+from benchlab.model.expressions import compile_expression
 
 
 def _unit(f: Finding, name: str) -> str:
@@ -66,12 +69,39 @@ def split_reasons(groups: Sequence[dict]) -> list[str]:
     return reasons
 
 
-def label_json(f: Finding, floor: dict, groups: Sequence[dict]) -> dict:
+#: the measured heat input and its factors (P = clutch torque x slip speed): the model already puts all of it in, so a
+#: further source that reads them and adds net heat over the runs creates energy
+MEASURED_POWER = (SLIP_POWER, "slip_speed", "clutch_torque")
+
+
+def energy_reasons(f: Finding, result: Diagnosis) -> list[str]:
+    """Why a finding creates energy: a source it adds (not in the baseline) that reads the measured friction power
+    or its factors (MEASURED_POWER), no temperature, and whose heat integrated over the diagnosed runs is a net input
+    (J), on top of the friction heat the model already holds."""
+    model, baseline = f.spec.definition, {s.name for s in result.baseline.spec.definition.sources}
+    values = {**f.params, **result.final.params}
+    reasons = []
+    for source in model.sources:
+        reads = source.heat.names
+        if (source.name in baseline or reads & set(model.nodes) or not reads & set(MEASURED_POWER)
+                or not reads & set(model.parameters) <= set(values)):  # a source split per run group: left out
+            continue
+        kinds = {name: "parameter" if name in model.parameters else "channel" for name in reads}
+        heat = compile_expression(source.heat, kinds)
+        joules = sum(float(np.sum(np.broadcast_to(heat(values, d.channels, {}), (len(d),)))) * d.dt
+                     for d in result.final_held.datasets)
+        if joules > 0:
+            reasons.append(f"{source.name} adds {joules / 1e3:.3g} kJ over the runs on top of the measured friction "
+                           "power it reads: it creates energy")
+    return reasons
+
+
+def label_json(f: Finding, floor: dict, groups: Sequence[dict], energy: Sequence[str] = ()) -> dict:
     """A finding's label and why: a patch (a description of the misfit, not a mechanism) where the final model stays
     BEYOND_FLOOR x the noise floor, its added parameters are not identified, or its split per run group does not
-    separate the groups (split_reasons); else a lead where its gain does not carry to the unseen runs; else a cause."""
+    separate the groups (split_reasons), or it creates energy (`energy`, energy_reasons); else a lead where its gain does not carry to the unseen runs; else a cause."""
     patch = [f"{name} not identified: {why}" for name, why in f.not_identified.items()]
-    patch += split_reasons(groups)
+    patch += split_reasons(groups) + list(energy)
     if floor["beyond_library"]:
         patch.append(f"the final model stays {floor['best_ratio']:.1f}x the noise floor (>= {BEYOND_FLOOR:g}x): "
                      "no candidate explains the remainder, so this extension describes the misfit, not its cause")
@@ -113,7 +143,7 @@ def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors:
     groups = per_group_values(f, result, errors) if c.splits else []
     if groups:
         out["per_group"] = groups
-    out.update(label_json(f, floor, groups))
+    out.update(label_json(f, floor, groups, energy_reasons(f, result)))
     if f.lead_reasons:
         out["reasons"] = f.lead_reasons
     return out
@@ -204,7 +234,8 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                              "(reasons), taken out of the model, the rest refitted and re-checked",
                    "label": "each finding and lead is labelled: patch (a description of the misfit, not a "
                             f"mechanism) where the final model stays >= {BEYOND_FLOOR:g}x the noise floor, an added "
-                            "parameter is not identified, or a split per run group has no two groups whose values "
+                            "parameter is not identified, a source it adds reads the measured friction power or its factors and "
+                            "adds net heat over the runs (energy created), or a split per run group has no two groups whose values "
                             f"differ by more than {SPLIT_SEPARATION:g} * sqrt(se_a^2 + se_b^2); else lead where its "
                             "gain does not carry to the unseen runs; else cause; label_reasons says why",
                    "floor": "noise_K: the fitting targets' white noise from their second differences "
