@@ -98,8 +98,9 @@ def energy_reasons(f: Finding, result: Diagnosis) -> list[str]:
 
 def label_json(f: Finding, floor: dict, groups: Sequence[dict], energy: Sequence[str] = ()) -> dict:
     """A finding's label and why: a patch (a description of the misfit, not a mechanism) where the final model stays
-    BEYOND_FLOOR x the noise floor, its added parameters are not identified, or its split per run group does not
-    separate the groups (split_reasons), or it creates energy (`energy`, energy_reasons); else a lead where its gain does not carry to the unseen runs; else a cause."""
+    BEYOND_FLOOR x the noise floor, its added parameters are not identified, its split per run group does not
+    separate the groups (split_reasons) or it creates energy (`energy`, energy_reasons); else a lead where its gain
+    does not carry to the unseen runs; else a cause."""
     patch = [f"{name} not identified: {why}" for name, why in f.not_identified.items()]
     patch += split_reasons(groups) + list(energy)
     if floor["beyond_library"]:
