@@ -87,8 +87,8 @@ def print_report(result: dict) -> None:
         if f["label"] != "cause":
             print(f"  a {f['label']}, not a cause: {'; '.join(f['label_reasons'])}")
     for lead in result["leads"]:
-        print(f"lead ({lead['label']}, not a cause): {lead['candidate']} ({lead['signal']}/{lead['mechanism']}), {unseen_text(lead)}"
-              f"held-out gain {lead['gain_pct']:.1f} %: {'; '.join(lead['reasons'])}")
+        print(f"lead ({lead['label']}, not a cause): {lead['candidate']} ({lead['signal']}/{lead['mechanism']}), "
+              f"{unseen_text(lead)}held-out gain {lead['gain_pct']:.1f} %: {'; '.join(lead['label_reasons'])}")
     best, floor = result["best"], result["floor"]
     print(f"best {best['model']}: {unseen_text(best)}held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
     print(f"noise floor of the measurements {floor['noise_K']:.4f} K: baseline {floor['baseline_ratio']:.1f}x, "

@@ -135,8 +135,9 @@ def _unseen_cells(entry: dict) -> tuple[str, str]:
 def _better(summary: dict, gains_png: Path) -> list[str]:
     heads = ("finding", "label", "signal", "unseen runs RMSE (K)", "unseen gain (%)", "held-out RMSE before (K)",
              "held-out RMSE after (K)", "held-out gain (%)", "p")
-    cells = [(literal(f["candidate"]), text(f["label"]), literal(f["signal"]), *_unseen_cells(f), number(f["rmse_before_K"], 4),
-              number(f["rmse_after_K"], 4), number(f["gain_pct"], 1), f"{f['p_value']:.2g}") for f in summary["findings"]]
+    cells = [(literal(f["candidate"]), text(f["label"]), literal(f["signal"]), *_unseen_cells(f),
+              number(f["rmse_before_K"], 4), number(f["rmse_after_K"], 4), number(f["gain_pct"], 1),
+              f"{f['p_value']:.2g}") for f in summary["findings"]]
     leads = [(literal(f["candidate"]), literal(f["signal"]), *_unseen_cells(f), number(f["gain_pct"], 1),
               text(f"{f['label']}: " + "; ".join(f["label_reasons"]))) for f in summary["leads"]]
     base, best = summary["baseline"], summary["best"]

@@ -235,8 +235,9 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                              "(reasons), taken out of the model, the rest refitted and re-checked",
                    "label": "each finding and lead is labelled: patch (a description of the misfit, not a "
                             f"mechanism) where the final model stays >= {BEYOND_FLOOR:g}x the noise floor, an added "
-                            "parameter is not identified, a source it adds reads the measured friction power or its factors and "
-                            "adds net heat over the runs (energy created), or a split per run group has no two groups whose values "
+                            "parameter is not identified, a source it adds reads the measured friction power or its "
+                            "factors and adds net heat over the runs (energy created), or a split per run group has "
+                            "no two groups whose values "
                             f"differ by more than {SPLIT_SEPARATION:g} * sqrt(se_a^2 + se_b^2); else lead where its "
                             "gain does not carry to the unseen runs; else cause; label_reasons says why",
                    "floor": "noise_K: the fitting targets' white noise from their second differences "
