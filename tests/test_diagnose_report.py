@@ -196,3 +196,73 @@ def test_hostile_run_attributes_run_no_script_in_the_page(churn, tmp_path):
     finally:
         browser.close()
     headless_chromium.assert_inert(state, "benchlab diagnose – " + headless_chromium.HOSTILE.rsplit("/", 1)[-1])
+
+
+def _groups(values_and_errors):
+    return [{"parameter": "R0", "group": str(i), "value": v, "standard_error": se}
+            for i, (v, se) in enumerate(values_and_errors)]
+
+
+def test_a_split_is_named_only_where_groups_differ_beyond_their_errors():
+    """The issue's case, 43.48 ± 1559 against 43.24 ± 1550 K/W, is one value told twice; 40 ± 0.5 against 43 ± 0.5
+    (4.2 combined errors apart) are runs that disagree; a NaN error separates nothing."""
+    from benchlab.diagnose.report import split_reasons
+
+    assert split_reasons(_groups([(43.48, 1559.0), (43.24, 1550.0)]))
+    assert split_reasons(_groups([(40.0, 0.5), (43.0, 0.5)])) == []
+    assert split_reasons(_groups([(40.0, float("nan")), (43.0, 0.5)]))
+    assert split_reasons(_groups([(40.0, 0.5), (40.1, 0.5), (43.0, 0.5)])) == []  # one pair apart is enough
+
+
+class _Finding:
+    """What label_json reads of a finding."""
+
+    def __init__(self, not_identified=None, lead_reasons=()):
+        self.not_identified = dict(not_identified or {})
+        self.lead_reasons = [f"{k} not identified: {v}" for k, v in self.not_identified.items()] + list(lead_reasons)
+
+
+def test_labels_patch_before_lead_before_cause():
+    """A model left beyond the floor, a parameter not identified or an inseparable split makes a patch; a gain that
+    does not carry to unseen runs (alone) a lead; nothing of these a cause."""
+    from benchlab.diagnose.report import label_json
+
+    within, beyond = {"beyond_library": False, "best_ratio": 1.2}, {"beyond_library": True, "best_ratio": 10.4}
+    assert label_json(_Finding(), within, []) == {"label": "cause", "label_reasons": []}
+    assert label_json(_Finding(), beyond, [])["label"] == "patch"
+    assert label_json(_Finding({"q0": "standard error above value"}), within, [])["label"] == "patch"
+    assert label_json(_Finding(), within, _groups([(43.48, 1559.0), (43.24, 1550.0)]))["label"] == "patch"
+    lead = label_json(_Finding(lead_reasons=["its gain does not carry"]), within, [])
+    assert lead == {"label": "lead", "label_reasons": ["its gain does not carry"]}
+
+
+def test_no_json_names_a_cause_beside_beyond_library(churn):
+    _, _, summary = churn
+    for f in summary["findings"] + summary["leads"]:
+        assert f["label"] in {"cause", "lead", "patch"} and (f["label"] == "cause") == (not f["label_reasons"])
+        assert not (f["label"] == "cause" and summary["floor"]["beyond_library"])
+        if f["label"] == "cause":
+            assert not f["not_identified"] and not f.get("reasons")
+
+
+def test_a_source_on_top_of_the_measured_friction_power_creates_energy(churn):
+    """The library's friction-power source at the plate, at +50 W at the signal's maximum, adds net heat to what the
+    model already injects: energy created; at 0 W it adds none; the churning source (clutch speed) reads no
+    measured power and is not judged by this rule."""
+    from types import SimpleNamespace
+
+    from benchlab.diagnose.library import channel_source, source_name
+    from benchlab.diagnose.report import energy_reasons
+
+    _, diagnosis, _ = churn
+    assert all(energy_reasons(f, diagnosis) == [] for f in diagnosis.findings)
+    base = diagnosis.baseline.spec.definition
+    channels = {k: np.concatenate([d.channels[k] for d in diagnosis.final_held.datasets])
+                for k in diagnosis.final_held.datasets[0].channels}
+    extended = channel_source(("friction_power",), "P", (None,))(base, channels)
+    tag = source_name(("friction_power",), "P", (None,)).removeprefix("source_")
+
+    def finding(q: float):
+        return SimpleNamespace(spec=SimpleNamespace(definition=extended), params={f"q_{tag}": q, f"n_{tag}": 1.0})
+    assert energy_reasons(finding(50.0), diagnosis) and "creates energy" in energy_reasons(finding(50.0), diagnosis)[0]
+    assert energy_reasons(finding(0.0), diagnosis) == []

@@ -42,6 +42,7 @@ def test_two_benches_that_differ_in_housing_resistance_are_named_as_disagreeing_
     assert values["0"]["value"] == pytest.approx(PLAIN_K_PER_W, rel=0.05)
     assert values["1"]["value"] == pytest.approx(FAN_K_PER_W, rel=0.05)
     assert all(g["standard_error"] > 0 and g["unit"] == "K/W" for g in values.values())
+    assert first["label"] == "cause", first["label_reasons"]  # 0.08 against 0.035 K/W: beyond 2 combined errors
     assert result["floor"]["best_ratio"] < 2.0
 
 

@@ -78,6 +78,7 @@ def test_a_gain_that_does_not_carry_is_a_lead(tmp_path, capsys):
     lead = result["leads"][0]
     assert (lead["signal"], lead["mechanism"]) == ("engine_speed", "heat_source")
     assert lead["unseen_gain_pct"] < 0 and "does not carry" in lead["reasons"][0]
+    assert lead["label"] == ("patch" if result["floor"]["beyond_library"] else "lead"), lead["label_reasons"]
     assert result["best"]["model"] == "nonlinear"
 
 

@@ -77,16 +77,18 @@ def print_report(result: dict) -> None:
     if not result["findings"]:
         print("no finding: no extension lowers the held-out error significantly; the model is kept as it is")
     for f in result["findings"]:
-        print(f"finding: {f['summary']}\n  signal {f['signal']}, mechanism {f['mechanism']}, extension "
+        print(f"finding ({f['label']}): {f['summary']}\n  signal {f['signal']}, mechanism {f['mechanism']}, extension "
               f"{f['extension']}\n  {unseen_text(f)}held-out RMSE {f['rmse_before_K']:.3f} -> {f['rmse_after_K']:.3f} K, "
               f"gain {f['gain_pct']:.1f} % (p = {f['p_value']:.2g})"
               + (f", {f['run_gain_pct']:.1f} % on runs it was not fitted on" if f["run_gain_pct"] is not None else ""))
         for g in f.get("per_group", []):
             print(f"  {g['parameter']} for {g['group']} (runs {', '.join(map(str, g['runs']))}): {g['value']:.6g} "
                   f"± {g['standard_error']:.2g} {g['unit']}")
+        if f["label"] != "cause":
+            print(f"  a {f['label']}, not a cause: {'; '.join(f['label_reasons'])}")
     for lead in result["leads"]:
-        print(f"lead (not a cause): {lead['candidate']} ({lead['signal']}/{lead['mechanism']}), {unseen_text(lead)}"
-              f"held-out gain {lead['gain_pct']:.1f} %: {'; '.join(lead['reasons'])}")
+        print(f"lead ({lead['label']}, not a cause): {lead['candidate']} ({lead['signal']}/{lead['mechanism']}), "
+              f"{unseen_text(lead)}held-out gain {lead['gain_pct']:.1f} %: {'; '.join(lead['label_reasons'])}")
     best, floor = result["best"], result["floor"]
     print(f"best {best['model']}: {unseen_text(best)}held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
     print(f"noise floor of the measurements {floor['noise_K']:.4f} K: baseline {floor['baseline_ratio']:.1f}x, "

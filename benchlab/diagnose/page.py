@@ -116,7 +116,9 @@ def _added(summary: dict) -> list[str]:
         params = [(literal(k), f"{v:.6g}", text(units[k]) if units.get(k) else unit(k))
                   for k, v in f["params"].items()]
         signal = f"Signal {literal(f['signal'])}" if f["signal"] else "No signal (a change of the structure)"
-        parts += [f"**{text(f['candidate'])}** – {text(f['summary'])}. {signal}, mechanism "
+        label = ("a cause" if f["label"] == "cause" else
+                 f"a {f['label']}, not a cause ({text('; '.join(f['label_reasons']))})")
+        parts += [f"**{text(f['candidate'])}** ({label}) – {text(f['summary'])}. {signal}, mechanism "
                   f"{literal(f['mechanism'])}: {literal(f['extension'])}",
                   table(("parameter", "value", "unit"), params)]
     return parts
@@ -132,12 +134,13 @@ def _unseen_cells(entry: dict) -> tuple[str, str]:
 
 
 def _better(summary: dict, gains_png: Path) -> list[str]:
-    heads = ("finding", "signal", "unseen runs RMSE (K)", "unseen gain (%)", "held-out RMSE before (K)",
+    heads = ("finding", "label", "signal", "unseen runs RMSE (K)", "unseen gain (%)", "held-out RMSE before (K)",
              "held-out RMSE after (K)", "held-out gain (%)", "p")
-    cells = [(literal(f["candidate"]), literal(f["signal"]), *_unseen_cells(f), number(f["rmse_before_K"], 4),
-              number(f["rmse_after_K"], 4), number(f["gain_pct"], 1), f"{f['p_value']:.2g}") for f in summary["findings"]]
+    cells = [(literal(f["candidate"]), text(f["label"]), literal(f["signal"]), *_unseen_cells(f),
+              number(f["rmse_before_K"], 4), number(f["rmse_after_K"], 4), number(f["gain_pct"], 1),
+              f"{f['p_value']:.2g}") for f in summary["findings"]]
     leads = [(literal(f["candidate"]), literal(f["signal"]), *_unseen_cells(f), number(f["gain_pct"], 1),
-              text("; ".join(f["reasons"]))) for f in summary["leads"]]
+              text(f"{f['label']}: " + "; ".join(f["label_reasons"]))) for f in summary["leads"]]
     base, best = summary["baseline"], summary["best"]
     unseen = best["unseen"]
     together = (f"on the unseen runs {unseen['rmse_before_K']:.4f} K → {unseen['rmse_after_K']:.4f} K "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
 import pandas as pd
 
 from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT, SCORED_FITS,
@@ -13,9 +14,11 @@ from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, CROSS_VALIDATED, FOLD
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
 from benchlab.diagnose.library import telling_apart
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
+from benchlab.identify.data import SLIP_POWER
 from benchlab.identify.metrics import RESIDUAL_LABEL
 from benchlab.identify.uncertainty import estimate_uncertainty
 from benchlab.model.definition import ModelDefinition
+from benchlab.model.expressions import compile_expression
 
 
 def _unit(f: Finding, name: str) -> str:
@@ -33,16 +36,78 @@ def final_standard_errors(result: Diagnosis) -> dict[str, float]:
 def per_group_values(f: Finding, result: Diagnosis, errors: dict[str, float]) -> list[dict]:
     """For a finding that splits a parameter per run group: each group's runs (their order on the command line), its
     value in the final model and the value's standard error (`errors`, final_standard_errors), so a lab sees how far
-    apart the runs are against how well each is known."""
+    apart the runs are against how well each is known. A lead's split is out of the final model: its own refit's
+    value, with no standard error."""
     datasets = result.final_held.datasets
     out = []
     for name in f.candidate.splits:
         for group in run_groups(datasets):
             key = f"{name}@{group}"
-            out.append({"parameter": name, "group": group, "value": result.final.params[key],
+            out.append({"parameter": name, "group": group, "value": result.final.params.get(key, f.params.get(key)),
                         "standard_error": errors.get(key, float("nan")), "unit": _unit(f, name),
                         "runs": [i for i, d in enumerate(datasets) if d.group_label == group]})
     return out
+
+
+#: a split per run group is named only where two groups' values differ by more than this many of their combined
+#: standard errors, |a - b| > SPLIT_SEPARATION * sqrt(se_a^2 + se_b^2); closer groups are one value told twice
+SPLIT_SEPARATION = 2.0
+
+
+def split_reasons(groups: Sequence[dict]) -> list[str]:
+    """Why a per-group split (per_group_values) is not a cause: a split parameter no two of whose groups differ by
+    more than SPLIT_SEPARATION combined standard errors (a NaN standard error separates nothing)."""
+    reasons = []
+    for name in dict.fromkeys(g["parameter"] for g in groups):
+        own = [g for g in groups if g["parameter"] == name]
+        apart = [abs(a["value"] - b["value"]) / math.hypot(a["standard_error"], b["standard_error"])
+                 for i, a in enumerate(own) for b in own[i + 1:]]
+        widest = max((x for x in apart if math.isfinite(x)), default=float("nan"))
+        if not widest > SPLIT_SEPARATION:
+            reasons.append(f"the groups' {name} differ by at most {widest:.2g} combined standard errors "
+                           f"(the runs disagree only beyond {SPLIT_SEPARATION:g})")
+    return reasons
+
+
+#: the measured heat input and its factors (P = clutch torque x slip speed): the model already puts all of it in, so a
+#: further source that reads them and adds net heat over the runs creates energy
+MEASURED_POWER = (SLIP_POWER, "slip_speed", "clutch_torque")
+
+
+def energy_reasons(f: Finding, result: Diagnosis) -> list[str]:
+    """Why a finding creates energy: a source it adds (not in the baseline) that reads the measured friction power
+    or its factors (MEASURED_POWER), no temperature, and whose heat integrated over the diagnosed runs is a net input
+    (J), on top of the friction heat the model already holds."""
+    model, baseline = f.spec.definition, {s.name for s in result.baseline.spec.definition.sources}
+    values = {**f.params, **result.final.params}
+    reasons = []
+    for source in model.sources:
+        reads = source.heat.names
+        if (source.name in baseline or reads & set(model.nodes) or not reads & set(MEASURED_POWER)
+                or not reads & set(model.parameters) <= set(values)):  # a source split per run group: left out
+            continue
+        kinds = {name: "parameter" if name in model.parameters else "channel" for name in reads}
+        heat = compile_expression(source.heat, kinds)
+        joules = sum(float(np.sum(np.broadcast_to(heat(values, d.channels, {}), (len(d),)))) * d.dt
+                     for d in result.final_held.datasets)
+        if joules > 0:
+            reasons.append(f"{source.name} adds {joules / 1e3:.3g} kJ over the runs on top of the measured friction "
+                           "power it reads: it creates energy")
+    return reasons
+
+
+def label_json(f: Finding, floor: dict, groups: Sequence[dict], energy: Sequence[str] = ()) -> dict:
+    """A finding's label and why: a patch (a description of the misfit, not a mechanism) where the final model stays
+    BEYOND_FLOOR x the noise floor, its added parameters are not identified, its split per run group does not
+    separate the groups (split_reasons) or it creates energy (`energy`, energy_reasons); else a lead where its gain
+    does not carry to the unseen runs; else a cause."""
+    patch = [f"{name} not identified: {why}" for name, why in f.not_identified.items()]
+    patch += split_reasons(groups) + list(energy)
+    if floor["beyond_library"]:
+        patch.append(f"the final model stays {floor['best_ratio']:.1f}x the noise floor (>= {BEYOND_FLOOR:g}x): "
+                     "no candidate explains the remainder, so this extension describes the misfit, not its cause")
+    lead = [r for r in f.lead_reasons if r not in patch]
+    return {"label": "patch" if patch else "lead" if lead else "cause", "label_reasons": patch or lead}
 
 
 def unseen_json(before: HeldOut | None, after: HeldOut | None) -> dict | None:
@@ -56,10 +121,11 @@ def unseen_json(before: HeldOut | None, after: HeldOut | None) -> dict | None:
             "p_value": block_test(before, after), "runs": runs}
 
 
-def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors: dict[str, float]) -> dict:
+def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors: dict[str, float],
+                  floor: dict) -> dict:
     """Contract §3 keys, the gain on unseen runs, then the test figures, the fitted extension, and the alternatives
     the data cannot rule out with the measurement that would; for runs that disagree, each group's value; for a lead,
-    why it is not a cause."""
+    why it is not a cause; its label (label_json)."""
     c = f.candidate
     out = {"signal": c.signal, "mechanism": c.mechanism, "summary": c.summary, "extension": c.extension,
            "signals": list(c.reads), "unseen_gain_pct": f.unseen_gain_pct,
@@ -75,8 +141,10 @@ def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors:
                              "gain_pct": a.gain_pct, "n_params": a.added, "p_value": a.p_value,
                              "p_vs_finding": a.p_vs_winner,
                              "tell_apart_by": telling_apart(model, c, a.candidate)} for a in f.alternatives]}
-    if c.splits:
-        out["per_group"] = per_group_values(f, result, errors)
+    groups = per_group_values(f, result, errors) if c.splits else []
+    if groups:
+        out["per_group"] = groups
+    out.update(label_json(f, floor, groups, energy_reasons(f, result)))
     if f.lead_reasons:
         out["reasons"] = f.lead_reasons
     return out
@@ -117,15 +185,17 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
     final = result.final
     errors = final_standard_errors(result) if any(f.candidate.splits for f in result.findings) else {}
     unseen = unseen_json(result.unseen_baseline, result.unseen_final)
+    floor = floor_json(result)
     return {
         "baseline": {"model": baseline, "rmse_K": result.baseline_held.rmse,
                      "nrmse_pct": result.baseline_held.nrmse_pct},
-        "findings": [_finding_json(f, result.baseline.spec.definition, result, errors) for f in result.findings],
-        "leads": [_finding_json(f, result.baseline.spec.definition, result, errors) for f in result.leads],
+        "findings": [_finding_json(f, result.baseline.spec.definition, result, errors, floor)
+                     for f in result.findings],
+        "leads": [_finding_json(f, result.baseline.spec.definition, result, errors, floor) for f in result.leads],
         "best": {"model": final.spec.name, "unseen_gain_pct": unseen["gain_pct"] if unseen else None,
                  "unseen": unseen, "rmse_K": result.final_held.rmse,
                  "nrmse_pct": result.final_held.nrmse_pct, "params": final.params},
-        "floor": floor_json(result),
+        "floor": floor,
         "regimes": {"baseline": regime_errors(result.baseline_held), "best": regime_errors(result.final_held)},
         "evidence": [e.as_dict() for e in residual_evidence(result.baseline_held, result.baseline.spec,
                                                              result.baseline.params)],
@@ -163,6 +233,13 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                              "benchlab.identify.identifiability) and, with --validate runs, its unseen gain passes "
                              f"the in-run rule (>= {MIN_GAIN_PCT:g} %, p < {ALPHA:g}); otherwise it is a lead "
                              "(reasons), taken out of the model, the rest refitted and re-checked",
+                   "label": "each finding and lead is labelled: patch (a description of the misfit, not a "
+                            f"mechanism) where the final model stays >= {BEYOND_FLOOR:g}x the noise floor, an added "
+                            "parameter is not identified, a source it adds reads the measured friction power or its "
+                            "factors and adds net heat over the runs (energy created), or a split per run group has "
+                            "no two groups whose values "
+                            f"differ by more than {SPLIT_SEPARATION:g} * sqrt(se_a^2 + se_b^2); else lead where its "
+                            "gain does not carry to the unseen runs; else cause; label_reasons says why",
                    "floor": "noise_K: the fitting targets' white noise from their second differences "
                             "(median absolute deviation / sqrt(6), pooled), what a perfect model scores; ratios are "
                             f"held-out RMSE / noise_K; beyond_library where the final model stays >= {BEYOND_FLOOR:g}x",
