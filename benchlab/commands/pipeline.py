@@ -308,7 +308,9 @@ def job_figures(figures: dict, story: dict, cooldowns, eq11_errors: dict[str, fl
     best = diagnosis.get("best", {})
     unseen_gain = best.get("unseen_gain_pct")
     eq11_model = HELD_MODEL if HELD_MODEL in eq11_errors else DIAGNOSED_MODEL
-    return {"causes": [f["candidate"] for f in diagnosis.get("findings", [])],
+    findings = diagnosis.get("findings", [])
+    return {"causes": [f["candidate"] for f in findings if f.get("label", "cause") == "cause"],
+            "patches": [f["candidate"] for f in findings if f.get("label") == "patch"],
             "leads": [f["candidate"] for f in diagnosis.get("leads", [])],
             "unseen_gain_pct": float(unseen_gain) if unseen_gain is not None else math.nan,
             "diagnosed_runs": list(DIAGNOSED_RUNS), "identified_by": diagnosed.extra["identified_by"],

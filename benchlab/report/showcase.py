@@ -201,7 +201,7 @@ def verdict(figures: Mapping[str, Any]) -> str:
     best models against the paper's figures, then the plate that wear needs (against /truth where known)."""
     parts = []
     gain = figures.get("unseen_gain_pct", np.nan)
-    causes, leads = figures.get("causes") or [], figures.get("leads") or []
+    causes, leads, patches = (figures.get(k) or [] for k in ("causes", "leads", "patches"))
     rmse = figures.get("validation_rmse_k_by_model") or {}
     diagnosed = " on Table 1 and the sweep together" if figures.get("diagnosed_runs") else ""
     if causes and np.isfinite(gain):
@@ -211,10 +211,12 @@ def verdict(figures: Mapping[str, Any]) -> str:
                         f"{table1:.2f} K)" if np.isfinite(before) and np.isfinite(after) and np.isfinite(table1)
                         else "")
         parts.append(f"diagnose{diagnosed} names {', '.join(causes)}: the extension gains {gain:.0f} % on the "
-                     f"validation run it never saw{figures_text}")
+                     f"validation run it never saw{figures_text}"
+                     + (f" (with patches, not causes: {', '.join(patches)})" if patches else ""))
     elif "causes" in figures:
         parts.append("diagnose names no cause whose gain carries to the validation run"
-                     + (f" (leads: {', '.join(leads)})" if leads else ""))
+                     + (f" (leads: {', '.join(leads)})" if leads else "")
+                     + (f" (patches, not causes: {', '.join(patches)})" if patches else ""))
     misses = largest_misses(figures)
     parts.append("the largest misses of the best models: " + "; ".join(misses) if misses
                  else "the models meet the paper's figures on this plant")
