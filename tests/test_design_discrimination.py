@@ -69,3 +69,17 @@ def test_designed_run_tells_the_rivals_apart_better_than_table1(run_file, short_
     assert {s["channel"] for s in doc["sensors"]} >= {"T_pressure_plate", "T_flywheel", "T_air", "T_housing"}
     assert all(s["test_gain"] is not None and s["test_gain"] >= 0 for s in doc["sensors"])
     assert "test statistic +" in printed
+
+
+def test_diagnose_page_names_each_tie_and_the_design_that_settles_it():
+    from benchlab.diagnose.page import _added
+
+    finding = {"candidate": FAVOURED, "summary": "s", "signal": "engine_speed", "mechanism": "m", "extension": "e",
+               "params": {}, "units": {},
+               "alternatives": [{"candidate": OTHER, "gain_pct": 12.0, "tell_apart_by": "a sensor on node P"}]}
+    summary = {"method": {"baseline_bounds": []}, "findings": [finding],
+               "floor": {"noise_K": 0.01, "baseline_ratio": 9.0, "best_ratio": 2.0, "verdict": "v"}}
+    page = "\n".join(_added(summary))
+    assert OTHER in page and "a sensor on node P" in page and "--diagnosis" in page
+    finding["alternatives"] = []
+    assert "--diagnosis" not in "\n".join(_added(summary))

@@ -39,7 +39,7 @@ class SensorWorth:
     node: str
     measured: bool
     plate_variance_reduction_pct: float  # share of the plate's mean estimate variance the sensor removes
-    log_det_gain: float  # information on the designed-for parameters it adds (natural log of the determinant)
+    log_det_gain: float | None  # precision plans: information it adds on the designed-for parameters (log det)
     test_gain: float | None = None  # discrimination plans: what it adds to the test statistic between the rivals
 
     def line(self) -> str:
@@ -113,5 +113,5 @@ def rank_discriminating_sensors(favoured: "Rival", other: "Rival", plan: "Discri
         with_var, without_var = (base_var, other_var) if measured else (other_var, base_var)
         diff = {channel: (run_a[channel].to_numpy() - run_b[channel].to_numpy())[::every]}
         ranked.append(SensorWorth(channel, node, measured, 100 * (1 - with_var / without_var) if plate else np.nan,
-                                  np.nan, noncentrality(diff, noise, rho)))
+                                  None, noncentrality(diff, noise, rho)))
     return sorted(ranked, key=lambda s: (-np.nan_to_num(s.plate_variance_reduction_pct), -(s.test_gain or 0.0)))
