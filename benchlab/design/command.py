@@ -119,15 +119,17 @@ def design(args: argparse.Namespace, schema: str) -> int:
 def discriminate(args: argparse.Namespace, schema: str) -> int:
     """Read the diagnosis and runs, refit the two contenders, design, print the expected outcome, write the plan."""
     from benchlab.design.discrimination import design_discrimination
-    from benchlab.design.rivals import contest, refitted_rivals
+    from benchlab.design.rivals import baseline_model, contest, refitted_rivals
     from benchlab.design.sensors import rank_discriminating_sensors
-    from benchlab.model.catalog import resolve_model
 
+    if args.parameters:
+        raise InputError("command line", "--parameters", "--params (a discrimination design has no parameters of "
+                                                          "interest: it tells two models apart)")
     doc = read_document(args.diagnosis, "diagnose JSON", json.loads, (ValueError,), "a JSON object")
-    contest(doc, args.diagnosis)  # a diagnosis without a finding is refused before the runs are read
+    model = baseline_model(contest(doc, args.diagnosis), args.diagnosis)  # refused before the runs are read
     limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
     budget_s = checked_budget(args.budget, limits)
-    runs = load_runs(args.runs, resolve_model(doc["baseline"]["model"]))
+    runs = load_runs(args.runs, model)
     favoured, other, data = refitted_rivals(doc, args.diagnosis, runs)
     ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
     try:

@@ -22,6 +22,7 @@ from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import fit_multistart
 from benchlab.model.build import build_spec
 from benchlab.model.catalog import resolve_model
+from benchlab.model.definition import ModelDefinition
 from benchlab.runfile import ALIGNED_UNITS
 
 #: Starts of the parent's multistart fit (diagnose's baseline uses 4; the parent only seeds the rivals' fits).
@@ -57,19 +58,21 @@ def contest(doc: dict, source: str) -> Contest:
     return Contest(baseline, parent, tied["candidate"], other)
 
 
-def _datasets(runs: Sequence[pd.DataFrame], network) -> list[FitData]:
-    return [prepare(run, STEP_S, name=str(i), network=network) for i, run in enumerate(runs)]
+def baseline_model(plan: Contest, source: str) -> ModelDefinition:
+    """The diagnosis's baseline model, or InputError naming the diagnosis."""
+    try:
+        return resolve_model(plan.baseline)
+    except (OSError, ValueError) as exc:
+        raise InputError(source, "baseline.model", f"a built-in model or a model file ({exc})") from None
 
 
 def refitted_rivals(doc: dict, source: str, runs: Sequence[pd.DataFrame], seed: int = 0) -> tuple[Rival, Rival, list[FitData]]:
     """The two contenders of `doc` (a diagnose JSON) refitted to `runs`, the favoured (the named finding) first, and
     the runs as they were fitted (diagnose's step)."""
     plan = contest(doc, source)
-    try:
-        model = resolve_model(plan.baseline)
-    except (OSError, ValueError) as exc:
-        raise InputError(source, "baseline.model", f"a built-in model or a model file ({exc})") from None
-    datasets = _datasets(runs, build_spec(model).network)
+    model = baseline_model(plan, source)
+    network = build_spec(model).network
+    datasets = [prepare(run, STEP_S, name=str(i), network=network) for i, run in enumerate(runs)]
     shared = set.intersection(*(set(d.channels) for d in datasets))
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels if k in shared}
     units = {**ALIGNED_UNITS, **runs[0].attrs.get("units", {})}
