@@ -12,8 +12,8 @@ designed run, and delivered by the peer; "agrees" where expected and delivered s
 change) and lie within a factor of 2. Targets: delivered ≤ 20 % of the value; agreement on every seed. Exit 1 if
 a target is missed.
 
-`--discriminate`: per seed, the Table 1 run diagnosed (linear baseline, as the main job), `benchlab design
---diagnosis` on it and the designed run, and the peer Table 1 run of the plan's length. The two rivals are
+`--discriminate`: per seed, the Table 1 run diagnosed (nonlinear baseline, as the main job; Table 1 alone),
+`benchlab design --diagnosis` on it and the designed run, and the peer Table 1 run of the plan's length. The rivals are
 refitted to the Table 1 run with each new run (`design/rivals.py`, as the design refits them) and scored on the
 new run: each one's RMSE there, and diagnose's block test (5-min blocks, `engine.block_test`) both ways. Printed:
 which one is beaten at alpha on the designed run and on the peer; the expected RMSE gap against the delivered one
@@ -104,7 +104,7 @@ def discriminate_seed(seed: int, minutes: float, hours: float, folder: Path) -> 
     step(["run", "table1", *on, "--seed", str(seed), "--duration", str(hours * 3600), "--out", str(table1), "--force"])
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
-        step(["diagnose", str(table1), "--json"])
+        step(["diagnose", str(table1), "--baseline", "nonlinear", "--json"])
     diagnosis.write_text(printed.getvalue()[printed.getvalue().index("{"):printed.getvalue().rindex("}") + 1])
     step(["design", str(table1), "--diagnosis", str(diagnosis), "--budget", str(minutes), "--out", str(plan),
           "--force"])
