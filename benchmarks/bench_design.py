@@ -1,6 +1,7 @@
 """A designed run against a Table 1 run of the same length, on the reference plant (docs/design.md).
 
     .venv/bin/python benchmarks/bench_design.py [--seeds 101 102 103] [--minutes 30] [--hours 1] [--only] [--plant reference|paper] [--out DIR]
+    .venv/bin/python benchmarks/bench_design.py --discriminate [--seeds …] [--minutes 30] [--hours 1] [--out DIR]
 
 Per seed (seeds the tests do not use): the main job's Table 1 run (`--hours`, default 1 h as `benchlab pipeline`)
 on the simulated bench's reference plant, identified with the nonlinear model (4 starts, as the main job); then
@@ -9,7 +10,15 @@ the designed run's length (seed + 200). Both are identified together with the fi
 eq. (11): the standard error in % of the value after Table 1 alone, expected by the design, delivered by the
 designed run, and delivered by the peer; "agrees" where expected and delivered shrink alike (the same sign of the
 change) and lie within a factor of 2. Targets: delivered ≤ 20 % of the value; agreement on every seed. Exit 1 if
-a target is missed. Discrimination of diagnose's tied alternatives is not measured (not built, docs/design.md).
+a target is missed.
+
+`--discriminate`: per seed, the Table 1 run diagnosed (nonlinear baseline, as the main job; Table 1 alone),
+`benchlab design --diagnosis` on it and the designed run, and the peer Table 1 run of the plan's length. The rivals are
+refitted to the Table 1 run with each new run (`design/rivals.py`, as the design refits them) and scored on the
+new run: each one's RMSE there, and diagnose's block test (5-min blocks, `engine.block_test`) both ways. Printed:
+which one is beaten at alpha on the designed run and on the peer; the expected RMSE gap against the delivered one
+("agrees": same sign, within a factor of 2). The block test is in-sample here (both rivals fitted on the new run
+too), not held out as in diagnose.
 """
 
 from __future__ import annotations
@@ -70,6 +79,75 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool,
                 "delivered": delivered[n], "peer": peered[n]} for n in PARAMETERS}
 
 
+def scored(doc: dict, runs: list[Path]) -> dict[str, float]:
+    """The two rivals refitted to `runs` and scored on the last: RMSE of each (K) and the block test both ways."""
+    from benchlab.design.rivals import refitted_rivals
+    from benchlab.diagnose.engine import HeldOut, block_test
+    from benchlab.identify.fit import simulate_outputs
+    from benchlab.model.catalog import resolve_model
+    from benchlab.model.runs import load_runs
+
+    frames = load_runs(runs, resolve_model(doc["baseline"]["model"]))
+    favoured, other, data = refitted_rivals(doc, "diagnosis", frames)
+    held = [HeldOut([data[-1]], [simulate_outputs(r.network, r.params, data[-1])], []) for r in (favoured, other)]
+    return {"rmse_favoured": held[0].rmse, "rmse_other": held[1].rmse,
+            "p_other_beaten": block_test(held[1], held[0]), "p_favoured_beaten": block_test(held[0], held[1])}
+
+
+def discriminate_seed(seed: int, minutes: float, hours: float, folder: Path) -> dict:
+    """Table 1, diagnose, design --diagnosis, the designed run and its peer, each scored (`scored`)."""
+    import contextlib
+    import io
+
+    on = ["--bench", "sim", "--plant", "reference"]
+    table1, diagnosis, plan = folder / "table1.h5", folder / "diagnosis.json", folder / "plan.json"
+    step(["run", "table1", *on, "--seed", str(seed), "--duration", str(hours * 3600), "--out", str(table1), "--force"])
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        step(["diagnose", str(table1), "--baseline", "nonlinear", "--json"])
+    diagnosis.write_text(printed.getvalue()[printed.getvalue().index("{"):printed.getvalue().rindex("}") + 1])
+    step(["design", str(table1), "--diagnosis", str(diagnosis), "--budget", str(minutes), "--out", str(plan),
+          "--force"])
+    doc, diag = json.loads(plan.read_text()), json.loads(diagnosis.read_text())
+    designed, peer = folder / "designed.h5", folder / "peer.h5"
+    step(["run", str(plan), *on, "--seed", str(seed + 100), "--out", str(designed), "--force"])
+    step(["run", "table1", *on, "--seed", str(seed + 200), "--duration", str(doc["planned_min"] * 60),
+          "--out", str(peer), "--force"])
+    return {"expected": doc["expected"], "planned_min": doc["planned_min"], "designed": scored(diag, [table1, designed]),
+            "peer": scored(diag, [table1, peer])}
+
+
+def verdict(score: dict[str, float], alpha: float) -> str:
+    """Which rival the run beats at alpha (by the block test), or "tie"."""
+    if score["p_other_beaten"] < alpha:
+        return "other beaten"
+    return "favoured beaten" if score["p_favoured_beaten"] < alpha else "tie"
+
+
+def discriminate(args: argparse.Namespace) -> int:
+    """The discrimination benchmark's table (module docstring); exit 1 where a seed's tie is not broken or the
+    expected gap does not agree with the delivered one."""
+    from benchlab.diagnose.engine import ALPHA
+
+    missed = False
+    print("| seed | favoured vs other | planned min | expected gap K | delivered gap K | agrees | designed "
+          "| peer | p (other beaten), designed / peer |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for seed in args.seeds:
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = args.out / f"discriminate{seed}" if args.out else Path(tmp)
+            folder.mkdir(parents=True, exist_ok=True)
+            row = discriminate_seed(seed, args.minutes, args.hours, folder)
+        e, d, p = row["expected"], row["designed"], row["peer"]
+        gap = d["rmse_other"] - d["rmse_favoured"]
+        ok = gap * e["rmse_gap_K"] > 0 and 0.5 <= gap / e["rmse_gap_K"] <= 2.0
+        broken = verdict(d, ALPHA) != "tie"
+        missed |= not ok or not broken
+        print(f"| {seed} | {e['favoured']} vs {e['loser']} | {row['planned_min']:.1f} | {e['rmse_gap_K']:.4f} | {gap:.4f} | {'yes' if ok else 'no'} | {verdict(d, ALPHA)} "
+              f"| {verdict(p, ALPHA)} | {d['p_other_beaten']:.2g} / {p['p_other_beaten']:.2g} |", flush=True)
+    return 1 if missed else 0
+
+
 def agrees(row: dict[str, float]) -> bool:
     """Expected and delivered shrink alike (same sign of the change from before) and within a factor of 2."""
     same_sign = (row["expected"] - row["before"]) * (row["delivered"] - row["before"]) > 0
@@ -87,8 +165,12 @@ def main_(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", action="store_true", help="design for a2 and b2 alone (default: for every "
                         "parameter the Table 1 run leaves open, a2 and b2 among them)")
     parser.add_argument("--out", type=Path, help="keep the runs and files here (default: a temporary directory)")
+    parser.add_argument("--discriminate", action="store_true", help="measure `design --diagnosis` instead: the tie "
+                        "of the Table 1 run's diagnosis broken by the designed run, and not by the peer")
     args = parser.parse_args(argv)
     print(f"load average at start {os.getloadavg()[0]:.1f}")
+    if args.discriminate:
+        return discriminate(args)
     missed = False
     print("| seed | parameter | SE before | expected | delivered (designed) | peer (Table 1, same length) | agrees |")
     print("| --- | --- | --- | --- | --- | --- | --- |")

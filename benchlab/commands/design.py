@@ -1,5 +1,6 @@
-"""`benchlab design RUN.h5 [RUN2.h5 …] --params P.json --out PLAN.json [--budget MINUTES] [--bench sim|BENCH.toml]`:
-the next run, chosen to identify what the runs leave open (docs/design.md); `benchlab run PLAN.json` runs it."""
+"""`benchlab design RUN.h5 [RUN2.h5 …] --params P.json | --diagnosis D.json --out PLAN.json [--budget MINUTES]
+[--bench sim|BENCH.toml]`: the next run, chosen to identify what the runs leave open or to tell apart the models a
+diagnosis leaves tied (docs/design.md); `benchlab run PLAN.json` runs it."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ from benchlab.interrupts import interrupts_held
 from benchlab.outputs import check_output
 
 NAME = "design"
-HELP = "design the next run: launches and cool-downs that identify the parameters a parameter file leaves open"
+HELP = ("design the next run: launches and cool-downs that identify the parameters a parameter file leaves open, "
+        "or tell apart the models a diagnosis leaves tied")
 #: The plan file's schema (docs/contract.md §3, "Plan file").
 PLAN_SCHEMA = "benchlab-plan/1"
 DEFAULT_BUDGET_MIN = 30.0
@@ -22,8 +24,11 @@ DEFAULT_BUDGET_MIN = 30.0
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", metavar="RUN.h5", help="the runs so far (those the parameter file was "
                                                                    "identified on)")
-    parser.add_argument("--params", required=True, help="parameter file of `benchlab identify` on those runs: its "
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--params", help="parameter file of `benchlab identify` on those runs: its "
                         "not_identified parameters are designed for, the others are nuisance")
+    source.add_argument("--diagnosis", metavar="D.json", help="diagnose JSON of those runs: the run that best tells "
+                        "apart its tied alternatives (or its first finding and the model without it), each refitted")
     parser.add_argument("--parameters", metavar="NAME,…", help="design for these free parameters (default: those the "
                         "parameter file records as not identified); the others are nuisance")
     parser.add_argument("--out", required=True, type=cliargs.output_file, metavar="PLAN.json",
@@ -37,8 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output(Path(args.out), "--out", args.force, inputs=[args.params, *args.runs])
+    check_output(Path(args.out), "--out", args.force, inputs=[args.params or args.diagnosis, *args.runs])
     with interrupts_held():  # the implementation's imports (see benchlab.cli)
-        from benchlab.design.command import design
+        from benchlab.design.command import design, discriminate
 
-    return design(args, PLAN_SCHEMA)
+    return discriminate(args, PLAN_SCHEMA) if args.diagnosis else design(args, PLAN_SCHEMA)

@@ -14,7 +14,7 @@ from benchlab.design.blocks import candidate_blocks
 from benchlab.design.fisher import predicted_run
 from benchlab.design.precision import design_precision
 from benchlab.design.sensors import rank_sensors
-from benchlab.errors import InputError
+from benchlab.errors import InputError, read_document
 from benchlab.identify.data import prepare
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.model.catalog import model_spec
@@ -22,6 +22,7 @@ from benchlab.model.params import ModelParams, load_params
 from benchlab.model.runs import load_runs
 from benchlab.outputs import write_text
 from benchlab.runner.session import RunRequest, bench_config
+from protocols.limits import BenchLimits
 
 
 def nominal_values(params: ModelParams, open_: Mapping[str, str]) -> dict[str, float]:
@@ -49,6 +50,16 @@ def model_error_warnings(fit: object) -> list[str]:
             "designed run may bend other parameters instead (benchlab diagnose says what the model misses)"]
 
 
+def checked_budget(budget_min: float, limits: BenchLimits) -> float:
+    """The budget in s, or InputError where it is shorter than the shortest block on this bench."""
+    shortest = min((b.expected_s for b in candidate_blocks(limits)), default=np.inf)
+    if budget_min * 60.0 < shortest:
+        raise InputError("command line", "--budget", f"at least {np.ceil(shortest / 60):g} min: the shortest block "
+                                                     f"(heat, then a cool-down) lasts {shortest / 60:.1f} min on "
+                                                     f"this bench, got {budget_min:g}")
+    return budget_min * 60.0
+
+
 def design(args: argparse.Namespace, schema: str) -> int:
     """Read, check, design, print the expected outcome, write the plan (docs/design.md)."""
     params = load_params(args.params)
@@ -69,12 +80,7 @@ def design(args: argparse.Namespace, schema: str) -> int:
                                                         "(every parameter is identified: name some with --parameters)")
     nominal = nominal_values(params, open_)
     limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
-    budget_s = args.budget * 60.0
-    shortest = min((b.expected_s for b in candidate_blocks(limits)), default=np.inf)
-    if budget_s < shortest:
-        raise InputError("command line", "--budget", f"at least {np.ceil(shortest / 60):g} min: the shortest block "
-                                                     f"(heat, then a cool-down) lasts {shortest / 60:.1f} min on "
-                                                     f"this bench, got {args.budget:g}")
+    budget_s = checked_budget(args.budget, limits)
     runs = load_runs(args.runs, params.definition, nominal, str(args.params))
     data = [prepare(run, FIT_STEP_S, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
@@ -106,5 +112,44 @@ def design(args: argparse.Namespace, schema: str) -> int:
            "sensors": [asdict(s) for s in sensors], "warnings": warnings,
            "schedule": [s.as_dict() for s in plan.steps]}
     write_text(args.out, json.dumps(doc, indent=1) + "\n")
+    print(f"plan       {args.out}")
+    return 0
+
+
+def discriminate(args: argparse.Namespace, schema: str) -> int:
+    """Read the diagnosis and runs, refit the two contenders, design, print the expected outcome, write the plan."""
+    from benchlab.design.discrimination import design_discrimination
+    from benchlab.design.rivals import baseline_model, contest, refitted_rivals
+    from benchlab.design.sensors import rank_discriminating_sensors
+
+    if args.parameters:
+        raise InputError("command line", "--parameters", "--params (a discrimination design has no parameters of "
+                                                          "interest: it tells two models apart)")
+    doc = read_document(args.diagnosis, "diagnose JSON", json.loads, (ValueError,), "a JSON object")
+    model = baseline_model(contest(doc, args.diagnosis), args.diagnosis)  # refused before the runs are read
+    limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
+    budget_s = checked_budget(args.budget, limits)
+    runs = load_runs(args.runs, model)
+    favoured, other, data = refitted_rivals(doc, args.diagnosis, runs)
+    ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
+    try:
+        plan = design_discrimination(favoured, other, data, limits, ambient, budget_s)
+    except ValueError as exc:
+        raise InputError(args.bench, "limits", f"room for one block of heating and cooling ({exc})") from None
+    print("\n".join(plan.lines()))
+    sensors = rank_discriminating_sensors(favoured, other, plan, ambient, limits)
+    print("a sensor at each place, on the designed run (what it removes of the plate's estimate variance, what it "
+          "adds to the test between the two):")
+    print("\n".join(s.line() for s in sensors))
+    out = {"schema": schema, "kind": "discrimination", "model": doc["baseline"]["model"],
+           "diagnosis_file": str(args.diagnosis), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
+           "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
+           "blocks": [b.name for b in plan.blocks],
+           "expected": {"favoured": plan.favoured, "loser": plan.other, "rmse_gap_K": plan.expected_rmse_gap,
+                        "rms_difference_K": plan.rms_difference, "misfit_K": plan.noise,
+                        "statistic": plan.statistic, "statistic_now": plan.statistic_now, "p_value": plan.p_value},
+           "ambient_C": ambient, "sensors": [asdict(s) for s in sensors],
+           "schedule": [s.as_dict() for s in plan.steps]}
+    write_text(args.out, json.dumps(out, indent=1) + "\n")
     print(f"plan       {args.out}")
     return 0

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -21,6 +22,10 @@ from benchlab.design import fisher
 from benchlab.identify.data import prepare
 from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.network import ThermalNetwork
+
+if TYPE_CHECKING:
+    from benchlab.design.discrimination import DiscriminationDesign, Rival
+    from protocols.limits import BenchLimits
 
 #: The estimate the ranking is about: the pressure plate, which no sensor on the paper's bench reads.
 PLATE = "T_pressure_plate"
@@ -34,12 +39,15 @@ class SensorWorth:
     node: str
     measured: bool
     plate_variance_reduction_pct: float  # share of the plate's mean estimate variance the sensor removes
-    log_det_gain: float  # information on the designed-for parameters it adds (natural log of the determinant)
+    log_det_gain: float | None  # precision plans: information it adds on the designed-for parameters (log det)
+    test_gain: float | None = None  # discrimination plans: what it adds to the test statistic between the rivals
 
     def line(self) -> str:
         now = "measured now" if self.measured else "no sensor now"
+        second = (f"test statistic +{self.test_gain:.1f}" if self.test_gain is not None
+                  else f"information +{self.log_det_gain:.2f} (log det)")
         return (f"  {self.channel} (node {self.node}, {now}): plate variance -{self.plate_variance_reduction_pct:.1f} %,"
-                f" information +{self.log_det_gain:.2f} (log det)")
+                f" {second}")
 
 
 def _plate_variance(run: pd.DataFrame, params: Mapping[str, float], network: ThermalNetwork,
@@ -77,3 +85,33 @@ def rank_sensors(run: pd.DataFrame, params: Mapping[str, float], network: Therma
         ranked.append(SensorWorth(channel, node, measured, 100 * (1 - with_var / without_var),
                                   float(with_det - without_det)))
     return sorted(ranked, key=lambda s: (-np.nan_to_num(s.plate_variance_reduction_pct), -s.log_det_gain))
+
+
+def rank_discriminating_sensors(favoured: "Rival", other: "Rival", plan: "DiscriminationDesign", ambient_c: float,
+                                limits: "BenchLimits") -> list[SensorWorth]:
+    """Every place both rivals have a channel for, on the discrimination plan as predicted: the plate's variance a
+    sensor there removes (the favoured model's observer) and the test statistic between the rivals it adds (its
+    channel's difference over its misfit; a new sensor taking the worst measured misfit). A measured place is
+    valued by what losing it would cost."""
+    from benchlab.design.discrimination import STEP_S, noncentrality, predicted_run_both
+
+    run_a, run_b = predicted_run_both(favoured, other, plan.steps, ambient_c, limits)
+    network, params = favoured.network, favoured.params
+    sensors = list(network.measured)
+    noise = {**{c: max(plan.noise.values()) for c in network.outputs}, **plan.noise}
+    rho = min(favoured.rho, other.rho)
+    every = max(1, round(STEP_S / fisher.PREDICTION_DT_S))  # the statistic counts samples at diagnose's step
+    plate = PLATE in network.outputs
+    base_var = _plate_variance(run_a, params, network, sensors) if plate else np.nan
+    ranked = []
+    for channel, node in network.outputs.items():
+        if channel not in other.network.outputs:
+            continue
+        measured = channel in sensors
+        other_var = _plate_variance(run_a, params, network,
+                                    [s for s in sensors if s != channel] if measured else [*sensors, channel])
+        with_var, without_var = (base_var, other_var) if measured else (other_var, base_var)
+        diff = {channel: (run_a[channel].to_numpy() - run_b[channel].to_numpy())[::every]}
+        ranked.append(SensorWorth(channel, node, measured, 100 * (1 - with_var / without_var) if plate else np.nan,
+                                  None, noncentrality(diff, noise, rho)))
+    return sorted(ranked, key=lambda s: (-np.nan_to_num(s.plate_variance_reduction_pct), -(s.test_gain or 0.0)))

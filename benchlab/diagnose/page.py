@@ -121,6 +121,13 @@ def _added(summary: dict) -> list[str]:
         parts += [f"**{text(f['candidate'])}** ({label}) – {text(f['summary'])}. {signal}, mechanism "
                   f"{literal(f['mechanism'])}: {literal(f['extension'])}",
                   table(("parameter", "value", "unit"), params)]
+        parts += [f"Not told apart from {literal(a['candidate'])} (gain {a['gain_pct']:.0f} %): "
+                  f"{text(a['tell_apart_by'])}." for a in f.get("alternatives", [])]
+    if any(f.get("alternatives") for f in summary["findings"]):
+        parts.append("`benchlab design RUN.h5 … --diagnosis D.json` (this diagnosis as `--json`) designs the run that "
+                     "tells the first tie apart, says which should lose by how much, and ranks every place a sensor "
+                     "could go (the pressure plate, the chamber air, the housing, …) by the plate's estimate "
+                     "variance it removes and the test between the two it adds (docs/design.md).")
     return parts
 
 

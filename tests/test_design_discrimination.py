@@ -1,0 +1,85 @@
+"""`benchlab design --diagnosis`: the T-optimal run between two extensions of a diagnosis, refitted to the session's
+20-min Table 1 run; its expected outcome printed, its schedule within the bench's limits, and more telling than a
+Table 1 run of the same length under the same two models."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from benchlab.cli import main
+from benchlab.design.discrimination import differences, noncentrality
+from benchlab.design.rivals import contest, refitted_rivals
+from benchlab.runner.session import RunRequest, bench_config
+from protocols.limits import schedule_problems
+from protocols.table1 import table1_schedule
+
+#: Two explanations of the paper's speed-dependent convection (eq. 10-11) as diagnose's library names them.
+FAVOURED, OTHER = "speed_convection", "engine_speed_linear_R_PA_R_FA"
+
+
+def tied(favoured: str = FAVOURED, other: str | None = OTHER) -> dict:
+    """A diagnosis of the linear model with one finding, tied with `other` where given."""
+    alternatives = [{"candidate": other}] if other else []
+    return {"baseline": {"model": "linear"},
+            "findings": [{"candidate": favoured, "round": 1, "alternatives": alternatives}]}
+
+
+def test_contest_is_the_tie_else_the_cause_against_its_parent():
+    doc = {"baseline": {"model": "linear"},
+           "findings": [{"candidate": "a", "round": 1, "alternatives": []},
+                        {"candidate": "b", "round": 2, "alternatives": [{"candidate": "c"}]}]}
+    found = contest(doc, "d.json")
+    assert (found.parent, found.favoured, found.other) == (("a",), "b", "c")
+    alone = contest(tied(other=None), "d.json")
+    assert (alone.parent, alone.favoured, alone.other) == ((), FAVOURED, None)
+
+
+def test_a_diagnosis_without_findings_is_one_line(refused, run_file, tmp_path):
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps({"baseline": {"model": "linear"}, "findings": [], "leads": []}))
+    refused(["design", str(run_file), "--diagnosis", str(path), "--out", str(tmp_path / "plan.json")],
+            "findings", "nothing is left open")
+
+
+def test_designed_run_tells_the_rivals_apart_better_than_table1(run_file, short_run, tmp_path, capsys):
+    path, out = tmp_path / "d.json", tmp_path / "plan.json"
+    path.write_text(json.dumps(tied()))
+    assert main(["design", str(run_file), "--diagnosis", str(path), "--out", str(out), "--budget", "15"]) == 0
+    printed = capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["kind"] == "discrimination" and doc["planned_min"] <= 15
+    expected = doc["expected"]
+    assert (expected["favoured"], expected["loser"]) == (FAVOURED, OTHER)
+    assert expected["rmse_gap_K"] > 0 and f"expected: {OTHER}" in printed
+    limits = bench_config(RunRequest(protocol="design", out=out, bench="sim")).limits
+    from protocols.schedule import steps_from_rows
+
+    steps = steps_from_rows(doc["schedule"], str(out))
+    assert not schedule_problems(steps, limits)
+    # the same two models, refitted the same way, on a Table 1 run of the plan's length: less to tell them apart
+    favoured, other, _ = refitted_rivals(tied(), "d.json", [short_run])
+    peer = table1_schedule(11, duration_s=doc["planned_min"] * 60)
+    ambient = doc["ambient_C"]
+    peer_statistic = noncentrality(differences(favoured, other, peer, ambient, limits), expected["misfit_K"],
+                                   min(favoured.rho, other.rho))
+    assert expected["statistic"] > peer_statistic
+    # every place both models have is ranked, the plate (unmeasured) by what it removes of its own variance
+    assert {s["channel"] for s in doc["sensors"]} >= {"T_pressure_plate", "T_flywheel", "T_air", "T_housing"}
+    assert all(s["test_gain"] is not None and s["test_gain"] >= 0 for s in doc["sensors"])
+    assert "test statistic +" in printed
+
+
+def test_diagnose_page_names_each_tie_and_the_design_that_settles_it():
+    from benchlab.diagnose.page import _added
+
+    finding = {"candidate": FAVOURED, "summary": "s", "signal": "engine_speed", "mechanism": "m", "extension": "e",
+               "params": {}, "units": {},
+               "alternatives": [{"candidate": OTHER, "gain_pct": 12.0, "tell_apart_by": "a sensor on node P"}]}
+    summary = {"method": {"baseline_bounds": []}, "findings": [finding],
+               "floor": {"noise_K": 0.01, "baseline_ratio": 9.0, "best_ratio": 2.0, "verdict": "v"}}
+    page = "\n".join(_added(summary))
+    assert OTHER in page and "a sensor on node P" in page and "--diagnosis" in page
+    finding["alternatives"] = []
+    assert "--diagnosis" not in "\n".join(_added(summary))
