@@ -359,9 +359,9 @@ class SimPhysics:
         time (`np.asarray` reads one whole)."""
         from benchlab.network import state_channels
 
-        n = max(rows - self._truth_k0, 0)
+        n, computed = max(rows - self._truth_k0, 0), self._end - self._truth_k0
         names = state_channels(self.plant.network)
-        return {names[s]: self._truth.column(i, n) for i, s in enumerate(self.plant.state_names)}
+        return {names[s]: self._truth.column(i, n, computed) for i, s in enumerate(self.plant.state_names)}
 
     def true_convection_resistance(self, engine_rpm: float, clutch_state: int) -> float:
         """R_FA = R_PA of eq. (11) at an operating point: the paper plant's own; NaN for a plant without one."""

@@ -33,25 +33,26 @@ class TruthStore:
             os.pwrite(file.fileno(), np.ascontiguousarray(states[:, i], dtype=ITEM).tobytes(), start * ITEM.itemsize)
         self.rows = max(self.rows, start + len(states))
 
-    def read(self, column: int, start: int, stop: int) -> np.ndarray:
-        """Rows [start, stop) of one column; NaN where nothing was written."""
+    def read(self, column: int, start: int, stop: int, valid: int | None = None) -> np.ndarray:
+        """Rows [start, stop) of one column; NaN where nothing was written, and from row `valid` on (rows a cut
+        took back, not computed again yet)."""
         out = np.full(max(stop - start, 0), np.nan)
-        have = max(min(stop, self.rows) - start, 0)
+        have = max(min(stop, self.rows, self.rows if valid is None else valid) - start, 0)
         if have:
             data = os.pread(self._files[column].fileno(), have * ITEM.itemsize, start * ITEM.itemsize)
             out[:have] = np.frombuffer(data, dtype=ITEM)
         return out
 
-    def column(self, index: int, rows: int) -> "TruthColumn":
-        """The first `rows` rows of a column, read lazily."""
-        return TruthColumn(self, index, rows)
+    def column(self, index: int, rows: int, valid: int | None = None) -> "TruthColumn":
+        """The first `rows` rows of a column, read lazily; NaN from row `valid` on (`read`)."""
+        return TruthColumn(self, index, rows, valid)
 
 
 class TruthColumn:
     """A column of a TruthStore read a slice at a time; `np.asarray` reads it whole (for small uses and tests)."""
 
-    def __init__(self, store: TruthStore, index: int, rows: int) -> None:
-        self.store, self.index, self.rows = store, index, int(rows)
+    def __init__(self, store: TruthStore, index: int, rows: int, valid: int | None = None) -> None:
+        self.store, self.index, self.rows, self.valid = store, index, int(rows), valid
         self.dtype, self.shape, self.size = ITEM, (self.rows,), self.rows
 
     def __len__(self) -> int:
@@ -60,9 +61,9 @@ class TruthColumn:
     def __getitem__(self, part: "slice | int | np.ndarray") -> "np.ndarray | float":
         if isinstance(part, slice) and part.step in (None, 1):
             start, stop, _ = part.indices(self.rows)
-            return self.store.read(self.index, start, max(start, stop))
+            return self.store.read(self.index, start, max(start, stop), self.valid)
         return np.asarray(self)[part]
 
     def __array__(self, dtype: "np.dtype | None" = None, copy: "bool | None" = None) -> np.ndarray:
-        whole = self.store.read(self.index, 0, self.rows)
+        whole = self.store.read(self.index, 0, self.rows, self.valid)
         return whole if dtype is None else whole.astype(dtype, copy=False)

@@ -21,3 +21,10 @@ def test_rows_round_trip_overwrite_and_read_nan_where_nothing_was_written():
     assert np.isnan(whole[12:]).all() and len(column) == 14 and column.shape == (14,)
     assert np.array_equal(column[3:9], whole[3:9]) and np.array_equal(column[::5], whole[::5], equal_nan=True)
     assert np.array_equal(column[20:30], np.array([]))
+
+
+def test_rows_a_cut_took_back_read_nan_until_computed_again():
+    store = TruthStore(1)
+    store.write(0, np.arange(10, dtype=float)[:, None])
+    column = np.asarray(store.column(0, 10, valid=6))  # the bench cut back to row 6: rows 6-9 are not computed now
+    assert np.array_equal(column[:6], np.arange(6.0)) and np.isnan(column[6:]).all()

@@ -298,8 +298,9 @@ def job_figures(figures: dict, story: dict, cooldowns, eq11_errors: dict[str, fl
     the job could not measure one (no truth, no finding); the long cool-downs' figure is the best model's, eq. (11)'s
     that of the model identified with the sweep by the paper's procedure (HELD_MODEL; DIAGNOSED_MODEL where the
     points could not determine eq. 11), each model's beside it."""
-    nonlinear = figures["nonlinear"]
     from benchlab.report.index import mean_cooldown_nrmse
+
+    nonlinear = figures["nonlinear"]
 
     plate = story["plate"]
     by_model = {m: mean_cooldown_nrmse(cooldowns, m) for m in (cooldowns[0].nrmse_pct if cooldowns else ())}
@@ -335,6 +336,8 @@ def job_figures(figures: dict, story: dict, cooldowns, eq11_errors: dict[str, fl
 
 def run(args: argparse.Namespace) -> int:
     with interrupts_held():  # the implementation's imports (see benchlab.cli): Ctrl-C meanwhile is exit 130
+        import numpy as np
+
         from benchlab.identify.api import identify
         from benchlab.identify.identifiability import recorded
         from benchlab.model.params import load_params, save_params
@@ -342,8 +345,6 @@ def run(args: argparse.Namespace) -> int:
         from benchlab.report.index import cooldown_scores, mean_cooldown_nrmse, write_index
         from benchlab.report.resistance import standard_errors
         from benchlab.report.scores import estimate
-        import numpy as np
-
         from benchlab.observer.spread import slipping_residual, start_discrepancy
         from benchlab.report.showcase import FLYWHEEL, PLATE, labelled_mask, peak_misfit, scores_on, verdict
         from benchlab.wear import analyse_wear
@@ -416,11 +417,11 @@ def run(args: argparse.Namespace) -> int:
                                 flywheel_miss, plate_relative)
     if story["wear_band"] is not None:
         wear["from_observer"] = story["wear_band"].band.as_dict()["wear_mm"]
+        wear["flywheel_miss_K"] = flywheel_miss
     write_text(out / "wear.json", json.dumps(wear, indent=2, default=float))
     plot_wear(wear_report, out / "wear.png")
     print(f"wear      {wear['engagements']} engagements, {wear['friction_energy_J'] / 1e6:.2f} MJ -> {out / 'wear.json'}")
     if "from_observer" in wear:
-        wear["flywheel_miss_K"] = flywheel_miss
         print(f"          the flywheel's band widened by the model's {flywheel_miss:.2f} K RMS miss on its sensor while "
               f"slipping on the validation run (the sensor reads behind the friction face)")
     for side, values in wear.get("from_observer", {}).items():
