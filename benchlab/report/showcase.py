@@ -213,6 +213,10 @@ def verdict(figures: Mapping[str, Any]) -> str:
         parts.append(f"diagnose{diagnosed} names {', '.join(causes)}: the extension gains {gain:.0f} % on the "
                      f"validation run it never saw{figures_text}"
                      + (f" (with patches, not causes: {', '.join(patches)})" if patches else ""))
+    elif patches and np.isfinite(gain):
+        parts.append(f"diagnose{diagnosed} names no cause: {', '.join(patches)} describe the misfit as patches "
+                     f"(docs/diagnose.md), gaining {gain:.0f} % on the validation run it never saw"
+                     + (f" (leads: {', '.join(leads)})" if leads else ""))
     elif "causes" in figures:
         parts.append("diagnose names no cause whose gain carries to the validation run"
                      + (f" (leads: {', '.join(leads)})" if leads else "")
