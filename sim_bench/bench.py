@@ -203,14 +203,34 @@ class SimPhysics:
         for a plant with μ(ϑ) piece by piece along μ's periods (each piece's torque from its period's factor)."""
         pieces, k = [], k0
         while k < k0 + n:
-            end = k0 + n if self.plant.friction is None else min(k0 + n, (k // self._mu_period + 1) * self._mu_period)
+            end = self._piece_end(k, k0 + n)
             cols = self._channels(self.drivetrain, k, end - k)
             pieces.append((cols, self.plant.advance(cols, self.dt)))
+            self._note_periods(k, end, pieces[-1][1])
             k = end
         if len(pieces) == 1:
             return pieces[0]
         return ({name: np.concatenate([c[name] for c, _ in pieces]) for name in pieces[0][0]},
                 {name: np.concatenate([t[name] for _, t in pieces]) for name in pieces[0][1]})
+
+    def _piece_end(self, k: int, stop: int) -> int:
+        """Where the plant's piece from grid point k ends: at the next μ period while the clutch slips (the torque it
+        transmits reads μ), else at `stop`. Set-points hold over a chunk, so a clutch that does not slip at k (open,
+        or clamped and locked) does not slip again before the chunk ends, and μ changes nothing there: one piece
+        instead of one per period (the plant's laws iterated once over it, not once per 2 s)."""
+        if self.plant.friction is None or not self.drivetrain.slipping:
+            return stop
+        return min(stop, (k // self._mu_period + 1) * self._mu_period)
+
+    def _note_periods(self, k: int, end: int, states: Mapping[str, np.ndarray]) -> None:
+        """μ of every period that starts inside the piece k..end, from the plant's state at its start, as a piece per
+        period would have taken it: a cut inside such a period starts its launch from that μ."""
+        if self.plant.friction is None:
+            return
+        first = k // self._mu_period + 1
+        for period in range(first, (end - 1) // self._mu_period + 1):
+            row = period * self._mu_period - k
+            self._mu[period] = self.plant.friction_factor(np.array([states[s][row] for s in self.plant.state_names]))
 
     def _friction_factor(self, k0: int) -> float:
         """μ(ϑ)/μ_cal for the period holding grid point k0: from the plant's state at the period's start (taken when

@@ -177,11 +177,13 @@ class ThermalPlant:
         return ThermalPlant(self.params, tuple(self.effects) + tuple(effects), self.base_network, self.reads_states,
                             self.friction, self.name)
 
-    def friction_factor(self) -> float:
-        """μ(ϑ)/μ_cal at the current state: 1 for a plant without temperature-dependent friction."""
-        if self.friction is None or self.state is None:
+    def friction_factor(self, state: np.ndarray | None = None) -> float:
+        """μ(ϑ)/μ_cal at `state` (the states in `state_names` order; default the current state): 1 for a plant
+        without temperature-dependent friction."""
+        state = self.state if state is None else state
+        if self.friction is None or state is None:
             return 1.0
-        return self.friction(dict(zip(self.state_names, self.state.tolist())))
+        return self.friction(dict(zip(self.state_names, state.tolist())))
 
     @property
     def state_names(self) -> list[str]:

@@ -104,3 +104,51 @@ def test_the_plant_keeps_the_states_of_its_numpy_laws():
                 for name, values in stored["states"].items())
     assert worst <= 1e-3, worst  # within 1 mK; bit for bit where numpy's and the compiled exp/log agree
     assert max(stored["states"]["T_clutch_disc"]) > 95.5 and min(stored["states"]["T_chamber_air"]) < 31.0
+
+
+def test_a_piece_per_slipping_period_only_keeps_the_states():
+    """Issue 47: the plant is advanced one μ period (2 s) at a time only while the clutch slips; a chunk where it
+    does not is one piece. The states stay those of a piece per period: the solid nodes within 1 mK, the chamber
+    air (and its sensor) within one step of the laws' 0.5 % resolution (reference_plant._BIN) on its largest
+    temperature difference to a neighbour: where a law's value sits on a bin's edge, the fixed point may take
+    either bin, however the horizon is cut."""
+    from sim_bench import reference_plant as ref
+    from sim_bench.bench import SimPhysics
+    from sim_bench.clock import SimClock
+
+    script = [(0.0, 1800.0, None, 0.0), (4.0, 1800.0, 110.0, 150.0), (12.0, 2500.0, None, 0.0),
+              (60.0, 1200.0, 60.0, 0.0), (95.0, 900.0, None, 0.0)]  # (time, engine rpm, clutch torque or None, load)
+
+    def run(piece_end) -> tuple[dict[str, np.ndarray], int]:
+        clock = SimClock(0.0)
+        physics = SimPhysics(SimBenchConfig(seed=4, dropouts=False, initial_c={"F": 60.0, "L": 62.0, "P": 55.0,
+                                                                                "A": 28.0, "SA": 28.0}),
+                             clock, reference_plant())
+        if piece_end is not None:
+            physics._piece_end = piece_end.__get__(physics)
+        advances = []
+        plant_advance = physics.plant.advance
+        physics.plant.advance = lambda channels, dt: advances.append(dt) or plant_advance(channels, dt)
+        for t, rpm, torque, load in script:
+            clock.t = t
+            physics.advance(t)
+            physics.set_drive_speed(rpm)
+            physics.set_clutch(torque or 0.0, torque is None)
+            physics.set_load_torque(load)
+        clock.t = 150.0
+        physics.advance(150.0)
+        return {name: np.asarray(column) for name, column in physics.true_states(15000).items()}, len(advances)
+
+    def per_period(self, k: int, stop: int) -> int:  # the rule before: every μ period its own piece
+        return min(stop, (k // self._mu_period + 1) * self._mu_period)
+
+    (merged, merged_pieces), (pieces, per_period_pieces) = run(None), run(per_period)
+    air = {"T_chamber_air", "T_air"}
+    for name in set(merged) - air:
+        assert np.max(np.abs(merged[name] - pieces[name])) <= 1e-3, name
+    neighbours = np.maximum.reduce([np.abs(pieces["T_chamber_air"] - pieces[n])
+                                    for n in ("T_pressure_plate", "T_cover", "T_flywheel_bulk", "T_housing")])
+    for name in air:
+        assert np.all(np.abs(merged[name] - pieces[name]) <= ref._BIN * neighbours + 1e-3), name
+    # the launches slipped over several periods, each its own piece; the rest of the run came in far fewer
+    assert len(script) < merged_pieces < per_period_pieces / 3

@@ -209,7 +209,17 @@ class NetworkStream:
         self.inputs = len(network.sources) + len(network.boundaries)
         self.points: _Points | None = None
         self.keyed_by: tuple = ()  # which laws vary, and the constant laws' values, the points were made with
-        self._values: dict[int, tuple[object, tuple | None, object]] = {}  # id(law) -> (law, reads, value)
+        # each distinct resistance law once (links that share one law object share its value), then the sources'
+        # heat flows and the boundaries' temperatures
+        resistances: dict[int, int] = {}
+        self._resistances: list[_Law] = []
+        for link in network.links:
+            if id(link.resistance) not in resistances:
+                resistances[id(link.resistance)] = len(self._resistances)
+                self._resistances.append(_Law(lambda ch, link=link: _conductance(link, params, ch)))
+        self._link_law = [resistances[id(link.resistance)] for link in network.links]
+        self._flows = [_Law(lambda ch, s=s: s.heat_flow(params, ch)) for s in network.sources]
+        self._flows += [_Law(lambda ch, b=b: b.temperature(ch)) for b in network.boundaries]
         self._last: tuple | None = None  # (samples, laws, inputs, x0, states) of the last run of one block
 
     def run(self, channels: Channels, x0: np.ndarray, block: int | None = None) -> np.ndarray | None:
@@ -227,11 +237,9 @@ class NetworkStream:
         for start, stop in _blocks(n, block or BLOCK):
             part = channels if stop - start == n else window(channels, start, stop)  # one block: the very arrays
             size = stop - start
-            laws = self._conductances(part)
-            flows = [self._value(s.heat_flow, lambda ch, s=s: as_samples(s.heat_flow(self.params, ch), size), part)
-                     for s in self.network.sources]
-            flows += [self._value(b.temperature, lambda ch, b=b: as_samples(b.temperature(ch), size), part)
-                      for b in self.network.boundaries]
+            values = [law.value_on(part) for law in self._resistances]
+            laws = [values[i] for i in self._link_law]  # 1/R of every link (`solver._conductances`)
+            flows = [as_samples(law.value_on(part), size) for law in self._flows]
             if size == n and self._repeats(n, laws, flows, x0):
                 return self._last[-1]
             if out is None:
@@ -264,32 +272,6 @@ class NetworkStream:
         self._last = (n, laws, flows, x0.copy(), out) if 0 < n <= (block or BLOCK) else None
         return out
 
-    def _conductances(self, channels: Channels) -> list[np.ndarray | float]:
-        """1/R of every link (`solver._conductances`), each law's value reused while what it read is unchanged."""
-        out: list[np.ndarray | float] = []
-        by_law: dict[int, np.ndarray | float] = {}
-        for link in self.network.links:
-            if id(link.resistance) not in by_law:
-                by_law[id(link.resistance)] = self._value(
-                    link.resistance, lambda ch, link=link: _conductance(link, self.params, ch), channels)
-            out.append(by_law[id(link.resistance)])
-        return out
-
-    def _value(self, law: object, compute, channels: Channels):
-        """compute(channels) of a law, or its value from before where every channel it read is the array it read."""
-        entry = self._values.get(id(law))
-        if entry is not None and entry[0] is law and entry[1] is not None:
-            get = channels.get
-            for name, before in entry[1]:
-                if get(name, _ABSENT) is not before:
-                    break
-            else:
-                return entry[2]
-        reading = _Reading(channels)
-        value = compute(reading)
-        self._values[id(law)] = (law, None if reading.whole else tuple(reading.read.items()), value)
-        return value
-
     def _repeats(self, n: int, laws: list, flows: list, x0: np.ndarray) -> bool:
         """Whether a run of one block of n samples with these laws, inputs and start is the last one's again."""
         if self._last is None:
@@ -297,6 +279,38 @@ class NetworkStream:
         last_n, last_laws, last_flows, last_x0, _ = self._last
         return (n == last_n and _identical(x0, last_x0) and all(_identical(a, b) for a, b in zip(laws, last_laws))
                 and all(_identical(a, b) for a, b in zip(flows, last_flows)))
+
+
+class _Law:
+    """One law of a network (a link's conductance, a source's heat flow, a boundary's temperature) as a stream
+    evaluates it: its value kept while every channel it read is the very array it read before (a caller hands a
+    changed channel as a new array, never changes one in place), for good once it read none (the parameters do not
+    change)."""
+
+    __slots__ = ("compute", "reads", "value", "fixed")
+
+    def __init__(self, compute) -> None:
+        self.compute = compute  # channels -> value
+        self.reads: tuple | None = None  # (name, array) of each channel read; None: not evaluated, or read all
+        self.value: object = None
+        self.fixed = False
+
+    def value_on(self, channels: Channels):
+        """The law's value on the channels, computed only where a channel it read is not the array it read."""
+        if self.fixed:
+            return self.value
+        if self.reads is not None:
+            get = channels.get
+            for name, before in self.reads:
+                if get(name, _ABSENT) is not before:
+                    break
+            else:
+                return self.value
+        reading = _Reading(channels)
+        self.value = self.compute(reading)
+        self.reads = None if reading.whole else tuple(reading.read.items())
+        self.fixed = self.reads == ()
+        return self.value
 
 
 def _identical(a: object, b: object) -> bool:
