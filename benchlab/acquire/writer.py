@@ -34,10 +34,10 @@ from typing import Any
 
 import h5py
 import numpy as np
-from isal import isal_zlib
 from benchlab.jit import njit
 
 from benchlab.outputs import OutputError, is_no_space, no_space
+from benchlab.runfile.compressed import compressed_dataset
 from benchlab.runfile.read import complete_events, read_progress, text
 from benchlab.runfile.schema import EVENT_FIELDS, SCHEMA, aligned_description
 
@@ -730,7 +730,6 @@ def _tmp(path: Path) -> Path:
 
 
 COMPRESS_FROM = 1024  # values: smaller datasets of the compact file stay contiguous
-CHUNK = 65536  # values per compressed chunk
 
 
 class _Rows:
@@ -756,23 +755,11 @@ def _sliced(values: Any) -> bool:
 
 
 def _dataset(parent: h5py.Group, name: str, arr: "np.ndarray | _Rows", compact: bool) -> h5py.Dataset:
-    """`arr` as dataset `name`: contiguous, or in the compact file (if large enough) chunked, shuffled and gzipped.
-
-    The chunks are shuffled and deflated here (ISA-L, several times faster than HDF5's zlib filter at level 1)
-    and written as they are: HDF5's own shuffle and gzip filters read them, as any HDF5 reader does.
-    """
+    """`arr` as dataset `name`: contiguous, or in the compact file (if large enough) chunked, shuffled and gzipped
+    (`runfile.compressed`)."""
     if not compact or arr.size < COMPRESS_FROM:
         return parent.create_dataset(name, data=arr[:], track_times=False)
-    chunk = min(arr.size, CHUNK)
-    ds = parent.create_dataset(name, shape=arr.shape, dtype=arr.dtype, chunks=(chunk,), compression="gzip",
-                               compression_opts=1, shuffle=True, track_times=False)
-    for start in range(0, arr.size, chunk):
-        part = np.ascontiguousarray(arr[start:start + chunk])
-        if len(part) < chunk:  # a chunk is whole even where the dataset ends inside it
-            part = np.concatenate([part, np.zeros(chunk - len(part), dtype=arr.dtype)])
-        shuffled = part.view(np.uint8).reshape(chunk, arr.dtype.itemsize).T.copy()  # HDF5's shuffle filter
-        ds.id.write_direct_chunk((start,), isal_zlib.compress(shuffled, 1))
-    return ds
+    return compressed_dataset(parent, name, arr)
 
 
 def describe_layout(layout: Layout) -> dict[str, Any]:

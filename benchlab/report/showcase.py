@@ -214,7 +214,8 @@ def verdict(figures: Mapping[str, Any]) -> str:
                      f"validation run it never saw{figures_text}"
                      + (f" (with patches, not causes: {', '.join(patches)})" if patches else ""))
     elif patches and np.isfinite(gain):
-        parts.append(f"diagnose{diagnosed} names no cause: {', '.join(patches)} describe the misfit as patches "
+        describe = "describes the misfit as a patch" if len(patches) == 1 else "describe the misfit as patches"
+        parts.append(f"diagnose{diagnosed} names no cause: {', '.join(patches)} {describe} "
                      f"(docs/diagnose.md), gaining {gain:.0f} % on the validation run it never saw"
                      + (f" (leads: {', '.join(leads)})" if leads else ""))
     elif "causes" in figures:
