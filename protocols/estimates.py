@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Protocol
 
 from benchlab.drivetrain import RPM
+from protocols.schedule import Condition, pulse_due
 
 #: Where a run starts: the bench at room temperature.
 ROOM_C = 22.0
@@ -91,36 +92,30 @@ def _flywheel(plant: Plant, seconds: float, rpm: float, shaft_rpm: float, state:
     return 0.5 * (seen["T_flywheel_1"] + seen["T_flywheel_2"])
 
 
-def _steady(history: list[float], window_n: int, target_c: float, band_k: float, drift_k: float) -> bool:
-    """The sweep's "steady" condition (protocols.schedule.Condition) on the last `window_n` samples."""
-    import numpy as np
-
-    if len(history) < window_n:
-        return False
-    window = np.asarray(history[-window_n:])
-    half = window_n // 2
-    return abs(window.mean() - target_c) <= band_k and abs(window[half:].mean() - window[:half].mean()) <= drift_k
-
-
 def sweep_durations(points: Sequence[tuple[float, int, float]], heat: Mapping[str, float], plant: Plant,
                     dt: float = ESTIMATE_DT_S) -> list[tuple[float, float]]:
     """(heat-up, cool-down) seconds of each sweep point, simulated on `plant` from ROOM_C in the order the run
-    goes: pulses at `heat`'s torque and speed with the runner's pulse rule (benchlab.runner.engine `_Pulses`: a
-    pulse starts while the flywheel is below the target minus half the last pulse's rise) until the flywheel is
-    steady at the target, then (ω_e, S, shaft speed) until it reads the cool-down target. `heat`: the
+    goes: pulses at `heat`'s torque and speed with the heat step's pulse rule (protocols.schedule `pulse_due`) until
+    the flywheel is steady at the target (the runner's test, `Condition.steady_over`), then (ω_e, S, shaft speed)
+    until it reads the cool-down target. `heat`: the
     SweepConfig's fields; `points`: (engine rpm, S, shaft rpm)."""
     import numpy as np
 
     plant.reset(ROOM_C)
     out = []
     hold = (heat["heat_speed_rpm"], 0.0)
+    steady = Condition("T_flywheel", "steady", heat["heat_target_c"], heat["band_k"], heat["window_s"], heat["drift_k"])
+
+    def settled(history: list[float]) -> bool:
+        times = np.arange(len(history)) * dt
+        return steady.steady_over(times, np.asarray(history), times[-1])
+
     for rpm, state, shaft in points:
         history = list(_flywheel(plant, 2.0, *hold, 0, 0.0, dt))  # the shaft comes to rest under the load first
-        rise, window_n = 0.0, int(round(heat["window_s"] / dt))
-        while not _steady(history, window_n, heat["heat_target_c"], heat["band_k"], heat["drift_k"]) \
-                and len(history) * dt < heat["heat_timeout_s"]:
+        rise = 0.0
+        while not settled(history) and len(history) * dt < heat["heat_timeout_s"]:
             before = history[-1]
-            if before < heat["heat_target_c"] - rise / 2.0:
+            if pulse_due(before, heat["heat_target_c"], rise):
                 pulse = _flywheel(plant, heat["pulse_s"], *hold, 1, heat["heat_torque_nm"], dt)
                 history += list(pulse)
                 rise = max(0.0, float(pulse[-1]) - before)

@@ -34,6 +34,21 @@ class Condition:
     window_s: float = 120.0
     drift_k: float = 0.3
 
+    def steady_over(self, times: Any, values: Any, now: float) -> bool:
+        """The "steady" test on the channel's samples (`times`, `values`: arrays, oldest first) seen up to `now`:
+        false until they span the window."""
+        import numpy as np
+
+        if len(times) == 0 or now - times[0] < self.window_s:
+            return False
+        window = times >= now - self.window_s
+        second = times >= now - self.window_s / 2
+        first = window & ~second
+        if not first.any() or not second.any():
+            return False
+        return (abs(float(np.mean(values[window])) - self.value) <= self.band_k
+                and abs(float(np.mean(values[second])) - float(np.mean(values[first]))) <= self.drift_k)
+
     def describe(self) -> str:
         if self.op == "steady":
             return (f"{self.channel} steady at {self.value:g} (mean of {self.window_s:g} s within ±{self.band_k:g},"
@@ -84,6 +99,12 @@ class Step:
 
 
 PHASES = ("launch", "drive", "open", "heat")
+
+
+def pulse_due(flywheel_c: float, target_c: float, last_rise_k: float) -> bool:
+    """A "heat" step's rule for starting a pulse: the flywheel below the target by more than half the last pulse's
+    rise, so that the saw-tooth the pulses leave is centred on the target."""
+    return flywheel_c < target_c - last_rise_k / 2.0
 
 
 class Setpoints(NamedTuple):

@@ -27,7 +27,7 @@ from benchlab.runner.devices import BenchStatus
 from benchlab.runner.interlocks import Engagements, InterlockSet, Trip
 from protocols.limits import BenchLimits
 from protocols.safety import FRICTION_POWER_SEEN_W, OPEN_IDLE, SafeState, strongest
-from protocols.schedule import Condition, Step, setpoints
+from protocols.schedule import Condition, Step, pulse_due, setpoints
 
 STATE_FIELDS = ("cycle", "next_step", "resumes", "energy_j", "held")  # held: 1 while an interlock holds the bench
 
@@ -284,17 +284,8 @@ class Runner:
 
     def _steady(self, c: Condition, now: float) -> bool:
         h = self._history
-        if not h or now - h[0][0] < c.window_s:
-            return False
         times = np.fromiter((p[0] for p in h), float, len(h))
-        vals = np.fromiter((p[1] for p in h), float, len(h))
-        w = times >= now - c.window_s
-        half = times >= now - c.window_s / 2
-        first, second = vals[w & ~half], vals[half]
-        if first.size == 0 or second.size == 0:
-            return False
-        mean = float(np.mean(vals[w]))
-        return abs(mean - c.value) <= c.band_k and abs(float(np.mean(second)) - float(np.mean(first))) <= c.drift_k
+        return c.steady_over(times, np.fromiter((p[1] for p in h), float, len(h)), now)
 
     # -- the tick ---------------------------------------------------------------------------------------
     def _tick(self, fast: bool = False, interlocks: bool = True, until: float = math.inf) -> None:
@@ -462,7 +453,7 @@ class _Pulses:
                 self.rise = max(0.0, st.T_flywheel - self._t_start_temp)
             return True
         held = np.isfinite(st.clutch_speed) and abs(st.clutch_speed) < 20.0
-        if held and np.isfinite(st.T_flywheel) and st.T_flywheel < target - self.rise / 2.0:
+        if held and np.isfinite(st.T_flywheel) and pulse_due(st.T_flywheel, target, self.rise):
             self.on, self.until = True, now + self.step.pulse_s
             self._t_start_temp = st.T_flywheel
             return True
