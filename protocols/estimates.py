@@ -78,6 +78,12 @@ ESTIMATE_DT_S = 0.5
 COOL_PIECE_S = 60.0
 
 
+#: The channels a sweep's estimate feeds its plant (what `_flywheel` sets): a model whose laws read others cannot
+#: time the sweep.
+ESTIMATE_CHANNELS = ("engine_speed", "clutch_speed", "clutch_torque", "clutch_state", "friction_power",
+                     "load_torque", "T_ambient")
+
+
 def _flywheel(plant: Plant, seconds: float, rpm: float, shaft_rpm: float, state: int, torque_nm: float,
               dt: float) -> Any:
     """The flywheel sensors' mean over `seconds` at one operating point (friction power where the clutch slips
@@ -86,8 +92,7 @@ def _flywheel(plant: Plant, seconds: float, rpm: float, shaft_rpm: float, state:
 
     n = max(1, int(round(seconds / dt)))
     power = torque_nm * plant.friction_factor() * (rpm - shaft_rpm) * RPM
-    channels = {"engine_speed": rpm, "clutch_speed": shaft_rpm, "clutch_torque": torque_nm,
-                "clutch_state": float(state), "friction_power": power, "load_torque": 0.0, "T_ambient": ROOM_C}
+    channels = dict(zip(ESTIMATE_CHANNELS, (rpm, shaft_rpm, torque_nm, float(state), power, 0.0, ROOM_C)))
     seen = plant.sensor_temperatures(plant.advance({k: np.full(n, v) for k, v in channels.items()}, dt))
     return 0.5 * (seen["T_flywheel_1"] + seen["T_flywheel_2"])
 

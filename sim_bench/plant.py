@@ -16,8 +16,7 @@ import numpy as np
 from benchlab.model.clutch import clutch_network, convection_resistance
 from benchlab.network import Lag, Link, Node, Source, ThermalNetwork
 from benchlab.model.params import paper_params
-from benchlab.network.solver import DEFAULT_RESOLUTION, run_network
-from benchlab.network.stream import NetworkStream
+from benchlab.network.plant import NetworkPlant
 
 STEFAN_BOLTZMANN = 5.670374419e-8
 KELVIN = 273.15
@@ -143,7 +142,7 @@ def custom_source(name: str, node: str, signal: str, mechanism: str,
     return Effect(name, signal, mechanism, edit)
 
 
-class ThermalPlant:
+class ThermalPlant(NetworkPlant):
     """True temperatures of the bench for given drivetrain channels; keeps its state between calls.
 
     By default the paper's network (`name` "paper"); `network` gives another one (sim_bench.reference_plant), whose
@@ -163,14 +162,12 @@ class ThermalPlant:
             self.params.update(effect.params)
             network = effect.edit(network, self.params)
         network.validate()
-        self.network = network
+        super().__init__(network, self.params)
         self.effects = tuple(effects)
-        self.state: np.ndarray | None = None
         self.reads_states = reads_states
         self.friction = friction
         self.name = name
         self._iterative = reads_states or any(e.reads_states for e in effects)
-        self._stream: NetworkStream | None = None
 
     def with_effects(self, effects: Sequence[Effect]) -> "ThermalPlant":
         """The same plant (network, parameters, friction) with `effects` added to its own."""
@@ -184,23 +181,6 @@ class ThermalPlant:
         if self.friction is None or state is None:
             return 1.0
         return self.friction(dict(zip(self.state_names, state.tolist())))
-
-    @property
-    def state_names(self) -> list[str]:
-        return self.network.state_names
-
-    def reset(self, temperature_c: float | Mapping[str, float]) -> None:
-        """Start every state (or each named state) at the given temperature."""
-        if isinstance(temperature_c, Mapping):
-            self.state = np.array([temperature_c[s] for s in self.state_names], dtype=float)
-        else:
-            self.state = np.full(len(self.state_names), float(temperature_c))
-
-    def advance(self, channels: Mapping[str, np.ndarray], dt: float) -> dict[str, np.ndarray]:
-        """True state temperatures at the start of each sample of `channels`; the state moves to their end."""
-        states = self._states_from_now(channels, dt)
-        self.state = states[-1].copy()
-        return {name: states[:-1, i] for i, name in enumerate(self.state_names)}
 
     def prime(self, channels: Mapping[str, np.ndarray], dt: float) -> None:
         """Compile (or load from numba's cache) the solver kernels `advance` calls, on a few samples of the
@@ -223,14 +203,6 @@ class ThermalPlant:
                 break  # the reference plant's laws: converged (the paper's effects keep their fixed count)
         return states
 
-    def _run(self, channels: Mapping[str, np.ndarray], dt: float) -> np.ndarray:
-        """States (N + 1, n) of one pass from the current state, through the plant's own stream of the network
-        (what repeats from pass to pass and chunk to chunk is not computed again), the solver where it cannot."""
-        if self._stream is None or self._stream.dt != dt:
-            self._stream = NetworkStream(self.network, self.params, dt, DEFAULT_RESOLUTION)
-        states = self._stream.run(channels, self.state)
-        return states.T if states is not None else run_network(self.network, self.params, channels, dt, self.state)
-
     def _with_states(self, channels: dict[str, np.ndarray], states: np.ndarray | None) -> dict[str, np.ndarray]:
         if not self._iterative:
             return channels
@@ -238,11 +210,3 @@ class ThermalPlant:
         for i, name in enumerate(self.state_names):
             channels[f"_state_{name}"] = states[:-1, i] if states is not None else np.full(n, self.state[i])
         return channels
-
-    def sensor_temperatures(self, true_states: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """What the sensors see: measured channel name -> true temperature at the sensor; the flywheel node's two
-        PT1000s as T_flywheel_1 and T_flywheel_2 (both the flywheel node where the network has one sensor)."""
-        seen = {channel: true_states[state] for channel, state in self.network.outputs.items()}
-        for sensor in ("T_flywheel_1", "T_flywheel_2"):
-            seen.setdefault(sensor, seen["T_flywheel"])
-        return seen

@@ -3,6 +3,9 @@ duration the run takes (issue 34)."""
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import pytest
 
 from benchlab.cli import main
@@ -83,3 +86,36 @@ def test_duration_is_a_floor_for_what_diagnose_needs(tmp_path):
     out = tmp_path / "t1.h5"
     assert main(["run", "table1", "--bench", "sim", "--duration", f"{MIN_DURATION_S:g}", "--out", str(out), "-q"]) == 0
     assert len(load_diagnosed_runs([str(out)], resolve_model("linear", "--model"))) == 1  # not refused as too short
+
+
+def _estimated_s(capsys, *argv: str) -> float:
+    """The expected duration `benchlab run ... --dry-run` prints (s)."""
+    assert main(["run", "cooldown-sweep", "--dry-run", "--grid", "1000:1,1500:0", *argv]) == 0
+    return float(re.search(r"estimated (\d+) s", capsys.readouterr().out).group(1))
+
+
+def test_a_hardware_sweep_is_timed_on_the_parameter_files_model(params_file, tmp_path, capsys):
+    """Issue 46: on a hardware bench a sweep's heat-ups and cool-downs are timed on the model of `--params` (the
+    sim bench's estimate on its own plant); without one, the paper's closed forms; a model that cannot be driven
+    by the bench's channels is one line, exit 2."""
+    bench = str(Path(__file__).parents[1] / "examples" / "bench.toml")
+    on_model = _estimated_s(capsys, "--bench", bench, "--params", str(params_file))
+    on_paper_plant = _estimated_s(capsys, "--bench", "sim", "--plant", "paper")  # the same network and values
+    assert on_model == pytest.approx(on_paper_plant, abs=1.0)
+    from benchlab.model.catalog import resolve_model
+    from benchlab.model.params import ModelParams, load_params, save_params
+
+    heavy = load_params(params_file)  # a clutch twice as heavy: heats and cools twice as slowly
+    heavy.update(C_P=2 * heavy["C_P"], C_F=2 * heavy["C_F"])
+    save_params(tmp_path / "heavy.json", heavy)
+    assert _estimated_s(capsys, "--bench", bench, "--params", str(tmp_path / "heavy.json")) > 1.6 * on_model
+    assert _estimated_s(capsys, "--bench", bench) != on_model  # without a parameter file: the closed forms
+
+    text = (Path(__file__).parents[1] / "models" / "clutch-nonlinear.toml").read_text()
+    assert "a2*exp(b2*engine_speed)" in text
+    (tmp_path / "geared.toml").write_text(text.replace("a2*exp(b2*engine_speed)", "a2*exp(b2*gearbox_speed)"))
+    geared = resolve_model(str(tmp_path / "geared.toml"))  # its open clutch reads a channel the bench has not
+    save_params(tmp_path / "geared.json", ModelParams(geared, dict(load_params(params_file))))
+    assert main(["run", "cooldown-sweep", "--dry-run", "--bench", bench, "--params", str(tmp_path / "geared.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "geared.json" in err and "gearbox_speed" in err, err

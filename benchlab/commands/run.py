@@ -41,7 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dry-run", action="store_true", help="print the schedule, check limits, estimate duration")
     parser.add_argument("--resume", metavar="RUN.h5", help="continue an interrupted run with its next planned cycle")
     parser.add_argument("--params", help="cooldown-sweep: analyse the cool-downs with this parameter file "
-                        "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`)")
+                        "(or 'sim-truth') after the run and store /analysis (see `benchlab cooldown`); on a hardware "
+                        "bench its model also times the heat-ups and cool-downs in the plan (--dry-run's estimate)")
     parser.add_argument("--plant", choices=("reference", "paper"),
                         help="--bench sim: the simulated clutch, the reference plant (default, docs/plant.md) or the "
                              "paper's network; a resumed run keeps its own")
@@ -165,7 +166,7 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     request = RunRequest(protocol="design" if plan else args.protocol or "", out=out, bench=bench, seed=args.seed, cycles=args.cycles,
                          duration_s=args.duration, grid=args.grid, dry_run=args.dry_run, resume=bool(args.resume),
                          progress=for_terminal(args.quiet), steps=plan[0] if plan else None,
-                         options=plan[1] if plan else None)
+                         options=plan[1] if plan else None, params=args.params)
     code, summary = execute(request)
     if summary is not None:
         print("\n".join(summary.lines()))

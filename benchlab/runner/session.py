@@ -33,12 +33,13 @@ from benchlab.runner.devices import BenchConfig, DriverBench, prime_drivers
 from benchlab.runner.engine import STATE_FIELDS, Runner, RunSummary
 from drivers.errors import CanLogError
 from protocols import catalog
+from protocols.estimates import ESTIMATE_CHANNELS
 from protocols.limits import BenchLimits, check_schedule, schedule_problems, with_launch_estimates
 from protocols.schedule import Step, describe, duration_s
 
 if TYPE_CHECKING:
+    from protocols.estimates import Plant
     from sim_bench.bench import SimBench, SimulatedBench
-    from sim_bench.plant import ThermalPlant
 
 # what a run asks for: a BENCH.toml path, "sim" (the default simulated bench) or a simulated bench of its own
 BenchChoice = Union[str, "os.PathLike[str]", "SimulatedBench"]
@@ -59,6 +60,7 @@ class RunRequest:
     install_signals: bool = True
     steps: tuple[Step, ...] | None = None  # a custom schedule instead of the named protocol's (tests, scripts, plans)
     options: dict[str, Any] | None = None  # what the run file records of a custom schedule (a plan's source)
+    params: str | None = None  # a parameter file whose model times a hardware bench's cool-down sweep in advance
 
 
 def software_version() -> str:
@@ -96,15 +98,30 @@ def _simulated(request: RunRequest, config: BenchConfig) -> str:
     return "" if simulated(request.bench) is not None else opening.simulated_devices(config)
 
 
-def estimate_plant(request: RunRequest) -> "ThermalPlant | None":
-    """A fresh copy of the thermal plant a simulated cool-down sweep will run on, for its expected durations
-    (protocols.estimates.sweep_durations); None for other protocols and on hardware (the paper's closed forms)."""
-    sim = simulated(request.bench)
-    if sim is None or request.protocol != "cooldown-sweep":
+def estimate_plant(request: RunRequest) -> "Plant | None":
+    """A fresh copy of the thermal plant a cool-down sweep will run on, for its expected durations
+    (protocols.estimates.sweep_durations): the simulated bench's, or on hardware the model of `request.params`;
+    None for other protocols and on hardware without a parameter file (the paper's closed forms)."""
+    if request.protocol != "cooldown-sweep":
         return None
-    from sim_bench.reference_plant import DEFAULT_PLANT, plant_named
+    sim = simulated(request.bench)
+    if sim is not None:
+        from sim_bench.reference_plant import DEFAULT_PLANT, plant_named
 
-    return sim.plant.with_effects(()) if sim.plant is not None else plant_named(DEFAULT_PLANT)
+        return sim.plant.with_effects(()) if sim.plant is not None else plant_named(DEFAULT_PLANT)
+    if request.params is None or request.params == "sim-truth":
+        return None
+    from benchlab.model.params import load_params
+    from benchlab.network.plant import NetworkPlant
+
+    params = load_params(request.params)
+    model = params.definition
+    unknown = sorted(model.law_channels() - set(ESTIMATE_CHANNELS))
+    if "T_flywheel" not in model.outputs or unknown:
+        raise InputError(request.params, "model", f"a clutch model that reads only {', '.join(ESTIMATE_CHANNELS)} "
+                                                  f"and has a T_flywheel output, to time the sweep (model "
+                                                  f"{model.label} reads {', '.join(unknown) or 'no T_flywheel'})")
+    return NetworkPlant(params.network, params)
 
 
 def bench_config(request: RunRequest) -> BenchConfig:
