@@ -14,10 +14,6 @@ import sys
 
 from benchlab.interrupts import note_interrupts
 
-#: the commands that read or write Parquet (export --to OUT.parquet, batch's table): the only ones given pyarrow
-PARQUET_COMMANDS = frozenset({"export", "batch"})
-
-
 class _Hidden(importlib.abc.MetaPathFinder):
     """An import of `package` (or a module of it) fails as if it were not installed."""
 
@@ -35,11 +31,17 @@ def command_of(argv: list[str]) -> str | None:
     return next((word for word in argv if not word.startswith("-")), None)
 
 
+def needs_parquet(argv: list[str]) -> bool:
+    """Whether the command line may read or write Parquet: batch (its table), or an export to a .parquet file."""
+    command = command_of(argv)
+    return command == "batch" or (command == "export" and any(word.endswith(".parquet") for word in argv))
+
+
 def main() -> int:
     """Note interrupts, hide pyarrow from a command without Parquet, then run the command line (benchlab.cli.main
     answers the interrupts noted)."""
     note_interrupts()
-    if command_of(sys.argv[1:]) not in PARQUET_COMMANDS:
+    if not needs_parquet(sys.argv[1:]):
         sys.meta_path.insert(0, _Hidden("pyarrow"))
     from benchlab.cli import main as run_command_line
 

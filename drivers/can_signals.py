@@ -65,3 +65,23 @@ TX_KEYS = frozenset({
     "load.torque_setpoint", "load.enable", "load.cmd_alive",
     "estop.request", "estop.source", "estop.alive", "pc.hb_state", "pc.hb_alive",
 })
+
+
+#: The run file's raw CAN streams: per stream its columns as (column, logical DBC signal key, unit).
+CAN_STREAMS = {
+    "can_drive": (("speed", "drive.speed", "rpm"), ("torque", "drive.torque", "N*m"),
+                  ("state", "drive.state", "1"), ("fault_code", "drive.fault_code", "1")),
+    "can_clutch": (("torque", "clutch.torque", "N*m"), ("position", "clutch.position", "mm"),
+                   ("clamp_state", "clutch.clamp_state", "1"), ("state", "clutch.state", "1"),
+                   ("fault_code", "clutch.fault_code", "1")),
+    "can_load": (("torque", "load.torque", "N*m"), ("speed", "load.speed", "rpm"),
+                 ("state", "load.state", "1"), ("fault_code", "load.fault_code", "1")),
+}
+#: The DBC signal (logical key of drivers.can_signals.BENCH_SIGNALS) each raw CAN column holds, by (stream, column):
+#: what `benchlab export` gives the DBC's value tables from.
+CAN_COLUMN_SIGNALS = {(stream, column): key for stream, cols in CAN_STREAMS.items() for column, key, _ in cols}
+#: The /aligned channels taken from the CAN status streams: (channel, stream, column, times the gear ratio);
+#: `_clamp_state` is the actuator's (derive_aligned makes clutch_state and friction_power of it).
+CAN_ALIGNED = (("engine_speed", "can_drive", "speed", False), ("clutch_speed", "can_load", "speed", True),
+               ("clutch_torque", "can_clutch", "torque", False), ("_clamp_state", "can_clutch", "clamp_state", False),
+               ("load_torque", "can_load", "torque", False))

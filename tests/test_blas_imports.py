@@ -129,5 +129,14 @@ def test_commands_without_parquet_load_no_pyarrow(command, run_file, params_file
     assert _as_console(*argv, code=code) == ["True", "False"]  # pandas loaded, pyarrow not
 
 
+def test_a_csv_export_loads_neither_pyarrow_nor_the_simulation_stack(run_file, tmp_path) -> None:
+    """Issue 47: a command that does not simulate loads no numba or scipy, and only Parquet loads pyarrow."""
+    code = ("import sys\nfrom benchlab.console import main\nsys.argv = ['benchlab', *sys.argv[1:]]\ncode = main()\n"
+            "print(code, sorted(m for m in ('pandas', 'pyarrow', 'numba', 'scipy') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code, "export", str(run_file), "--to", str(tmp_path / "run.csv")],
+                          env=_clean_env(), capture_output=True, text=True, timeout=600)
+    assert done.stdout.splitlines()[-1] == "0 ['pandas']", done.stderr[-2000:]
+
+
 def test_parquet_export_loads_pyarrow(run_file, tmp_path) -> None:
     assert _as_console("export", run_file, "--to", tmp_path / "run.parquet") == ["True", "True"]

@@ -24,8 +24,7 @@ def can_sources(attrs: dict[str, str]) -> dict[str, BusSource]:
     """Export channel name (`can_drive.state`) -> its BusSource for every raw CAN column of the bench's layout."""
     import cantools
 
-    from benchlab.runner.devices import CAN_COLUMN_SIGNALS
-    from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS
+    from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CAN_COLUMN_SIGNALS
 
     try:
         configured = json.loads(attrs.get("bench_config", "{}")).get("dbc")

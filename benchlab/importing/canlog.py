@@ -41,7 +41,7 @@ CAN_LOG_SUFFIXES = (".blf", ".asc", ".trc", ".log", ".mf4")
 #: Time stamps beyond this (s) are UNIX time (after 1973): the log says when it was recorded.
 UNIX_TIME_S = 1e8
 #: The internal channel of the actuator's clamp state (0 open, 1 slipping, 2 clamped) on the grid, as the bench's
-#: layout names it (benchlab.runner.devices.CAN_ALIGNED).
+#: layout names it (drivers.can_signals.CAN_ALIGNED).
 CLAMP_STATE = "_clamp_state"
 #: A BLF file's header starts with "LOGG" and its own size (python-can's blf.FILE_HEADER_STRUCT); each object with
 #: "LOBJ", its header's size and version, its size and its type (OBJ_HEADER_BASE_STRUCT), padded to 4 bytes; a log
@@ -59,8 +59,7 @@ INFLATE_PIECE = 1 << 20
 
 def bench_entries(gear_ratio: float) -> list[Mapped]:
     """The contract channels `benchlab run` takes from the bench's CAN signals, as mapping entries (DBC names)."""
-    from benchlab.runner.devices import CAN_ALIGNED, CAN_COLUMN_SIGNALS
-    from drivers.can_signals import BENCH_SIGNALS
+    from drivers.can_signals import BENCH_SIGNALS, CAN_ALIGNED, CAN_COLUMN_SIGNALS
 
     entries = []
     for channel, stream, column, geared in CAN_ALIGNED:

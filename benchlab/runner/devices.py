@@ -28,7 +28,7 @@ from benchlab.acquire import writer as acquire_writer
 from benchlab.drivetrain import DrivetrainFacts, friction_power
 from benchlab.runfile.schema import ALIGNED_UNITS
 from drivers import cvd
-from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CLAMP_CLAMPED, CLAMP_SLIPPING
+from drivers.can_signals import BENCH_DBC, BENCH_SIGNALS, CAN_ALIGNED, CAN_STREAMS, CLAMP_CLAMPED, CLAMP_SLIPPING
 from drivers.clutch_node import SENSOR_STATUSES
 from drivers.errors import CanLogError, ConnectionLost, DriverError
 from protocols.limits import BenchLimits
@@ -147,24 +147,7 @@ def actuator_slipping(clamp_state: float) -> float:  # pragma: no cover - compil
 Reading = tuple[str, "float | np.ndarray", "tuple[float, ...] | np.ndarray"]  # one row, or a block: times, rows
 BenchEvent = tuple[float, str, str]  # (time, kind, detail)
 
-_CAN_STREAMS = {
-    "can_drive": (("speed", "drive.speed", "rpm"), ("torque", "drive.torque", "N*m"),
-                  ("state", "drive.state", "1"), ("fault_code", "drive.fault_code", "1")),
-    "can_clutch": (("torque", "clutch.torque", "N*m"), ("position", "clutch.position", "mm"),
-                   ("clamp_state", "clutch.clamp_state", "1"), ("state", "clutch.state", "1"),
-                   ("fault_code", "clutch.fault_code", "1")),
-    "can_load": (("torque", "load.torque", "N*m"), ("speed", "load.speed", "rpm"),
-                 ("state", "load.state", "1"), ("fault_code", "load.fault_code", "1")),
-}
-_CAN_KEYS = {stream: tuple(key for _, key, _ in cols) for stream, cols in _CAN_STREAMS.items()}
-#: The DBC signal (logical key of drivers.can_signals.BENCH_SIGNALS) each raw CAN column holds, by (stream, column):
-#: what `benchlab export` gives the DBC's value tables from.
-CAN_COLUMN_SIGNALS = {(stream, column): key for stream, cols in _CAN_STREAMS.items() for column, key, _ in cols}
-#: The /aligned channels taken from the CAN status streams: (channel, stream, column, times the gear ratio);
-#: `_clamp_state` is the actuator's (derive_aligned makes clutch_state and friction_power of it).
-CAN_ALIGNED = (("engine_speed", "can_drive", "speed", False), ("clutch_speed", "can_load", "speed", True),
-               ("clutch_torque", "can_clutch", "torque", False), ("_clamp_state", "can_clutch", "clamp_state", False),
-               ("load_torque", "can_load", "torque", False))
+_CAN_KEYS = {stream: tuple(key for _, key, _ in cols) for stream, cols in CAN_STREAMS.items()}
 _STATUS_MESSAGE = {"drive": "can_drive", "clutch": "can_clutch", "load": "can_load"}
 
 
@@ -320,7 +303,7 @@ def bench_layout(config: BenchConfig) -> Layout:
                             ("supply", "V"), ("rssi", "dBm"), ("lqi", "1"), ("flags", "1")),
                    1.0 / config.node_period_s + 1.0, 1.5 * config.node_period_s),
     ]
-    for stream, cols in _CAN_STREAMS.items():
+    for stream, cols in CAN_STREAMS.items():
         cycle = status_cycle_s(config, cols[0][1])
         streams.append(StreamSpec(stream, tuple((c, u) for c, _, u in cols), 1.0 / cycle, CAN_HOLD_CYCLES * cycle))
     if config.can_timestamps == "interface":  # run time = CAN interface time + offset (drivers/timebase.py)
