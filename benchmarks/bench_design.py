@@ -52,7 +52,40 @@ def shares(params_file: Path) -> dict[str, float]:
     return {n: doc["uncertainty"].get(n, float("inf")) / abs(doc["params"][n]) for n in PARAMETERS}
 
 
-def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool,
+def read_shares(eq11: dict | None) -> dict[str, float]:
+    """Standard error of each of PARAMETERS in % of its value from eq. (11) fitted to cool-down points (inf where
+    the points do not determine it)."""
+    eq11 = eq11 or {}
+    return {n: eq11[f"{n}_se"] / abs(eq11[n]) if eq11.get(n) and f"{n}_se" in eq11 else float("inf")
+            for n in PARAMETERS}
+
+
+def read_designed(run: Path, params: Path) -> dict:
+    """`benchlab cooldown RUN --json`: the designed run's cool-downs read one by one, eq. (11) fitted to them."""
+    import contextlib
+    import io
+
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        step(["cooldown", str(run), "--params", str(params), "--json", "--no-store"])
+    text = printed.getvalue()
+    return json.loads(text[text.index("{"):text.rindex("}") + 1])["eq11"]
+
+
+def read_peer(run: Path, params: Path) -> dict | None:
+    """The peer's held stretches read the same way (`design.points.held_points`), eq. (11) fitted to them."""
+    from benchlab.design.points import held_points
+    from benchlab.identify.cooldown import fit_eq11, segment_model
+    from benchlab.model.params import load_params
+
+    loaded = load_params(params)
+    try:
+        return fit_eq11(held_points([run], dict(loaded.items()), segment_model(loaded)), partial=True)
+    except ValueError:
+        return None
+
+
+def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
              plant: str) -> dict[str, dict[str, float]]:
     """The figures of one seed: share before, expected, delivered (designed) and peer, per parameter."""
     on = ["--bench", "sim", "--plant", plant]
@@ -61,7 +94,7 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool,
           str(table1), "--force"])
     step(["identify", str(table1), "--model", "nonlinear", "--starts", "4", "--out", str(first), "--force"])
     plan = folder / "plan.json"
-    aim = ["--parameters", ",".join(PARAMETERS)] if only else []
+    aim = [] if joint else ["--parameters", ",".join(PARAMETERS)]
     step(["design", str(table1), "--params", str(first), *aim, "--budget", str(minutes), "--out", str(plan), "--force"])
     doc = json.loads(plan.read_text())
     designed, peer = folder / "designed.h5", folder / "peer.h5"
@@ -69,14 +102,21 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool,
     step(["run", "table1", *on, "--seed", str(seed + 200), "--duration", str(doc["planned_min"] * 60),
           "--out", str(peer), "--force"])
     after, with_peer = folder / "designed.params.json", folder / "peer.params.json"
-    step(["identify", str(table1), str(designed), "--model", "nonlinear", "--starts", "4", "--out", str(after),
-          "--force"])
+    if doc.get("identification") == "cooldowns":
+        eq11 = read_designed(designed, first)
+        delivered, values = read_shares(eq11), {n: (eq11 or {}).get(n, float("nan")) for n in PARAMETERS}
+    else:
+        step(["identify", str(table1), str(designed), "--model", "nonlinear", "--starts", "4", "--out", str(after),
+              "--force"])
+        delivered, values = shares(after), {n: json.loads(after.read_text())["params"][n] for n in PARAMETERS}
+    peer_read = read_shares(read_peer(peer, first))
     step(["identify", str(table1), str(peer), "--model", "nonlinear", "--starts", "4", "--out", str(with_peer),
           "--force"])
-    before, delivered, peered = shares(first), shares(after), shares(with_peer)
+    before, peered = shares(first), shares(with_peer)
     return {n: {"before": before[n], "expected": doc["expected"].get(n, {}).get("relative_error_expected",
                                                                                  float("nan")),
-                "delivered": delivered[n], "peer": peered[n]} for n in PARAMETERS}
+                "delivered": delivered[n], "value": values[n], "peer": peered[n], "peer_read": peer_read[n]}
+            for n in PARAMETERS}
 
 
 def scored(doc: dict, runs: list[Path]) -> dict[str, float]:
@@ -162,8 +202,9 @@ def main_(argv: list[str] | None = None) -> int:
     parser.add_argument("--plant", choices=("reference", "paper"), default="reference",
                         help="the simulated clutch (the paper's network: the model's own structure, a check that the "
                              "design works where its assumptions hold)")
-    parser.add_argument("--only", action="store_true", help="design for a2 and b2 alone (default: for every "
-                        "parameter the Table 1 run leaves open, a2 and b2 among them)")
+    parser.add_argument("--joint", action="store_true", help="design for every parameter the Table 1 run leaves "
+                        "open, identified jointly with it (default: for a2 and b2 alone, read from the designed run's "
+                        "cool-downs)")
     parser.add_argument("--out", type=Path, help="keep the runs and files here (default: a temporary directory)")
     parser.add_argument("--discriminate", action="store_true", help="measure `design --diagnosis` instead: the tie "
                         "of the Table 1 run's diagnosis broken by the designed run, and not by the peer")
@@ -172,18 +213,20 @@ def main_(argv: list[str] | None = None) -> int:
     if args.discriminate:
         return discriminate(args)
     missed = False
-    print("| seed | parameter | SE before | expected | delivered (designed) | peer (Table 1, same length) | agrees |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print("| seed | parameter | SE before | expected | delivered (designed) | value | peer, joint | peer, read alike "
+          "| agrees |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             folder = args.out / f"seed{seed}" if args.out else Path(tmp)
             folder.mkdir(parents=True, exist_ok=True)
-            rows = one_seed(seed, args.minutes, args.hours, folder, args.only, args.plant)
+            rows = one_seed(seed, args.minutes, args.hours, folder, args.joint, args.plant)
         for name, row in rows.items():
             ok = agrees(row)
             missed |= not ok or not row["delivered"] <= TARGET_SHARE
             print(f"| {seed} | {name} | {100 * row['before']:.3g} % | {100 * row['expected']:.3g} % | "
-                  f"{100 * row['delivered']:.3g} % | {100 * row['peer']:.3g} % | {'yes' if ok else 'no'} |", flush=True)
+                  f"{100 * row['delivered']:.3g} % | {row['value']:.4g} | {100 * row['peer']:.3g} % | "
+                  f"{100 * row['peer_read']:.3g} % | {'yes' if ok else 'no'} |", flush=True)
     print(f"load average at end {os.getloadavg()[0]:.1f}")
     return 1 if missed else 0
 

@@ -12,7 +12,9 @@ import numpy as np
 
 from benchlab.design.blocks import candidate_blocks
 from benchlab.design.fisher import predicted_run
-from benchlab.design.precision import design_precision
+from benchlab.design.precision import design_cooldown_reading, design_precision
+from benchlab.identify.cooldown import segment_model
+from benchlab.identify.staged import EQ11
 from benchlab.design.sensors import rank_sensors
 from benchlab.errors import InputError, read_document
 from benchlab.identify.data import prepare
@@ -79,6 +81,13 @@ def design(args: argparse.Namespace, schema: str) -> int:
         raise InputError(args.params, "not_identified", "at least one parameter of the model the runs leave open "
                                                         "(every parameter is identified: name some with --parameters)")
     nominal = nominal_values(params, open_)
+    reading = set(interest) <= set(EQ11)  # eq. (11) alone: read from the designed run's cool-downs (docs/design.md)
+    if reading:
+        from benchlab.design.points import values_from_runs
+
+        free = {p.name: p for p in params.definition.free_parameters()}
+        nominal.update(values_from_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
+                                        {n: (free[n].min, free[n].max) for n in EQ11}, segment_model(params)))
     limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
     budget_s = checked_budget(args.budget, limits)
     runs = load_runs(args.runs, params.definition, nominal, str(args.params))
@@ -87,12 +96,23 @@ def design(args: argparse.Namespace, schema: str) -> int:
     reported = params.extra.get("uncertainty") or {}
     identified = [n for n in names if n not in open_]
     try:
-        plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits, ambient,
-                                budget_s)
+        if reading:
+            fit = params.extra.get("fit") if isinstance(params.extra.get("fit"), dict) else {}
+            before = {n: float(reported.get(n, np.inf)) / abs(params[n]) if params[n] else np.inf for n in interest}
+            plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
+                                           fit.get("fitting") or {}, limits, ambient, budget_s,
+                                           segment_model(params))
+        else:
+            plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits,
+                                    ambient, budget_s)
     except ValueError as exc:  # no block the bench's interlocks allow: the bench's limits are the input at fault
         raise InputError(args.bench, "limits", f"room for one block of heating and cooling ({exc})") from None
-    moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_)
-    print(f"not identified, taken at the model file's start values: {moved}")
+    moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_ and not (reading and n in EQ11))
+    if moved:
+        print(f"not identified, taken at the model file's start values: {moved}")
+    if reading:
+        print("eq. (11) taken as the runs' held stretches read as cool-downs give it (b: the model file's): "
+              + ", ".join(f"{n} {nominal[n]:.4g}" for n in EQ11))
     print("\n".join(plan.lines(nominal)))
     warnings = model_error_warnings(params.extra.get("fit"))
     for line in warnings:
@@ -102,7 +122,8 @@ def design(args: argparse.Namespace, schema: str) -> int:
     print("a sensor at each place, on the designed run (what it removes of the plate's estimate variance, what it "
           "adds to the information):")
     print("\n".join(s.line() for s in sensors))
-    doc = {"schema": schema, "kind": "precision", "model": params.definition.label,
+    doc = {"schema": schema, "kind": "precision", "identification": plan.identification,
+           "model": params.definition.label,
            "params_file": str(args.params), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
            "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
            "blocks": [b.name for b in plan.blocks],
