@@ -12,6 +12,7 @@ import numpy as np
 
 from benchlab.design.blocks import candidate_blocks
 from benchlab.design.fisher import predicted_run
+from benchlab.design.points import determines, values_from_runs
 from benchlab.design.precision import design_cooldown_reading, design_precision
 from benchlab.identify.cooldown import segment_model
 from benchlab.identify.staged import EQ11
@@ -81,15 +82,13 @@ def design(args: argparse.Namespace, schema: str) -> int:
         raise InputError(args.params, "not_identified", "at least one parameter of the model the runs leave open "
                                                         "(every parameter is identified: name some with --parameters)")
     nominal = nominal_values(params, open_)
+    limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
+    budget_s = checked_budget(args.budget, limits)
     reading = set(interest) <= set(EQ11)  # eq. (11) alone: read from the designed run's cool-downs (docs/design.md)
     if reading:
-        from benchlab.design.points import values_from_runs
-
         free = {p.name: p for p in params.definition.free_parameters()}
         nominal.update(values_from_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
                                         {n: (free[n].min, free[n].max) for n in EQ11}, segment_model(params)))
-    limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
-    budget_s = checked_budget(args.budget, limits)
     runs = load_runs(args.runs, params.definition, nominal, str(args.params))
     data = [prepare(run, FIT_STEP_S, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
@@ -98,11 +97,14 @@ def design(args: argparse.Namespace, schema: str) -> int:
     try:
         if reading:
             fit = params.extra.get("fit") if isinstance(params.extra.get("fit"), dict) else {}
-            before = {n: float(reported.get(n, np.inf)) / abs(params[n]) if params[n] else np.inf for n in interest}
+            before = {n: np.inf if n in open_ or not params[n] else float(reported.get(n, np.inf)) / abs(params[n])
+                      for n in interest}
             plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
                                            fit.get("fitting") or {}, limits, ambient, budget_s,
                                            segment_model(params))
-        else:
+            reading = determines(plan.blocks, interest)
+        if not reading:  # or the budget holds too few cool-downs to read eq. (11) from: the joint fit's design
+            nominal = nominal_values(params, open_)
             plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits,
                                     ambient, budget_s)
     except ValueError as exc:  # no block the bench's interlocks allow: the bench's limits are the input at fault

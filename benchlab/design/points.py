@@ -25,7 +25,8 @@ import numpy as np
 
 from benchlab.design import fisher
 from benchlab.design.blocks import Block
-from benchlab.identify.cooldown import FIT_CHANNELS, CooldownResult, fit_eq11, fit_segment
+from benchlab.errors import InputError
+from benchlab.identify.cooldown import BRANCHES, FIT_CHANNELS, CooldownResult, fit_eq11, fit_segment
 from benchlab.identify.staged import EQ11
 from benchlab.model.clutch import convection_resistance
 from benchlab.model.definition import ModelDefinition
@@ -38,6 +39,9 @@ from protocols.limits import BenchLimits
 #: depends on the length (0.163 and 0.203 K/W at 500 rpm open, 300 and 600 s, reference plant, seed 102), so
 #: points read alike are comparable.
 READING_LENGTH_S = 300.0
+#: Heating launches a read cool-down may follow: fewer heat less (a model that cools slowly predicts the
+#: interlocks sooner) and leave more of the budget to further points.
+READING_LAUNCHES = (2, 4)
 #: Seed of the white noise added to the predicted cool-downs (the expected error should not change from call to call).
 NOISE_SEED = 0
 
@@ -102,8 +106,11 @@ SHORTEST_HELD_S = 30.0
 def held_stretches(path: Path) -> list[tuple[float, float, dict[str, float]]]:
     """(t_start, t_end, operating point) of every stretch of the run held at one engine speed without slip heat:
     its steps that drive clamped or stand open for their whole time (a Table 1 cycle's two cool-down halves), at
-    least SHORTEST_HELD_S long."""
-    steps = load_schedule(path)
+    least SHORTEST_HELD_S long; none for a run without its schedule (another tool's file)."""
+    try:
+        steps = load_schedule(path)
+    except InputError:
+        return []
     started: dict[int, float] = {}
     out = []
     for event in load_events(path):
@@ -149,3 +156,11 @@ def values_from_runs(paths: Sequence[Path], params: Mapping[str, float], start: 
     except ValueError:
         return {n: start[n] for n in EQ11}
     return {n: eq11[n] if n in eq11 and bounds[n][0] < eq11[n] < bounds[n][1] else start[n] for n in EQ11}
+
+
+def determines(blocks: Sequence[Block], interest: Sequence[str]) -> bool:
+    """Whether the blocks' cool-down points determine the branches of eq. (11) that `interest` lies in: at least
+    three engine speeds in that clutch state (its a, b and R0)."""
+    needed = {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
+    return all(len({operating_point(b)["engine_speed"] for b in blocks
+                    if operating_point(b)["clutch_state"] == state}) >= 3 for state in needed)

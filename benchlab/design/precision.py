@@ -14,7 +14,7 @@ parameters), which is printed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,7 +58,8 @@ class PrecisionDesign:
                self.header()]
         for name in self.interest:
             value = abs(params[name])
-            out.append(f"  {name}: {100 * self.before[name]:.0f} % of {params[name]:.4g} now -> "
+            now = f"{100 * self.before[name]:.0f} %" if np.isfinite(self.before[name]) else "not identified"
+            out.append(f"  {name}: {now} of {params[name]:.4g} now -> "
                        f"{100 * self.expected[name]:.1f} % ({self.expected[name] * value:.3g}) after the run")
         return out
 
@@ -82,17 +83,20 @@ def too_hot(data: FitData, limits: BenchLimits) -> bool:
 
 
 def greedy(gains: Sequence[np.ndarray], seconds: Sequence[float], start: np.ndarray, names: Sequence[str],
-           interest: Sequence[str], budget_s: float) -> list[int]:
+           interest: Sequence[str], budget_s: float, clear: Callable[[list[int]], bool] | None = None) -> list[int]:
     """Indices of the blocks (information `gains`, lengths `seconds`), the most log det on `interest` gained per
-    second of bench time first, from the information `start`, until no block fits `budget_s`."""
+    second of bench time first, from the information `start`, until no block fits `budget_s`; with `clear`, only
+    blocks after which the plan so far is still clear (of the interlocks, say)."""
     chosen: list[int] = []
     total, spent = start.copy(), 0.0
     while True:
         fits = [i for i, s in enumerate(seconds) if spent + s <= budget_s]
-        if not fits:
-            return chosen
         now = fisher.log_det(total, names, interest)
-        best = max(fits, key=lambda i: (fisher.log_det(total + gains[i], names, interest) - now) / seconds[i])
+        ranked = sorted(fits, key=lambda i: (fisher.log_det(total + gains[i], names, interest) - now) / seconds[i],
+                        reverse=True)
+        best = next((i for i in ranked if clear is None or clear([*chosen, i])), None)
+        if best is None:
+            return chosen
         chosen.append(best)
         total, spent = total + gains[best], spent + seconds[best]
 
@@ -151,8 +155,8 @@ def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float]
     the calibration); `before` is the parameter file's own share of each value. ValueError when no block fits."""
     from benchlab.design import points
 
-    blocks = [b for b in candidate_blocks(limits)
-              if b.expected_s <= budget_s and b.steps[-1].duration_s == points.READING_LENGTH_S]
+    blocks = [b for b in candidate_blocks(limits, points.READING_LAUNCHES, (points.READING_LENGTH_S,))
+              if b.expected_s <= budget_s]
     if not blocks:
         raise ValueError("no block fits")
     noise = fisher.channel_noise(runs)
@@ -160,7 +164,12 @@ def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float]
     gains = [points.point_information(b, params, scale * points.point_error(b, params, network, ambient_c, limits,
                                                                              noise, model)) for b in blocks]
     start = np.zeros((len(points.EQ11), len(points.EQ11)))
-    chosen = greedy(gains, [b.expected_s for b in blocks], start, points.EQ11, interest, budget_s)
+
+    def clear(chosen: list[int]) -> bool:  # a hot plant cools slowly: each block must leave the plan clear
+        steps = numbered([blocks[i] for i in chosen])
+        return not too_hot(fisher.predicted_data(steps, params, network, ambient_c, limits.drivetrain), limits)
+
+    chosen = greedy(gains, [b.expected_s for b in blocks], start, points.EQ11, interest, budget_s, clear)
     chosen, steps, _ = within_interlocks(blocks, chosen, params, network, ambient_c, limits)
     total = sum((gains[i] for i in chosen), start)
     expected = fisher.relative_errors(total, points.EQ11, interest)
