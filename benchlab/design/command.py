@@ -12,7 +12,7 @@ import numpy as np
 
 from benchlab.design.blocks import candidate_blocks
 from benchlab.design.fisher import predicted_run
-from benchlab.design.points import determines, values_from_runs
+from benchlab.design.points import determines, read_runs
 from benchlab.design.precision import design_cooldown_reading, design_precision
 from benchlab.identify.cooldown import segment_model
 from benchlab.identify.staged import EQ11
@@ -87,8 +87,9 @@ def design(args: argparse.Namespace, schema: str) -> int:
     reading = set(interest) <= set(EQ11)  # eq. (11) alone: read from the designed run's cool-downs (docs/design.md)
     if reading:
         free = {p.name: p for p in params.definition.free_parameters()}
-        nominal.update(values_from_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
-                                        {n: (free[n].min, free[n].max) for n in EQ11}, segment_model(params)))
+        read = read_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
+                         {n: (free[n].min, free[n].max) for n in EQ11}, segment_model(params))
+        nominal.update(read.values)
     runs = load_runs(args.runs, params.definition, nominal, str(args.params))
     data = [prepare(run, FIT_STEP_S, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
@@ -100,8 +101,8 @@ def design(args: argparse.Namespace, schema: str) -> int:
             before = {n: np.inf if n in open_ or not params[n] else float(reported.get(n, np.inf)) / abs(params[n])
                       for n in interest}
             plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
-                                           fit.get("fitting") or {}, limits, ambient, budget_s,
-                                           segment_model(params))
+                                           fit.get("fitting") or {}, read.disagreement, limits, ambient,
+                                           budget_s, segment_model(params))
             reading = determines(plan.blocks, interest)
         if not reading:  # or the budget holds too few cool-downs to read eq. (11) from: the joint fit's design
             nominal = nominal_values(params, open_)
@@ -113,7 +114,8 @@ def design(args: argparse.Namespace, schema: str) -> int:
     if moved:
         print(f"not identified, taken at the model file's start values: {moved}")
     if reading:
-        print("eq. (11) taken as the runs' held stretches read as cool-downs give it (b: the model file's): "
+        print("eq. (11) taken as the runs' held stretches read as cool-downs give it (b: the model file's), their "
+              f"points {plan.disagreement:.2f} x their errors off it: "
               + ", ".join(f"{n} {nominal[n]:.4g}" for n in EQ11))
     print("\n".join(plan.lines(nominal)))
     warnings = model_error_warnings(params.extra.get("fit"))
@@ -131,7 +133,8 @@ def design(args: argparse.Namespace, schema: str) -> int:
            "blocks": [b.name for b in plan.blocks],
            "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
-           "calibration": plan.calibration, "ambient_C": ambient,
+           "calibration": plan.calibration, **({"disagreement": plan.disagreement} if reading else {}),
+           "ambient_C": ambient,
            "sensors": [asdict(s) for s in sensors], "warnings": warnings,
            "schedule": [s.as_dict() for s in plan.steps]}
     write_text(args.out, json.dumps(doc, indent=1) + "\n")

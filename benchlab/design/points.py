@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -143,19 +144,29 @@ def held_points(paths: Sequence[Path], params: Mapping[str, float],
     return found
 
 
-def values_from_runs(paths: Sequence[Path], params: Mapping[str, float], start: Mapping[str, float],
-                     bounds: Mapping[str, tuple[float, float]], model: ModelDefinition | None = None,
-                     ) -> dict[str, float]:
-    """Values of eq. (11) to design with, from the runs so far read the way the designed run will be: each held
-    stretch a point (`held_points`), the amplitudes and R0 of eq. (11) fitted to the points of the branches they
-    determine (`cooldown.fit_eq11`, partial), the curvatures b and what the points leave out or put on or beyond
-    the model file's `bounds` at `start` (the model file's)."""
+@dataclass(frozen=True)
+class RunsReading:
+    """What the runs so far, read as the designed run will be, say: eq. (11)'s values to design with and how far
+    their points disagree with eq. (11) beyond their own errors (sqrt of the fit's reduced chi-square, at least 1)."""
+
+    values: dict[str, float]
+    disagreement: float
+
+
+def read_runs(paths: Sequence[Path], params: Mapping[str, float], start: Mapping[str, float],
+              bounds: Mapping[str, tuple[float, float]], model: ModelDefinition | None = None) -> RunsReading:
+    """The runs so far read the way the designed run will be: each held stretch a point (`held_points`). The
+    disagreement from eq. (11) fitted to the points of the branches they determine (`cooldown.fit_eq11`, partial);
+    the values from the amplitudes and R0 fitted with the curvatures b at `start` (the model file's: Table 1's
+    1000-2000 rpm hardly show them), `start` for what the points leave out or put on or beyond `bounds`."""
     found = held_points(paths, params, model)
-    try:  # the curvature b is the model file's: Table 1's engine speeds (1000-2000 rpm) hardly see it
+    try:
+        chi2 = fit_eq11(found, partial=True)["chi2_red"]
         eq11 = fit_eq11(found, partial=True, held={n: start[n] for n in ("b1", "b2")})
     except ValueError:
-        return {n: start[n] for n in EQ11}
-    return {n: eq11[n] if n in eq11 and bounds[n][0] < eq11[n] < bounds[n][1] else start[n] for n in EQ11}
+        return RunsReading({n: start[n] for n in EQ11}, 1.0)
+    values = {n: eq11[n] if n in eq11 and bounds[n][0] < eq11[n] < bounds[n][1] else start[n] for n in EQ11}
+    return RunsReading(values, float(np.sqrt(max(1.0, chi2))) if np.isfinite(chi2) else 1.0)
 
 
 def determines(blocks: Sequence[Block], interest: Sequence[str]) -> bool:

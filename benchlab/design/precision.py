@@ -43,12 +43,16 @@ class PrecisionDesign:
     #: which identification the expected errors are of: "joint" (the designed run fitted together with the runs so
     #: far) or "cooldowns" (its cool-downs read one by one, eq. 11 fitted to their points: `design_cooldown_reading`)
     identification: str = "joint"
+    #: the cool-down reading's points' disagreement with eq. (11) on the runs so far (`points.RunsReading`)
+    disagreement: float = 1.0
 
     def header(self) -> str:
         """What the expected errors are of, and their calibration."""
         if self.identification == "cooldowns":
             return (f"expected standard errors of eq. (11) fitted to the designed run's cool-downs, each read on its own "
-                    f"(the runs' misfit x {self.calibration:.2f} the noise; now: the parameter file's):")
+                    f"(each point's error x {self.calibration:.2f}, the runs' misfit against the noise; eq. (11)'s "
+                    f"x {self.disagreement:.2f}, its points' disagreement on the runs so far; now: the parameter "
+                    "file's):")
         return f"expected standard errors (white-noise information x {self.calibration:.2f}, the runs' own ratio):"
 
     def lines(self, params: Mapping[str, float]) -> list[str]:
@@ -146,13 +150,15 @@ def design_precision(network: ThermalNetwork, params: Mapping[str, float], names
 
 def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
                             interest: Sequence[str], runs: Sequence[FitData], before: Mapping[str, float],
-                            fitting: Mapping[str, object], limits: BenchLimits, ambient_c: float,
-                            budget_s: float, model: ModelDefinition | None = None) -> PrecisionDesign:
+                            fitting: Mapping[str, object], disagreement: float, limits: BenchLimits,
+                            ambient_c: float, budget_s: float, model: ModelDefinition | None = None,
+                            ) -> PrecisionDesign:
     """Greedy D-optimal blocks within `budget_s` for `interest` (parameters of eq. 11) as the designed run's
     cool-downs read one by one (with `model`'s structure where given, as the reading does) give them
     (`benchlab.design.points`): the expected errors are those of eq. (11)
-    fitted to the run's own points, scaled by the misfit the runs so far show (`points.misfit_factor`, printed as
-    the calibration); `before` is the parameter file's own share of each value. ValueError when no block fits."""
+    fitted to the run's own points, each point's scaled by the misfit the runs so far show (`points.misfit_factor`,
+    printed as the calibration), eq. (11)'s by `disagreement` (its points' on the runs so far, `points.read_runs`);
+    `before` is the parameter file's own share of each value. ValueError when no block fits."""
     from benchlab.design import points
 
     blocks = [b for b in candidate_blocks(limits, points.READING_LAUNCHES, (points.READING_LENGTH_S,))
@@ -172,7 +178,7 @@ def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float]
     chosen = greedy(gains, [b.expected_s for b in blocks], start, points.EQ11, interest, budget_s, clear)
     chosen, steps, _ = within_interlocks(blocks, chosen, params, network, ambient_c, limits)
     total = sum((gains[i] for i in chosen), start)
-    expected = fisher.relative_errors(total, points.EQ11, interest)
+    expected = {n: disagreement * v for n, v in fisher.relative_errors(total, points.EQ11, interest).items()}
     prior = fisher.information(network, params, names, runs, noise)  # for what a sensor would add
     return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), dict(before), expected, scale,
-                           prior, noise, "cooldowns")
+                           prior, noise, "cooldowns", disagreement)
