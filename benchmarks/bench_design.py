@@ -5,7 +5,7 @@
 
 Per seed (seeds the tests do not use): the main job's Table 1 run (`--hours`, default 1 h as `benchlab pipeline`)
 on the simulated bench's reference plant, identified with the nonlinear model (4 starts, as the main job); then
-`benchlab design --parameters a2,b2` on it within `--minutes` (the cool-down reading: docs/design.md) and `benchlab
+`benchlab design --parameters a2,b2 --reading` on it within `--minutes` (the cool-down reading: docs/design.md) and `benchlab
 run PLAN.json`, and, as the peer, a Table 1 run planned to the designed run's length (seed + 200). The designed run
 is read as the plan says (`benchlab cooldown`: each cool-down a point, eq. 11 fitted to them; with `--joint`, the
 design is for every parameter Table 1 leaves open and the run identified together with Table 1); the peer both
@@ -57,9 +57,9 @@ def shares(params_file: Path) -> dict[str, float]:
 
 def read_shares(eq11: dict | None) -> dict[str, float]:
     """Standard error of each of PARAMETERS in % of its value from eq. (11) fitted to cool-down points (inf where
-    the points do not determine it)."""
+    the points do not determine it: no fit, or left on a bound of the fit, where it has no standard error)."""
     eq11 = eq11 or {}
-    return {n: eq11[f"{n}_se"] / abs(eq11[n]) if eq11.get(n) and f"{n}_se" in eq11 else float("inf")
+    return {n: eq11[f"{n}_se"] / abs(eq11[n]) if eq11.get(n) and eq11.get(f"{n}_se", 0) > 0 else float("inf")
             for n in PARAMETERS}
 
 
@@ -97,7 +97,7 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
           str(table1), "--force"])
     step(["identify", str(table1), "--model", "nonlinear", "--starts", "4", "--out", str(first), "--force"])
     plan = folder / "plan.json"
-    aim = [] if joint else ["--parameters", ",".join(PARAMETERS)]
+    aim = [] if joint else ["--parameters", ",".join(PARAMETERS), "--reading"]
     step(["design", str(table1), "--params", str(first), *aim, "--budget", str(minutes), "--out", str(plan), "--force"])
     doc = json.loads(plan.read_text())
     designed, peer = folder / "designed.h5", folder / "peer.h5"

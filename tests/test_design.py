@@ -132,10 +132,12 @@ def test_a_fixed_length_cooldown_is_complete_and_a_timed_out_condition_is_not():
 
 
 def test_eq11_alone_is_designed_for_the_cooldown_reading(run_file, open_params, tmp_path, capsys):
-    """Designed for a2 and b2 alone within 30 min, the plan is cool-downs read one by one: open-clutch cool-downs at
-    three engine speeds at least (the open branch's a2, b2 and R0), the expected errors those of that reading."""
+    """Designed for a2 and b2 alone within 30 min for the reading, the plan is cool-downs read one by one:
+    open-clutch cool-downs at three engine speeds at least (the open branch's a2, b2 and R0), the expected errors
+    those of that reading."""
     out = tmp_path / "plan.json"
-    assert main(["design", str(run_file), "--params", str(open_params), "--out", str(out), "--budget", "30"]) == 0
+    assert main(["design", str(run_file), "--params", str(open_params), "--out", str(out), "--budget", "30",
+                 "--reading"]) == 0
     printed = capsys.readouterr().out
     doc = json.loads(out.read_text())
     assert doc["identification"] == "cooldowns" and doc["planned_min"] <= 30

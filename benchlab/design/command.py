@@ -84,7 +84,10 @@ def design(args: argparse.Namespace, schema: str) -> int:
     nominal = nominal_values(params, open_)
     limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
     budget_s = checked_budget(args.budget, limits)
-    reading = set(interest) <= set(EQ11)  # eq. (11) alone: read from the designed run's cool-downs (docs/design.md)
+    reading = args.reading  # the designed run's cool-downs read one by one (docs/design.md)
+    if reading and not set(interest) <= set(EQ11):
+        raise InputError("command line", "--reading", f"parameters of eq. (11) only ({', '.join(EQ11)}) to design "
+                                                      f"for, got {', '.join(interest)}")
     if reading:
         free = {p.name: p for p in params.definition.free_parameters()}
         read = read_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
@@ -104,8 +107,11 @@ def design(args: argparse.Namespace, schema: str) -> int:
                                            fit.get("fitting") or {}, read.disagreement, limits, ambient,
                                            budget_s, segment_model(params))
             reading = determines(plan.blocks, interest)
-        if not reading:  # or the budget holds too few cool-downs to read eq. (11) from: the joint fit's design
-            nominal = nominal_values(params, open_)
+            if not reading:
+                print("--reading: the budget holds too few cool-downs to read eq. (11) from (three engine speeds in "
+                      "the clutch state designed for): designed for the joint fit instead")
+                nominal = nominal_values(params, open_)
+        if not reading:
             plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits,
                                     ambient, budget_s)
     except ValueError as exc:  # no block the bench's interlocks allow: the bench's limits are the input at fault
