@@ -133,8 +133,19 @@ def scored(doc: dict, runs: list[Path]) -> dict[str, float]:
     frames = load_runs(runs, resolve_model(doc["baseline"]["model"]))
     favoured, other, data = refitted_rivals(doc, "diagnosis", frames)
     held = [HeldOut([data[-1]], [simulate_outputs(r.network, r.params, data[-1])], []) for r in (favoured, other)]
-    return {"rmse_favoured": held[0].rmse, "rmse_other": held[1].rmse,
+    return {"rmse_favoured": held[0].rmse, "rmse_other": held[1].rmse, "t_other_beaten": block_t(held[1], held[0]),
             "p_other_beaten": block_test(held[1], held[0]), "p_favoured_beaten": block_test(held[0], held[1])}
+
+
+def block_t(before, after) -> float:
+    """The t statistic of diagnose's block test (`engine.block_test`, whose p-value it goes with): the mean of the
+    blocks' log MSE ratios over its standard error."""
+    import numpy as np
+
+    _, inverse = np.unique(before.blocks, return_inverse=True)
+    count = np.bincount(inverse)
+    ratio = np.log(np.bincount(inverse, before.squared) / count) - np.log(np.bincount(inverse, after.squared) / count)
+    return float(np.mean(ratio) / (np.std(ratio, ddof=1) / np.sqrt(len(ratio)))) if len(ratio) > 2 else 0.0
 
 
 def discriminate_seed(seed: int, minutes: float, hours: float, folder: Path) -> dict:
@@ -173,9 +184,9 @@ def discriminate(args: argparse.Namespace) -> int:
     from benchlab.diagnose.engine import ALPHA
 
     missed = False
-    print("| seed | favoured vs other | planned min | expected gap K | delivered gap K | agrees | designed "
-          "| peer | p (other beaten), designed / peer |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| seed | favoured vs other | planned min | expected gap K | delivered gap K | agrees | expected t (p) "
+          "| delivered t (p) | agrees | designed | peer | p (other beaten), designed / peer |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             folder = args.out / f"discriminate{seed}" if args.out else Path(tmp)
@@ -184,9 +195,12 @@ def discriminate(args: argparse.Namespace) -> int:
         e, d, p = row["expected"], row["designed"], row["peer"]
         gap = d["rmse_other"] - d["rmse_favoured"]
         ok = gap * e["rmse_gap_K"] > 0 and 0.5 <= gap / e["rmse_gap_K"] <= 2.0
+        t_ok = d["t_other_beaten"] * e["block_t"] > 0 and 0.5 <= d["t_other_beaten"] / e["block_t"] <= 2.0
         broken = verdict(d, ALPHA) != "tie"
-        missed |= not ok or not broken
-        print(f"| {seed} | {e['favoured']} vs {e['loser']} | {row['planned_min']:.1f} | {e['rmse_gap_K']:.4f} | {gap:.4f} | {'yes' if ok else 'no'} | {verdict(d, ALPHA)} "
+        missed |= not ok or not t_ok or not broken
+        print(f"| {seed} | {e['favoured']} vs {e['loser']} | {row['planned_min']:.1f} | {e['rmse_gap_K']:.4f} | "
+              f"{gap:.4f} | {'yes' if ok else 'no'} | {e['block_t']:.2f} ({e['block_p']:.2g}) | "
+              f"{d['t_other_beaten']:.2f} ({d['p_other_beaten']:.2g}) | {'yes' if t_ok else 'no'} | {verdict(d, ALPHA)} "
               f"| {verdict(p, ALPHA)} | {d['p_other_beaten']:.2g} / {p['p_other_beaten']:.2g} |", flush=True)
     return 1 if missed else 0
 

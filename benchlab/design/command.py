@@ -179,7 +179,8 @@ def discriminate(args: argparse.Namespace, schema: str) -> int:
            "blocks": [b.name for b in plan.blocks],
            "expected": {"favoured": plan.favoured, "loser": plan.other, "rmse_gap_K": plan.expected_rmse_gap,
                         "rms_difference_K": plan.rms_difference, "misfit_K": plan.noise,
-                        "statistic": plan.statistic, "statistic_now": plan.statistic_now, "p_value": plan.p_value},
+                        "statistic": plan.statistic, "statistic_now": plan.statistic_now, "p_value": plan.p_value,
+                        "block_t": plan.block_t, "block_p": plan.block_p, "blocks": plan.block_count},
            "ambient_C": ambient, "sensors": [asdict(s) for s in sensors],
            "schedule": [s.as_dict() for s in plan.steps]}
     write_text(args.out, json.dumps(out, indent=1) + "\n")
