@@ -1,16 +1,19 @@
 """A designed run against a Table 1 run of the same length, on the reference plant (docs/design.md).
 
-    .venv/bin/python benchmarks/bench_design.py [--seeds 101 102 103] [--minutes 30] [--hours 1] [--only] [--plant reference|paper] [--out DIR]
+    .venv/bin/python benchmarks/bench_design.py [--seeds 101 102 103] [--minutes 30] [--hours 1] [--joint] [--plant reference|paper] [--out DIR]
     .venv/bin/python benchmarks/bench_design.py --discriminate [--seeds …] [--minutes 30] [--hours 1] [--out DIR]
 
 Per seed (seeds the tests do not use): the main job's Table 1 run (`--hours`, default 1 h as `benchlab pipeline`)
 on the simulated bench's reference plant, identified with the nonlinear model (4 starts, as the main job); then
-`benchlab design` on it within `--minutes` and `benchlab run PLAN.json`, and, as the peer, a Table 1 run planned to
-the designed run's length (seed + 200). Both are identified together with the first run. Printed for a2 and b2 of
-eq. (11): the standard error in % of the value after Table 1 alone, expected by the design, delivered by the
-designed run, and delivered by the peer; "agrees" where expected and delivered shrink alike (the same sign of the
-change) and lie within a factor of 2. Targets: delivered ≤ 20 % of the value; agreement on every seed. Exit 1 if
-a target is missed.
+`benchlab design --parameters a2,b2 --reading` on it within `--minutes` (the cool-down reading: docs/design.md) and `benchlab
+run PLAN.json`, and, as the peer, a Table 1 run planned to the designed run's length (seed + 200). The designed run
+is read as the plan says (`benchlab cooldown`: each cool-down a point, eq. 11 fitted to them; with `--joint`, the
+design is for every parameter Table 1 leaves open and the run identified together with Table 1); the peer both
+ways: identified together with Table 1, and its held stretches read as cool-downs (`design.points.held_points`).
+Printed for a2 and b2 of eq. (11): the standard error in % of the value after Table 1 alone, expected by the
+design, delivered by the designed run (and the value), and by the peer; "agrees" where expected and delivered
+shrink alike (the same sign of the change) and lie within a factor of 2. Targets: delivered ≤ 20 % of the value;
+agreement on every seed. Exit 1 if a target is missed.
 
 `--discriminate`: per seed, the Table 1 run diagnosed (nonlinear baseline, as the main job; Table 1 alone),
 `benchlab design --diagnosis` on it and the designed run, and the peer Table 1 run of the plan's length. The rivals are
@@ -52,7 +55,40 @@ def shares(params_file: Path) -> dict[str, float]:
     return {n: doc["uncertainty"].get(n, float("inf")) / abs(doc["params"][n]) for n in PARAMETERS}
 
 
-def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool,
+def read_shares(eq11: dict | None) -> dict[str, float]:
+    """Standard error of each of PARAMETERS in % of its value from eq. (11) fitted to cool-down points (inf where
+    the points do not determine it: no fit, or left on a bound of the fit, where it has no standard error)."""
+    eq11 = eq11 or {}
+    return {n: eq11[f"{n}_se"] / abs(eq11[n]) if eq11.get(n) and eq11.get(f"{n}_se", 0) > 0 else float("inf")
+            for n in PARAMETERS}
+
+
+def read_designed(run: Path, params: Path) -> dict:
+    """`benchlab cooldown RUN --json`: the designed run's cool-downs read one by one, eq. (11) fitted to them."""
+    import contextlib
+    import io
+
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        step(["cooldown", str(run), "--params", str(params), "--json", "--no-store"])
+    text = printed.getvalue()
+    return json.loads(text[text.index("{"):text.rindex("}") + 1])["eq11"]
+
+
+def read_peer(run: Path, params: Path) -> dict | None:
+    """The peer's held stretches read the same way (`design.points.held_points`), eq. (11) fitted to them."""
+    from benchlab.design.points import held_points
+    from benchlab.identify.cooldown import fit_eq11, segment_model
+    from benchlab.model.params import load_params
+
+    loaded = load_params(params)
+    try:
+        return fit_eq11(held_points([run], dict(loaded.items()), segment_model(loaded)), partial=True)
+    except ValueError:
+        return None
+
+
+def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
              plant: str) -> dict[str, dict[str, float]]:
     """The figures of one seed: share before, expected, delivered (designed) and peer, per parameter."""
     on = ["--bench", "sim", "--plant", plant]
@@ -61,7 +97,7 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool,
           str(table1), "--force"])
     step(["identify", str(table1), "--model", "nonlinear", "--starts", "4", "--out", str(first), "--force"])
     plan = folder / "plan.json"
-    aim = ["--parameters", ",".join(PARAMETERS)] if only else []
+    aim = [] if joint else ["--parameters", ",".join(PARAMETERS), "--reading"]
     step(["design", str(table1), "--params", str(first), *aim, "--budget", str(minutes), "--out", str(plan), "--force"])
     doc = json.loads(plan.read_text())
     designed, peer = folder / "designed.h5", folder / "peer.h5"
@@ -69,14 +105,21 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, only: bool,
     step(["run", "table1", *on, "--seed", str(seed + 200), "--duration", str(doc["planned_min"] * 60),
           "--out", str(peer), "--force"])
     after, with_peer = folder / "designed.params.json", folder / "peer.params.json"
-    step(["identify", str(table1), str(designed), "--model", "nonlinear", "--starts", "4", "--out", str(after),
-          "--force"])
+    if doc.get("identification") == "cooldowns":
+        eq11 = read_designed(designed, first)
+        delivered, values = read_shares(eq11), {n: (eq11 or {}).get(n, float("nan")) for n in PARAMETERS}
+    else:
+        step(["identify", str(table1), str(designed), "--model", "nonlinear", "--starts", "4", "--out", str(after),
+              "--force"])
+        delivered, values = shares(after), {n: json.loads(after.read_text())["params"][n] for n in PARAMETERS}
+    peer_read = read_shares(read_peer(peer, first))
     step(["identify", str(table1), str(peer), "--model", "nonlinear", "--starts", "4", "--out", str(with_peer),
           "--force"])
-    before, delivered, peered = shares(first), shares(after), shares(with_peer)
+    before, peered = shares(first), shares(with_peer)
     return {n: {"before": before[n], "expected": doc["expected"].get(n, {}).get("relative_error_expected",
                                                                                  float("nan")),
-                "delivered": delivered[n], "peer": peered[n]} for n in PARAMETERS}
+                "delivered": delivered[n], "value": values[n], "peer": peered[n], "peer_read": peer_read[n]}
+            for n in PARAMETERS}
 
 
 def scored(doc: dict, runs: list[Path]) -> dict[str, float]:
@@ -90,8 +133,19 @@ def scored(doc: dict, runs: list[Path]) -> dict[str, float]:
     frames = load_runs(runs, resolve_model(doc["baseline"]["model"]))
     favoured, other, data = refitted_rivals(doc, "diagnosis", frames)
     held = [HeldOut([data[-1]], [simulate_outputs(r.network, r.params, data[-1])], []) for r in (favoured, other)]
-    return {"rmse_favoured": held[0].rmse, "rmse_other": held[1].rmse,
+    return {"rmse_favoured": held[0].rmse, "rmse_other": held[1].rmse, "t_other_beaten": block_t(held[1], held[0]),
             "p_other_beaten": block_test(held[1], held[0]), "p_favoured_beaten": block_test(held[0], held[1])}
+
+
+def block_t(before, after) -> float:
+    """The t statistic of diagnose's block test (`engine.block_test`, whose p-value it goes with): the mean of the
+    blocks' log MSE ratios over its standard error."""
+    import numpy as np
+
+    _, inverse = np.unique(before.blocks, return_inverse=True)
+    count = np.bincount(inverse)
+    ratio = np.log(np.bincount(inverse, before.squared) / count) - np.log(np.bincount(inverse, after.squared) / count)
+    return float(np.mean(ratio) / (np.std(ratio, ddof=1) / np.sqrt(len(ratio)))) if len(ratio) > 2 else 0.0
 
 
 def discriminate_seed(seed: int, minutes: float, hours: float, folder: Path) -> dict:
@@ -130,9 +184,9 @@ def discriminate(args: argparse.Namespace) -> int:
     from benchlab.diagnose.engine import ALPHA
 
     missed = False
-    print("| seed | favoured vs other | planned min | expected gap K | delivered gap K | agrees | designed "
-          "| peer | p (other beaten), designed / peer |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| seed | favoured vs other | planned min | expected gap K | delivered gap K | agrees | expected t (p) "
+          "| delivered t (p) | agrees | designed | peer | p (other beaten), designed / peer |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             folder = args.out / f"discriminate{seed}" if args.out else Path(tmp)
@@ -141,9 +195,12 @@ def discriminate(args: argparse.Namespace) -> int:
         e, d, p = row["expected"], row["designed"], row["peer"]
         gap = d["rmse_other"] - d["rmse_favoured"]
         ok = gap * e["rmse_gap_K"] > 0 and 0.5 <= gap / e["rmse_gap_K"] <= 2.0
+        t_ok = d["t_other_beaten"] * e["block_t"] > 0 and 0.5 <= d["t_other_beaten"] / e["block_t"] <= 2.0
         broken = verdict(d, ALPHA) != "tie"
-        missed |= not ok or not broken
-        print(f"| {seed} | {e['favoured']} vs {e['loser']} | {row['planned_min']:.1f} | {e['rmse_gap_K']:.4f} | {gap:.4f} | {'yes' if ok else 'no'} | {verdict(d, ALPHA)} "
+        missed |= not ok or not t_ok or not broken
+        print(f"| {seed} | {e['favoured']} vs {e['loser']} | {row['planned_min']:.1f} | {e['rmse_gap_K']:.4f} | "
+              f"{gap:.4f} | {'yes' if ok else 'no'} | {e['block_t']:.2f} ({e['block_p']:.2g}) | "
+              f"{d['t_other_beaten']:.2f} ({d['p_other_beaten']:.2g}) | {'yes' if t_ok else 'no'} | {verdict(d, ALPHA)} "
               f"| {verdict(p, ALPHA)} | {d['p_other_beaten']:.2g} / {p['p_other_beaten']:.2g} |", flush=True)
     return 1 if missed else 0
 
@@ -162,8 +219,9 @@ def main_(argv: list[str] | None = None) -> int:
     parser.add_argument("--plant", choices=("reference", "paper"), default="reference",
                         help="the simulated clutch (the paper's network: the model's own structure, a check that the "
                              "design works where its assumptions hold)")
-    parser.add_argument("--only", action="store_true", help="design for a2 and b2 alone (default: for every "
-                        "parameter the Table 1 run leaves open, a2 and b2 among them)")
+    parser.add_argument("--joint", action="store_true", help="design for every parameter the Table 1 run leaves "
+                        "open, identified jointly with it (default: for a2 and b2 alone, read from the designed run's "
+                        "cool-downs)")
     parser.add_argument("--out", type=Path, help="keep the runs and files here (default: a temporary directory)")
     parser.add_argument("--discriminate", action="store_true", help="measure `design --diagnosis` instead: the tie "
                         "of the Table 1 run's diagnosis broken by the designed run, and not by the peer")
@@ -172,18 +230,20 @@ def main_(argv: list[str] | None = None) -> int:
     if args.discriminate:
         return discriminate(args)
     missed = False
-    print("| seed | parameter | SE before | expected | delivered (designed) | peer (Table 1, same length) | agrees |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print("| seed | parameter | SE before | expected | delivered (designed) | value | peer, joint | peer, read alike "
+          "| agrees |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             folder = args.out / f"seed{seed}" if args.out else Path(tmp)
             folder.mkdir(parents=True, exist_ok=True)
-            rows = one_seed(seed, args.minutes, args.hours, folder, args.only, args.plant)
+            rows = one_seed(seed, args.minutes, args.hours, folder, args.joint, args.plant)
         for name, row in rows.items():
             ok = agrees(row)
             missed |= not ok or not row["delivered"] <= TARGET_SHARE
             print(f"| {seed} | {name} | {100 * row['before']:.3g} % | {100 * row['expected']:.3g} % | "
-                  f"{100 * row['delivered']:.3g} % | {100 * row['peer']:.3g} % | {'yes' if ok else 'no'} |", flush=True)
+                  f"{100 * row['delivered']:.3g} % | {row['value']:.4g} | {100 * row['peer']:.3g} % | "
+                  f"{100 * row['peer_read']:.3g} % | {'yes' if ok else 'no'} |", flush=True)
     print(f"load average at end {os.getloadavg()[0]:.1f}")
     return 1 if missed else 0
 

@@ -91,3 +91,59 @@ def test_residual_structure_is_said_against_the_expected_outcome():
     lines = model_error_warnings({"residuals": {"r.h5": {"T_air": white,
                                                          "T_flywheel": {"white": False, "structure_K": 0.186}}}})
     assert len(lines) == 1 and "0.186 K" in lines[0] and "T_flywheel of r.h5" in lines[0]
+
+
+def test_open_branch_alone_is_fitted_from_its_points_with_the_covariance_error():
+    """A designed run's cool-downs may all have the clutch open: eq. (11)'s open branch and R0 from them alone, the
+    clamped branch left out; the standard errors follow the points' (twice the noise, twice the error)."""
+    import numpy as np
+
+    from benchlab.identify.cooldown import CooldownResult, fit_eq11
+
+    def points(se_share):
+        rows = []
+        for rpm in (500.0, 1000.0, 1500.0, 2000.0, 2500.0):
+            r = 0.4 * np.exp(-0.0012 * rpm) + 0.03
+            rows.append(CooldownResult(-1, rpm, 0, rpm, 0.0, 300.0, r, se_share * r, np.nan, np.nan, np.nan,
+                                       np.nan, 300, 1.0))
+        return rows
+
+    with pytest.raises(ValueError):
+        fit_eq11(points(0.01))  # the full law needs both clutch states
+    eq11 = fit_eq11(points(0.01), partial=True)
+    assert "a1" not in eq11 and "b1" not in eq11
+    assert eq11["a2"] == pytest.approx(0.4, rel=1e-4) and eq11["b2"] == pytest.approx(-0.0012, rel=1e-4)
+    assert eq11["a2_se"] > 0 and fit_eq11(points(0.02), partial=True)["a2_se"] == pytest.approx(2 * eq11["a2_se"],
+                                                                                                rel=1e-3)
+
+
+def test_a_fixed_length_cooldown_is_complete_and_a_timed_out_condition_is_not():
+    from benchlab.identify.cooldown import completed
+    from benchlab.runfile.read import Event
+    from protocols.schedule import Condition, Step
+
+    fixed = Step("open", 300.0, 1500.0, 0.0, 0.0, 0, label="cooldown")
+    conditional = Step("open", 3600.0, 1500.0, 0.0, 0.0, 0, label="cooldown",
+                       until=(Condition("T_flywheel", "<=", 60.0),))
+    end = lambda step, reason: Event(300.0, 0, "cooldown_end", "", step, reason)  # noqa: E731
+    assert completed(end(0, "time"), [fixed])
+    assert not completed(end(0, "time"), [conditional])
+    assert completed(end(0, "condition"), [conditional])
+
+
+def test_eq11_alone_is_designed_for_the_cooldown_reading(run_file, open_params, tmp_path, capsys):
+    """Designed for a2 and b2 alone within 30 min for the reading, the plan is cool-downs read one by one:
+    open-clutch cool-downs at three engine speeds at least (the open branch's a2, b2 and R0), the expected errors
+    those of that reading."""
+    out = tmp_path / "plan.json"
+    assert main(["design", str(run_file), "--params", str(open_params), "--out", str(out), "--budget", "30",
+                 "--reading"]) == 0
+    printed = capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["identification"] == "cooldowns" and doc["planned_min"] <= 30
+    assert "each read on its own" in printed
+    speeds = {step["engine_speed_rpm"] for step in doc["schedule"] if step.get("label") == "cooldown"
+              and dict(step.get("point") or {}).get("clutch_state") == 0.0}
+    assert len(speeds) >= 3
+    for name in ("a2", "b2"):
+        assert 0 < doc["expected"][name]["relative_error_expected"] < 1

@@ -83,3 +83,20 @@ def test_diagnose_page_names_each_tie_and_the_design_that_settles_it():
     assert OTHER in page and "a sensor on node P" in page and "--diagnosis" in page
     finding["alternatives"] = []
     assert "--diagnosis" not in "\n".join(_added(summary))
+
+
+def test_expected_outcome_counts_diagnoses_blocks_not_samples():
+    """30 min of a 0.1 K difference against a 0.1 K misfit: six 5-min blocks, each the other model's MSE twice the
+    favoured's (log 2); the t statistic over those blocks, smaller where the runs so far show the ratio scatter."""
+    import numpy as np
+
+    from benchlab.design.discrimination import expected_block_test
+
+    diff = {"T_air": np.full(1800, 0.1), "T_flywheel": np.full(1800, 0.1)}
+    noise = {"T_air": 0.1, "T_flywheel": 0.1}
+    t, p, blocks = expected_block_test(diff, noise, spread=0.5)
+    assert blocks == 6
+    assert t == pytest.approx(np.log(2.0) / (0.5 / np.sqrt(6)), rel=1e-9)
+    wider_t, wider_p, _ = expected_block_test(diff, noise, spread=1.0)
+    assert wider_t < t and wider_p > p
+    assert expected_block_test({"T_air": np.full(500, 0.1)}, noise, spread=0.5)[1] == 1.0  # two blocks: no test

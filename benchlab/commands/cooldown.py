@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     params = load_analysis_params(args.params, path)
     results = analyse(path, params, args.sample, progress=for_terminal(args.quiet), model=segment_model(params))
     try:
-        eq11 = fit_eq11(results)
+        eq11 = fit_eq11(results, partial=True)  # a designed run's cool-downs may cover one clutch state
     except ValueError:
         eq11 = None
     if args.store or args.out:
@@ -90,5 +90,5 @@ def run(args: argparse.Namespace) -> int:
     else:
         print("\n".join(table_lines(results, eq11)))
         if eq11 is None:
-            print("eq. (11): not enough points (needs 5 cool-downs, 2 engine speeds per clutch state)")
+            print("eq. (11): not enough points (needs 5 cool-downs, 2 engine speeds per clutch state, or 3 in one)")
     return 0

@@ -31,6 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "apart its tied alternatives (or its first finding and the model without it), each refitted")
     parser.add_argument("--parameters", metavar="NAME,…", help="design for these free parameters (default: those the "
                         "parameter file records as not identified); the others are nuisance")
+    parser.add_argument("--reading", action="store_true", help="design for reading the run's cool-downs one by "
+                        "one, eq. (11) fitted to their points (`benchlab cooldown`), instead of the joint fit with the "
+                        "runs so far: eq. (11)'s parameters only (docs/design.md)")
     parser.add_argument("--out", required=True, type=cliargs.output_file, metavar="PLAN.json",
                         help="the plan: a schedule `benchlab run PLAN.json --bench …` runs, and the expected outcome")
     parser.add_argument("--budget", type=cliargs.positive_float("a duration in min", MAX_RUN_DURATION_S / 60),

@@ -78,24 +78,27 @@ def cooldown_steps(speed_rpm: float, clamped: bool, length_s: float) -> tuple[St
     return (Step("open", length_s, speed_rpm, 0.0, 0.0, 0, label="cooldown", point=point),)
 
 
-def candidate_blocks(limits: BenchLimits) -> list[Block]:
-    """Every block the bench can run: heat then cool at each speed, clutch clamped or open, each length; blocks
-    with a problem under the bench's limits left out."""
+def candidate_blocks(limits: BenchLimits, launches: tuple[int, ...] = (HEAT_LAUNCHES,),
+                     lengths: tuple[float, ...] = COOLDOWN_LENGTHS_S) -> list[Block]:
+    """Every block the bench can run: heat by each number of `launches`, then cool at each speed, clutch clamped
+    or open, each of `lengths`; blocks with a problem under the bench's limits left out."""
     launch = heating_launch(limits)
     if launch is None:
         return []
     stop = Step("open", STOP_S, launch.engine_speed_rpm, 0.0, launch.load_torque_nm, 0, label="heat")
-    heat = (launch, stop) * HEAT_LAUNCHES
     blocks = []
-    for speed in COOLDOWN_SPEEDS_RPM:
-        if speed > limits.max_engine_speed_rpm:
-            continue
-        for clamped in (False, True):
-            for length in COOLDOWN_LENGTHS_S:
-                steps = with_launch_estimates(heat + cooldown_steps(speed, clamped, length), limits)
-                if not schedule_problems(steps, limits):
-                    state = "clamped" if clamped else "open"
-                    blocks.append(Block(f"heat, cool {length:g} s at {speed:g} rpm clutch {state}", steps))
+    for count in launches:
+        heat = (launch, stop) * count
+        named = "heat" if count == HEAT_LAUNCHES else f"heat by {count} launches"
+        for speed in COOLDOWN_SPEEDS_RPM:
+            if speed > limits.max_engine_speed_rpm:
+                continue
+            for clamped in (False, True):
+                for length in lengths:
+                    steps = with_launch_estimates(heat + cooldown_steps(speed, clamped, length), limits)
+                    if not schedule_problems(steps, limits):
+                        state = "clamped" if clamped else "open"
+                        blocks.append(Block(f"{named}, cool {length:g} s at {speed:g} rpm clutch {state}", steps))
     return blocks
 
 

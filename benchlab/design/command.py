@@ -12,7 +12,10 @@ import numpy as np
 
 from benchlab.design.blocks import candidate_blocks
 from benchlab.design.fisher import predicted_run
-from benchlab.design.precision import design_precision
+from benchlab.design.points import determines, read_runs
+from benchlab.design.precision import design_cooldown_reading, design_precision
+from benchlab.identify.cooldown import segment_model
+from benchlab.identify.staged import EQ11
 from benchlab.design.sensors import rank_sensors
 from benchlab.errors import InputError, read_document
 from benchlab.identify.data import prepare
@@ -81,18 +84,45 @@ def design(args: argparse.Namespace, schema: str) -> int:
     nominal = nominal_values(params, open_)
     limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
     budget_s = checked_budget(args.budget, limits)
+    reading = args.reading  # the designed run's cool-downs read one by one (docs/design.md)
+    if reading and not set(interest) <= set(EQ11):
+        raise InputError("command line", "--reading", f"parameters of eq. (11) only ({', '.join(EQ11)}) to design "
+                                                      f"for, got {', '.join(interest)}")
+    if reading:
+        free = {p.name: p for p in params.definition.free_parameters()}
+        read = read_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
+                         {n: (free[n].min, free[n].max) for n in EQ11}, segment_model(params))
+        nominal.update(read.values)
     runs = load_runs(args.runs, params.definition, nominal, str(args.params))
     data = [prepare(run, FIT_STEP_S, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
     reported = params.extra.get("uncertainty") or {}
     identified = [n for n in names if n not in open_]
     try:
-        plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits, ambient,
-                                budget_s)
+        if reading:
+            fit = params.extra.get("fit") if isinstance(params.extra.get("fit"), dict) else {}
+            before = {n: np.inf if n in open_ or not params[n] else float(reported.get(n, np.inf)) / abs(params[n])
+                      for n in interest}
+            plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
+                                           fit.get("fitting") or {}, read.disagreement, limits, ambient,
+                                           budget_s, segment_model(params))
+            reading = determines(plan.blocks, interest)
+            if not reading:
+                print("--reading: the budget holds too few cool-downs to read eq. (11) from (three engine speeds in "
+                      "the clutch state designed for): designed for the joint fit instead")
+                nominal = nominal_values(params, open_)
+        if not reading:
+            plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits,
+                                    ambient, budget_s)
     except ValueError as exc:  # no block the bench's interlocks allow: the bench's limits are the input at fault
         raise InputError(args.bench, "limits", f"room for one block of heating and cooling ({exc})") from None
-    moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_)
-    print(f"not identified, taken at the model file's start values: {moved}")
+    moved = ", ".join(f"{n} {nominal[n]:.4g}" for n in names if n in open_ and not (reading and n in EQ11))
+    if moved:
+        print(f"not identified, taken at the model file's start values: {moved}")
+    if reading:
+        print("eq. (11) taken as the runs' held stretches read as cool-downs give it (b: the model file's), their "
+              f"points {plan.disagreement:.2f} x their errors off it: "
+              + ", ".join(f"{n} {nominal[n]:.4g}" for n in EQ11))
     print("\n".join(plan.lines(nominal)))
     warnings = model_error_warnings(params.extra.get("fit"))
     for line in warnings:
@@ -102,13 +132,15 @@ def design(args: argparse.Namespace, schema: str) -> int:
     print("a sensor at each place, on the designed run (what it removes of the plate's estimate variance, what it "
           "adds to the information):")
     print("\n".join(s.line() for s in sensors))
-    doc = {"schema": schema, "kind": "precision", "model": params.definition.label,
+    doc = {"schema": schema, "kind": "precision", "identification": plan.identification,
+           "model": params.definition.label,
            "params_file": str(args.params), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
            "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
            "blocks": [b.name for b in plan.blocks],
            "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
-           "calibration": plan.calibration, "ambient_C": ambient,
+           "calibration": plan.calibration, **({"disagreement": plan.disagreement} if reading else {}),
+           "ambient_C": ambient,
            "sensors": [asdict(s) for s in sensors], "warnings": warnings,
            "schedule": [s.as_dict() for s in plan.steps]}
     write_text(args.out, json.dumps(doc, indent=1) + "\n")
@@ -147,7 +179,8 @@ def discriminate(args: argparse.Namespace, schema: str) -> int:
            "blocks": [b.name for b in plan.blocks],
            "expected": {"favoured": plan.favoured, "loser": plan.other, "rmse_gap_K": plan.expected_rmse_gap,
                         "rms_difference_K": plan.rms_difference, "misfit_K": plan.noise,
-                        "statistic": plan.statistic, "statistic_now": plan.statistic_now, "p_value": plan.p_value},
+                        "statistic": plan.statistic, "statistic_now": plan.statistic_now, "p_value": plan.p_value,
+                        "block_t": plan.block_t, "block_p": plan.block_p, "blocks": plan.block_count},
            "ambient_C": ambient, "sensors": [asdict(s) for s in sensors],
            "schedule": [s.as_dict() for s in plan.steps]}
     write_text(args.out, json.dumps(out, indent=1) + "\n")

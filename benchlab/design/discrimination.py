@@ -28,7 +28,7 @@ from benchlab.design import fisher
 from benchlab.design.blocks import Block, candidate_blocks, numbered
 from benchlab.design.precision import too_hot
 from benchlab.diagnose.engine import ALPHA  # the level the loser must be beaten at: diagnose's
-from benchlab.diagnose.engine import STEP_S
+from benchlab.diagnose.engine import BLOCK_S, STEP_S
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import simulate_outputs
 from benchlab.network import ThermalNetwork
@@ -84,6 +84,49 @@ def differences(first: Rival, second: Rival, steps: Sequence[Step], ambient_c: f
     return {c: a.targets[c] - b.targets[c] for c in a.targets if c in b.targets}
 
 
+def block_log_ratios(favoured: Mapping[str, np.ndarray], other: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Diagnose's unit of the contest (`engine.block_test`): per BLOCK_S block of a run at its step STEP_S, the log
+    of the other model's mean squared error over the favoured's, the channels' squared errors pooled."""
+    block_len = max(1, int(BLOCK_S / STEP_S))
+    n = max((len(v) for v in favoured.values()), default=0)
+    ratios = []
+    for start in range(0, n, block_len):
+        pair = [(favoured[c][start:start + block_len], other[c][start:start + block_len]) for c in favoured if c in other]
+        f = np.concatenate([a[np.isfinite(a) & np.isfinite(b)] for a, b in pair])
+        o = np.concatenate([b[np.isfinite(a) & np.isfinite(b)] for a, b in pair])
+        if f.size and f.mean() > 0:
+            ratios.append(float(np.log(o.mean() / f.mean())))
+    return np.array(ratios)
+
+
+def expected_block_test(diff: Mapping[str, np.ndarray], noise: Mapping[str, float],
+                        spread: float) -> tuple[float, float, int]:
+    """The block test diagnose will run on the designed run, expected: per block the favoured at its misfit and the
+    other at the misfit plus the predicted difference (`block_log_ratios`), against the blocks' own spread and
+    `spread`, the spread of that log ratio from block to block on the runs so far (what the prediction cannot
+    see). The t statistic, its one-sided p-value and the number of blocks (p = 1 below 3 blocks, as the test)."""
+    squared_fav = {c: np.where(np.isfinite(d), noise[c] ** 2, np.nan) for c, d in diff.items() if c in noise}
+    squared_other = {c: noise[c] ** 2 + diff[c] ** 2 for c in squared_fav}
+    ratios = block_log_ratios(squared_fav, squared_other)
+    if len(ratios) < 3:
+        return 0.0, 1.0, len(ratios)
+    sd = float(np.sqrt(np.var(ratios, ddof=1) + spread ** 2))
+    t = float(np.mean(ratios) / (sd / np.sqrt(len(ratios)))) if sd > 0 else np.inf
+    return t, float(stats.t.sf(t, len(ratios) - 1)), len(ratios)
+
+
+def runs_spread(favoured: "Rival", other: "Rival", runs: Sequence[FitData]) -> float:
+    """The standard deviation of `block_log_ratios` of the two rivals' squared residuals on the runs so far, over
+    their blocks: how much the contest's unit varies where neither prediction sees why."""
+    ratios = []
+    for data in runs:
+        sims = [simulate_outputs(r.network, r.params, data) for r in (favoured, other)]
+        squared = [{c: (data.targets[c] - sim[c]) ** 2 for c in sim if c in data.targets} for sim in sims]
+        ratios.append(block_log_ratios(*squared))
+    pooled = np.concatenate(ratios) if ratios else np.array([])
+    return float(np.std(pooled, ddof=1)) if pooled.size > 1 else 0.0
+
+
 def noncentrality(diff: Mapping[str, np.ndarray], noise: Mapping[str, float], rho: float) -> float:
     """T-criterion: Σ (difference / noise)² over every channel and sample, in effective samples."""
     return float(sum(np.nansum((d / noise[c]) ** 2) for c, d in diff.items() if c in noise) * (1 - rho) / (1 + rho))
@@ -101,6 +144,10 @@ class DiscriminationDesign:
     rms_difference: dict[str, float]  # per channel, K, over the designed run
     statistic: float  # expected non-centrality (Σ (d/σ)², effective samples) of the designed run
     statistic_now: float  # the same on the runs so far (how far they tell the two apart)
+    #: diagnose's block test on the run, expected (`expected_block_test`): t, p and the blocks it counts
+    block_t: float = 0.0
+    block_p: float = 1.0
+    block_count: int = 0
 
     @property
     def expected_rmse_gap(self) -> float:
@@ -116,15 +163,16 @@ class DiscriminationDesign:
 
     def lines(self) -> list[str]:
         """The expected outcome, for the terminal before the run."""
-        verdict = "should be beaten" if self.p_value < ALPHA else "may not be beaten"
+        verdict = "should be beaten" if self.block_p < ALPHA else "may not be beaten"
         return [f"designed run: {len(self.blocks)} blocks, {sum(s.expected_s for s in self.steps) / 60:.1f} min",
                 *(f"  block {i}: {b.name}" for i, b in enumerate(self.blocks)),
                 f"to tell apart {self.favoured} (taken as right) and {self.other}:",
                 *(f"  {c}: the two differ by {d:.3f} K RMS on the run against a misfit of {self.noise[c]:.3f} K"
                   for c, d in self.rms_difference.items()),
-                f"expected: {self.other} {verdict} at alpha {ALPHA:g}, its RMSE {self.expected_rmse_gap:.3f} K above "
-                f"{self.favoured}'s; test statistic {self.statistic:.1f} (runs so far {self.statistic_now:.1f}), "
-                f"p = {self.p_value:.2g}"]
+                f"expected: {self.other} {verdict} at alpha {ALPHA:g} by diagnose's block test ({self.block_count} "
+                f"blocks of {BLOCK_S:g} s: t = {self.block_t:.2f}, p = {self.block_p:.2g}), its RMSE "
+                f"{self.expected_rmse_gap:.3f} K above {self.favoured}'s; sample statistic {self.statistic:.1f} (runs "
+                f"so far {self.statistic_now:.1f})"]
 
 
 def design_discrimination(favoured: Rival, other: Rival, runs: Sequence[FitData], limits: BenchLimits,
@@ -158,5 +206,6 @@ def design_discrimination(favoured: Rival, other: Rival, runs: Sequence[FitData]
         raise ValueError("every block heats the clutch beyond the over-temperature interlocks")
     diff = differences(favoured, other, steps, ambient_c, limits)
     rms = {c: float(np.sqrt(np.nanmean(d ** 2))) for c, d in diff.items() if c in noise}
+    t, p, count = expected_block_test(diff, noise, runs_spread(favoured, other, runs))
     return DiscriminationDesign(tuple(blocks[i] for i in chosen), steps, favoured.name, other.name, noise, rms,
-                                noncentrality(diff, noise, rho), now)
+                                noncentrality(diff, noise, rho), now, t, p, count)

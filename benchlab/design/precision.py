@@ -14,7 +14,7 @@ parameters), which is printed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +22,7 @@ import numpy as np
 from benchlab.design import fisher
 from benchlab.design.blocks import Block, candidate_blocks, numbered
 from benchlab.identify.data import FitData
+from benchlab.model.definition import ModelDefinition
 from benchlab.network import ThermalNetwork
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
@@ -39,15 +40,30 @@ class PrecisionDesign:
     calibration: float
     prior: np.ndarray  # the runs' information (ln θ of every free parameter), for what a sensor would add
     noise: dict[str, float]  # each measured channel's noise at the fitting step, K
+    #: which identification the expected errors are of: "joint" (the designed run fitted together with the runs so
+    #: far) or "cooldowns" (its cool-downs read one by one, eq. 11 fitted to their points: `design_cooldown_reading`)
+    identification: str = "joint"
+    #: the cool-down reading's points' disagreement with eq. (11) on the runs so far (`points.RunsReading`)
+    disagreement: float = 1.0
+
+    def header(self) -> str:
+        """What the expected errors are of, and their calibration."""
+        if self.identification == "cooldowns":
+            return (f"expected standard errors of eq. (11) fitted to the designed run's cool-downs, each read on its own "
+                    f"(each point's error x {self.calibration:.2f}, the runs' misfit against the noise; eq. (11)'s "
+                    f"x {self.disagreement:.2f}, its points' disagreement on the runs so far; now: the parameter "
+                    "file's):")
+        return f"expected standard errors (white-noise information x {self.calibration:.2f}, the runs' own ratio):"
 
     def lines(self, params: Mapping[str, float]) -> list[str]:
         """The expected outcome, one line per parameter, for the terminal before the run."""
         out = [f"designed run: {len(self.blocks)} blocks, {sum(s.expected_s for s in self.steps) / 60:.1f} min",
                *(f"  block {i}: {b.name}" for i, b in enumerate(self.blocks)),
-               f"expected standard errors (white-noise information x {self.calibration:.2f}, the runs' own ratio):"]
+               self.header()]
         for name in self.interest:
             value = abs(params[name])
-            out.append(f"  {name}: {100 * self.before[name]:.0f} % of {params[name]:.4g} now -> "
+            now = f"{100 * self.before[name]:.0f} %" if np.isfinite(self.before[name]) else "not identified"
+            out.append(f"  {name}: {now} of {params[name]:.4g} now -> "
                        f"{100 * self.expected[name]:.1f} % ({self.expected[name] * value:.3g}) after the run")
         return out
 
@@ -70,6 +86,43 @@ def too_hot(data: FitData, limits: BenchLimits) -> bool:
             or peaks.get("T_air", -np.inf) > limits.max_air_c - limits.clear_margin_k)
 
 
+def greedy(gains: Sequence[np.ndarray], seconds: Sequence[float], start: np.ndarray, names: Sequence[str],
+           interest: Sequence[str], budget_s: float, clear: Callable[[list[int]], bool] | None = None) -> list[int]:
+    """Indices of the blocks (information `gains`, lengths `seconds`), the most log det on `interest` gained per
+    second of bench time first, from the information `start`, until no block fits `budget_s`; with `clear`, only
+    blocks after which the plan so far is still clear (of the interlocks, say)."""
+    chosen: list[int] = []
+    total, spent = start.copy(), 0.0
+    while True:
+        fits = [i for i, s in enumerate(seconds) if spent + s <= budget_s]
+        now = fisher.log_det(total, names, interest)
+        ranked = sorted(fits, key=lambda i: (fisher.log_det(total + gains[i], names, interest) - now) / seconds[i],
+                        reverse=True)
+        best = next((i for i in ranked if clear is None or clear([*chosen, i])), None)
+        if best is None:
+            return chosen
+        chosen.append(best)
+        total, spent = total + gains[best], spent + seconds[best]
+
+
+def within_interlocks(blocks: Sequence[Block], chosen: list[int], params: Mapping[str, float],
+                      network: ThermalNetwork, ambient_c: float, limits: BenchLimits,
+                      ) -> tuple[list[int], tuple[Step, ...], FitData]:
+    """The chosen blocks with blocks dropped from the end until the plan as predicted stays clear of the
+    over-temperature interlocks (the blocks' heat adds up); its schedule and prediction. ValueError where even
+    one block does not."""
+    chosen = list(chosen)
+    while True:
+        steps = numbered([blocks[i] for i in chosen])
+        predicted = fisher.predicted_data(steps, params, network, ambient_c, limits.drivetrain)
+        if len(chosen) == 1 or not too_hot(predicted, limits):
+            break
+        chosen.pop()
+    if too_hot(predicted, limits):
+        raise ValueError("every block heats the clutch beyond the over-temperature interlocks")
+    return chosen, steps, predicted
+
+
 def design_precision(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
                      interest: Sequence[str], identified: Sequence[str], runs: Sequence[FitData],
                      reported: Mapping[str, float], limits: BenchLimits, ambient_c: float,
@@ -86,26 +139,46 @@ def design_precision(network: ThermalNetwork, params: Mapping[str, float], names
     gains = [fisher.information(network, params, names,
                                 [fisher.predicted_data(b.steps, params, network, ambient_c, limits.drivetrain)], noise)
              for b in blocks]
-    chosen: list[int] = []
-    total, spent = prior.copy(), 0.0
-    while True:
-        fits = [i for i, b in enumerate(blocks) if spent + b.expected_s <= budget_s]
-        if not fits:
-            break
-        now = fisher.log_det(total, names, interest)
-        best = max(fits, key=lambda i: (fisher.log_det(total + gains[i], names, interest) - now) / blocks[i].expected_s)
-        chosen.append(best)
-        total, spent = total + gains[best], spent + blocks[best].expected_s
-    while True:  # the blocks' heat adds up: the plan as a whole must stay clear of the over-temperature interlocks
-        steps = numbered([blocks[i] for i in chosen])
-        predicted = fisher.predicted_data(steps, params, network, ambient_c, limits.drivetrain)
-        if len(chosen) == 1 or not too_hot(predicted, limits):
-            break
-        chosen.pop()
-    if too_hot(predicted, limits):
-        raise ValueError("every block heats the clutch beyond the over-temperature interlocks")
+    chosen = greedy(gains, [b.expected_s for b in blocks], prior, names, interest, budget_s)
+    chosen, steps, predicted = within_interlocks(blocks, chosen, params, network, ambient_c, limits)
     whole = fisher.information(network, params, names, [predicted], noise)
     before = {k: v * scale for k, v in fisher.relative_errors(prior, names, interest).items()}
     expected = {k: v * scale for k, v in fisher.relative_errors(prior + whole, names, interest).items()}
-    return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), before, expected, scale, prior,
-                           noise)
+    return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), dict(before), expected, scale,
+                           prior, noise, "joint")
+
+
+def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
+                            interest: Sequence[str], runs: Sequence[FitData], before: Mapping[str, float],
+                            fitting: Mapping[str, object], disagreement: float, limits: BenchLimits,
+                            ambient_c: float, budget_s: float, model: ModelDefinition | None = None,
+                            ) -> PrecisionDesign:
+    """Greedy D-optimal blocks within `budget_s` for `interest` (parameters of eq. 11) as the designed run's
+    cool-downs read one by one (with `model`'s structure where given, as the reading does) give them
+    (`benchlab.design.points`): the expected errors are those of eq. (11)
+    fitted to the run's own points, each point's scaled by the misfit the runs so far show (`points.misfit_factor`,
+    printed as the calibration), eq. (11)'s by `disagreement` (its points' on the runs so far, `points.read_runs`);
+    `before` is the parameter file's own share of each value. ValueError when no block fits."""
+    from benchlab.design import points
+
+    blocks = [b for b in candidate_blocks(limits, points.READING_LAUNCHES, (points.READING_LENGTH_S,))
+              if b.expected_s <= budget_s]
+    if not blocks:
+        raise ValueError("no block fits")
+    noise = fisher.channel_noise(runs)
+    scale = points.misfit_factor(fitting, noise)
+    gains = [points.point_information(b, params, scale * points.point_error(b, params, network, ambient_c, limits,
+                                                                             noise, model)) for b in blocks]
+    start = np.zeros((len(points.EQ11), len(points.EQ11)))
+
+    def clear(chosen: list[int]) -> bool:  # a hot plant cools slowly: each block must leave the plan clear
+        steps = numbered([blocks[i] for i in chosen])
+        return not too_hot(fisher.predicted_data(steps, params, network, ambient_c, limits.drivetrain), limits)
+
+    chosen = greedy(gains, [b.expected_s for b in blocks], start, points.EQ11, interest, budget_s, clear)
+    chosen, steps, _ = within_interlocks(blocks, chosen, params, network, ambient_c, limits)
+    total = sum((gains[i] for i in chosen), start)
+    expected = {n: disagreement * v for n, v in fisher.relative_errors(total, points.EQ11, interest).items()}
+    prior = fisher.information(network, params, names, runs, noise)  # for what a sensor would add
+    return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), dict(before), expected, scale,
+                           prior, noise, "cooldowns", disagreement)

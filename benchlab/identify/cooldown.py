@@ -45,7 +45,7 @@ from benchlab.identify.metrics import robust_sigma
 from benchlab.progress import SILENT, Progress, Task
 from benchlab.runfile import (Event, load_analysis, load_attrs, load_events, load_run, load_schedule,
                               write_analysis, write_analysis_file)
-from benchlab.runfile.schema import END_CONDITION
+from benchlab.runfile.schema import END_CONDITION, END_TIME
 from benchlab.network.simulation import initial_state, input_channels
 from benchlab.network.solver import run_network
 from protocols.schedule import Step
@@ -83,8 +83,9 @@ class CooldownResult:
 
 
 def segments(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, dict[str, float]]]:
-    """(cycle, t_start, t_end, point) of every completed cool-down of the run (its `cooldown_end`'s reason:
-    the step's condition was met).
+    """(cycle, t_start, t_end, point) of every completed cool-down of the run (its `cooldown_end`'s reason: the
+    step's condition was met, or its time ran out on a cool-down of fixed length, one without a condition: a
+    designed run's, docs/design.md).
 
     The times are the `cooldown_start`/`cooldown_end` events'; the operating point is that of the step in the
     stored schedule the events belong to (their `step`; see `_cooldown_point` for files without it).
@@ -98,9 +99,18 @@ def segments(path: "str | os.PathLike[str]") -> list[tuple[int, float, float, di
             open_[event.cycle] = (event.time, _cooldown_point(path, steps, event, started))
         elif event.kind == "cooldown_end" and event.cycle in open_:
             t0, point = open_.pop(event.cycle)
-            if event.reason == END_CONDITION:  # ended by its condition, not on time or by an abort
+            if completed(event, steps):
                 out.append((event.cycle, t0, event.time, point))
     return out
+
+
+def completed(end: Event, steps: Sequence[Step]) -> bool:
+    """Whether the cool-down that `end` (a cooldown_end event) closes ran its course: ended by its condition, or on
+    time where its step has no condition (a fixed length); not a condition's time-out, not an abort."""
+    if end.reason == END_CONDITION:
+        return True
+    fixed = 0 <= end.step < len(steps) and not steps[end.step].until
+    return end.reason == END_TIME and fixed
 
 
 def _cooldown_point(path: Path, steps: Sequence[Step], start: Event, started: dict[int, int]) -> dict[str, float]:
@@ -283,33 +293,51 @@ def _fit_cooldown(run: pd.DataFrame, params: Mapping[str, float], sample_s: floa
                           fit["T_P0_se"], fit["rmse_K"], int(fit["n"]), fit["chi2_red"], r_true)
 
 
-def fit_eq11(results: Sequence[CooldownResult]) -> dict[str, float]:
-    """a1, b1, a2, b2, R0 (and *_se) of eq. (11) from the per-point resistances; ValueError if underdetermined."""
+#: eq. (11)'s parameters of each clutch state's branch (S = 1 clamped, S = 0 open); R0 is shared
+BRANCHES = {1: ("a1", "b1"), 0: ("a2", "b2")}
+
+
+def fit_eq11(results: Sequence[CooldownResult], partial: bool = False,
+             held: Mapping[str, float] | None = None) -> dict[str, float]:
+    """a1, b1, a2, b2, R0 (and *_se) of eq. (11) from the per-point resistances; ValueError if underdetermined.
+
+    `partial`: the branches the points determine (at least 2 engine speeds in that clutch state) with R0, the
+    others left out (a designed run's cool-downs may all be in one clutch state: docs/design.md). `held`: values
+    (b in 1/rpm) kept as given instead of fitted (returned without a standard error)."""
+    held = dict(held or {})
     rows = [r for r in results if np.isfinite(r.R) and r.R_se > 0]
-    by_state = {s: [r for r in rows if r.clutch_state == s] for s in (0, 1)}
-    if len(rows) < 5 or any(len({r.engine_speed for r in by_state[s]}) < 2 for s in (0, 1)):
-        raise ValueError("eq. (11) needs at least 5 cool-downs with 2 engine speeds in each clutch state")
+    speeds = {s: {r.engine_speed for r in rows if r.clutch_state == s} for s in BRANCHES}
+    states = [s for s in BRANCHES if len(speeds[s]) >= 2] if partial else list(BRANCHES)
+    rows = [r for r in rows if r.clutch_state in states]
+    names = tuple(n for s in states for n in BRANCHES[s] if n not in held) + ("R0",)
+    if not states or any(len(speeds[s]) < 2 for s in states) or len(rows) < len(names) or \
+            len({(r.engine_speed, r.clutch_state) for r in rows}) < len(names) - len(states) + 1 - len(held):
+        raise ValueError("eq. (11) needs at least 5 cool-downs with 2 engine speeds in each clutch state"
+                         + (" (or 3 engine speeds in one of them)" if partial else ""))
     w = np.array([r.engine_speed for r in rows]) / 1000.0  # krpm inside, for conditioning
     s = np.array([r.clutch_state for r in rows])
     y = np.array([r.R for r in rows])
     e = np.array([r.R_se for r in rows])
-
-    names = ("a1", "b1", "a2", "b2", "R0")
     operating_point = {"engine_speed": w, "clutch_state": s.astype(float)}
 
     def model(th: np.ndarray) -> np.ndarray:  # eq. (11) of the model file, b in 1/krpm here
-        return convection_resistance(dict(zip(names, th)), operating_point)
+        kept = {n: v * 1e3 if n.startswith("b") else v for n, v in held.items()}  # b in 1/krpm here
+        return convection_resistance({"a1": 0.0, "b1": 0.0, "a2": 0.0, "b2": 0.0, **kept, **dict(zip(names, th))},
+                                     operating_point)
 
-    th0 = np.array([0.3, -1.0, 0.4, -1.0, max(1e-3, 0.8 * y.min())])
-    fit = scipy.optimize.least_squares(lambda th: (model(th) - y) / e, th0,
-                                       bounds=([0, -20, 0, -20, 0], [50, 5, 50, 5, 50]))
-    n, p = y.size, 5
+    start = {"a1": 0.3, "b1": -1.0, "a2": 0.4, "b2": -1.0, "R0": max(1e-3, 0.8 * y.min())}
+    lower = {"a1": 0.0, "b1": -20.0, "a2": 0.0, "b2": -20.0, "R0": 0.0}
+    upper = {"a1": 50.0, "b1": 5.0, "a2": 50.0, "b2": 5.0, "R0": 50.0}
+    fit = scipy.optimize.least_squares(lambda th: (model(th) - y) / e, np.array([start[n] for n in names]),
+                                       bounds=([lower[n] for n in names], [upper[n] for n in names]))
+    n, p = y.size, len(names)
     chi2 = float(fit.fun @ fit.fun) / max(1, n - p) if n > p else math.nan
     cov = np.linalg.pinv(fit.jac.T @ fit.jac) * (max(1.0, chi2) if np.isfinite(chi2) else 1.0)
     se = np.sqrt(np.diag(cov))
-    scale = np.array([1.0, 1e-3, 1.0, 1e-3, 1.0])  # b in 1/rpm
+    scale = np.array([1e-3 if name.startswith("b") else 1.0 for name in names])  # b in 1/rpm
     out = {k: float(v * c) for k, v, c in zip(names, fit.x, scale)}
     out.update({f"{k}_se": float(v * c) for k, v, c in zip(names, se, scale)})
+    out.update({k: float(v) for k, v in held.items() if k in {m for s in states for m in BRANCHES[s]}})
     out["chi2_red"] = chi2
     out["points"] = n
     return out
@@ -354,5 +382,5 @@ def table_lines(results: Sequence[CooldownResult], eq11: Mapping[str, float] | N
                      f"{r.R_u:9.4f}  {r.T_P0:10.2f}  {r.rmse_K:7.3f}  {r.R_true:7.4f}")
     if eq11 is not None:
         lines.append("eq. (11): " + ", ".join(f"{k} = {eq11[k]:.4g} ± {eq11[k + '_se']:.2g}"
-                                              for k in ("a1", "b1", "a2", "b2", "R0")))
+                                              for k in ("a1", "b1", "a2", "b2", "R0") if k in eq11))
     return lines
