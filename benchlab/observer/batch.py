@@ -86,11 +86,11 @@ def observe(run: pd.DataFrame, params: Params, sensors: Sequence[str], network: 
     source = run.attrs.get("source", "<run>")
     channels = input_channels(run)
     measured = sensor_readings(run, sensors)
-    readings = fresh(measured)
     dt = float(run.attrs["dt"])
     noise = noise or tune_noise(network, params, [*sensors, *(r.channel for r in resets)], initial_offset_k)
     model = ObserverModel(network, params, sensors, noise, resets, adapt)
-    x0 = initial_state(network, channels, source) + initial_offset_k
+    readings = model.temperatures(fresh(measured), np.arange(len(run)) * dt)
+    x0 = initial_state(network, channels, source, params=params) + initial_offset_k
     disc = model.discretise(channels, dt)
     samples = len(run)
     resistances = model.resistances(channels, samples)
