@@ -14,7 +14,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from benchlab.model.clutch import clutch_network, convection_resistance
-from benchlab.network import Lag, Link, Node, Source, ThermalNetwork
+from benchlab.network import Calibration, Lag, Link, Node, Source, ThermalNetwork
+from benchlab.network.sensors import reading
 from benchlab.model.params import paper_params
 from benchlab.network.solver import DEFAULT_RESOLUTION, run_network
 from benchlab.network.stream import NetworkStream
@@ -92,6 +93,16 @@ def sensor_lag(time_constant_s: float) -> Effect:
     def edit(net, p):
         return net.with_lag(Lag("F_sensor", "F", "tau_F"), "T_flywheel")
     return Effect("sensor_lag", "T_flywheel", "sensor", edit, {"tau_F": time_constant_s})
+
+
+def sensor_calibration(channel: str, offset_k: float, gain: float, drift_k_per_s: float = 0.0) -> Effect:
+    """The PT1000 of `channel` is miscalibrated (a wrong curve, a lead resistance): it reads
+    `gain`·T + `offset_k` + `drift_k_per_s`·t where the plant's readings are made (`sensor_temperatures`)."""
+    def edit(net, p):
+        return replace(net, calibrations={**net.calibrations, channel: Calibration(
+            f"cal_gain_{channel}", f"cal_offset_{channel}", f"cal_drift_{channel}")})
+    return Effect("sensor_calibration", channel, "sensor", edit,
+                  {f"cal_gain_{channel}": gain, f"cal_offset_{channel}": offset_k, f"cal_drift_{channel}": drift_k_per_s})
 
 
 def extra_mass(capacity_j_per_k: float, resistance_k_per_w: float) -> Effect:
@@ -237,10 +248,15 @@ class ThermalPlant:
             channels[f"_state_{name}"] = states[:-1, i] if states is not None else np.full(n, self.state[i])
         return channels
 
-    def sensor_temperatures(self, true_states: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """What the sensors see: measured channel name -> true temperature at the sensor; the flywheel node's two
-        PT1000s as T_flywheel_1 and T_flywheel_2 (both the flywheel node where the network has one sensor)."""
-        seen = {channel: true_states[state] for channel, state in self.network.outputs.items()}
+    def sensor_temperatures(self, true_states: Mapping[str, np.ndarray],
+                            seconds: "float | np.ndarray" = 0.0) -> dict[str, np.ndarray]:
+        """What the sensors see: measured channel name -> true temperature at the sensor, read through a
+        miscalibrated sensor's calibration (`sensor_calibration`; `seconds` since the run's start, the clock of its
+        drift); the flywheel node's two PT1000s as T_flywheel_1 and T_flywheel_2 (both the flywheel node where the
+        network has one sensor)."""
+        calibrations = self.network.calibrations
+        seen = {channel: reading(calibrations.get(channel), self.params, true_states[state], seconds)
+                for channel, state in self.network.outputs.items()}
         for sensor in ("T_flywheel_1", "T_flywheel_2"):
             seen.setdefault(sensor, seen["T_flywheel"])
         return seen

@@ -109,3 +109,14 @@ def test_every_measured_output_gets_a_calibration_candidate_named_as_a_sensor():
     extended = flywheel.build(model, channels)
     assert extended.calibrations[0].output == "T_flywheel"
     assert {extended.parameters[n].unit for n in extended.calibrations[0].names} == {"1", "K"}
+
+
+def test_the_plants_miscalibrated_sensor_reads_through_its_calibration():
+    """sim_bench's hidden calibration error acts where the plant's readings are made, on its channel only."""
+    from sim_bench import plant as P
+
+    plant = P.ThermalPlant(effects=[P.sensor_calibration("T_housing", -0.8, 1.02, 1e-4)])
+    states = {name: np.array([30.0, 60.0]) for name in plant.state_names}
+    seen = plant.sensor_temperatures(states, np.array([0.0, 100.0]))
+    np.testing.assert_allclose(seen["T_housing"], [1.02 * 30.0 - 0.8, 1.02 * 60.0 - 0.8 + 0.01], rtol=1e-12)
+    assert seen["T_air"] is states["A"] and seen["T_flywheel_1"] is states["F"]
