@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import tomllib
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from benchlab.identify.fit import fit
 from benchlab.model.build import build_spec
 from benchlab.model.catalog import builtin
 from benchlab.model.definition import parse_model, to_toml
-from benchlab.model.params import ModelParams, paper_params
+from benchlab.model.params import ModelParams, load_params, paper_params, save_params
 from benchlab.network.sensors import Calibration, reading, temperature_of
 from benchlab.network.simulation import simulate
 
@@ -56,6 +57,14 @@ def test_old_files_mean_the_same_and_calibrations_round_trip():
     assert parse_model(tomllib.loads(to_toml(model)), "again.toml") == model
     assert parse_model(json.loads(json.dumps(model.to_doc())), "again.json") == model
     assert model.calibrations[0].names == ("gain_T_flywheel", "offset_T_flywheel", "drift_F")
+
+
+def test_the_parameter_file_carries_the_calibration_with_its_units(tmp_path):
+    save_params(tmp_path / "p.json", calibrated(drift=True))
+    params = load_params(tmp_path / "p.json")
+    assert params.definition == calibrated(drift=True).definition and params["drift_F"] == DRIFT
+    units = json.loads((tmp_path / "p.json").read_text())["units"]
+    assert (units["gain_T_flywheel"], units["offset_T_flywheel"], units["drift_F"]) == ("1", "K", "K/s")
 
 
 def test_the_inverse_is_the_inverse():
@@ -120,3 +129,21 @@ def test_the_plants_miscalibrated_sensor_reads_through_its_calibration():
     seen = plant.sensor_temperatures(states, np.array([0.0, 100.0]))
     np.testing.assert_allclose(seen["T_housing"], [1.02 * 30.0 - 0.8, 1.02 * 60.0 - 0.8 + 0.01], rtol=1e-12)
     assert seen["T_air"] is states["A"] and seen["T_flywheel_1"] is states["F"]
+
+
+def test_the_observer_reads_a_calibrated_sensor_as_the_temperature_it_stands_for(short_run):
+    """Observing the misread run with the calibrated model is observing the true run with the plain one: each
+    reading turned back into its temperature, its noise divided by the gain (the filter's states the same). Without
+    drift: a drift put on the grid's held values would make every held sample a fresh reading."""
+    from benchlab.observer.batch import observe
+
+    part = short_run.iloc[:30_000].copy()
+    part.attrs = dict(short_run.attrs)
+    misread_part = misread(part)
+    plain = observe(part, paper_params("nonlinear"), [CHANNEL, "T_air"], paper_params("nonlinear").network)
+    params = calibrated()
+    noise = plain.model.noise  # the misread readings' noise is GAIN times the true ones' (a reading's noise, in K)
+    noise = replace(noise, sensor_k={**noise.sensor_k, CHANNEL: GAIN * noise.sensor_k[CHANNEL]})
+    seen = observe(misread_part, params, [CHANNEL, "T_air"], params.network, noise=noise)
+    np.testing.assert_allclose(seen.estimate["T_pressure_plate"], plain.estimate["T_pressure_plate"], atol=1e-6)
+    np.testing.assert_allclose(seen.estimate[CHANNEL], plain.estimate[CHANNEL], atol=1e-6)

@@ -52,9 +52,11 @@ def model_network(params: Params, network: ThermalNetwork | None = None) -> Ther
 
 
 def initial_state(network: ThermalNetwork, channels: Mapping[str, np.ndarray], source: str = "<run>",
-                  overrides: Mapping[str, float] | None = None, params: Params | None = None) -> np.ndarray:
+                  overrides: Mapping[str, float] | None = None, params: Params | None = None,
+                  seconds: float = 0.0) -> np.ndarray:
     """Each state starts at the first valid sample of the channel it is initialised from, the temperature that
-    reading stands for where the channel's sensor is calibrated (`params` then holds its calibration)."""
+    reading stands for where the channel's sensor is calibrated (`params` then holds its calibration; `seconds`: when
+    the channels start, since the run's first sample)."""
     overrides = dict(overrides or {})
     x0 = []
     for state in network.state_names:
@@ -65,14 +67,15 @@ def initial_state(network: ThermalNetwork, channels: Mapping[str, np.ndarray], s
         first = _first_valid(channels, channel)
         if first is None:
             raise InputError(source, f"/aligned/{channel}", f"a valid sample to start state {state} from")
-        x0.append(started_from(network, params, channel, first))
+        x0.append(started_from(network, params, channel, first, seconds))
     return np.array(x0)
 
 
-def started_from(network: ThermalNetwork, params: Params | None, channel: str, value: float) -> float:
-    """The temperature a state starts at from its channel's first reading (taken at the run's start)."""
+def started_from(network: ThermalNetwork, params: Params | None, channel: str, value: float,
+                 seconds: float = 0.0) -> float:
+    """The temperature a state starts at from its channel's first reading, taken `seconds` after the run's start."""
     calibration = network.calibrations.get(channel)
-    return value if calibration is None else float(temperature_of(calibration, params, value, 0.0))
+    return value if calibration is None else float(temperature_of(calibration, params, value, seconds))
 
 
 def output_frame(network: ThermalNetwork, params: Params, states: np.ndarray, dt: float,
