@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from benchlab.diagnose.library import calibration_parameters, candidates, sensor_calibration
+from benchlab.diagnose.library import calibration_parameters, candidates, sensor_calibration, telling_apart
 from benchlab.identify.data import prepare
 from benchlab.identify.fit import fit
 from benchlab.model.build import build_spec
@@ -115,6 +115,8 @@ def test_every_measured_output_gets_a_calibration_candidate_named_as_a_sensor():
     flywheel = found["sensor_calibration_T_flywheel"]
     assert flywheel.mechanism == "sensor" and "sensor error" in flywheel.summary
     assert "known-temperature soak" in flywheel.summary and "second sensor on the flywheel" in flywheel.summary
+    physics = next(c for c in candidates(model, channels) if c.mechanism == "heat_source")
+    assert telling_apart(model, physics, flywheel).startswith("a known-temperature soak of the T_flywheel sensor")
     extended = flywheel.build(model, channels)
     assert extended.calibrations[0].output == "T_flywheel"
     assert {extended.parameters[n].unit for n in extended.calibrations[0].names} == {"1", "K"}

@@ -46,6 +46,7 @@ EXPONENT_RANGE = (0.05, 8.0)  # of a signal in a law or a source: from nearly a 
 #: ±0.3 K + 0.5 % at 100 °C; a wrong curve or a wrong lead resistance, some kelvin)
 CALIBRATION_GAIN = (0.8, 1.25)
 CALIBRATION_OFFSET_K = 20.0
+CALIBRATION_KEY = "sensor_calibration_"  # + the output's channel
 #: Screening starts of a sensor lag (s): a lag of 5 ms is flat to first order, so its screen starts also here
 LAG_PROBES_S = (1.0, 10.0, 100.0)
 LAWS = ("linear", "power", "exponential")  # a link's resistance against a signal; an on/off signal gets one factor
@@ -347,7 +348,7 @@ def sensor_calibration(output: str) -> Build:
             doc.setdefault("calibrations", []).append({"output": output, "gain": gain, "offset": offset})
             _parameter(doc, gain, 1.0, *CALIBRATION_GAIN, "1")
             _parameter(doc, offset, 0.0, -CALIBRATION_OFFSET_K, CALIBRATION_OFFSET_K, "K", scale=1.0)
-        return revise(model, f"sensor_calibration_{output}", edit)
+        return revise(model, f"{CALIBRATION_KEY}{output}", edit)
     return build
 
 
@@ -358,7 +359,7 @@ def calibration_parameters(output: str) -> tuple[str, str]:
 
 def calibration_candidate(output: str, node: str) -> Candidate:
     """Offset and gain of the sensor of `output`: a sensor error, named as one, with what would confirm it."""
-    return Candidate(f"sensor_calibration_{output}", output, "sensor",
+    return Candidate(f"{CALIBRATION_KEY}{output}", output, "sensor",
                      f"{output} measured = gain * {node} + offset",
                      f"the {output} sensor is miscalibrated (it reads gain x the temperature of node {node} + offset): "
                      f"a sensor error, not physics; a known-temperature soak of the sensor or a second sensor on node "
@@ -830,12 +831,16 @@ def per_group_candidates(model: ModelDefinition, names: "list[str]", group_by: s
 
 
 def telling_apart(model: ModelDefinition, first: Candidate, second: Candidate) -> str:
-    """The measurement that would tell two candidate extensions apart: a sensor on a node either changes that the
-    model does not measure (both change its heat balance differently); else runs in which their signals vary
+    """The measurement that would tell two candidate extensions apart: a soak or a second sensor where one is a
+    sensor's calibration; a sensor on a node either changes that the model does not measure (both change its heat balance differently); else runs in which their signals vary
     independently; else longer runs (more blocks for the test between them)."""
     if first.splits or second.splits:
         return ("runs of each group with the other's conditions: the same bench, day and specimen as the other "
                 "runs, where the parameter's difference would vanish and the other explanation's would not")
+    calibration = next((c for c in (first, second) if c.key.startswith(CALIBRATION_KEY)), None)
+    if calibration is not None:
+        return (f"a known-temperature soak of the {calibration.signal} sensor or a second sensor on node "
+                f"{calibration.nodes[0]}: a sensor error shows on that sensor alone")
     measured = set(model.outputs.values())
     channel_of = {node: channel for channel, node in {**model.simulated, **model.outputs}.items()}
     unmeasured = sorted(n for n in set(first.nodes) | set(second.nodes) if n in model.nodes and n not in measured)
