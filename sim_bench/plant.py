@@ -102,7 +102,8 @@ def sensor_calibration(channel: str, offset_k: float, gain: float, drift_k_per_s
         return replace(net, calibrations={**net.calibrations, channel: Calibration(
             f"cal_gain_{channel}", f"cal_offset_{channel}", f"cal_drift_{channel}")})
     return Effect("sensor_calibration", channel, "sensor", edit,
-                  {f"cal_gain_{channel}": gain, f"cal_offset_{channel}": offset_k, f"cal_drift_{channel}": drift_k_per_s})
+                  {f"cal_gain_{channel}": gain, f"cal_offset_{channel}": offset_k,
+                   f"cal_drift_{channel}": drift_k_per_s})
 
 
 def extra_mass(capacity_j_per_k: float, resistance_k_per_w: float) -> Effect:

@@ -169,7 +169,8 @@ def test_a_sweep_read_by_miscalibrated_sensors_through_a_model_that_says_so(tmp_
         model = sensor_calibration(channel)(model, {})
         values.update(zip(calibration_parameters(channel), (gain, offset)))
     (result,) = analyse(out, ModelParams(model, values, params.extra), model=model)
-    (unaware,) = analyse(out, params, model=replace(params.definition, alias=None))  # the same structure, no [[calibrations]]
+    unaware_model = replace(params.definition, alias=None)  # the same structure without [[calibrations]]
+    (unaware,) = analyse(out, params, model=unaware_model)
     true_r = float(np.ravel(convection_resistance(plant.params, {"engine_speed": np.array([1500.0]),
                                                                  "clutch_state": np.array([1.0])}))[0])
     assert abs(result.R - true_r) <= result.R_u and 0.5 < result.chi2_red < 2.0, (result, true_r)

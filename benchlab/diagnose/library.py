@@ -5,10 +5,10 @@ The generator works on any network (benchlab.model.ModelDefinition): every link 
 resistance law) × every varying signal under three resistance laws (linear, power, exponential in the signal;
 one factor for an on/off signal); every node × signal as a heat source; a new link between each pair of nodes
 that have none; one extra node hung on each node and one bridging each pair of nodes; a first-order lag and an
-offset-and-gain calibration on each measured output; heat moved between each pair of sources; then, last, learned piecewise-linear heat flows.
-Every candidate starts NESTED: at its start values it is its parent model (a factor of one, a source of zero
-watts, a node of 1 J/K, a link of 1e4 K/W, a lag of 5 ms, a sensor of gain 1 and offset 0 K), and that point lies inside its bounds, so a fit
-that starts there can only lower the parent's cost.
+offset-and-gain calibration on each measured output; heat moved between each pair of sources; then, last, learned
+piecewise-linear heat flows. Every candidate starts NESTED: at its start values it is its parent model (a factor of
+one, a source of zero watts, a node of 1 J/K, a link of 1e4 K/W, a lag of 5 ms, a sensor of gain 1 and offset 0 K),
+and that point lies inside its bounds, so a fit that starts there can only lower the parent's cost.
 The paper's clutch gets the same generator plus physical names (convection on R_PA/R_FA, conduction on R_Feng,
 `heat_split` of plate and flywheel shares, `extra_mass` behind the flywheel, `sensor_lag` of the flywheel),
 the convection law of eq. (11) where the baseline lacks it, the clamped plate–flywheel conduction and radiation.
@@ -832,7 +832,8 @@ def per_group_candidates(model: ModelDefinition, names: "list[str]", group_by: s
 
 def telling_apart(model: ModelDefinition, first: Candidate, second: Candidate) -> str:
     """The measurement that would tell two candidate extensions apart: a soak or a second sensor where one is a
-    sensor's calibration; a sensor on a node either changes that the model does not measure (both change its heat balance differently); else runs in which their signals vary
+    sensor's calibration; a sensor on a node either changes that the model does not measure (both change its heat
+    balance differently); else runs in which their signals vary
     independently; else longer runs (more blocks for the test between them)."""
     if first.splits or second.splits:
         return ("runs of each group with the other's conditions: the same bench, day and specimen as the other "

@@ -19,7 +19,8 @@ from benchlab.identify.spec import ModelSpec
 from benchlab.identify.trust_region import least_squares_trf
 from benchlab.network import ThermalNetwork
 from benchlab.progress import Task
-from benchlab.network.sensors import reading, temperature_of
+from benchlab.network.sensors import reading
+from benchlab.network.simulation import started_from
 from benchlab.network.solver import run_network
 from benchlab.network.sets import run_network_sets
 
@@ -72,9 +73,8 @@ def initial_state(network: ThermalNetwork, data: FitData, params: Mapping[str, f
     (`init_<channel>@<run name>`), as the temperature that reading stands for where the channel's sensor is
     calibrated; an `init_<state>` parameter overrides either."""
     def first(channel: str) -> float:
-        value = params.get(f"init_{channel}@{data.name}", data.first_valid[channel])
-        calibration = network.calibrations.get(channel)
-        return value if calibration is None else float(temperature_of(calibration, params, value, 0.0))
+        return started_from(network, params, channel, params.get(f"init_{channel}@{data.name}",
+                                                                data.first_valid[channel]))
     return np.array([params.get(f"init_{s}", first(network.initial[s])) for s in network.state_names])
 
 

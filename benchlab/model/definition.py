@@ -393,7 +393,8 @@ def _calibrations(source, prefix, doc, outputs, params) -> tuple[CalibrationEntr
             raise _fail(source, entry, "at least one of gain, offset, drift (reading = gain * T + offset + drift * t)")
         for term in CALIBRATION_TERMS:
             if term in table and table[term] not in params:
-                raise _fail(source, f"{entry}.{term}", f"a parameter name (with a [parameters] table), got {table[term]!r}")
+                raise _fail(source, f"{entry}.{term}",
+                            f"a parameter name (with a [parameters] table), got {table[term]!r}")
         if "gain" in table:
             _positive(source, entry, params[table["gain"]], "a sensor's gain")
         out.append(CalibrationEntry(output, *(table.get(term) for term in CALIBRATION_TERMS)))

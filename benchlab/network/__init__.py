@@ -1,9 +1,9 @@
 """The thermal-network engine: a network as data, its exact zero-order-hold solver, and simulation of a run.
 
 One face for the rest of benchlab. `structure` holds the network (nodes, capacities, links, sources,
-boundaries, sensor lags), `sensors` the output equation of a calibrated sensor, `solver` discretises and propagates it exactly per sample, `memo` keeps what a
-fit's repeated calls share, `sets` simulates a Jacobian's parameter sets together, `simulation` drives a
-network with a run's measured inputs. The structure is light (numpy only) and loads with the package; the
+boundaries, sensor lags), `sensors` the output equation of a calibrated sensor, `solver` discretises and
+propagates it exactly per sample, `memo` keeps what a fit's repeated calls share, `sets` simulates a Jacobian's
+parameter sets together, `simulation` drives a network with a run's measured inputs. The structure is light (numpy only) and loads with the package; the
 solver (numba) loads on first use of `discretise`, `run_network` or `simulate`.
 """
 

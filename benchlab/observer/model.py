@@ -52,9 +52,8 @@ class ObserverModel:
         self.reset_state = np.array([index[network.outputs[r.channel]] for r in self.resets], dtype=np.int64)
         # a calibrated sensor's reading is handed to the filter as the temperature it stands for (`temperatures`),
         # its noise divided by the gain: an exact rescaling of a scalar update
-        gains = np.array([coefficients(network.calibrations.get(c), params)[0] for c in self.sensors])
-        self.sensor_var = np.array([noise.sensor_k[c] ** 2 for c in self.sensors]) / gains ** 2
-        self.reset_var = np.array([noise.sensor_k[r.channel] ** 2 for r in self.resets])
+        self.sensor_var = np.array([(noise.sensor_k[c] / self._gain(c)) ** 2 for c in self.sensors])
+        self.reset_var = np.array([(noise.sensor_k[r.channel] / self._gain(r.channel)) ** 2 for r in self.resets])
         self.nodes = [node.name for node in network.nodes]
         self._noisy = replace(network, sources=network.sources + tuple(
             Source(node, _no_heat, f"process noise {node}") for node in self.nodes))
@@ -100,13 +99,18 @@ class ObserverModel:
         """Variance added to each correction per sample: a random walk of ADAPT_DRIFT of its resistance per √s."""
         return (ADAPT_DRIFT * np.asarray(first_resistances)) ** 2 * dt
 
-    def temperatures(self, readings: np.ndarray, seconds: "float | np.ndarray") -> np.ndarray:
-        """The sensors' readings (samples × sensors, or one sample's) as the temperatures of the states they read,
-        `seconds` since the run's first sample (benchlab.network.sensors.temperature_of, per sensor)."""
+    def _gain(self, channel: str) -> float:
+        """The gain of the channel's sensor (1 where it has no calibration)."""
+        return coefficients(self.network.calibrations.get(channel), self.params)[0]
+
+    def temperatures(self, readings: np.ndarray, seconds: "float | np.ndarray",
+                     channels: Sequence[str] | None = None) -> np.ndarray:
+        """Readings of `channels` (default the sensors; samples × channels, or one sample's) as the temperatures of
+        the states they read, `seconds` since the run's first sample (benchlab.network.sensors.temperature_of)."""
         if not self.network.calibrations:
             return readings
         out = np.array(readings, dtype=np.float64)
-        for j, channel in enumerate(self.sensors):
+        for j, channel in enumerate(self.sensors if channels is None else channels):
             out[..., j] = temperature_of(self.network.calibrations.get(channel), self.params, out[..., j], seconds)
         return out
 
