@@ -120,6 +120,14 @@ def test_every_measured_output_gets_a_calibration_candidate_named_as_a_sensor():
     extended = flywheel.build(model, channels)
     assert extended.calibrations[0].output == "T_flywheel"
     assert {extended.parameters[n].unit for n in extended.calibrations[0].names} == {"1", "K"}
+    drifts = {c.key: c for c in candidates(model, channels) if c.key.startswith("sensor_drift_")}
+    assert set(drifts) == {f"sensor_drift_{c}" for c in model.outputs}
+    both = drifts["sensor_drift_T_flywheel"].build(extended, channels)  # found after the offset: one entry
+    assert [(c.output, c.names) for c in both.calibrations] == [
+        ("T_flywheel", ("gain_T_flywheel", "offset_T_flywheel", "drift_T_flywheel"))]
+    assert both.parameters["drift_T_flywheel"].unit == "K/s"
+    left = {c.key for c in candidates(both, channels) if c.mechanism == "sensor" and c.signal == "T_flywheel"}
+    assert left == {"sensor_lag"}  # a calibrated, drifting sensor gets neither again, only the clutch's named lag
 
 
 def test_the_plants_miscalibrated_sensor_reads_through_its_calibration():
