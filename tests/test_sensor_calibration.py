@@ -157,3 +157,11 @@ def test_the_observer_reads_a_calibrated_sensor_as_the_temperature_it_stands_for
     seen = observe(misread_part, params, [CHANNEL, "T_air"], params.network, noise=noise)
     np.testing.assert_allclose(seen.estimate["T_pressure_plate"], plain.estimate["T_pressure_plate"], atol=1e-6)
     np.testing.assert_allclose(seen.estimate[CHANNEL], plain.estimate[CHANNEL], atol=1e-6)
+
+
+def test_wear_takes_the_nodes_temperatures_not_the_miscalibrated_readings(short_run):
+    from benchlab.wear.thermal import lining_temperatures
+
+    plain = lining_temperatures(short_run, paper_params("nonlinear"), 0.5)
+    seen = lining_temperatures(misread(short_run), calibrated(), 0.5)
+    np.testing.assert_allclose(seen[CHANNEL].to_numpy(), plain[CHANNEL].to_numpy(), rtol=0, atol=1e-9)
