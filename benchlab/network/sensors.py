@@ -2,8 +2,9 @@
 
 A measured channel reads its state (a node, or a sensor lag's state) as `gain * T + offset + drift * t`, t the
 seconds since the run's first sample (contract §6, `[[calibrations]]`). Every user of a model's outputs goes
-through this module: the simulation's output stage, identification's residuals and initial states, the online
-observer and the deployed C module (`coefficients`), so the equation has one home.
+through this module: the simulation's output stage, identification's residuals and initial states, the cool-down
+analysis, the observers, wear's lining temperatures, the deployed C module (`coefficients`) and the simulated
+plant's readings, so the equation has one home.
 """
 
 from __future__ import annotations
