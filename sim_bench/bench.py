@@ -148,7 +148,7 @@ class SimPhysics:
         k0 = self._end
         self._apply_stuck(k0 * self.dt)
         cols, states = self._advance(k0, n)
-        temps = self.plant.sensor_temperatures(states)
+        temps = self.plant.sensor_temperatures(states, (k0 + np.arange(n)) * self.dt)
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
         self._record_truth(k0, temps["_states"])
         # what the sensors read on this grid: the node's two sensors, then the DMM's channels, one row each: noise

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from benchlab.model.clutch import clutch_network, convection_resistance
-from benchlab.network import Lag, Link, Node, Source, ThermalNetwork
+from benchlab.network import Calibration, Lag, Link, Node, Source, ThermalNetwork
 from benchlab.model.params import paper_params
 from benchlab.network.plant import NetworkPlant
 
@@ -91,6 +91,17 @@ def sensor_lag(time_constant_s: float) -> Effect:
     def edit(net, p):
         return net.with_lag(Lag("F_sensor", "F", "tau_F"), "T_flywheel")
     return Effect("sensor_lag", "T_flywheel", "sensor", edit, {"tau_F": time_constant_s})
+
+
+def sensor_calibration(channel: str, offset_k: float, gain: float, drift_k_per_s: float = 0.0) -> Effect:
+    """The PT1000 of `channel` is miscalibrated (a wrong curve, a lead resistance): it reads
+    `gain`·T + `offset_k` + `drift_k_per_s`·t where the plant's readings are made (`sensor_temperatures`)."""
+    def edit(net, p):
+        return replace(net, calibrations={**net.calibrations, channel: Calibration(
+            f"cal_gain_{channel}", f"cal_offset_{channel}", f"cal_drift_{channel}")})
+    return Effect("sensor_calibration", channel, "sensor", edit,
+                  {f"cal_gain_{channel}": gain, f"cal_offset_{channel}": offset_k,
+                   f"cal_drift_{channel}": drift_k_per_s})
 
 
 def extra_mass(capacity_j_per_k: float, resistance_k_per_w: float) -> Effect:

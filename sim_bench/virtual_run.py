@@ -115,7 +115,7 @@ def run_schedule(steps: Sequence[Step], plant: ThermalPlant, seed: int, dt: floa
         truth["T_engine"] = np.asarray(engine_c(time), dtype=np.float64)
     plant.reset(truth["T_ambient"][0] if initial_c is None else initial_c)
     states = plant.advance(truth, dt)
-    at_sensor = plant.sensor_temperatures(states)
+    at_sensor = plant.sensor_temperatures(states, time)
 
     wired = max(1, int(round(sensors.wired_period_s / dt)))
     node = max(1, int(round(sensors.node_period_s / dt)))

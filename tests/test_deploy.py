@@ -15,7 +15,8 @@ from benchlab.cli import main
 from benchlab.deploy import verify
 from benchlab.deploy.module import prove, write_module
 from benchlab.deploy.plan import make_plan
-from benchlab.diagnose.library import channel_source, extra_node, sensor_lag
+from benchlab.diagnose.library import channel_source, extra_node, sensor_calibration, sensor_lag
+from benchlab.model.definition import parse_model
 from benchlab.model.params import ModelParams, paper_params, save_params
 from benchlab.runfile import write_run
 from benchlab.wear.clutchfile import default_clutch
@@ -34,14 +35,20 @@ def part(short_run):
 
 def extended() -> ModelParams:
     """The nonlinear clutch with diagnose's extensions: a mass hung on the flywheel, a slip-driven heat source into
-    the plate (a power law of the clutch speed) and a lagging air sensor; the new parameters at set values."""
+    the plate (a power law of the clutch speed) and a lagging air sensor that reads 1.5 % + 0.6 K high and drifts
+    (the module turns its readings back into temperatures); the new parameters at set values."""
     params = paper_params("nonlinear")
     model = params.definition
     channels = {"clutch_speed": np.array([0.0, 150.0])}
     for build in (extra_node(("F",), "mass_F", "H"), channel_source(("clutch_speed",), "P", (None,)),
-                  sensor_lag("T_air", "A")):
+                  sensor_lag("T_air", "A"), sensor_calibration("T_air")):
         model = build(model, channels)
-    values = {**params, **{name: p.start for name, p in model.parameters.items() if name not in params}}
+    doc = model.to_doc()
+    doc["calibrations"][0]["drift"] = "drift_T_air"
+    doc["parameters"]["drift_T_air"] = {"start": 2e-4, "min": -1e-2, "max": 1e-2, "unit": "K/s", "scale": 1e-4}
+    model = parse_model(doc, "extended.toml")
+    values = {**params, **{name: p.start for name, p in model.parameters.items() if name not in params},
+              "gain_T_air": 1.015, "offset_T_air": 0.6}
     values.update({name: 40.0 for name in values if name.startswith("q_")})
     return ModelParams(model, values, params.extra)
 

@@ -48,7 +48,8 @@ def names_as_promised(finding: dict, truth: set[tuple[str | None, str]], alpha: 
 
 
 def _sensor_truth(plant: P.ThermalPlant, run) -> dict[str, np.ndarray]:
-    return plant.sensor_temperatures(run.attrs["true_states"])
+    seconds = run["time"].to_numpy() - run["time"].iloc[0]  # a drifting sensor's clock
+    return plant.sensor_temperatures(run.attrs["true_states"], seconds)
 
 
 def _floor(plant: P.ThermalPlant, run) -> float:
@@ -91,6 +92,8 @@ HIDDEN = [  # (effect, seed, signal, mechanism): two magnitudes per effect, seed
     (P.extra_mass(4000.0, 0.15), 114, None, "capacity"),
     (P.radiation(0.08), 117, "T_flywheel", "other"),
     (P.radiation(0.2), 118, "T_flywheel", "other"),
+    (P.sensor_calibration("T_housing", -0.9, 1.02), 191, "T_housing", "sensor"),  # one size each of two outputs
+    (P.sensor_calibration("T_air", 1.4, 0.985), 192, "T_air", "sensor"),
     (_custom_torque_heat(40.0), 115, "clutch_torque", "other"),
     (_custom_torque_heat(80.0), 116, "clutch_torque", "other"),
 ]

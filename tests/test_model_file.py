@@ -197,6 +197,10 @@ BAD_MODELS = {
     "unknown key": (_set(("links", 2, "resistence"), "R_AT"), "links[R_AT].resistence"),
     "wrong schema": (_set(("schema",), "benchlab-model/9"), "schema"),
     "name collision": (_set(("nodes", "R0"), "C_A"), "nodes.R0"),
+    "calibration of no output": (lambda d: d.update(calibrations=[{"output": "T_plate", "offset": "R0"}]),
+                                 "calibrations[0].output"),
+    "calibration gain that may be zero": (lambda d: d.update(calibrations=[{"output": "T_air", "gain": "b1"}]),
+                                          "parameters.b1.min"),
 }
 
 

@@ -146,3 +146,32 @@ def test_cooldown_out_writes_the_analysis_beside_the_run_and_report_reads_it(swe
     sweep_file(str(analysis))  # accepted by report --sweep without /aligned
     assert main(["cooldown", str(out), "--params", "sim-truth", "--out", str(analysis)]) == 2  # exists: --force
     assert "--force" in capsys.readouterr().err
+
+
+def test_a_sweep_read_by_miscalibrated_sensors_through_a_model_that_says_so(tmp_path):
+    """The flywheel and air sensors read 1.2 K + 1.5 % high and 0.8 K low: analysed with a model file whose
+    [[calibrations]] say so (contract §6), each cool-down's resistance is the plant's true one again."""
+    from dataclasses import replace
+
+    from benchlab.diagnose.library import calibration_parameters, sensor_calibration
+    from benchlab.model.params import ModelParams, paper_params
+    from sim_bench import plant as P
+
+    out = tmp_path / "sweep.h5"
+    errors = {"T_flywheel": (1.2, 1.015), "T_air": (-0.8, 1.0)}
+    plant = ThermalPlant(effects=[P.sensor_calibration(c, offset, gain) for c, (offset, gain) in errors.items()])
+    code, _ = execute(RunRequest("cooldown-sweep", out, seed=3, grid="1500:1", bench=SimulatedBench(plant),
+                                 install_signals=False))
+    assert code == 0
+    params = paper_params("nonlinear")
+    model, values = params.definition, dict(params)
+    for channel, (offset, gain) in errors.items():
+        model = sensor_calibration(channel)(model, {})
+        values.update(zip(calibration_parameters(channel), (gain, offset)))
+    (result,) = analyse(out, ModelParams(model, values, params.extra), model=model)
+    unaware_model = replace(params.definition, alias=None)  # the same structure without [[calibrations]]
+    (unaware,) = analyse(out, params, model=unaware_model)
+    true_r = float(np.ravel(convection_resistance(plant.params, {"engine_speed": np.array([1500.0]),
+                                                                 "clutch_state": np.array([1.0])}))[0])
+    assert abs(result.R - true_r) <= result.R_u and 0.5 < result.chi2_red < 2.0, (result, true_r)
+    assert abs(unaware.R - true_r) > 3 * unaware.R_u  # the calibration errors matter: the comparison has content

@@ -13,6 +13,7 @@ from __future__ import annotations
 from benchlab.deploy.plan import READING_RANGE, Plan
 from benchlab.model.definition import kinds
 from benchlab.model.expressions import to_c
+from benchlab.network.sensors import coefficients
 from benchlab.network.solver import DEFAULT_RESOLUTION
 
 #: Taylor order of φ1 after scaling ‖A·h‖₁ ≤ THETA: the tail is below 0.5^(K+1)/(K+2)! (3e-10 float, 2e-21 double).
@@ -59,6 +60,8 @@ def header(plan: Plan, real: str) -> str:
               f"    {p}_real key[{max(len(plan.key), 1)}];  /* the operating point the matrices are for */"]
     if wear:
         lines.append(f"    {p}_real wear[6], wearc[6];  /* energy_J, wear_mm, loss per side; compensations */")
+    if calibrated(plan):
+        lines.append("    uint32_t samples;  /* samples stepped since init: the time a sensor's drift is in */")
     lines += ["    uint8_t have_point, have_inputs;", f"}} {p}_state;", "", "typedef struct {",
               f"    {p}_real temperature[{n}];  /* degC */", f"    {p}_real std[{n}];  /* K, 1 sigma */"]
     if wear:
@@ -75,6 +78,25 @@ def header(plan: Plan, real: str) -> str:
               f"/* Set state `index` to a sensor's value from the next sample on, with that sensor's noise as its spread. */",
               f"void {p}_reinit({p}_state *state, int index, {p}_real value);", "", f"#endif /* {guard} */", ""]
     return "\n".join(lines)
+
+
+def calibrated(plan: Plan) -> bool:
+    """Whether a sensor of the module reads through a calibration (its readings are then turned back into the
+    temperatures they stand for before the update)."""
+    return any(c in plan.params.network.calibrations for c in plan.sensors)
+
+
+def _sensor_constants(plan: Plan) -> list[str]:
+    """Each sensor's noise variance in its state's K² and, where one is calibrated, the gain, offset (K) and drift
+    (K/s) of its output equation (benchlab.network.sensors.coefficients)."""
+    network = plan.params.network
+    terms = [coefficients(network.calibrations.get(c), plan.params) for c in plan.sensors]
+    out = [f"static const real sensor_var[NS > 0 ? NS : 1] = "
+           f"{_numbers([plan.noise.sensor_k[c] ** 2 / gain ** 2 for c, (gain, _, _) in zip(plan.sensors, terms)])};"]
+    if calibrated(plan):
+        out += [f"static const real sensor_{name}[NS] = {_numbers([t[k] for t in terms])};"
+                for k, name in enumerate(("gain", "offset", "drift"))]
+    return out
 
 
 def _law_texts(plan: Plan) -> tuple[list[str], list[str], list[tuple[int, int]]]:
@@ -135,8 +157,7 @@ def source(plan: Plan, real: str) -> str:
             f"static const real noise_q[NODES] = {_numbers(q)};  /* W^2 per sample: density^2 / dt */",
             f"static const int sensor_state[NS > 0 ? NS : 1] = "
             f"{_ints([states[outputs[c]] for c in plan.sensors])};",
-            f"static const real sensor_var[NS > 0 ? NS : 1] = "
-            f"{_numbers([plan.noise.sensor_k[c] ** 2 for c in plan.sensors])};",
+            *_sensor_constants(plan),
             f"static const real reinit_var[N] = {_numbers(reinit_var)};",
             f"static const real initial_var = BL_R({plan.noise.initial_k ** 2!r});",
             f"static const real reading_lo = BL_R({READING_RANGE[0]!r}), reading_hi = BL_R({READING_RANGE[1]!r});", ""]
@@ -273,6 +294,8 @@ def _step(plan: Plan, m_src: int, boundary_input: list[int]) -> list[str]:
              "    for (i = 0; i < (NK > 0 ? NK : 1); ++i) state->key[i] = BL_R(0.0);"]
     if wear:
         lines.append("    for (i = 0; i < 6; ++i) { state->wear[i] = wear_start[i]; state->wearc[i] = BL_R(0.0); }")
+    if calibrated(plan):
+        lines.append("    state->samples = 0u;")
     lines += ["    state->have_point = 0; state->have_inputs = 0;", "}", "",
               f"void {p}_reinit({p}_state *state, int index, real value)", "{", "    int j;",
               "    if (index < 0 || index >= N || !isfinite(value)) return;",
@@ -305,6 +328,8 @@ def _step(plan: Plan, m_src: int, boundary_input: list[int]) -> list[str]:
               "        real v = readings[i];",
               "        if (isnan(v)) continue;",
               "        if (!isfinite(v) || v < reading_lo || v > reading_hi) { flags |= 4u; continue; }",
+              *(["        v = (v - sensor_offset[i] - sensor_drift[i] * ((real)state->samples * dt)) / sensor_gain[i];"
+                 "  /* the temperature the reading stands for */"] if calibrated(plan) else []),
               "        update(state->z, state->zc, state->P, state->Pc, sensor_state[i], v, sensor_var[i]);", "    }",
               "    for (i = 0; i < N; ++i) {", "        out->temperature[i] = state->z[i];",
               "        out->std[i] = BL_SQRT(BL_MAX(state->P[i][i], BL_R(0.0)));", "    }"]
@@ -326,6 +351,8 @@ def _step(plan: Plan, m_src: int, boundary_input: list[int]) -> list[str]:
                   "        out->energy_J[i] = state->wear[i]; out->wear_mm[i] = state->wear[2 + i];",
                   "        out->loss[i] = state->wear[4 + i]; out->lining_mm[i] = height_mm - state->wear[2 + i];",
                   "    }"]
+    if calibrated(plan):
+        lines.append("    state->samples += 1u;")
     lines += ["    for (i = 0; i < N; ++i) {  /* prediction as increments: D z + Bd u; D P + (P + D P) D' + Qd */",
               "        real acc = BL_R(0.0);",
               "        for (j = 0; j < N; ++j) acc += state->D[i][j] * state->z[j];",

@@ -113,7 +113,7 @@ def reference(plan: Plan, run: pd.DataFrame) -> dict[str, np.ndarray]:
     """benchlab's online observer with its wear over the run: temperatures, their σ, wear per side (N, ...)."""
     inputs, channels, names = run_inputs(plan, run)
     readings = fresh(sensor_readings(run, plan.sensors))
-    x0 = initial_state(plan.params.network, channels, run.attrs.get("source", "<run>"))
+    x0 = initial_state(plan.params.network, channels, run.attrs.get("source", "<run>"), params=plan.params)
     unique = list(dict.fromkeys(names))
     columns = [names.index(c) for c in unique]
     observer = OnlineObserver(plan.params, plan.sensors, unique, x0, plan.dt, plan.params.network, plan.noise,

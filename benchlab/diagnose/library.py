@@ -4,11 +4,12 @@ nodes, lags and parameter tables), so the extended model diagnose finds can be s
 The generator works on any network (benchlab.model.ModelDefinition): every link group (links sharing one
 resistance law) × every varying signal under three resistance laws (linear, power, exponential in the signal;
 one factor for an on/off signal); every node × signal as a heat source; a new link between each pair of nodes
-that have none; one extra node hung on each node and one bridging each pair of nodes; a first-order lag on each
-measured output; heat moved between each pair of sources; then, last, learned piecewise-linear heat flows.
-Every candidate starts NESTED: at its start values it is its parent model (a factor of one, a source of zero
-watts, a node of 1 J/K, a link of 1e4 K/W, a lag of 5 ms), and that point lies inside its bounds, so a fit
-that starts there can only lower the parent's cost.
+that have none; one extra node hung on each node and one bridging each pair of nodes; a first-order lag, an
+offset-and-gain calibration and a drift on each measured output; heat moved between each pair of sources; then,
+last, learned piecewise-linear heat flows. Every candidate starts NESTED: at its start values it is its parent model
+(a factor of one, a source of zero watts, a node of 1 J/K, a link of 1e4 K/W, a lag of 5 ms, a sensor of gain 1,
+offset 0 K and drift 0 K/s), and that point lies inside its bounds, so a fit that starts there can only lower the
+parent's cost.
 The paper's clutch gets the same generator plus physical names (convection on R_PA/R_FA, conduction on R_Feng,
 `heat_split` of plate and flywheel shares, `extra_mass` behind the flywheel, `sensor_lag` of the flywheel),
 the convection law of eq. (11) where the baseline lacks it, the clamped plate–flywheel conduction and radiation.
@@ -42,6 +43,14 @@ NESTED_RESISTANCE = 1.0e4
 NESTED_LAG_S = 0.005
 OPEN_CIRCUIT = 1.0e6  # K/W of a gated link while it is open: no heat crosses
 EXPONENT_RANGE = (0.05, 8.0)  # of a signal in a law or a source: from nearly a step (x^0.05) to a steep rise
+#: A calibration candidate's bounds: a sensor's gain within ±20 % and its offset within ±20 K (a PT1000 class B is
+#: ±0.3 K + 0.5 % at 100 °C; a wrong curve or a wrong lead resistance, some kelvin)
+CALIBRATION_GAIN = (0.8, 1.25)
+CALIBRATION_OFFSET_K = 20.0
+CALIBRATION_KEY = "sensor_calibration_"  # + the output's channel
+DRIFT_KEY = "sensor_drift_"  # + the output's channel
+#: A drift candidate's bound (K/s): 36 K an hour either way
+CALIBRATION_DRIFT_K_PER_S = 0.01
 #: Screening starts of a sensor lag (s): a lag of 5 ms is flat to first order, so its screen starts also here
 LAG_PROBES_S = (1.0, 10.0, 100.0)
 LAWS = ("linear", "power", "exponential")  # a link's resistance against a signal; an on/off signal gets one factor
@@ -333,6 +342,66 @@ def sensor_lag(output: str, node: str) -> Build:
     return build
 
 
+def _calibrate(doc: Doc, output: str, **terms: str) -> None:
+    """Add calibration terms (gain, offset, drift: parameter names) to the output's entry of `calibrations`, one
+    entry per output (a drift found after an offset, or both built into one model, join its entry)."""
+    entries = doc.setdefault("calibrations", [])
+    entry = next((e for e in entries if e["output"] == output), None)
+    if entry is None:
+        entries.append({"output": output, **terms})
+    else:
+        entry.update(terms)
+
+
+def sensor_calibration(output: str) -> Build:
+    """The sensor of `output` reads gain * T + offset (benchlab.network.sensors), from gain 1 and offset 0 K: exactly
+    the parent."""
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        gain, offset = calibration_parameters(output)
+
+        def edit(doc: Doc) -> None:
+            _calibrate(doc, output, gain=gain, offset=offset)
+            _parameter(doc, gain, 1.0, *CALIBRATION_GAIN, "1")
+            _parameter(doc, offset, 0.0, -CALIBRATION_OFFSET_K, CALIBRATION_OFFSET_K, "K", scale=1.0)
+        return revise(model, f"{CALIBRATION_KEY}{output}", edit)
+    return build
+
+
+def sensor_drift(output: str) -> Build:
+    """The sensor of `output` reads T + drift * t (t from the run's first sample), from a drift of 0 K/s: exactly the
+    parent."""
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        drift = f"drift_{output}"
+
+        def edit(doc: Doc) -> None:
+            _calibrate(doc, output, drift=drift)
+            _parameter(doc, drift, 0.0, -CALIBRATION_DRIFT_K_PER_S, CALIBRATION_DRIFT_K_PER_S, "K/s", scale=1e-4)
+        return revise(model, f"{DRIFT_KEY}{output}", edit)
+    return build
+
+
+def drift_candidate(output: str, node: str) -> Candidate:
+    """A sensor of `output` whose reading creeps in time: a sensor error, named as one, with what would confirm it."""
+    return Candidate(f"{DRIFT_KEY}{output}", output, "sensor", f"{output} measured = {node} + drift * t",
+                     f"the {output} sensor drifts (it reads the temperature of node {node} + drift x time): a sensor "
+                     f"error, not physics; a known-temperature soak of the sensor or a second sensor on node {node} "
+                     f"would confirm it", sensor_drift(output), nodes=(node,), signals=(output,))
+
+
+def calibration_parameters(output: str) -> tuple[str, str]:
+    """The gain (1) and offset (K) parameters of a calibration of `output`."""
+    return f"gain_{output}", f"offset_{output}"
+
+
+def calibration_candidate(output: str, node: str) -> Candidate:
+    """Offset and gain of the sensor of `output`: a sensor error, named as one, with what would confirm it."""
+    return Candidate(f"{CALIBRATION_KEY}{output}", output, "sensor",
+                     f"{output} measured = gain * {node} + offset",
+                     f"the {output} sensor is miscalibrated (it reads gain x the temperature of node {node} + offset): "
+                     f"a sensor error, not physics; a known-temperature soak of the sensor or a second sensor on node "
+                     f"{node} would confirm it", sensor_calibration(output), nodes=(node,), signals=(output,))
+
+
 def lag_time_constant(output: str) -> str:
     """The time constant of a lag on `output` (tau_F for the clutch's flywheel, its earlier name)."""
     return "tau_F" if output == "T_flywheel" else f"tau_{output}"
@@ -525,6 +594,10 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
                                  f"the {output} sensor lags its node's temperature", sensor_lag(output, node),
                                  nodes=(node,), structural=True, probes=lag_probes(output), exact=False,
                                  signals=(output,)))
+    scaled = {c.output for c in model.calibrations if c.gain or c.offset}
+    drifting = {c.output for c in model.calibrations if c.drift}
+    out += [calibration_candidate(output, node) for output, node in model.outputs.items() if output not in scaled]
+    out += [drift_candidate(output, node) for output, node in model.outputs.items() if output not in drifting]
     for a, b in combinations(model.sources, 2):
         if a.node != b.node:
             signal = next(iter(sorted((a.heat.names | b.heat.names) - set(model.parameters) - set(model.nodes))), None)
@@ -796,12 +869,17 @@ def per_group_candidates(model: ModelDefinition, names: "list[str]", group_by: s
 
 
 def telling_apart(model: ModelDefinition, first: Candidate, second: Candidate) -> str:
-    """The measurement that would tell two candidate extensions apart: a sensor on a node either changes that the
-    model does not measure (both change its heat balance differently); else runs in which their signals vary
+    """The measurement that would tell two candidate extensions apart: a soak or a second sensor where one is a
+    sensor's calibration; a sensor on a node either changes that the model does not measure (both change its heat
+    balance differently); else runs in which their signals vary
     independently; else longer runs (more blocks for the test between them)."""
     if first.splits or second.splits:
         return ("runs of each group with the other's conditions: the same bench, day and specimen as the other "
                 "runs, where the parameter's difference would vanish and the other explanation's would not")
+    calibration = next((c for c in (first, second) if c.key.startswith((CALIBRATION_KEY, DRIFT_KEY))), None)
+    if calibration is not None:
+        return (f"a known-temperature soak of the {calibration.signal} sensor or a second sensor on node "
+                f"{calibration.nodes[0]}: a sensor error shows on that sensor alone")
     measured = set(model.outputs.values())
     channel_of = {node: channel for channel, node in {**model.simulated, **model.outputs}.items()}
     unmeasured = sorted(n for n in set(first.nodes) | set(second.nodes) if n in model.nodes and n not in measured)

@@ -15,7 +15,7 @@ import numpy as np
 from benchlab.jit import njit
 
 from benchlab.identify.data import FitData
-from benchlab.identify.fit import KEY_RESOLUTION, run_values
+from benchlab.identify.fit import KEY_RESOLUTION, reading_gains, run_values
 from benchlab.network import Channels, ThermalNetwork, as_samples
 from benchlab.network.solver import _coefficients, _conductances, discretise
 
@@ -35,6 +35,8 @@ class ScoreResponse:
         self.law_channels = None if reads.listed else frozenset(reads.names)  # None: any channel may be read
         self.inputs = disc.inputs[: self.samples]
         flat, _ = data.fitted_flat(network.state_names, network.outputs)
+        gains = reading_gains(network, params, data)  # a calibrated sensor reads its state times its gain
+        jacobian = np.asarray(jacobian, dtype=np.float64) if gains is None else jacobian * gains[:, None]
         states = len(network.state_names)
         weights = np.stack([np.bincount(flat, weights=column, minlength=states * (self.samples + 1))
                             for column in np.asarray(jacobian, dtype=np.float64).T]).reshape(-1, states,

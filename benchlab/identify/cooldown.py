@@ -46,6 +46,7 @@ from benchlab.progress import SILENT, Progress, Task
 from benchlab.runfile import (Event, load_analysis, load_attrs, load_events, load_run, load_schedule,
                               write_analysis, write_analysis_file)
 from benchlab.runfile.schema import END_CONDITION, END_TIME
+from benchlab.network.sensors import reading, temperature_of
 from benchlab.network.simulation import initial_state, input_channels
 from benchlab.network.solver import run_network
 from protocols.schedule import Step
@@ -168,11 +169,12 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
         raise ValueError(f"cool-down [{t_start:g}, {t_end:g}] s too short")
     network = clutch_network("linear") if model is None else build_network(model)
     inputs = input_channels(seg)
-    x0 = initial_state(network, inputs, str(run.attrs.get("source", "<run>")))
+    t_seg = seg["time"].to_numpy()
+    x0 = initial_state(network, inputs, str(run.attrs.get("source", "<run>")), params=params,
+                       seconds=float(t_seg[0] - time[0]))
     names = network.state_names
     # residuals at reading times: the first grid sample of each new reading (a held sample is that
     # reading, late), at most one per `sample_s`
-    t_seg = seg["time"].to_numpy()
     picks: dict[str, np.ndarray] = {}
     for c in channels:
         v = seg[c].to_numpy()
@@ -190,7 +192,8 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
     prior: dict[str, tuple[float, float]] = {}
     for state in free[1:]:
         channel = next(c for c, st in network.outputs.items() if st == state and c in seg)
-        v = seg[channel].to_numpy()
+        # the temperatures the readings stand for (a calibrated sensor's turned back)
+        v = temperature_of(network.calibrations.get(channel), base, seg[channel].to_numpy(), t_seg - time[0])
         new = np.flatnonzero(np.isfinite(v) & np.r_[True, v[1:] != v[:-1]])
         new = new[t_seg[new] - t_seg[0] <= INIT_S]
         if new.size >= 3:
@@ -210,11 +213,15 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
             x[names.index(name)] = value
         return run_network(network, p, inputs, dt, x)[:-1]
 
+    def read(states: np.ndarray, c: str) -> np.ndarray:
+        """Channel c's sensor's readings at its picks (through its calibration, t from the run's first sample)."""
+        return reading(network.calibrations.get(c), base, states[picks[c], out_index[c]], t_seg[picks[c]] - time[0])
+
     def residuals(theta: np.ndarray) -> np.ndarray:
         states = simulate(theta)
         parts = []
         for c in channels:
-            parts.append((states[picks[c], out_index[c]] - measured[c]) / sigma[c])
+            parts.append((read(states, c) - measured[c]) / sigma[c])
         for name, value in zip(free[1:], theta[2:]):
             if name in prior:
                 parts.append(np.array([(value - prior[name][0]) / prior[name][1]]))
@@ -231,7 +238,7 @@ def fit_segment(run: pd.DataFrame, params: Mapping[str, float], t_start: float, 
     cov = np.linalg.pinv(jac.T @ jac) * max(1.0, chi2)
     se = np.sqrt(np.diag(cov))
     states = simulate(fit.x)
-    err = np.concatenate([(states[picks[c], out_index[c]] - measured[c]) for c in channels])
+    err = np.concatenate([(read(states, c) - measured[c]) for c in channels])
     return {"R": float(fit.x[0]), "R_se": float(se[0]), "T_P0": float(fit.x[1]), "T_P0_se": float(se[1]),
             "rmse_K": float(np.sqrt(np.nanmean(err ** 2))), "n": n, "chi2_red": chi2}
 

@@ -19,6 +19,8 @@ from benchlab.identify.spec import ModelSpec
 from benchlab.identify.trust_region import least_squares_trf
 from benchlab.network import ThermalNetwork
 from benchlab.progress import Task
+from benchlab.network.sensors import reading
+from benchlab.network.simulation import started_from
 from benchlab.network.solver import run_network
 from benchlab.network.sets import run_network_sets
 
@@ -68,9 +70,11 @@ def coordinate_bounds(spec: ModelSpec) -> tuple[np.ndarray, np.ndarray]:
 
 def initial_state(network: ThermalNetwork, data: FitData, params: Mapping[str, float]) -> np.ndarray:
     """States start at the first valid measurement of their channel, or at its fitted value for this run
-    (`init_<channel>@<run name>`); an `init_<state>` parameter overrides either."""
+    (`init_<channel>@<run name>`), as the temperature that reading stands for where the channel's sensor is
+    calibrated; an `init_<state>` parameter overrides either."""
     def first(channel: str) -> float:
-        return params.get(f"init_{channel}@{data.name}", data.first_valid[channel])
+        return started_from(network, params, channel, params.get(f"init_{channel}@{data.name}",
+                                                                data.first_valid[channel]))
     return np.array([params.get(f"init_{s}", first(network.initial[s])) for s in network.state_names])
 
 
@@ -87,7 +91,36 @@ def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data:
     """Model outputs at the fitting step for the measured channels of `data`."""
     states = _states(network, params, data)[:-1]
     index = {s: i for i, s in enumerate(network.state_names)}
-    return {c: states[:, index[network.outputs[c]]] for c in data.targets}
+    seconds = np.arange(len(states)) * data.dt
+    values = run_values(params, data)
+    return {c: reading(network.calibrations.get(c), values, states[:, index[network.outputs[c]]], seconds)
+            for c in data.targets}
+
+
+def read_fitted(network: ThermalNetwork, params: Mapping[str, float], data: FitData,
+                predicted: np.ndarray) -> np.ndarray:
+    """The fitted samples' states (`fitted_flat`'s order) as their sensors read them: each calibrated channel's part
+    through its calibration (benchlab.network.sensors), in place."""
+    if not network.calibrations:
+        return predicted
+    values, start = run_values(params, data), 0
+    for channel, (index, _) in data.fitted.items():
+        stop = start + len(index)
+        calibration = network.calibrations.get(channel)
+        if calibration is not None:
+            predicted[start:stop] = reading(calibration, values, predicted[start:stop], index * data.dt)
+        start = stop
+    return predicted
+
+
+def reading_gains(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> np.ndarray | None:
+    """d reading / d state of each fitted sample (`fitted_flat`'s order): its sensor's gain; None where all are 1."""
+    if not any(c.gain for c in network.calibrations.values()):
+        return None
+    values = run_values(params, data)
+    return np.concatenate([np.full(len(index), network.calibrations[c].values(values)[0]
+                                   if c in network.calibrations else 1.0)
+                           for c, (index, _) in data.fitted.items()])
 
 
 def _states(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> np.ndarray:
@@ -102,7 +135,8 @@ def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datase
     parts = []
     for data in datasets:
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
-        parts.append(_state_major(_states(network, params, data)).take(flat) - targets)
+        parts.append(read_fitted(network, params, data, _state_major(_states(network, params, data)).take(flat))
+                     - targets)
     return np.concatenate(parts)
 
 
@@ -117,8 +151,8 @@ def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_s
         runs = run_network_sets(network, run_values(base, data), own_sets, data.channels, data.dt, x0s,
                                 KEY_RESOLUTION, data.memo)
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
-        for part, states in zip(parts, runs):
-            part.append(_state_major(states).take(flat) - targets)
+        for part, states, params in zip(parts, runs, param_sets):
+            part.append(read_fitted(network, params, data, _state_major(states).take(flat)) - targets)
     return [np.concatenate(part) for part in parts]
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from benchlab.identify.spec import ModelSpec, ParamSpec
 from benchlab.model.definition import ModelDefinition, kinds
 from benchlab.model.expressions import Expression, affine_parts, compile_expression
-from benchlab.network import Boundary, Channels, Lag, Link, Node, Params, Source, ThermalNetwork
+from benchlab.network import Boundary, Calibration, Channels, Lag, Link, Node, Params, Source, ThermalNetwork
 
 NO_TEMPERATURES: dict[str, float] = {}
 
@@ -44,7 +44,7 @@ def _first_present(channels: tuple[str, ...]) -> Callable[[Channels], np.ndarray
 
 
 def build_network(model: ModelDefinition) -> ThermalNetwork:
-    """The model's nodes, boundaries, links, sources and sensor lags as a ThermalNetwork."""
+    """The model's nodes, boundaries, links, sources, sensor lags and calibrations as a ThermalNetwork."""
     laws: dict[str, Callable] = {}
 
     def law(expr: Expression) -> Callable:
@@ -71,6 +71,7 @@ def build_network(model: ModelDefinition) -> ThermalNetwork:
         lags=tuple(Lag(model.lag_state(g.output), g.node, g.time_constant) for g in model.lags),
         initial=dict(model.initial),
         measured=tuple(model.outputs),
+        calibrations={c.output: Calibration(c.gain, c.offset, c.drift) for c in model.calibrations},
     )
 
 

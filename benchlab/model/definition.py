@@ -24,8 +24,9 @@ from benchlab.values import check_keys, finite_number
 SCHEMA = "benchlab-model/1"
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 TOP_KEYS = ("schema", "name", "description", "requires", "nodes", "boundaries", "links", "sources", "lags",
-            "outputs", "simulated", "initial", "parameters")
+            "calibrations", "outputs", "simulated", "initial", "parameters")
 PARAMETER_KEYS = ("start", "min", "max", "unit", "fixed", "scale")
+CALIBRATION_TERMS = ("gain", "offset", "drift")  # reading = gain * T + offset + drift * t (benchlab.network.sensors)
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,21 @@ class LagEntry:
 
 
 @dataclass(frozen=True)
+class CalibrationEntry:
+    """A miscalibrated sensor: the measured channel `output` reads gain * T + offset + drift * t (each a parameter
+    name, None where the file leaves it out: 1, 0 K, 0 K/s)."""
+
+    output: str
+    gain: str | None = None
+    offset: str | None = None
+    drift: str | None = None
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(n for n in (self.gain, self.offset, self.drift) if n)
+
+
+@dataclass(frozen=True)
 class ModelDefinition:
     """A checked model file. `alias` is the built-in name (linear, nonlinear) it was loaded under, if any."""
 
@@ -87,6 +103,7 @@ class ModelDefinition:
     description: str = ""
     source: str = field(default="<model>", compare=False)  # where it was read from, for error messages
     alias: str | None = field(default=None, compare=False)
+    calibrations: tuple[CalibrationEntry, ...] = ()
 
     @property
     def label(self) -> str:
@@ -141,6 +158,9 @@ class ModelDefinition:
         doc["links"] = [{"name": l.name, "between": list(l.between), "resistance": l.resistance.text} for l in self.links]
         doc["sources"] = [{"name": s.name, "node": s.node, "heat": s.heat.text} for s in self.sources]
         doc["lags"] = [{"output": g.output, "node": g.node, "time_constant": g.time_constant} for g in self.lags]
+        doc["calibrations"] = [{"output": c.output, **{term: name for term, name in zip(CALIBRATION_TERMS,
+                                                                                  (c.gain, c.offset, c.drift)) if name}}
+                               for c in self.calibrations]
         doc["outputs"] = dict(self.outputs)
         doc["simulated"] = dict(self.simulated)
         doc["initial"] = dict(self.initial)
@@ -267,6 +287,7 @@ def parse_model(doc: object, source: "str | os.PathLike[str]", prefix: str = "")
     if not outputs:
         raise _fail(source, f"{prefix}outputs", "at least one measured channel = node")
     lags = _lags(source, prefix, doc, nodes, outputs, params)
+    calibrations = _calibrations(source, prefix, doc, outputs, params)
     initial = _initial(source, prefix, doc, nodes, outputs, lags, params)
     requires = doc.get("requires", [])
     if not isinstance(requires, list):
@@ -276,7 +297,7 @@ def parse_model(doc: object, source: "str | os.PathLike[str]", prefix: str = "")
         raise _fail(source, f"{prefix}description", "a string")
     model = ModelDefinition(name, nodes, boundaries, links, sources, lags, outputs, simulated, initial, params,
                             tuple(_name(source, f"{prefix}requires", c, "a channel") for c in requires),
-                            description, source)
+                            description, source, calibrations=calibrations)
     _check_names(model, prefix)
     return model
 
@@ -360,6 +381,27 @@ def _lags(source, prefix, doc, nodes, outputs, params) -> tuple[LagEntry, ...]:
     return tuple(out)
 
 
+def _calibrations(source, prefix, doc, outputs, params) -> tuple[CalibrationEntry, ...]:
+    out = []
+    for i, table in enumerate(_entries(source, f"{prefix}calibrations", doc.get("calibrations", []))):
+        entry = f"{prefix}calibrations[{i}]"
+        _keys(source, entry, table, ("output",) + CALIBRATION_TERMS, ("output",))
+        output = table["output"]
+        if output not in outputs:
+            raise _fail(source, f"{entry}.output", f"a measured channel of [outputs], got {output!r}")
+        if not any(term in table for term in CALIBRATION_TERMS):
+            raise _fail(source, entry, "at least one of gain, offset, drift (reading = gain * T + offset + drift * t)")
+        for term in CALIBRATION_TERMS:
+            if term in table and table[term] not in params:
+                raise _fail(source, f"{entry}.{term}",
+                            f"a parameter name (with a [parameters] table), got {table[term]!r}")
+        if "gain" in table:
+            _positive(source, entry, params[table["gain"]], "a sensor's gain")
+        out.append(CalibrationEntry(output, *(table.get(term) for term in CALIBRATION_TERMS)))
+    _unique(source, f"{prefix}calibrations", [c.output for c in out])
+    return tuple(out)
+
+
 def _initial(source, prefix, doc, nodes, outputs, lags, params) -> dict[str, str]:
     given = _table(source, f"{prefix}initial", doc.get("initial", {}))
     states = list(nodes) + [g.output for g in lags]
@@ -402,6 +444,7 @@ def _check_names(model: ModelDefinition, prefix: str) -> None:
             raise _fail(model.source, f"{prefix}{channel}", "a channel name no node or boundary shares")
     for name, param in model.parameters.items():
         used = (name in model.nodes.values() or any(g.time_constant == name for g in model.lags)
+                or any(name in c.names for c in model.calibrations)
                 or any(name in l.resistance.names for l in model.links) or any(name in s.heat.names for s in model.sources))
         if not used:
             raise _fail(model.source, f"{prefix}parameters.{name}", "a parameter the model uses (no law names it)")
@@ -435,7 +478,7 @@ def to_toml(model: ModelDefinition) -> str:
     for table in ("nodes", "boundaries"):
         if table in doc:
             lines += ["", f"[{table}]"] + [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in doc[table].items()]
-    for array in ("links", "sources", "lags"):
+    for array in ("links", "sources", "lags", "calibrations"):
         for item in doc.get(array, []):
             lines += ["", f"[[{array}]]"] + [f"{k} = {_toml_value(v)}" for k, v in item.items()]
     for table in ("outputs", "simulated", "initial"):

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from benchlab.network.sensors import reading
 from benchlab.network.solver import DEFAULT_RESOLUTION, run_network
 from benchlab.network.stream import NetworkStream
 from benchlab.network.structure import Params, ThermalNetwork
@@ -61,10 +62,15 @@ class NetworkPlant:
         states = self._stream.run(channels, self.state)
         return states.T if states is not None else run_network(self.network, self.params, channels, dt, self.state)
 
-    def sensor_temperatures(self, true_states: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """What the sensors see: measured channel name -> true temperature at the sensor; the flywheel node's two
-        PT1000s as T_flywheel_1 and T_flywheel_2 (both the flywheel node where the network has one sensor)."""
-        seen = {channel: true_states[state] for channel, state in self.network.outputs.items()}
+    def sensor_temperatures(self, true_states: Mapping[str, np.ndarray],
+                            seconds: "float | np.ndarray" = 0.0) -> dict[str, np.ndarray]:
+        """What the sensors see: measured channel name -> true temperature at the sensor, read through a
+        miscalibrated sensor's calibration (the network's `calibrations`; `seconds` since the run's start, the clock
+        of its drift); the flywheel node's two PT1000s as T_flywheel_1 and T_flywheel_2 (both the flywheel node where
+        the network has one sensor)."""
+        calibrations = self.network.calibrations
+        seen = {channel: reading(calibrations.get(channel), self.params, true_states[state], seconds)
+                for channel, state in self.network.outputs.items()}
         for sensor in ("T_flywheel_1", "T_flywheel_2"):
             seen.setdefault(sensor, seen["T_flywheel"])
         return seen

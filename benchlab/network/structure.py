@@ -12,6 +12,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from benchlab.network.sensors import Calibration
+
 Params = Mapping[str, float]
 Channels = Mapping[str, np.ndarray]
 #: A resistance (K/W) or heat flow (W): a scalar, or one value per sample, from params and channels.
@@ -76,6 +78,9 @@ class ThermalNetwork:
     lags: tuple[Lag, ...] = ()
     initial: Mapping[str, str] = field(default_factory=dict)  # state -> channel it starts from
     measured: tuple[str, ...] = ()  # the outputs a run measures (fitted and scored); the rest are only simulated
+    #: measured channel -> its sensor's calibration (benchlab.network.sensors: the output equation); absent: it
+    #: reads its state as it is
+    calibrations: Mapping[str, Calibration] = field(default_factory=dict)
 
     @property
     def state_names(self) -> list[str]:
@@ -112,6 +117,9 @@ class ThermalNetwork:
         for channel, state in self.outputs.items():
             if state not in self.state_names:
                 raise ValueError(f"output {channel} reads unknown state {state!r}")
+        for channel in self.calibrations:
+            if channel not in self.outputs:
+                raise ValueError(f"calibration of {channel}, which is no output")
 
 
 def as_samples(value: "float | np.ndarray", n: int) -> np.ndarray:

@@ -86,11 +86,11 @@ def observe(run: pd.DataFrame, params: Params, sensors: Sequence[str], network: 
     source = run.attrs.get("source", "<run>")
     channels = input_channels(run)
     measured = sensor_readings(run, sensors)
-    readings = fresh(measured)
     dt = float(run.attrs["dt"])
     noise = noise or tune_noise(network, params, [*sensors, *(r.channel for r in resets)], initial_offset_k)
     model = ObserverModel(network, params, sensors, noise, resets, adapt)
-    x0 = initial_state(network, channels, source) + initial_offset_k
+    readings = model.temperatures(fresh(measured), np.arange(len(run)) * dt)
+    x0 = initial_state(network, channels, source, params=params) + initial_offset_k
     disc = model.discretise(channels, dt)
     samples = len(run)
     resistances = model.resistances(channels, samples)
@@ -98,7 +98,8 @@ def observe(run: pd.DataFrame, params: Params, sensors: Sequence[str], network: 
     out_z, out_std = np.empty((samples, len(z0))), np.empty((samples, len(z0)))
     filter_run(disc.op_index, disc.Ad, disc.Bd, disc.inputs, model.process_variance(dt), resistances, model.S,
                model.T, model.correction_variance(resistances[0], dt), dt, readings, model.sensor_state,
-               model.sensor_var, reset_values(run, model.resets), model.reset_state, model.reset_var, z0,
+               model.sensor_var, model.temperatures(reset_values(run, model.resets), np.arange(samples) * dt,
+                                                    [r.channel for r in model.resets]), model.reset_state, model.reset_var, z0,
                model.initial_covariance(resistances[0]), out_z, out_std)
     columns = {}
     for i, name in enumerate([model.names[s] for s in model.states] + model.adapted):

@@ -14,6 +14,7 @@ import numpy as np
 from benchlab.errors import InputError
 from benchlab.network import (Channels, ParamChannelFunction, Params, Source, ThermalNetwork, as_samples, sample_matrix,
                               state_channels)
+from benchlab.network.sensors import coefficients, temperature_of
 from benchlab.observer.noise import ADAPT_DRIFT, ADAPT_INITIAL, NoiseModel
 from benchlab.network.solver import Discretised, conductance_matrices, discretise
 
@@ -49,8 +50,10 @@ class ObserverModel:
         self.resets = tuple(resets)
         self.sensor_state = np.array([index[network.outputs[c]] for c in self.sensors], dtype=np.int64)
         self.reset_state = np.array([index[network.outputs[r.channel]] for r in self.resets], dtype=np.int64)
-        self.sensor_var = np.array([noise.sensor_k[c] ** 2 for c in self.sensors])
-        self.reset_var = np.array([noise.sensor_k[r.channel] ** 2 for r in self.resets])
+        # a calibrated sensor's reading is handed to the filter as the temperature it stands for (`temperatures`),
+        # its noise divided by the gain: an exact rescaling of a scalar update
+        self.sensor_var = np.array([(noise.sensor_k[c] / self._gain(c)) ** 2 for c in self.sensors])
+        self.reset_var = np.array([(noise.sensor_k[r.channel] / self._gain(r.channel)) ** 2 for r in self.resets])
         self.nodes = [node.name for node in network.nodes]
         self._noisy = replace(network, sources=network.sources + tuple(
             Source(node, _no_heat, f"process noise {node}") for node in self.nodes))
@@ -95,6 +98,21 @@ class ObserverModel:
     def correction_variance(self, first_resistances: np.ndarray, dt: float) -> np.ndarray:
         """Variance added to each correction per sample: a random walk of ADAPT_DRIFT of its resistance per √s."""
         return (ADAPT_DRIFT * np.asarray(first_resistances)) ** 2 * dt
+
+    def _gain(self, channel: str) -> float:
+        """The gain of the channel's sensor (1 where it has no calibration)."""
+        return coefficients(self.network.calibrations.get(channel), self.params)[0]
+
+    def temperatures(self, readings: np.ndarray, seconds: "float | np.ndarray",
+                     channels: Sequence[str] | None = None) -> np.ndarray:
+        """Readings of `channels` (default the sensors; samples × channels, or one sample's) as the temperatures of
+        the states they read, `seconds` since the run's first sample (benchlab.network.sensors.temperature_of)."""
+        if not self.network.calibrations:
+            return readings
+        out = np.array(readings, dtype=np.float64)
+        for j, channel in enumerate(self.sensors if channels is None else channels):
+            out[..., j] = temperature_of(self.network.calibrations.get(channel), self.params, out[..., j], seconds)
+        return out
 
     def discretise(self, channels: Mapping[str, np.ndarray], dt: float) -> Discretised:
         """Ad, Bd per operating point with Bd = [network inputs | noise columns Γ]; inputs without noise columns."""

@@ -95,6 +95,7 @@ class OnlineObserver:
         self._laws = [lambda ch, law=s.heat_flow: law(params, ch) for s in network.sources]
         self._laws += [b.temperature for b in network.boundaries]
         self._held: Sequence[float] | None = None  # the last sample's inputs
+        self._samples = 0  # samples stepped: a calibrated sensor's drift is in K per second of the run
         self._key_channels: tuple[str, ...] = ()
         self._key_index: list[tuple[int, float]] = []  # (position in inputs, 1 / quantum) per key channel
         self._points: dict[Any, tuple[np.ndarray, np.ndarray]] = {}  # key -> ([Ad | Bd], adapted resistances)
@@ -167,8 +168,10 @@ class OnlineObserver:
         for i, law in enumerate(self._laws):
             u[i] = law(channels)
         model = self.model
+        readings = model.temperatures(np.asarray(measurement, dtype=np.float64), self._samples * self.dt)
+        self._samples += 1
         filter_step(point[0], u, self._q, point[1], model.S, model.T, self._qd, self.dt,
-                    np.asarray(measurement, dtype=np.float64), model.sensor_state, model.sensor_var, self.z, self.P,
+                    readings, model.sensor_state, model.sensor_var, self.z, self.P,
                     self._out, self._scratch)
         if self.lining is not None:
             estimate = self._out[0]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 from benchlab.model.clutch import DEFAULT_MODEL
@@ -11,6 +12,7 @@ from benchlab.model.catalog import builtin
 from benchlab.model.definition import ModelDefinition, parse_model
 from benchlab.network import ThermalNetwork
 from benchlab.model.params import ModelParams
+from benchlab.network.sensors import temperature_of
 from benchlab.network.simulation import simulate
 from benchlab.values import finite_number
 
@@ -62,5 +64,11 @@ def lining_network(params: ModelParams, split: float, source: str = "<params>") 
 
 def lining_temperatures(run: pd.DataFrame, params: ModelParams, split: float,
                         source: str = "<params>") -> pd.DataFrame:
-    """The model's T_pressure_plate, T_flywheel, T_air (degC) on the run's grid, with the heat split applied."""
-    return simulate(run, params, lining_network(params, split, source))
+    """The model's T_pressure_plate, T_flywheel, T_air (degC) on the run's grid, with the heat split applied: the
+    nodes' own temperatures, not what a miscalibrated sensor reads of them (its reading turned back)."""
+    network = lining_network(params, split, source)
+    simulated = simulate(run, params, network)
+    seconds = np.arange(len(run)) * float(run.attrs["dt"])
+    for channel, calibration in network.calibrations.items():
+        simulated[channel] = temperature_of(calibration, params, simulated[channel].to_numpy(), seconds)
+    return simulated
