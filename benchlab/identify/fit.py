@@ -107,18 +107,25 @@ def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datase
 
 
 def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_sets: Sequence[Mapping[str, float]],
-                     datasets: Sequence[FitData]) -> list[np.ndarray]:
+                     datasets: Sequence[FitData], base_residuals: np.ndarray | None = None) -> list[np.ndarray]:
     """`residual_vector` of each parameter set, bit for bit, computed together: the sets of a forward-difference
-    Jacobian, each near `base` (benchlab.network.sets)."""
+    Jacobian, each near `base` (benchlab.network.sets). `base_residuals`: `residual_vector` of `base`, where the
+    caller has it; a run that a set leaves as the base has it (another run's start temperature moved) then takes
+    its part instead of a simulation."""
     parts: list[list[np.ndarray]] = [[] for _ in param_sets]
+    offset = 0
     for data in datasets if param_sets else ():
+        base_values = run_values(base, data)
         own_sets = [run_values(params, data) for params in param_sets]
         x0s = np.array([initial_state(network, data, params) for params in own_sets])
-        runs = run_network_sets(network, run_values(base, data), own_sets, data.channels, data.dt, x0s,
-                                KEY_RESOLUTION, data.memo)
+        base_x0 = None if base_residuals is None else initial_state(network, data, base_values)
+        runs = run_network_sets(network, base_values, own_sets, data.channels, data.dt, x0s, KEY_RESOLUTION,
+                                data.memo, base_x0)
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
         for part, states in zip(parts, runs):
-            part.append(_state_major(states).take(flat) - targets)
+            part.append(base_residuals[offset:offset + len(flat)] if states is None else
+                        _state_major(states).take(flat) - targets)
+        offset += len(flat)
     return [np.concatenate(part) for part in parts]
 
 
@@ -143,16 +150,18 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
     lo, hi = coordinate_bounds(spec)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
 
-    last = [x0]  # the point the fit evaluated last: where it then takes the Jacobian
+    last: list[np.ndarray] = [x0, np.zeros(0)]  # the point the fit evaluated last and its residuals: where it then
+    # takes the Jacobian
 
     def fun(x: np.ndarray) -> np.ndarray:
-        last[0] = x.copy()
-        return residual_vector(spec.network, from_coordinates(spec, x), datasets)
+        residuals = residual_vector(spec.network, from_coordinates(spec, x), datasets)
+        last[:] = x.copy(), residuals
+        return residuals
 
     def columns(_fun: object, points: Iterable[np.ndarray]) -> list[np.ndarray]:
         """scipy's forward differences (its steps, its quotients), their residuals computed together."""
         return residual_vectors(spec.network, from_coordinates(spec, last[0]),
-                                [from_coordinates(spec, x) for x in points], datasets)
+                                [from_coordinates(spec, x) for x in points], datasets, last[1])
 
     sol = least_squares_trf(fun, x0, (lo, hi), columns, max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10,
                             stop=None if stop is None else lambda x: stop(from_coordinates(spec, x)))
