@@ -196,7 +196,7 @@ def within_errors(result: FitResult, params: Mapping[str, float], errors: np.nda
     return bool(np.all(np.isfinite(errors)) and np.all(gaps <= errors))
 
 
-def _arrived(best: FitResult) -> Callable[[Mapping[str, float]], bool] | None:
+def arrived(best: FitResult) -> Callable[[Mapping[str, float]], bool] | None:
     """A scout's `stop` once `best` has converged: the scout has arrived where its parameters are within the
     standard errors of best's, the agreement `same_minimum` asks for; None while best is still moving."""
     if not best.converged:
@@ -249,13 +249,13 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
         if len(found) >= 2 and unsettled:
             k = next(k for k, r in enumerate(found) if r is unsettled[0])
             found[k] = fit(spec, scouted, max_nfev=scout_nfev, start={n: unsettled[0].params[n] for n in
-                                                                       unsettled[0].free_names}, stop=_arrived(best))
+                                                                       unsettled[0].free_names}, stop=arrived(best))
         elif len(found) >= 2 and not best.converged and all(r.converged for r in found if r is not best):
             found[found.index(best)] = fit(spec, scouted, max_nfev=scout_nfev,
                                            start={n: best.params[n] for n in best.free_names})
         else:
             found.append(fit(spec, scouted, max_nfev=scout_nfev, start=_start(spec, len(found), rng, spread),
-                             stop=_arrived(best) if best is not None else None))
+                             stop=arrived(best) if best is not None else None))
         task.advance()
     best = min(found, key=lambda r: r.cost)
     final = fit(polish or spec, datasets, start={k: best.params[k] for k in best.free_names})
