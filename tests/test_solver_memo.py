@@ -101,12 +101,29 @@ def test_sets_computed_together_are_bit_identical(setting):
             assert np.array_equal(residuals, residual_vector(spec.network, params, [data])), spec.name
 
 
+def test_a_set_that_leaves_a_run_as_the_base_takes_the_base_residuals_bit_for_bit(setting):
+    """Two runs, each with its fitted start temperature: the column of one run's start leaves the other run as the base
+    (not simulated again, its part of the base's residuals taken), and every set's residuals are still exact."""
+    data, _ = setting
+    runs = [data, replace(data, name="1", memo=LawMemo())]
+    spec = diagnosed_spec(resolve_model("nonlinear"), runs)
+    start = {**spec.fixed, **{p.name: p.initial for p in spec.free}}
+    sets = list(_jacobian_sets(spec, start))
+    together = residual_vectors(spec.network, start, sets, runs, residual_vector(spec.network, start, runs))
+    for params, residuals in zip(sets, together):
+        assert np.array_equal(residuals, residual_vector(spec.network, params, runs))
+    other_start = [{**start, "init_T_flywheel@1": start["init_T_flywheel@1"] + 0.5}]
+    x0 = fit_module.initial_state(spec.network, data, start)
+    assert run_network_sets(spec.network, start, other_start, data.channels, data.dt, np.array([x0]), KEY_RESOLUTION,
+                            data.memo, x0) == [None]
+
+
 def test_fit_takes_the_same_steps_as_with_one_run_per_jacobian_column(setting, monkeypatch):
     data, specs = setting
     spec = specs[-1]  # the nonlinear model with an extra heat source: convection laws, a source, a fitted start
     together = fit(spec, [data], max_nfev=6)
     monkeypatch.setattr(fit_module, "residual_vectors",
-                        lambda network, base, sets, datasets: [residual_vector(network, p, datasets) for p in sets])
+                        lambda network, base, sets, datasets, *_: [residual_vector(network, p, datasets) for p in sets])
     one_by_one = fit(spec, [data], max_nfev=6)
     assert together.params == one_by_one.params and together.cost == one_by_one.cost
     assert np.array_equal(together.jacobian, one_by_one.jacobian)

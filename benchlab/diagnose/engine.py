@@ -43,8 +43,8 @@ from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.identifiability import not_identified, on_bound
-from benchlab.identify.fit import (FitResult, coordinate_bounds, fit, fit_multistart, from_coordinates, residual_vector,
-                                   simulate_outputs, to_coordinates)
+from benchlab.identify.fit import (FitResult, arrived, coordinate_bounds, fit, fit_multistart, from_coordinates,
+                                   residual_vector, simulate_outputs, to_coordinates)
 from benchlab.identify.spec import ModelSpec, ParamSpec
 from benchlab.identify.metrics import difference_noise, nrmse_pct, residual
 from benchlab.identify.uncertainty import estimate_uncertainty
@@ -437,11 +437,14 @@ def _polished(spec: ModelSpec, warm: dict[str, float], current: FitResult,
               datasets: Sequence[FitData]) -> tuple[FitResult | None, tuple[str, ...]]:
     """A candidate fitted to convergence from its warm (screened) start, and from the model file's neutral start
     (the new parameters nested) scouted and polished where it does better; the better fit with none of the
-    candidate's own new parameters on a bound, or None and those parameters."""
+    candidate's own new parameters on a bound, or None and those parameters. A scout that reaches the warm fit's
+    minimum (within its standard errors, as identify's multistart judges two starts alike: `arrived`) stops there:
+    going on could only find that minimum again."""
     neutral = {**{p.name: p.initial for p in spec.free},
                **{k: v for k, v in current.params.items() if k.startswith("init_") and k in warm}}
     fits = [fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: warm[p.name] for p in spec.free})]
-    scout = fit(spec, datasets, max_nfev=SCOUT_NFEV, start={p.name: neutral[p.name] for p in spec.free})
+    scout = fit(spec, datasets, max_nfev=SCOUT_NFEV, start={p.name: neutral[p.name] for p in spec.free},
+                stop=arrived(fits[0]))
     if scout.cost < fits[0].cost or at_bound(fits[0]):
         fits.append(fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: scout.params[p.name] for p in spec.free}))
     def own_at_bound(r: FitResult) -> tuple[str, ...]:

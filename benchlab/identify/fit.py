@@ -141,18 +141,27 @@ def residual_vector(network: ThermalNetwork, params: Mapping[str, float], datase
 
 
 def residual_vectors(network: ThermalNetwork, base: Mapping[str, float], param_sets: Sequence[Mapping[str, float]],
-                     datasets: Sequence[FitData]) -> list[np.ndarray]:
+                     datasets: Sequence[FitData], base_residuals: np.ndarray | None = None) -> list[np.ndarray]:
     """`residual_vector` of each parameter set, bit for bit, computed together: the sets of a forward-difference
-    Jacobian, each near `base` (benchlab.network.sets)."""
+    Jacobian, each near `base` (benchlab.network.sets). `base_residuals`: `residual_vector` of `base`, where the
+    caller has it; a run that a set leaves as the base has it (another run's start temperature moved) then takes
+    its part instead of a simulation."""
     parts: list[list[np.ndarray]] = [[] for _ in param_sets]
+    offset = 0
     for data in datasets if param_sets else ():
+        base_values = run_values(base, data)
         own_sets = [run_values(params, data) for params in param_sets]
         x0s = np.array([initial_state(network, data, params) for params in own_sets])
-        runs = run_network_sets(network, run_values(base, data), own_sets, data.channels, data.dt, x0s,
-                                KEY_RESOLUTION, data.memo)
+        # a calibrated output's drift moves its reading, not its state: such a network keeps simulating every set
+        reuse = base_residuals is not None and not network.calibrations
+        base_x0 = initial_state(network, data, base_values) if reuse else None
+        runs = run_network_sets(network, base_values, own_sets, data.channels, data.dt, x0s, KEY_RESOLUTION,
+                                data.memo, base_x0)
         flat, targets = data.fitted_flat(network.state_names, network.outputs)
         for part, states, params in zip(parts, runs, param_sets):
-            part.append(read_fitted(network, params, data, _state_major(states).take(flat)) - targets)
+            part.append(base_residuals[offset:offset + len(flat)] if states is None else
+                        read_fitted(network, params, data, _state_major(states).take(flat)) - targets)
+        offset += len(flat)
     return [np.concatenate(part) for part in parts]
 
 
@@ -177,16 +186,18 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
     lo, hi = coordinate_bounds(spec)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
 
-    last = [x0]  # the point the fit evaluated last: where it then takes the Jacobian
+    last: list[np.ndarray] = [x0, np.zeros(0)]  # the point the fit evaluated last and its residuals: where it then
+    # takes the Jacobian
 
     def fun(x: np.ndarray) -> np.ndarray:
-        last[0] = x.copy()
-        return residual_vector(spec.network, from_coordinates(spec, x), datasets)
+        residuals = residual_vector(spec.network, from_coordinates(spec, x), datasets)
+        last[:] = x.copy(), residuals
+        return residuals
 
     def columns(_fun: object, points: Iterable[np.ndarray]) -> list[np.ndarray]:
         """scipy's forward differences (its steps, its quotients), their residuals computed together."""
         return residual_vectors(spec.network, from_coordinates(spec, last[0]),
-                                [from_coordinates(spec, x) for x in points], datasets)
+                                [from_coordinates(spec, x) for x in points], datasets, last[1])
 
     sol = least_squares_trf(fun, x0, (lo, hi), columns, max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10,
                             stop=None if stop is None else lambda x: stop(from_coordinates(spec, x)))
@@ -221,7 +232,7 @@ def within_errors(result: FitResult, params: Mapping[str, float], errors: np.nda
     return bool(np.all(np.isfinite(errors)) and np.all(gaps <= errors))
 
 
-def _arrived(best: FitResult) -> Callable[[Mapping[str, float]], bool] | None:
+def arrived(best: FitResult) -> Callable[[Mapping[str, float]], bool] | None:
     """A scout's `stop` once `best` has converged: the scout has arrived where its parameters are within the
     standard errors of best's, the agreement `same_minimum` asks for; None while best is still moving."""
     if not best.converged:
@@ -274,13 +285,13 @@ def fit_multistart(spec: ModelSpec, datasets: Sequence[FitData], starts: int = 6
         if len(found) >= 2 and unsettled:
             k = next(k for k, r in enumerate(found) if r is unsettled[0])
             found[k] = fit(spec, scouted, max_nfev=scout_nfev, start={n: unsettled[0].params[n] for n in
-                                                                       unsettled[0].free_names}, stop=_arrived(best))
+                                                                       unsettled[0].free_names}, stop=arrived(best))
         elif len(found) >= 2 and not best.converged and all(r.converged for r in found if r is not best):
             found[found.index(best)] = fit(spec, scouted, max_nfev=scout_nfev,
                                            start={n: best.params[n] for n in best.free_names})
         else:
             found.append(fit(spec, scouted, max_nfev=scout_nfev, start=_start(spec, len(found), rng, spread),
-                             stop=_arrived(best) if best is not None else None))
+                             stop=arrived(best) if best is not None else None))
         task.advance()
     best = min(found, key=lambda r: r.cost)
     final = fit(polish or spec, datasets, start={k: best.params[k] for k in best.free_names})

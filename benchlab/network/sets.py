@@ -83,10 +83,14 @@ def _base(network: ThermalNetwork, params: Params, channels: Channels, dt: float
 
 
 def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence[Params], channels: Channels,
-                     dt: float, x0s: np.ndarray, resolution: float, memo: LawMemo) -> list[np.ndarray]:
+                     dt: float, x0s: np.ndarray, resolution: float, memo: LawMemo,
+                     base_x0: np.ndarray | None = None) -> list[np.ndarray | None]:
     """The states (N + 1, n) of each parameter set from its row of `x0s`: `run_network` of each, computed together.
 
     `memo` must serve `channels` (a fit's run); the base is discretised through it, the sets are not kept in it.
+    With `base_x0` (the base's initial state, for a caller that holds the base's own states), a set that moves no
+    parameter the network reads and starts from `base_x0` is None: its states are the base's, bit for bit (a fit's
+    column of another run's start temperature, which this run never reads).
     """
     if isinstance(memo, NoMemo) or not memo.holds(channels):
         return [propagate(discretise(network, p, channels, dt, resolution), x0) for p, x0 in zip(param_sets, x0s)]
@@ -99,6 +103,7 @@ def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence
     inputs_of = np.zeros(len(param_sets), dtype=np.int64)
     moved_A, moved_B, moved_inputs = [], [], [origin.inputs]
     alone: dict[int, np.ndarray] = {}  # sets that regroup the operating points, discretised on their own
+    as_base: set[int] = set()  # sets whose states are the base's (None in the result)
     for s, params in enumerate(param_sets):
         moved = _moved(base, params)
         if any(law.reads is None or law.reads & moved for law in laws) or factor_names & moved:
@@ -113,6 +118,9 @@ def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence
         if columns is not None:
             inputs_of[s] = len(moved_inputs)
             moved_inputs.append(sample_matrix(columns, n))
+        if (base_x0 is not None and not matrices_of[s] and not inputs_of[s]
+                and np.array_equal(x0s[s], base_x0)):
+            as_base.add(s)
     Ads, Bds = [origin.Ad[None]], [origin.Bd[None]]
     if moved_A:
         Ad, Bd = _zoh(np.concatenate(moved_A), np.concatenate(moved_B), dt)
@@ -121,12 +129,12 @@ def run_network_sets(network: ThermalNetwork, base: Params, param_sets: Sequence
         Bds.append(Bd.reshape(-1, points, *Bd.shape[1:]))
     x0s = np.ascontiguousarray(x0s, dtype=np.float64)
     out = np.empty((len(param_sets), x0s.shape[1], len(origin.op_index) + 1))  # state-major, as propagate's
-    together = np.array([s for s in range(len(param_sets)) if s not in alone], dtype=np.int64)
+    together = np.array([s for s in range(len(param_sets)) if s not in alone and s not in as_base], dtype=np.int64)
     _propagate_sets(origin.op_index, np.concatenate(Ads), np.concatenate(Bds), matrices_of, np.stack(moved_inputs),
                     inputs_of, x0s, together, out)
     for s, states in alone.items():
         out[s] = states.T
-    return [states.T for states in out]
+    return [None if s in as_base else states.T for s, states in enumerate(out)]
 
 
 def _moved_matrices(network: ThermalNetwork, params: Params, moved: set[str], laws: list[_Law], origin: _Base,
