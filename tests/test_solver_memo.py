@@ -118,6 +118,24 @@ def test_a_set_that_leaves_a_run_as_the_base_takes_the_base_residuals_bit_for_bi
                             data.memo, x0) == [None]
 
 
+def test_a_set_that_moves_a_sensors_drift_is_read_again(setting):
+    """A drift moves a calibrated output's reading, not its state, nor the state it starts from: with the base's
+    residuals given, a set that moves only the drift is still its own residual vector (not the base's)."""
+    from benchlab.diagnose.library import candidates as library_of
+
+    data, _ = setting
+    runs = [data, replace(data, name="1", memo=LawMemo())]
+    model = resolve_model("nonlinear")
+    drift = next(c for c in library_of(model, data.channels, ALIGNED_UNITS) if c.key.startswith("sensor_drift_"))
+    spec = diagnosed_spec(drift.build(model, data.channels), runs)
+    start = {**spec.fixed, **{p.name: p.initial for p in spec.free}}
+    name = spec.network.calibrations[drift.signal].drift
+    moved = [{**start, name: start[name] + 1e-4}]
+    [together] = residual_vectors(spec.network, start, moved, runs, residual_vector(spec.network, start, runs))
+    assert np.array_equal(together, residual_vector(spec.network, moved[0], runs))
+    assert not np.array_equal(together, residual_vector(spec.network, start, runs))
+
+
 def test_fit_takes_the_same_steps_as_with_one_run_per_jacobian_column(setting, monkeypatch):
     data, specs = setting
     spec = specs[-1]  # the nonlinear model with an extra heat source: convection laws, a source, a fitted start
