@@ -65,6 +65,9 @@ SCORED_FITS = 6  # best-scored candidates screened by a short fit
 STRUCTURAL_FITS = 3  # best-scored extra nodes and lags screened by a short fit beside them
 SCREEN_NFEV = 8
 HELD_OUT_NFEV = 60
+#: a held-out (cross-validation) fit starts at the all-data fit's optimum and stops once a step changes the cost, the
+#: parameters or the gradient by less than this share: what it predicts moves far below the noise floor from there
+HELD_OUT_TOLERANCE = 1e-6
 POLISH_NFEV = 80  # the all-data fit of a screened candidate: near convergence, so its gain is not underrated
 SCOUT_NFEV = 25  # the fit from a neutral start before it is polished (where it beats the warm start)
 CROSS_VALIDATED = 3
@@ -266,7 +269,8 @@ def _held_out(spec: ModelSpec, start: dict[str, float], datasets: Sequence[FitDa
     predictions = [{c: np.full(len(d), np.nan) for c in d.targets} for d in datasets]
     params = []
     for train, test in _folds(datasets):
-        result = fit(spec, train, max_nfev=HELD_OUT_NFEV, start={p.name: start[p.name] for p in spec.free})
+        result = fit(spec, train, max_nfev=HELD_OUT_NFEV, start={p.name: start[p.name] for p in spec.free},
+                     tolerance=HELD_OUT_TOLERANCE)
         params.append(result.params)
         for pred, d in zip(predictions, test):
             for c, values in simulate_outputs(spec.network, result.params, d).items():
@@ -283,7 +287,7 @@ def _held_out_runs(spec: ModelSpec, start: dict[str, float], datasets: Sequence[
         own = {name: start[name] for name in start if name.endswith(f"@{d.name}")}
         held = spec.with_fixed(own)
         result = fit(held, [e for j, e in enumerate(datasets) if j != i], max_nfev=HELD_OUT_NFEV,
-                     start={p.name: start[p.name] for p in held.free})
+                     start={p.name: start[p.name] for p in held.free}, tolerance=HELD_OUT_TOLERANCE)
         params.append(result.params)
         predictions.append(simulate_outputs(spec.network, {k: v for k, v in result.params.items() if k not in own}, d))
     return HeldOut(datasets, predictions, params)
