@@ -39,7 +39,7 @@ def build(name: str, seed: int = 1, n_cycles: int | None = None, duration_s: flo
     For a bench (`limits`): Table 1 draws whose launch cannot synchronise on its drivetrain are left out (each named
     in the notes and the options' "dropped"), and every launch is planned at its time to synchronise. `plant`: the
     thermal plant the run will use, on which a cool-down sweep's heat-ups and cool-downs are simulated for their
-    expected durations (protocols.estimates.sweep_durations)."""
+    expected durations (protocols.estimates.timed)."""
     if name == "table1":
         from protocols.table1 import table1_plan
 

@@ -20,7 +20,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from protocols.estimates import ROOM_C, Plant, cool_estimate_s, heat_estimate_s, sweep_durations
+from protocols.estimates import ROOM_C, Plant, cool_estimate_s, heat_estimate_s, timed
 from protocols.schedule import Condition, Step
 
 DEFAULT_GRID: tuple[tuple[float, int, float | None], ...] = (
@@ -73,26 +73,22 @@ def parse_grid(text: str) -> tuple[tuple[float, int, float | None], ...]:
 def cooldown_sweep_schedule(grid: Sequence[tuple[float, int, float | None]] = DEFAULT_GRID,
                             config: SweepConfig = SweepConfig(), plant: Plant | None = None) -> tuple[Step, ...]:
     """The sweep over `grid`; cycle i is grid point i. Its heat-ups and cool-downs are expected to last what they
-    last on `plant` (simulated: protocols.estimates.sweep_durations), without one what the paper's closed forms
-    say."""
+    last on `plant` (simulated: protocols.estimates.timed), without one what the paper's closed forms say."""
     cfg = config
     steps: list[Step] = []
-    shafts = [(rpm, state, rpm - (rpm if (state == 0 and slip is None) else (slip or 0.0)))
-              for rpm, state, slip in grid]
-    simulated = sweep_durations(shafts, cfg.__dict__, plant) if plant is not None else None
     steady = Condition("T_flywheel", "steady", cfg.heat_target_c, cfg.band_k, cfg.window_s, cfg.drift_k)
     cooled = Condition("T_flywheel", "<=", cfg.cool_target_c)
     for i, (rpm, state, slip) in enumerate(grid):
         slip = rpm if (state == 0 and slip is None) else (0.0 if slip is None else slip)
         shaft = rpm - slip
         point = (("engine_speed", float(rpm)), ("clutch_state", float(state)), ("slip_speed", float(slip)))
-        heat_s = simulated[i][0] if simulated else heat_estimate_s(
+        heat_s = heat_estimate_s(
             ROOM_C if i == 0 else cfg.cool_target_c, cfg.heat_target_c, cfg.heat_speed_rpm, cfg.heat_torque_nm,
             cfg.pulse_s, cfg.rest_s, cfg.window_s)
         steps.append(Step("heat", cfg.heat_timeout_s, cfg.heat_speed_rpm, cfg.heat_torque_nm, cfg.hold_load_nm, i,
                           until=(steady,), estimate_s=round(min(heat_s, cfg.heat_timeout_s), 1), pulse_s=cfg.pulse_s,
                           rest_s=cfg.rest_s, label="heat", point=point))
-        cool_s = simulated[i][1] if simulated else cool_estimate_s(rpm, state, cfg.heat_target_c, cfg.cool_target_c)
+        cool_s = cool_estimate_s(rpm, state, cfg.heat_target_c, cfg.cool_target_c)
         estimate = round(min(cfg.cool_timeout_s, cool_s), 1)
         if state == 1:
             steps.append(Step("launch", 5.0, rpm, cfg.launch_torque_nm, 0.0, i, label="prepare", point=point))
@@ -105,4 +101,4 @@ def cooldown_sweep_schedule(grid: Sequence[tuple[float, int, float | None]] = DE
         else:
             steps.append(Step("open", cfg.cool_timeout_s, rpm, 0.0, cfg.hold_load_nm, i, until=(cooled,),
                               estimate_s=estimate, label="cooldown", point=point))
-    return tuple(steps)
+    return tuple(steps) if plant is None else timed(steps, plant)

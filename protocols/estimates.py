@@ -5,7 +5,7 @@ From the paper's parameters (the plant a simulated bench runs; a hardware bench'
 that is expected. Measured against the simulated bench in tests/test_plans.py (within 10 % per protocol).
 
 A cool-down sweep's heat-ups and cool-downs are, where the plant the run will use is known (the simulated bench's,
-or a parameter file's), simulated on that plant (`sweep_durations`): the paper's closed forms above missed the
+or a parameter file's), simulated on that plant (`timed`, `played`: the closed-loop steps played on it): the paper's closed forms above missed the
 reference plant's sweep by almost half (4304 s against 7881 s of bench time).
 """
 
@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any, Protocol
 
 from benchlab.drivetrain import RPM
-from protocols.schedule import Condition, pulse_due
+from protocols.schedule import Condition, Step, pulse_due
 
 #: Where a run starts: the bench at room temperature.
 ROOM_C = 22.0
@@ -85,56 +86,110 @@ ESTIMATE_CHANNELS = ("engine_speed", "clutch_speed", "clutch_torque", "clutch_st
 
 
 def _flywheel(plant: Plant, seconds: float, rpm: float, shaft_rpm: float, state: int, torque_nm: float,
-              dt: float) -> Any:
+              dt: float, ambient_c: float = ROOM_C) -> Any:
     """The flywheel sensors' mean over `seconds` at one operating point (friction power where the clutch slips
     under `torque_nm`, as much as the lining's μ(ϑ) transmits); the plant's state moves to the end."""
     import numpy as np
 
     n = max(1, int(round(seconds / dt)))
     power = torque_nm * plant.friction_factor() * (rpm - shaft_rpm) * RPM
-    channels = dict(zip(ESTIMATE_CHANNELS, (rpm, shaft_rpm, torque_nm, float(state), power, 0.0, ROOM_C)))
+    channels = dict(zip(ESTIMATE_CHANNELS, (rpm, shaft_rpm, torque_nm, float(state), power, 0.0, ambient_c)))
     seen = plant.sensor_temperatures(plant.advance({k: np.full(n, v) for k, v in channels.items()}, dt))
     return 0.5 * (seen["T_flywheel_1"] + seen["T_flywheel_2"])
 
 
-def sweep_durations(points: Sequence[tuple[float, int, float]], heat: Mapping[str, float], plant: Plant,
-                    dt: float = ESTIMATE_DT_S) -> list[tuple[float, float]]:
-    """(heat-up, cool-down) seconds of each sweep point, simulated on `plant` from ROOM_C in the order the run
-    goes: pulses at `heat`'s torque and speed with the heat step's pulse rule (protocols.schedule `pulse_due`) until
-    the flywheel is steady at the target (the runner's test, `Condition.steady_over`), then (ω_e, S, shaft speed)
-    until it reads the cool-down target. `heat`: the
-    SweepConfig's fields; `points`: (engine rpm, S, shaft rpm)."""
+def _holds(conditions: Sequence[Condition], history: list[float], dt: float) -> bool:
+    """Whether any of `conditions` on the flywheel holds on its readings `history` (every `dt`), by the runner's
+    tests (a threshold on the last reading, `Condition.steady_over`)."""
     import numpy as np
 
-    plant.reset(ROOM_C)
-    out = []
-    hold = (heat["heat_speed_rpm"], 0.0)
-    steady = Condition("T_flywheel", "steady", heat["heat_target_c"], heat["band_k"], heat["window_s"], heat["drift_k"])
+    now = history[-1]
+    for c in conditions:
+        if c.channel != "T_flywheel":
+            continue
+        if (c.op == ">=" and now >= c.value) or (c.op == "<=" and now <= c.value):
+            return True
+        if c.op == "steady":
+            times = np.arange(len(history)) * dt
+            if c.steady_over(times, np.asarray(history), times[-1]):
+                return True
+    return False
 
-    def settled(history: list[float]) -> bool:
-        times = np.arange(len(history)) * dt
-        return steady.steady_over(times, np.asarray(history), times[-1])
 
-    for rpm, state, shaft in points:
-        history = list(_flywheel(plant, 2.0, *hold, 0, 0.0, dt))  # the shaft comes to rest under the load first
-        rise = 0.0
-        while not settled(history) and len(history) * dt < heat["heat_timeout_s"]:
-            before = history[-1]
-            if pulse_due(before, heat["heat_target_c"], rise):
-                pulse = _flywheel(plant, heat["pulse_s"], *hold, 1, heat["heat_torque_nm"], dt)
-                history += list(pulse)
-                rise = max(0.0, float(pulse[-1]) - before)
-            history += list(_flywheel(plant, heat["rest_s"], *hold, 0, 0.0, dt))
-        cooled = 0.0
-        while cooled < heat["cool_timeout_s"]:
-            start = plant.state.copy()
-            piece = _flywheel(plant, COOL_PIECE_S, rpm, shaft, state, 0.0, dt)
-            below = np.flatnonzero(piece <= heat["cool_target_c"])
-            if len(below):  # ends inside this piece: the plant goes back to where the step would end
-                plant.reset(dict(zip(plant.state_names, start)))
-                _flywheel(plant, (below[0] + 1) * dt, rpm, shaft, state, 0.0, dt)
-                cooled += (below[0] + 1) * dt
-                break
-            cooled += COOL_PIECE_S
-        out.append((len(history) * dt, min(cooled, heat["cool_timeout_s"])))
+def _heat_pulses(plant: Plant, step: Step, dt: float, ambient_c: float) -> tuple[Step, ...]:
+    """A "heat" step played on `plant` as the runner plays it (protocols.schedule `pulse_due` against its first
+    condition's value; 2 s for the shaft to come to rest under the load, then per period a pulse where due and a
+    rest) until its conditions hold or it times out: the open-loop steps it becomes, each pulse a launch against the
+    holding load (the set-points a pulse gives), each rest an open clutch."""
+    hold = (step.engine_speed_rpm, 0.0)
+    target = step.until[0].value if step.until else math.inf
+    rest = replace(step, phase="open", duration_s=step.rest_s, clutch_torque_nm=0.0, until=(), estimate_s=None)
+    pulse = replace(step, phase="launch", duration_s=step.pulse_s, until=(), estimate_s=None)
+    out = [replace(rest, duration_s=2.0)]
+    history = list(_flywheel(plant, 2.0, *hold, 0, 0.0, dt, ambient_c))
+    rise = 0.0
+    while not _holds(step.until, history, dt) and len(history) * dt < step.duration_s:
+        before = history[-1]
+        if pulse_due(before, target, rise):
+            heated = _flywheel(plant, step.pulse_s, *hold, 1, step.clutch_torque_nm, dt, ambient_c)
+            history += list(heated)
+            rise = max(0.0, float(heated[-1]) - before)
+            out.append(pulse)
+        history += list(_flywheel(plant, step.rest_s, *hold, 0, 0.0, dt, ambient_c))
+        out.append(rest)
+    return tuple(out)
+
+
+def _until_met(plant: Plant, step: Step, rpm: float, shaft_rpm: float, state: int, dt: float,
+               ambient_c: float) -> float:
+    """Seconds a step that holds its operating point until a threshold on the flywheel (a cool-down to a
+    temperature) lasts on `plant`, at most its time-out; the plant's state moves to where the step ends."""
+    import numpy as np
+
+    spent = 0.0
+    while spent < step.duration_s:
+        start = plant.state.copy()
+        piece = _flywheel(plant, COOL_PIECE_S, rpm, shaft_rpm, state, 0.0, dt, ambient_c)
+        met = np.flatnonzero([_holds(step.until, [value], dt) for value in piece])
+        if len(met):  # ends inside this piece: the plant goes back to where the step would end
+            plant.reset(dict(zip(plant.state_names, start)))
+            _flywheel(plant, (met[0] + 1) * dt, rpm, shaft_rpm, state, 0.0, dt, ambient_c)
+            return min(spent + (met[0] + 1) * dt, step.duration_s)
+        spent += COOL_PIECE_S
+    return step.duration_s
+
+
+def played(steps: Sequence[Step], plant: Plant, dt: float = ESTIMATE_DT_S,
+           ambient_c: float = ROOM_C) -> list[tuple[Step, ...]]:
+    """Each step as it is expected to go on `plant` from its present state, open loop: a "heat" step its pulses and
+    rests (`_heat_pulses`), a step that ends on a condition that step at the length it lasts, every other step as
+    it is. The one model of the closed-loop steps a plan holds: their expected durations (`timed`) and a designed
+    run's prediction (benchlab.design.fisher `predicted_run`)."""
+    out: list[tuple[Step, ...]] = []
+    shaft = 0.0
+    for step in steps:
+        rpm = step.engine_speed_rpm
+        if step.phase == "heat":
+            out.append(_heat_pulses(plant, step, dt, ambient_c))
+            shaft = 0.0
+            continue
+        if step.phase in ("launch", "drive") and step.load_torque_nm == 0.0:
+            shaft, state, torque = rpm, 1, 0.0  # synchronises at once: no slip heat worth timing
+        elif step.phase == "launch":
+            shaft, state, torque = 0.0, 1, step.clutch_torque_nm  # slips against the load
+        else:
+            shaft, state, torque = (0.0 if step.load_torque_nm > 0 else shaft), 0, 0.0
+        if step.until:
+            seconds = _until_met(plant, step, rpm, shaft, state, dt, ambient_c)
+            out.append((replace(step, duration_s=seconds, until=(), estimate_s=None),))
+        else:
+            _flywheel(plant, step.expected_s, rpm, shaft, state, torque, dt, ambient_c)
+            out.append((step,))
     return out
+
+
+def timed(steps: Sequence[Step], plant: Plant) -> tuple[Step, ...]:
+    """`steps` with each closed-loop step's expected duration as it goes on `plant` from ROOM_C (`played`)."""
+    plant.reset(ROOM_C)
+    return tuple(replace(step, estimate_s=round(min(sum(s.duration_s for s in went), step.duration_s), 1))
+                 if step.phase == "heat" or step.until else step for step, went in zip(steps, played(steps, plant)))

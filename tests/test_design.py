@@ -131,19 +131,30 @@ def test_a_fixed_length_cooldown_is_complete_and_a_timed_out_condition_is_not():
     assert completed(end(0, "condition"), [conditional])
 
 
-def test_eq11_alone_is_designed_for_the_cooldown_reading(run_file, open_params, tmp_path, capsys):
-    """Designed for a2 and b2 alone within 30 min for the reading, the plan is cool-downs read one by one:
-    open-clutch cool-downs at three engine speeds at least (the open branch's a2, b2 and R0), the expected errors
-    those of that reading."""
+def test_eq11_alone_is_designed_for_the_cooldown_reading(run_file, open_params, tmp_path, capsys, refused):
+    """Designed for a2 and b2 alone for the reading, the plan is the cool-down sweep's cycles (docs/design.md): each
+    cool-down follows a heat-up until the flywheel is steady, within the bench's limits; open-clutch cool-downs at
+    three engine speeds at least (the open branch's a2, b2 and R0), the expected errors those of that reading. A
+    budget shorter than one such cycle is one line, exit 2."""
+    from protocols.limits import schedule_problems
+    from protocols.schedule import step_from_dict
+
     out = tmp_path / "plan.json"
-    assert main(["design", str(run_file), "--params", str(open_params), "--out", str(out), "--budget", "30",
+    assert main(["design", str(run_file), "--params", str(open_params), "--out", str(out), "--budget", "60",
                  "--reading"]) == 0
     printed = capsys.readouterr().out
     doc = json.loads(out.read_text())
-    assert doc["identification"] == "cooldowns" and doc["planned_min"] <= 30
+    assert doc["identification"] == "cooldowns" and doc["planned_min"] <= 60
     assert "each read on its own" in printed
-    speeds = {step["engine_speed_rpm"] for step in doc["schedule"] if step.get("label") == "cooldown"
-              and dict(step.get("point") or {}).get("clutch_state") == 0.0}
+    steps = [step_from_dict(row) for row in doc["schedule"]]
+    assert not schedule_problems(steps, BenchLimits())
+    cycles = sorted({s.cycle for s in steps})
+    for cycle in cycles:
+        own = [s for s in steps if s.cycle == cycle]
+        assert own[0].phase == "heat" and own[0].until[0].op == "steady" and own[-1].label == "cooldown"
+    speeds = {s.engine_speed_rpm for s in steps if s.label == "cooldown" and dict(s.point)["clutch_state"] == 0.0}
     assert len(speeds) >= 3
     for name in ("a2", "b2"):
         assert 0 < doc["expected"][name]["relative_error_expected"] < 1
+    refused(["design", str(run_file), "--params", str(open_params), "--out", str(tmp_path / "short.json"),
+             "--budget", "5", "--reading"], "--budget", "shortest block")

@@ -67,7 +67,7 @@ def test_no_launch_of_an_accepted_table1_trips_the_slip_limit_and_the_estimate_h
     assert took == pytest.approx(planned, rel=0.10)
 
 
-# A sweep's heat-ups and cool-downs are simulated on the plant the run uses (protocols.estimates.sweep_durations):
+# A sweep's heat-ups and cool-downs are simulated on the plant the run uses (protocols.estimates.timed):
 # on the reference plant (the default) the paper's closed forms planned 1108 s for a run of 2319 s.
 @pytest.mark.parametrize("name, options, plant", [("cooldown-sweep", {"grid": "1000:1,1500:0"}, "reference"),
                                                   ("validation", {"cycles": 2}, "reference")])

@@ -1,16 +1,21 @@
 """The small library of feasible blocks a designed run is assembled from: each block heats the clutch by launches,
 then holds one long cool-down at a chosen engine speed with the clutch clamped or open (the operating points of
-eq. (11)), or holds the clutch clamped at speed (a hold: no launch heat, the convection alone).
+eq. (11)); or, for the cool-down reading, heats to a steady flywheel first and cools to a temperature, as the
+cool-down sweep reads its points (`steady_blocks`).
 
-Every block is open loop (fixed durations), so the design can predict it exactly with the bench's drivetrain, and
-every block passes `protocols.limits.schedule_problems` on the bench it is built for: a launch that cannot
+The launch blocks are open loop (fixed durations), so the design can predict them exactly with the bench's
+drivetrain; the steady ones are closed loop, predicted as the model expects them to go
+(`benchlab.design.fisher.open_loop`). Every block passes `protocols.limits.schedule_problems` on the bench it is built for: a launch that cannot
 synchronise on the bench's drivetrain is never offered.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+from protocols.cooldown_sweep import SweepConfig, cooldown_sweep_schedule
+from protocols.estimates import Plant
 from protocols.limits import BenchLimits, launch_problem, schedule_problems, with_launch_estimates
 from protocols.schedule import Step
 
@@ -78,28 +83,50 @@ def cooldown_steps(speed_rpm: float, clamped: bool, length_s: float) -> tuple[St
     return (Step("open", length_s, speed_rpm, 0.0, 0.0, 0, label="cooldown", point=point),)
 
 
-def candidate_blocks(limits: BenchLimits, launches: tuple[int, ...] = (HEAT_LAUNCHES,),
-                     lengths: tuple[float, ...] = COOLDOWN_LENGTHS_S) -> list[Block]:
-    """Every block the bench can run: heat by each number of `launches`, then cool at each speed, clutch clamped
-    or open, each of `lengths`; blocks with a problem under the bench's limits left out."""
+def candidate_blocks(limits: BenchLimits) -> list[Block]:
+    """Every block the bench can run: heat by HEAT_LAUNCHES launches, then cool at each speed, clutch clamped or
+    open, each of COOLDOWN_LENGTHS_S; blocks with a problem under the bench's limits left out."""
     launch = heating_launch(limits)
     if launch is None:
         return []
     stop = Step("open", STOP_S, launch.engine_speed_rpm, 0.0, launch.load_torque_nm, 0, label="heat")
+    heat = (launch, stop) * HEAT_LAUNCHES
     blocks = []
-    for count in launches:
-        heat = (launch, stop) * count
-        named = "heat" if count == HEAT_LAUNCHES else f"heat by {count} launches"
-        for speed in COOLDOWN_SPEEDS_RPM:
-            if speed > limits.max_engine_speed_rpm:
-                continue
-            for clamped in (False, True):
-                for length in lengths:
-                    steps = with_launch_estimates(heat + cooldown_steps(speed, clamped, length), limits)
-                    if not schedule_problems(steps, limits):
-                        state = "clamped" if clamped else "open"
-                        blocks.append(Block(f"{named}, cool {length:g} s at {speed:g} rpm clutch {state}", steps))
+    for speed in COOLDOWN_SPEEDS_RPM:
+        if speed > limits.max_engine_speed_rpm:
+            continue
+        for clamped in (False, True):
+            for length in COOLDOWN_LENGTHS_S:
+                steps = with_launch_estimates(heat + cooldown_steps(speed, clamped, length), limits)
+                if not schedule_problems(steps, limits):
+                    state = "clamped" if clamped else "open"
+                    blocks.append(Block(f"heat, cool {length:g} s at {speed:g} rpm clutch {state}", steps))
     return blocks
+
+
+def steady_blocks(limits: BenchLimits, plant: Plant) -> list[Block]:
+    """A block at each engine speed, clutch clamped or open, that reads its point as the cool-down sweep does: the
+    sweep's own cycle (`protocols.cooldown_sweep`: pulsed heat until the flywheel is steady at the heat target,
+    the point prepared, a cool-down until the flywheel reaches the cool target), timed on `plant` (the model) from
+    rest; blocks with a problem under the bench's limits left out."""
+    blocks = []
+    for speed in COOLDOWN_SPEEDS_RPM:
+        if speed > limits.max_engine_speed_rpm:
+            continue
+        for state in (0, 1):
+            steps = with_launch_estimates(cooldown_sweep_schedule([(speed, state, None)], SweepConfig(), plant), limits)
+            if not schedule_problems(steps, limits):
+                sweep = SweepConfig()
+                blocks.append(Block(f"heat to a steady {sweep.heat_target_c:g} degC, cool to {sweep.cool_target_c:g} "
+                                    f"degC at {speed:g} rpm clutch {'clamped' if state else 'open'}", steps))
+    return blocks
+
+
+def steady_schedule(blocks: Sequence[Block], limits: BenchLimits, plant: Plant) -> tuple[Step, ...]:
+    """Steady blocks one after the other: the sweep over their points, block i as cycle i, each heat-up and
+    cool-down timed on `plant` where it follows the one before."""
+    grid = [(b.steps[-1].engine_speed_rpm, int(dict(b.steps[-1].point)["clutch_state"]), None) for b in blocks]
+    return with_launch_estimates(cooldown_sweep_schedule(grid, SweepConfig(), plant), limits)
 
 
 def numbered(blocks: list[Block]) -> tuple[Step, ...]:

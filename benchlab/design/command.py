@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from benchlab.design.blocks import candidate_blocks
+from benchlab.design.blocks import Block, candidate_blocks, steady_blocks, steady_schedule
 from benchlab.design.fisher import predicted_run
-from benchlab.design.points import determines, read_runs
+from benchlab.design.points import determines, operating_point, read_runs
 from benchlab.design.precision import design_cooldown_reading, design_precision
 from benchlab.identify.cooldown import segment_model
 from benchlab.identify.staged import EQ11
@@ -23,9 +23,12 @@ from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.model.catalog import model_spec
 from benchlab.model.params import ModelParams, load_params
 from benchlab.model.runs import load_runs
+from benchlab.network.plant import NetworkPlant
 from benchlab.outputs import write_text
 from benchlab.runner.session import RunRequest, bench_config
+from protocols.estimates import Plant
 from protocols.limits import BenchLimits
+from protocols.schedule import duration_s
 
 
 def nominal_values(params: ModelParams, open_: Mapping[str, str]) -> dict[str, float]:
@@ -53,14 +56,28 @@ def model_error_warnings(fit: object) -> list[str]:
             "designed run may bend other parameters instead (benchlab diagnose says what the model misses)"]
 
 
-def checked_budget(budget_min: float, limits: BenchLimits) -> float:
-    """The budget in s, or InputError where it is shorter than the shortest block on this bench."""
-    shortest = min((b.expected_s for b in candidate_blocks(limits)), default=np.inf)
+def checked_budget(budget_min: float, limits: BenchLimits, blocks: Sequence[Block] | None = None) -> float:
+    """The budget in s, or InputError where it is shorter than the shortest of `blocks` (default the launch
+    blocks) on this bench."""
+    shortest = min((b.expected_s for b in (candidate_blocks(limits) if blocks is None else blocks)), default=np.inf)
     if budget_min * 60.0 < shortest:
         raise InputError("command line", "--budget", f"at least {np.ceil(shortest / 60):g} min: the shortest block "
                                                      f"(heat, then a cool-down) lasts {shortest / 60:.1f} min on "
                                                      f"this bench, got {budget_min:g}")
     return budget_min * 60.0
+
+
+def three_points_min(blocks: Sequence[Block], interest: Sequence[str], limits: BenchLimits, plant: Plant) -> float:
+    """Minutes the shortest plan of steady blocks at three engine speeds in each clutch state `interest` lies in
+    lasts (what the cool-down reading needs to determine eq. 11's branch there), timed in sequence on `plant`."""
+    from benchlab.identify.cooldown import BRANCHES
+
+    needed = {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
+    chosen: list[Block] = []
+    for state in sorted(needed):
+        own = sorted((b for b in blocks if operating_point(b)["clutch_state"] == state), key=lambda b: b.expected_s)
+        chosen += own[:3]
+    return duration_s(steady_schedule(chosen, limits, plant)) / 60.0
 
 
 def design(args: argparse.Namespace, schema: str) -> int:
@@ -83,16 +100,19 @@ def design(args: argparse.Namespace, schema: str) -> int:
                                                         "(every parameter is identified: name some with --parameters)")
     nominal = nominal_values(params, open_)
     limits = bench_config(RunRequest(protocol="design", out=Path(args.out), bench=args.bench)).limits
-    budget_s = checked_budget(args.budget, limits)
     reading = args.reading  # the designed run's cool-downs read one by one (docs/design.md)
     if reading and not set(interest) <= set(EQ11):
         raise InputError("command line", "--reading", f"parameters of eq. (11) only ({', '.join(EQ11)}) to design "
                                                       f"for, got {', '.join(interest)}")
+    steady: list[Block] = []
     if reading:
         free = {p.name: p for p in params.definition.free_parameters()}
         read = read_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
                          {n: (free[n].min, free[n].max) for n in EQ11}, segment_model(params))
         nominal.update(read.values)
+        plant = NetworkPlant(spec.network, dict(params.items()))  # times and checks them: the runs' own fit
+        steady = steady_blocks(limits, plant)
+    budget_s = checked_budget(args.budget, limits, steady if reading else None)
     runs = load_runs(args.runs, params.definition, nominal, str(args.params))
     data = [prepare(run, FIT_STEP_S, name=f"run{i}", network=spec.network) for i, run in enumerate(runs)]
     ambient = float(np.nanmean(runs[-1]["T_ambient"].to_numpy()))
@@ -105,11 +125,13 @@ def design(args: argparse.Namespace, schema: str) -> int:
                       for n in interest}
             plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
                                            fit.get("fitting") or {}, read.disagreement, limits, ambient,
-                                           budget_s, segment_model(params))
+                                           budget_s, steady, plant, segment_model(params))
             reading = determines(plan.blocks, interest)
             if not reading:
-                print("--reading: the budget holds too few cool-downs to read eq. (11) from (three engine speeds in "
-                      "the clutch state designed for): designed for the joint fit instead")
+                print(f"--reading: the budget holds too few steady cool-downs to read eq. (11) from (three engine "
+                      f"speeds in the clutch state designed for take "
+                      f"{three_points_min(steady, interest, limits, plant):.0f} min): designed for the joint fit "
+                      "instead")
                 nominal = nominal_values(params, open_)
         if not reading:
             plan = design_precision(spec.network, nominal, names, interest, identified, data, reported, limits,

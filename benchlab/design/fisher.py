@@ -88,15 +88,30 @@ def log_det(info: np.ndarray, names: Sequence[str], interest: Sequence[str]) -> 
     return float(value) if sign > 0 else -np.inf
 
 
+def open_loop(steps: Sequence[Step], params, network: ThermalNetwork, ambient_c: float) -> tuple[Step, ...]:
+    """`steps` as the model at `params` expects them to go from a bench at rest at `ambient_c`: each closed-loop
+    step (a heat-up to a steady flywheel, a cool-down to a temperature) the open-loop steps it becomes
+    (`protocols.estimates.played`, the runner's rules on the model); an open-loop schedule as it is."""
+    if not any(s.until or s.phase == "heat" for s in steps):
+        return tuple(steps)
+    from benchlab.network.plant import NetworkPlant
+    from protocols.estimates import played
+
+    plant = NetworkPlant(network, params)
+    plant.reset(ambient_c)
+    return tuple(s for went in played(steps, plant, ambient_c=ambient_c) for s in went)
+
+
 def predicted_run(steps: Sequence[Step], params, network: ThermalNetwork, ambient_c: float,
                   drivetrain: DrivetrainFacts, dt: float = PREDICTION_DT_S, name: str = "design") -> pd.DataFrame:
     """The run `steps` would give on a bench with this drivetrain and the model at `params`, noise-free: the
-    drivetrain's channels (`sim_bench.drivetrain`, the bench's own dynamics), the ambient held, every state
-    starting at the ambient (a bench at rest), every temperature the model outputs (measured or not) the model's."""
+    drivetrain's channels (`sim_bench.drivetrain`, the bench's own dynamics; closed-loop steps as the model expects
+    them to go, `open_loop`), the ambient held, every state starting at the ambient (a bench at rest), every
+    temperature the model outputs (measured or not) the model's, as its sensor reads it (`network/sensors.py`)."""
     from benchlab.network.simulation import simulate
     from sim_bench.virtual_run import drive_schedule
 
-    channels, _ = drive_schedule(steps, dt, drivetrain)
+    channels, _ = drive_schedule(open_loop(steps, params, network, ambient_c), dt, drivetrain)
     n = len(channels["engine_speed"])
     frame = pd.DataFrame({"time": np.arange(n) * dt, **channels, "T_ambient": np.full(n, ambient_c)})
     for channel in network.measured:

@@ -36,13 +36,6 @@ from benchlab.runfile import load_events, load_run, load_schedule
 from benchlab.runfile.schema import END_TIME
 from protocols.limits import BenchLimits
 
-#: The one cool-down length of a plan read point by point (s): the reading's bias on a plant richer than the model
-#: depends on the length (0.163 and 0.203 K/W at 500 rpm open, 300 and 600 s, reference plant, seed 102), so
-#: points read alike are comparable.
-READING_LENGTH_S = 300.0
-#: Heating launches a read cool-down may follow: fewer heat less (a model that cools slowly predicts the
-#: interlocks sooner) and leave more of the budget to further points.
-READING_LAUNCHES = (2, 4)
 #: Seed of the white noise added to the predicted cool-downs (the expected error should not change from call to call).
 NOISE_SEED = 0
 
@@ -70,14 +63,15 @@ def point_error(block: Block, params: Mapping[str, float], network: ThermalNetwo
     """Relative standard error of R the reading gives for the block's cool-down (with `model`'s structure where
     given: `cooldown.fit_segment`), on the run as the model predicts it with white noise at `noise` (the reading's
     own chi-square about 1 here: no misfit)."""
-    frame = fisher.predicted_run(block.steps, params, network, ambient_c, limits.drivetrain)
+    steps = fisher.open_loop(block.steps, params, network, ambient_c)  # a cool-down to a temperature: its length
+    frame = fisher.predicted_run(steps, params, network, ambient_c, limits.drivetrain)
     rng = np.random.default_rng(NOISE_SEED)
     for channel in FIT_CHANNELS:
         if channel in frame and channel in noise:
             frame[channel] = frame[channel].to_numpy() + rng.normal(0.0, noise[channel], len(frame))
     end = float(frame["time"].iloc[-1])
     point = operating_point(block)
-    fit = fit_segment(frame, params, end - block.steps[-1].duration_s, end, engine_speed=point["engine_speed"],
+    fit = fit_segment(frame, params, end - steps[-1].duration_s, end, engine_speed=point["engine_speed"],
                       model=model)
     return fit["R_se"] / fit["R"]
 

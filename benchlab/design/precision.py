@@ -14,18 +14,20 @@ parameters), which is printed.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from benchlab.design import fisher
-from benchlab.design.blocks import Block, candidate_blocks, numbered
+from benchlab.design.blocks import Block, candidate_blocks, numbered, steady_schedule
 from benchlab.identify.data import FitData
 from benchlab.model.definition import ModelDefinition
 from benchlab.network import ThermalNetwork
+from benchlab.network.plant import NetworkPlant
 from protocols.limits import BenchLimits
-from protocols.schedule import Step
+from protocols.schedule import Step, duration_s
 
 
 @dataclass(frozen=True)
@@ -151,32 +153,39 @@ def design_precision(network: ThermalNetwork, params: Mapping[str, float], names
 def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
                             interest: Sequence[str], runs: Sequence[FitData], before: Mapping[str, float],
                             fitting: Mapping[str, object], disagreement: float, limits: BenchLimits,
-                            ambient_c: float, budget_s: float, model: ModelDefinition | None = None,
-                            ) -> PrecisionDesign:
-    """Greedy D-optimal blocks within `budget_s` for `interest` (parameters of eq. 11) as the designed run's
-    cool-downs read one by one (with `model`'s structure where given, as the reading does) give them
-    (`benchlab.design.points`): the expected errors are those of eq. (11)
-    fitted to the run's own points, each point's scaled by the misfit the runs so far show (`points.misfit_factor`,
-    printed as the calibration), eq. (11)'s by `disagreement` (its points' on the runs so far, `points.read_runs`);
-    `before` is the parameter file's own share of each value. ValueError when no block fits."""
+                            ambient_c: float, budget_s: float, blocks: Sequence[Block], plant: NetworkPlant,
+                            model: ModelDefinition | None = None) -> PrecisionDesign:
+    """Greedy D-optimal steady `blocks` (`blocks.steady_blocks`) within `budget_s` for `interest` (parameters of
+    eq. 11) as the designed run's cool-downs read one by one (with `model`'s structure where given, as the reading
+    does) give them (`benchlab.design.points`): the expected errors are those of eq. (11) fitted to the run's own
+    points, each point's scaled by the misfit the runs so far show (`points.misfit_factor`, printed as the
+    calibration), eq. (11)'s by `disagreement` (its points' on the runs so far, `points.read_runs`); `before` is
+    the parameter file's own share of each value. A block is taken only where the plan with it, timed in sequence
+    on `plant` (the model at the parameter file's values, which predict the runs' temperatures: `params` hold
+    eq. 11's design values) by `blocks.steady_schedule`, fits the budget and stays clear of the interlocks there;
+    ranked by its information per second of bench time where it follows another block. ValueError when no block
+    fits."""
     from benchlab.design import points
 
-    blocks = [b for b in candidate_blocks(limits, points.READING_LAUNCHES, (points.READING_LENGTH_S,))
-              if b.expected_s <= budget_s]
+    blocks = [b for b in blocks if b.expected_s <= budget_s]
     if not blocks:
         raise ValueError("no block fits")
     noise = fisher.channel_noise(runs)
     scale = points.misfit_factor(fitting, noise)
     gains = [points.point_information(b, params, scale * points.point_error(b, params, network, ambient_c, limits,
                                                                              noise, model)) for b in blocks]
+    following = [duration_s(steady_schedule([b, b], limits, plant)) - b.expected_s for b in blocks]
     start = np.zeros((len(points.EQ11), len(points.EQ11)))
 
-    def clear(chosen: list[int]) -> bool:  # a hot plant cools slowly: each block must leave the plan clear
-        steps = numbered([blocks[i] for i in chosen])
-        return not too_hot(fisher.predicted_data(steps, params, network, ambient_c, limits.drivetrain), limits)
+    def fits(chosen: list[int]) -> bool:  # the plan timed in sequence: within the budget, clear of the interlocks
+        steps = steady_schedule([blocks[i] for i in chosen], limits, plant)
+        return duration_s(steps) <= budget_s and not too_hot(
+            fisher.predicted_data(steps, plant.params, network, ambient_c, limits.drivetrain), limits)
 
-    chosen = greedy(gains, [b.expected_s for b in blocks], start, points.EQ11, interest, budget_s, clear)
-    chosen, steps, _ = within_interlocks(blocks, chosen, params, network, ambient_c, limits)
+    chosen = greedy(gains, following, start, points.EQ11, interest, math.inf, fits)
+    if not chosen:
+        raise ValueError("no block fits")
+    steps = steady_schedule([blocks[i] for i in chosen], limits, plant)
     total = sum((gains[i] for i in chosen), start)
     expected = {n: disagreement * v for n, v in fisher.relative_errors(total, points.EQ11, interest).items()}
     prior = fisher.information(network, params, names, runs, noise)  # for what a sensor would add

@@ -100,7 +100,7 @@ def _simulated(request: RunRequest, config: BenchConfig) -> str:
 
 def estimate_plant(request: RunRequest) -> "Plant | None":
     """A fresh copy of the thermal plant a cool-down sweep will run on, for its expected durations
-    (protocols.estimates.sweep_durations): the simulated bench's, or on hardware the model of `request.params`;
+    (protocols.estimates.timed): the simulated bench's, or on hardware the model of `request.params`;
     None for other protocols and on hardware without a parameter file (the paper's closed forms)."""
     if request.protocol != "cooldown-sweep":
         return None
