@@ -5,8 +5,9 @@ From the paper's parameters (the plant a simulated bench runs; a hardware bench'
 that is expected. Measured against the simulated bench in tests/test_plans.py (within 10 % per protocol).
 
 A cool-down sweep's heat-ups and cool-downs are, where the plant the run will use is known (the simulated bench's,
-or a parameter file's), simulated on that plant (`timed`, `played`: the closed-loop steps played on it): the paper's closed forms above missed the
-reference plant's sweep by almost half (4304 s against 7881 s of bench time).
+or a parameter file's), simulated on that plant (`timed`, `played`: the closed-loop steps played on it with the
+runner's rules): the paper's closed forms above missed the reference plant's sweep by almost half (4304 s against
+7881 s of bench time). A designed run's closed-loop steps are predicted the same way (benchlab.design.fisher).
 """
 
 from __future__ import annotations

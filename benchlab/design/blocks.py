@@ -5,8 +5,8 @@ cool-down sweep reads its points (`steady_blocks`).
 
 The launch blocks are open loop (fixed durations), so the design can predict them exactly with the bench's
 drivetrain; the steady ones are closed loop, predicted as the model expects them to go
-(`benchlab.design.fisher.open_loop`). Every block passes `protocols.limits.schedule_problems` on the bench it is built for: a launch that cannot
-synchronise on the bench's drivetrain is never offered.
+(`benchlab.design.fisher.open_loop`). Every block passes `protocols.limits.schedule_problems` on the bench it is
+built for: a launch that cannot synchronise on the bench's drivetrain is never offered.
 """
 
 from __future__ import annotations
