@@ -158,3 +158,28 @@ def test_eq11_alone_is_designed_for_the_cooldown_reading(run_file, open_params, 
         assert 0 < doc["expected"][name]["relative_error_expected"] < 1
     refused(["design", str(run_file), "--params", str(open_params), "--out", str(tmp_path / "short.json"),
              "--budget", "5", "--reading"], "--budget", "shortest block")
+
+
+def test_a_steady_block_is_predicted_as_the_runner_plays_it():
+    """A steady block's closed-loop steps predicted on the model (`fisher.open_loop`, `protocols.estimates.played`):
+    heat pulses until the flywheel is steady at the sweep's 70 degC, then a cool-down that ends where the flywheel
+    reads 60 degC."""
+    import numpy as np
+
+    from benchlab.design.blocks import steady_blocks
+    from benchlab.network.plant import NetworkPlant
+
+    params = paper_params("nonlinear")
+    spec = model_spec(params.definition)
+    limits = BenchLimits()
+    block = steady_blocks(limits, NetworkPlant(spec.network, params))[0]
+    steps = fisher.open_loop(block.steps, params, spec.network, 22.0)
+    assert not any(s.until or s.phase == "heat" for s in steps)
+    pulses = [s for s in steps if s.phase == "launch" and s.label == "heat"]
+    heated_s = sum(s.duration_s for s in steps if s.label == "heat")
+    assert len(pulses) > 5 and heated_s < 0.5 * block.steps[0].duration_s  # ended by the steady test, not timed out
+    run = fisher.predicted_run(steps, params, spec.network, 22.0, limits.drivetrain)
+    flywheel, time = run["T_flywheel"].to_numpy(), run["time"].to_numpy()
+    cooled_from = time[-1] - steps[-1].duration_s
+    assert np.mean(flywheel[(time > cooled_from - 60) & (time <= cooled_from)]) == pytest.approx(70.0, abs=1.5)
+    assert flywheel[-1] == pytest.approx(60.0, abs=0.5)
