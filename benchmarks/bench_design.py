@@ -5,7 +5,8 @@
 
 Per seed (seeds the tests do not use): the main job's Table 1 run (`--hours`, default 1 h as `benchlab pipeline`)
 on the simulated bench's reference plant, identified with the nonlinear model (4 starts, as the main job); then
-`benchlab design --parameters a2,b2 --reading` on it within `--minutes` (the cool-down reading: docs/design.md) and `benchlab
+`benchlab design --parameters a2,b2 --reading` on it within `--minutes` (the cool-down reading: docs/design.md;
+its steady cycles need `--minutes 60` for three points, below that the design falls back to the joint fit) and `benchlab
 run PLAN.json`, and, as the peer, a Table 1 run planned to the designed run's length (seed + 200). The designed run
 is read as the plan says (`benchlab cooldown`: each cool-down a point, eq. 11 fitted to them; with `--joint`, the
 design is for every parameter Table 1 leaves open and the run identified together with Table 1); the peer both
