@@ -86,6 +86,21 @@ def plate_conduction(resistance_k_per_w: float) -> Effect:
     return Effect("plate_conduction", "clutch_state", "conduction", edit, {"R_PF": resistance_k_per_w})
 
 
+def contact_conduction(resistance_k_per_w: float, signal: str | None = None, reference: float = 1.0) -> Effect:
+    """Pressure plate and flywheel exchange heat through a contact whatever the clutch state: a resistance
+    `resistance_k_per_w`, or with `signal` a conductance in proportion to |signal| / `reference` (a contact pressed
+    by the clutch torque), no contact where the signal is zero."""
+    def law(p, ch):
+        if signal is None:
+            return np.full(len(ch["clutch_state"]), p["R_contact"])
+        share = np.abs(ch[signal]) / reference
+        return np.where(share > 1e-6, p["R_contact"] / np.maximum(share, 1e-6), 1e6)
+
+    def edit(net, p):
+        return net.with_link(Link("P", "F", law, "R_contact"))
+    return Effect("contact_conduction", signal, "conduction", edit, {"R_contact": resistance_k_per_w})
+
+
 def sensor_lag(time_constant_s: float) -> Effect:
     """The flywheel sensors follow the flywheel surface with a first-order lag."""
     def edit(net, p):

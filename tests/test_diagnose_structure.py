@@ -17,8 +17,7 @@ import numpy as np
 import pytest
 
 from benchlab.diagnose import diagnose
-from benchlab.diagnose.engine import STEP_S
-from benchlab.diagnose.library import candidates
+from benchlab.diagnose.engine import STEP_S, library_for
 from benchlab.identify.data import prepare
 from benchlab.model.catalog import builtin
 from benchlab.model.definition import parse_model
@@ -50,7 +49,8 @@ def _cover(capacity: float, r_plate: float, r_air: float) -> P.Effect:
 
 
 def test_every_candidate_starts_nested_inside_its_bounds():
-    """At its start values each extension is its parent (same outputs) and the start lies strictly inside the bounds."""
+    """At its start values each extension (two-step compositions included) is its parent (same outputs) and the start
+    lies strictly inside the bounds."""
     from benchlab.identify.fit import simulate_outputs
     from benchlab.model.build import build_spec
     _, run = _bench([], seed=201, duration_s=1200.0)
@@ -59,7 +59,7 @@ def test_every_candidate_starts_nested_inside_its_bounds():
         spec = build_spec(model)
         data = prepare(run, STEP_S, network=spec.network)
         parent = simulate_outputs(spec.network, {p.name: p.initial for p in spec.free}, data)
-        for cand in candidates(model, data.channels, data.units):
+        for cand in library_for(model, data.channels, data.units, [data]):
             ext = build_spec(cand.build(model, data.channels))
             for p in ext.free:
                 assert p.lower < p.initial < p.upper, (cand.key, p.name)

@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 
 from benchlab.design.discrimination import Rival, misfit
-from benchlab.diagnose.engine import STEP_S, diagnosed_spec, extended_spec, global_fit
-from benchlab.diagnose.library import Candidate, candidates
+from benchlab.diagnose.engine import STEP_S, diagnosed_spec, extended_spec, global_fit, library_for
+from benchlab.diagnose.library import Candidate
 from benchlab.errors import InputError
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import fit_multistart
@@ -76,7 +76,7 @@ def refitted_rivals(doc: dict, source: str, runs: Sequence[pd.DataFrame], seed: 
     shared = set.intersection(*(set(d.channels) for d in datasets))
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels if k in shared}
     units = {**ALIGNED_UNITS, **runs[0].attrs.get("units", {})}
-    library = {c.key: c for c in candidates(model, channels, units)}
+    library = {c.key: c for c in library_for(model, channels, units, datasets)}
 
     def candidate(key: str) -> Candidate:
         if key not in library:

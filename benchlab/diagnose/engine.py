@@ -38,7 +38,7 @@ import pandas as pd
 from scipy import stats
 
 from benchlab._blas import single_threaded_blas
-from benchlab.diagnose.library import Candidate, candidates, per_group_candidates
+from benchlab.diagnose.library import Candidate, applies, candidates, composed_links, per_group_candidates
 from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
@@ -63,11 +63,18 @@ ALPHA = 0.01
 SCORE_STEP = 0.05  # forward-difference step of a new parameter's column, in fitted coordinates
 SCORED_FITS = 6  # best-scored candidates screened by a short fit
 STRUCTURAL_FITS = 3  # best-scored extra nodes and lags screened by a short fit beside them
+#: best-scored explanations among the two-step candidates (a new link with its per-run split or a signal law), each
+#: with all its laws, screened beside them
+COMPOSED_FITS = 2
 SCREEN_NFEV = 8
 HELD_OUT_NFEV = 60
 #: a held-out (cross-validation) fit starts at the all-data fit's optimum and stops once a step changes the cost, the
 #: parameters or the gradient by less than this share: what it predicts moves far below the noise floor from there
 HELD_OUT_TOLERANCE = 1e-6
+#: ... or once its last HELD_OUT_STALL[0] steps together lowered the cost by less than HELD_OUT_STALL[1] of it: a fold
+#: fit crawling along a valley of a parameter the fold's half of the data hardly pins (seen taking 40-50 Jacobians
+#: for 2e-3 of cost) moves its predictions along the directions the data do not see
+HELD_OUT_STALL = (5, 1e-3)
 POLISH_NFEV = 80  # the all-data fit of a screened candidate: near convergence, so its gain is not underrated
 SCOUT_NFEV = 25  # the fit from a neutral start before it is polished (where it beats the warm start)
 CROSS_VALIDATED = 3
@@ -270,7 +277,7 @@ def _held_out(spec: ModelSpec, start: dict[str, float], datasets: Sequence[FitDa
     params = []
     for train, test in _folds(datasets):
         result = fit(spec, train, max_nfev=HELD_OUT_NFEV, start={p.name: start[p.name] for p in spec.free},
-                     tolerance=HELD_OUT_TOLERANCE)
+                     tolerance=HELD_OUT_TOLERANCE, stall=HELD_OUT_STALL)
         params.append(result.params)
         for pred, d in zip(predictions, test):
             for c, values in simulate_outputs(spec.network, result.params, d).items():
@@ -287,7 +294,8 @@ def _held_out_runs(spec: ModelSpec, start: dict[str, float], datasets: Sequence[
         own = {name: start[name] for name in start if name.endswith(f"@{d.name}")}
         held = spec.with_fixed(own)
         result = fit(held, [e for j, e in enumerate(datasets) if j != i], max_nfev=HELD_OUT_NFEV,
-                     start={p.name: start[p.name] for p in held.free}, tolerance=HELD_OUT_TOLERANCE)
+                     start={p.name: start[p.name] for p in held.free}, tolerance=HELD_OUT_TOLERANCE,
+                     stall=HELD_OUT_STALL)
         params.append(result.params)
         predictions.append(simulate_outputs(spec.network, {k: v for k, v in result.params.items() if k not in own}, d))
     return HeldOut(datasets, predictions, params)
@@ -413,7 +421,10 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
             channels: dict[str, np.ndarray], progress: Progress, what: str) -> list[Screened]:
     """Score every candidate, then a short in-sample fit, every parameter free, of the SCORED_FITS best-scored and
     the STRUCTURAL_FITS best-scored structural ones (extra nodes, lags: the score's first step is rougher there)
-    from the start that scored best; those that lower the current cost, by cost, best first.
+    and every law of the COMPOSED_FITS best-scored two-step explanations (their extra parameter always scores them
+    ahead: in slots of their own they leave the one-step candidates' screen as it is; every law, so that the simplest
+    form is judged beside the best-scored) from the start that scored best; those that lower the
+    current cost, by cost, best first.
 
     Every parameter, not only the new ones: a model that lacks an effect has bent its other
     parameters to absorb it, and the new term pays off only once they are released (a plate share
@@ -422,8 +433,12 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     specs = [extended_spec(current.spec, cand, channels, datasets) for cand in cands]
     scores = _score(specs, cands, current, datasets)
     order = list(np.argsort([cost for cost, _ in scores]))
-    structural = [i for i in order if cands[i].structural]
-    chosen = list(dict.fromkeys(order[:SCORED_FITS] + structural[:STRUCTURAL_FITS]))
+    one_step = [i for i in order if not cands[i].composed]
+    structural = [i for i in one_step if cands[i].structural]
+    composed = [i for i in order if cands[i].composed]
+    explanations = list(dict.fromkeys(_explains(cands[i]) for i in composed))[:COMPOSED_FITS]
+    composed = [i for i in composed if _explains(cands[i]) in explanations]  # every law of each: the simplest too
+    chosen = list(dict.fromkeys(one_step[:SCORED_FITS] + structural[:STRUCTURAL_FITS] + composed))
 
     def screen_one(k: int) -> tuple[float, dict[str, float]]:
         i = chosen[k]
@@ -767,6 +782,17 @@ def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, 
 
 
 @single_threaded_blas
+def library_for(model: ModelDefinition, channels: dict[str, np.ndarray], units: dict[str, str],
+                datasets: Sequence[FitData], group_by: str | None = None) -> list[Candidate]:
+    """Every candidate diagnose tries on these runs: the model's library, its two-step link compositions and, with
+    several run groups, each parameter split per group."""
+    groups = run_groups(datasets)
+    library = candidates(model, channels, units) + composed_links(model, channels, units, groups)
+    if len(groups) > 1:
+        library += per_group_candidates(model, [p.name for p in model.free_parameters()], group_by or "run")
+    return library
+
+
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", starts: int = 4,
                   seed: int = 0, progress: Progress = SILENT, group_by: str | None = None,
                   validate: Sequence[pd.DataFrame] = ()) -> Diagnosis:
@@ -795,14 +821,13 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
     with progress.task(f"diagnose: {model.label} baseline", starts + 1, unit="fit") as task:
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
-    library = candidates(model, channels, units)
-    if len(run_groups(datasets)) > 1:
-        library += per_group_candidates(model, [p.name for p in model.free_parameters()], group_by or "run")
+    library = library_for(model, channels, units, datasets, group_by)
     current, current_held, findings, failed, not_carried = base, base_held, [], [], []
     for round_ in range(1, MAX_ROUNDS + 1):
         used = {f.candidate.key for f in findings}
         finding, judged = None, pinned(current, datasets)
-        remaining = [c for c in library if c.key not in used and set(c.splits) <= set(judged.free_names)]
+        remaining = [c for c in library if c.key not in used and applies(c, current.spec.definition)
+                     and (c.composed or set(c.splits) <= set(judged.free_names))]
         for physical, what in ((True, "mechanisms"), (False, "learned flows")):
             if finding is None:
                 pool = [c for c in remaining if c.physical == physical]

@@ -42,6 +42,10 @@ NESTED_CAPACITY = 1.0
 NESTED_RESISTANCE = 1.0e4
 NESTED_LAG_S = 0.005
 OPEN_CIRCUIT = 1.0e6  # K/W of a gated link while it is open: no heat crosses
+#: A signal link's screening starts, times the typical resistance: where the signal is small most of the time (a
+#: torque), the link's conductance at the signal's maximum is far from the model's typical one
+COMPOSED_PROBES = (0.1, 1.0, 10.0)
+MIN_SHARE = 1.0e-6  # a signal link's conductance share where its signal is zero: R / 1e-6, no heat crosses
 EXPONENT_RANGE = (0.05, 8.0)  # of a signal in a law or a source: from nearly a step (x^0.05) to a steep rise
 #: A calibration candidate's bounds: a sensor's gain within ±20 % and its offset within ±20 K (a PT1000 class B is
 #: ±0.3 K + 0.5 % at 100 °C; a wrong curve or a wrong lead resistance, some kelvin)
@@ -93,6 +97,12 @@ class Candidate:
     #: parameters the extension fits once per run group instead of once for all runs (per_group_candidates): the
     #: model stays as it is, the runs disagree
     splits: tuple[str, ...] = ()
+    #: two steps of the library in one (composed_links): screened in slots of their own, so that they never crowd
+    #: the one-step candidates out of the screen
+    composed: bool = False
+    #: the link it adds between two nodes (its resistance's name): once a candidate adding it is accepted, the others
+    #: that would add it again no longer apply
+    adds_link: str | None = None
 
     @property
     def reads(self) -> tuple[str, ...]:
@@ -313,10 +323,12 @@ def node_probes(model: ModelDefinition, ends: tuple[str, ...], mass: str) -> Cal
     return probes
 
 
-def link_probes(model: ModelDefinition, resistance: str) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
-    """Screening start of a new link: the model's typical resistance. From NESTED_RESISTANCE a short fit moves its
-    logarithm too little (a path of 0.3 K/W reached 0.86 of the parent's cost in 8 evaluations, 0.07 from here)."""
-    return lambda values: [{resistance: typical_resistance(model, values)}]
+def link_probes(model: ModelDefinition, resistance: str, factors: tuple[float, ...] = (1.0,)
+                ) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening starts of a new link: the model's typical resistance (times each of `factors`). From
+    NESTED_RESISTANCE a short fit moves its logarithm too little (a path of 0.3 K/W reached 0.86 of the parent's cost
+    in 8 evaluations, 0.07 from here)."""
+    return lambda values: [{resistance: factor * typical_resistance(model, values)} for factor in factors]
 
 
 def repoint_probes(model: ModelDefinition, boundary: str) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
@@ -567,7 +579,7 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
         if frozenset((a, b)) not in linked:
             out.append(Candidate(f"link_{a}_{b}", None, "conduction", f"new link R_{a}{b} between {a} and {b}",
                                  f"nodes {a} and {b} exchange heat directly", new_link(a, b, f"link_{a}_{b}"), nodes=(a, b),
-                                 exact=False, probes=link_probes(model, f"R_{a}{b}")))
+                                 exact=False, probes=link_probes(model, f"R_{a}{b}"), adds_link=f"R_{a}{b}"))
             for gate in on_off:
                 for on in (True, False):
                     state = "on" if on else "off"
@@ -786,7 +798,7 @@ def clutch_candidates(model: ModelDefinition, channels: Channels, units: Mapping
     """The clutch's library: the generator on the clutch signals with the physical names, eq. (11) where the
     baseline lacks it, the clamped plate–flywheel conduction and radiation, the measured temperatures it does not
     read as boundaries; learned flows into flywheel and air."""
-    signals = [s for s in CLUTCH_SIGNALS if _available(s, channels) and np.ptp(signal_values(s, channels)) > 0]
+    signals = library_signals(model, channels, units)
     out = [] if "a1" in model.parameters else [Candidate(
         "speed_convection", "engine_speed", "convection", "R_FA = R_PA = a*exp(b*engine_speed) + R0",
         "cool-down rate depends on engine speed: convection grows with engine speed", engine_speed_convection,
@@ -824,6 +836,14 @@ def is_clutch(model: ModelDefinition) -> bool:
     """Whether the model has the paper's clutch structure the clutch names refer to (nodes, convection links, shares)."""
     return (set(CLUTCH_NODES) <= set(model.nodes) and set(CONVECTION_LINKS) <= {l.name for l in model.links}
             and set(SHARES) <= {s.name for s in model.sources})
+
+
+def library_signals(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[str]:
+    """The signals the library's laws read: the clutch's where the model has the paper's clutch structure, else the
+    network's inputs."""
+    if is_clutch(model):
+        return [s for s in CLUTCH_SIGNALS if _available(s, channels) and np.ptp(signal_values(s, channels)) > 0]
+    return network_signals(model, channels, units)
 
 
 def network_signals(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[str]:
@@ -866,6 +886,75 @@ def per_group_candidates(model: ModelDefinition, names: "list[str]", group_by: s
                                                                          if n in model.nodes),
                              splits=(name,)))
     return out
+
+
+#: A new link's conductance against a signal x = |s|/max, times 1/R: none at x = 0 (where the link is no link), so
+#: a contact that only a torque or a speed closes is inside the bounds, not on them
+CONDUCTANCE_LAWS = {"linear": "{x}", "power": "({x})^n", "exponential": "(1 - exp(-k*{x}))"}
+
+
+def signal_link(a: str, b: str, key: str, signal: str, law: str) -> Build:
+    """A link between two nodes the model does not link whose conductance is CONDUCTANCE_LAWS[law] / R, from
+    NESTED_RESISTANCE (none)."""
+    resistance = f"R_{a}{b}"
+
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        tag = f"{_slug(signal)}_{resistance}"
+        x = f"abs({signal_expression(signal)}) / {_reference(signal, ch)!r}"
+        share = {"linear": x, "power": f"({x}) ** n_{tag}", "exponential": f"(1.0 - exp(-k_{tag} * {x}))"}[law]
+
+        def edit(doc: Doc) -> None:
+            doc["links"].append({"name": resistance, "between": [a, b],
+                                 "resistance": f"{resistance} / maximum({share}, {MIN_SHARE!r})"})
+            _parameter(doc, resistance, NESTED_RESISTANCE, 1e-3, 10 * NESTED_RESISTANCE, "K/W (at the signal's maximum)")
+            if law == "power":
+                _parameter(doc, f"n_{tag}", 1.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)")
+            if law == "exponential":
+                _parameter(doc, f"k_{tag}", 3.0, 0.1, 30.0, "1 (rate over the signal's range)")
+        return revise(model, key, edit)
+    return build
+
+
+def composed_links(model: ModelDefinition, channels: Channels, units: Mapping[str, str],
+                   groups: tuple[str, ...]) -> list[Candidate]:
+    """Two steps in one round: a new link between two nodes the model does not link, together with its
+    resistance fitted once per run group (a contact that changes run by run, as a lining wears) and together
+    with each law of a continuous signal (a contact conductance that grows with the clamping torque). Alone, such
+    a link can gain too little to be chosen (a link at the runs' mean conductance explains little of a contact
+    that varies), so the greedy search would never take the second step that explains it."""
+    continuous = [s for s in library_signals(model, channels, units) if not is_on_off(s, channels)]
+    linked = {frozenset(l.between) for l in model.links}
+    words = _clutch_words if is_clutch(model) else (lambda text: text)
+    out = []
+    for a, b in combinations(list(model.nodes), 2):
+        if frozenset((a, b)) in linked:
+            continue
+        resistance, plain = f"R_{a}{b}", new_link(a, b, f"link_{a}_{b}")
+        probes = link_probes(model, resistance)
+        spread = link_probes(model, resistance, COMPOSED_PROBES)
+        if len(groups) > 1:
+            out.append(Candidate(
+                f"link_{a}_{b}_{PER_GROUP}", None, "conduction", f"new link {resistance}@<group> between {a} and {b}",
+                words(f"nodes {a} and {b} exchange heat directly, through a resistance that differs between the run "
+                      "groups (a contact that changes run by run)"), plain, nodes=(a, b), exact=False,
+                splits=(resistance,), composed=True, adds_link=resistance,
+                probes=lambda values, probe=probes: [{f"{k}@{g}": v for k, v in p.items() for g in groups}
+                                                     for p in probe(values)]))
+        for signal in continuous:
+            for law, shape in CONDUCTANCE_LAWS.items():
+                out.append(Candidate(
+                    f"link_{a}_{b}_{_slug(signal)}_{law}", signal, "conduction",
+                    f"new link between {a} and {b} of conductance {shape.format(x=f'|{signal}|/max')} / {resistance}",
+                    words(f"nodes {a} and {b} exchange heat directly, through a conductance that grows with {signal} "
+                          "(none where it is zero: a contact pressed by it)"),
+                    signal_link(a, b, f"link_{a}_{b}_{_slug(signal)}_{law}", signal, law), nodes=(a, b),
+                    exact=False, signals=(signal,), composed=True, probes=spread, adds_link=resistance))
+    return out
+
+
+def applies(cand: Candidate, model: ModelDefinition) -> bool:
+    """Whether the candidate still extends the model: not where it would add a link the model already has."""
+    return cand.adds_link is None or cand.adds_link not in {link.name for link in model.links}
 
 
 def telling_apart(model: ModelDefinition, first: Candidate, second: Candidate) -> str:

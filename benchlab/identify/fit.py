@@ -179,9 +179,12 @@ def residual_index(datasets: Sequence[FitData]) -> list[np.ndarray]:
 @single_threaded_blas
 def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = None,
         start: Mapping[str, float] | None = None,
-        stop: Callable[[Mapping[str, float]], bool] | None = None, tolerance: float = 1e-10) -> FitResult:
+        stop: Callable[[Mapping[str, float]], bool] | None = None, tolerance: float = 1e-10,
+        stall: tuple[int, float] | None = None) -> FitResult:
     """One local fit from the spec's starting values (or `start`); `stop`: asked after each iteration with the
-    parameters reached, True ends the fit there (not converged); `tolerance`: scipy's xtol, ftol and gtol."""
+    parameters reached, True ends the fit there (not converged); `tolerance`: scipy's xtol, ftol and gtol; `stall`
+    = (k, share): the fit also ends where its last k steps lowered the cost by less than that share
+    (benchlab.identify.trust_region)."""
     x0 = to_coordinates(spec, {p.name: p.initial for p in spec.free} | dict(start or {}))
     lo, hi = coordinate_bounds(spec)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
@@ -200,7 +203,7 @@ def fit(spec: ModelSpec, datasets: Sequence[FitData], max_nfev: int | None = Non
                                 [from_coordinates(spec, x) for x in points], datasets, last[1])
 
     sol = least_squares_trf(fun, x0, (lo, hi), columns, max_nfev=max_nfev, xtol=tolerance, ftol=tolerance,
-                            gtol=tolerance,
+                            gtol=tolerance, stall=stall,
                             stop=None if stop is None else lambda x: stop(from_coordinates(spec, x)))
     params = from_coordinates(spec, sol.x)
     scale = np.array([params[p.name] if p.log else p.linear_scale for p in spec.free])

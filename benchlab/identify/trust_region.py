@@ -31,12 +31,15 @@ except ImportError:  # pragma: no cover - depends on the installed scipy; tests/
 
 def least_squares_trf(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
                       workers: Callable, max_nfev: int | None = None, ftol: float = 1e-8, xtol: float = 1e-8,
-                      gtol: float = 1e-8, stop: Callable[[np.ndarray], bool] | None = None) -> OptimizeResult:
+                      gtol: float = 1e-8, stop: Callable[[np.ndarray], bool] | None = None,
+                      stall: tuple[int, float] | None = None) -> OptimizeResult:
     """`scipy.optimize.least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", workers=workers, ...)`
     with its 2-point Jacobian; `stop(x)` after each iteration, True ends the fit (status -2, as a callback's
-    StopIteration). Returns x, cost, fun, jac, nfev, njev and status as least_squares does."""
+    StopIteration); `stall` = (k, share): the fit also ends (status 2, ftol's) once its last k steps together
+    lowered the cost by less than that share, as a fit crawling along a valley does. Returns x, cost, fun, jac,
+    nfev, njev and status as least_squares does."""
     if select_step is None:
-        return _public(fun, x0, bounds, workers, max_nfev, ftol, xtol, gtol, stop)
+        return _public(fun, x0, bounds, workers, max_nfev, ftol, xtol, gtol, stop, stall)
     lb, ub = bounds
     x0 = make_strictly_feasible(np.asarray(x0, dtype=float), lb, ub)
 
@@ -60,6 +63,7 @@ def least_squares_trf(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, b
     max_nfev = x0.size * 100 if max_nfev is None else max_nfev
     alpha = 0.0  # the Levenberg-Marquardt parameter
     status = None
+    costs = [cost]  # the cost after each accepted step, for `stall`
     while True:
         v, dv = CL_scaling_vector(x, g, lb, ub)
         g_norm = norm(g * v, ord=np.inf)
@@ -104,10 +108,21 @@ def least_squares_trf(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, b
             g = compute_grad(J, f)
             scale, scale_inv = _jac_scale(J, scale_inv)
             R, qf = _triangular(J, f, work)
+            costs.append(cost)
+            if status is None and stalled(costs, stall):
+                status = 2
         if stop is not None and status is None and stop(x):
             status = -2
             break
     return OptimizeResult(x=x, cost=cost, fun=f, jac=J, nfev=nfev, njev=njev, status=0 if status is None else status)
+
+
+def stalled(costs: list[float], stall: tuple[int, float] | None) -> bool:
+    """Whether the last k accepted steps (`stall` = (k, share)) lowered the cost by less than share of it."""
+    if stall is None or len(costs) <= stall[0]:
+        return False
+    steps, share = stall
+    return costs[-1 - steps] - costs[-1] < share * costs[-1]
 
 
 def _triangular(J: np.ndarray, f: np.ndarray, work: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -130,12 +145,22 @@ def _jac_scale(J: np.ndarray, scale_inv_old: np.ndarray | None = None) -> tuple[
 
 def _public(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
             workers: Callable, max_nfev: int | None, ftol: float, xtol: float, gtol: float,
-            stop: Callable[[np.ndarray], bool] | None) -> OptimizeResult:
+            stop: Callable[[np.ndarray], bool] | None, stall: tuple[int, float] | None) -> OptimizeResult:
     """The same fit by scipy's public `least_squares` (an SVD of the whole Jacobian per iteration): the answer where
     an installed scipy keeps the private helpers elsewhere, at scipy's cost."""
+    costs: list[float] = []
+    ended_stalled = [False]
+
     def callback(intermediate_result: OptimizeResult) -> None:
+        costs.append(float(intermediate_result.cost))
+        if stalled(costs, stall):
+            ended_stalled[0] = True
+            raise StopIteration
         if stop is not None and stop(intermediate_result.x):
             raise StopIteration  # least_squares ends with status -2
 
-    return least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev, xtol=xtol, ftol=ftol,
-                         gtol=gtol, workers=workers, callback=callback)
+    result = least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev, xtol=xtol,
+                           ftol=ftol, gtol=gtol, workers=workers, callback=callback)
+    if ended_stalled[0]:
+        result.status = 2
+    return result
