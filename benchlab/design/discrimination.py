@@ -4,8 +4,10 @@ against the model without it), each refitted to the runs so far.
 T-optimal: the criterion is the expected sum of squared differences of the measured channels between the two
 models' predictions of the designed run, each channel weighted by its noise (the non-centrality of the test
 between them under white noise). Greedy like the precision design (`benchlab.design.precision`): the block that
-adds most of it per second of bench time first, each block predicted from a bench at rest; then the chosen plan
-predicted whole for the expected outcome.
+adds most of it per second of bench time first, each block predicted from a bench at rest. The expected outcome
+is a forecast of the verdict (`forecast`): the chosen plan simulated whole by the favoured model with the runs'
+misfit as noise, the other model refitted with that run (it absorbs what it can of the difference, as it will
+after the real run), both scored by diagnose's block test.
 
 The noise a difference is weighed against is each channel's misfit of the better model on the runs so far (its
 in-sample residual RMS), not the sensors' white noise: what the models cannot explain of the runs they were fitted
@@ -28,7 +30,8 @@ from benchlab.design import fisher
 from benchlab.design.blocks import Block, candidate_blocks, numbered
 from benchlab.design.precision import too_hot
 from benchlab.diagnose.engine import ALPHA  # the level the loser must be beaten at: diagnose's
-from benchlab.diagnose.engine import BEYOND_FLOOR, BLOCK_S, STEP_S, HeldOut, block_statistic, diagnosed_spec, noise_floor
+from benchlab.diagnose.engine import (BEYOND_FLOOR, BLOCK_S, STEP_S, HeldOut, block_statistic, diagnosed_spec,
+                                      noise_floor)
 from benchlab.identify.data import FitData, prepare
 from benchlab.identify.fit import fit, simulate_outputs
 from benchlab.identify.spec import ModelSpec
