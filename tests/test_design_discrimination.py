@@ -105,6 +105,6 @@ def test_forecast_names_no_loser_between_one_model_and_itself(short_run, tmp_pat
     limits = bench_config(RunRequest(protocol="design", out=tmp_path / "plan.json", bench="sim")).limits
     block = min(candidate_blocks(limits), key=lambda b: b.expected_s)
     steps = numbered([block] * 3)
-    expected, _ = forecast(plant, plant, steps, runs, float(short_run["T_ambient"].mean()), limits)
+    expected = forecast(plant, plant, steps, runs, float(short_run["T_ambient"].mean()), limits)
     assert expected.blocks >= 3 and expected.block_p >= ALPHA
     assert abs(expected.rmse_gap) < 0.1 * max(plant.rmse.values())

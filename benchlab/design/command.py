@@ -181,8 +181,7 @@ def discriminate(args: argparse.Namespace, schema: str) -> int:
                         "rms_difference_K": plan.rms_difference, "misfit_K": plan.noise,
                         "statistic": plan.statistic, "statistic_now": plan.statistic_now, "p_value": plan.p_value,
                         "block_t": plan.expected.block_t, "block_p": plan.expected.block_p,
-                        "blocks": plan.expected.blocks, "plans_forecast": plan.plans_forecast,
-                        "floor_ratio": plan.floor_ratio,
+                        "blocks": plan.expected.blocks, "floor_ratio": plan.floor_ratio,
                         "plant_may_be_neither": plan.neither},
            "ambient_C": ambient, "sensors": [asdict(s) for s in sensors],
            "schedule": [s.as_dict() for s in plan.steps]}

@@ -40,10 +40,6 @@ from protocols.limits import BenchLimits
 from protocols.schedule import Step
 
 
-#: plans designed against the other as the previous plan's forecast refitted it, after the first (`design_discrimination`)
-ADVERSARY_ROUNDS = 2
-
-
 @dataclass(frozen=True)
 class Rival:
     """One competing model: its name (diagnose's candidate key, or the model's), spec as diagnose fits it to the
@@ -116,12 +112,11 @@ class Forecast:
 
 
 def forecast(favoured: Rival, other: Rival, steps: Sequence[Step], runs: Sequence[FitData], ambient_c: float,
-             limits: BenchLimits, seed: int = 0) -> tuple[Forecast, Rival]:
+             limits: BenchLimits, seed: int = 0) -> Forecast:
     """T-optimal forecast of the verdict, favoured taken as the plant: the run `steps` simulated by the favoured
     model with its misfit on the runs so far added as noise (`correlated_noise`, each channel at its RMS, the
     residuals' lag-1 autocorrelation), the other refitted to the runs and that run from its values (one local fit:
-    what it can absorb of the difference), both scored on the run by diagnose's block test. Also the other as
-    refitted: the rival that plan leaves hardest to beat."""
+    what it can absorb of the difference), both scored on the run by diagnose's block test."""
     truth = predicted(favoured, steps, ambient_c, limits)
     rng = np.random.default_rng(seed)
     run = replace(truth, name="forecast", targets={
@@ -133,8 +128,7 @@ def forecast(favoured: Rival, other: Rival, steps: Sequence[Step], runs: Sequenc
     held = [HeldOut([run], [simulate_outputs(network, params, run)], [])
             for network, params in ((refit.spec.network, refit.params), (favoured.network, favoured.params))]
     t, p = block_statistic(*held)
-    return (Forecast(held[0].rmse - held[1].rmse, t, p, len(np.unique(held[0].blocks))),
-            replace(other, spec=refit.spec, params=refit.params))
+    return Forecast(held[0].rmse - held[1].rmse, t, p, len(np.unique(held[0].blocks)))
 
 
 def noncentrality(diff: Mapping[str, np.ndarray], noise: Mapping[str, float], rho: float) -> float:
@@ -156,7 +150,6 @@ class DiscriminationDesign:
     statistic_now: float  # the same on the runs so far (how far they tell the two apart)
     expected: Forecast  # the verdict forecast with the favoured as the plant (`forecast`)
     floor_ratio: float  # the favoured model's RMSE on the runs so far over their noise floor (`engine.noise_floor`)
-    plans_forecast: int = 1  # the plans the design forecast (one refit of the other each) before it chose
 
     @property
     def neither(self) -> bool:
@@ -181,42 +174,20 @@ class DiscriminationDesign:
                 f"expected: {self.other} {verdict} at alpha {ALPHA:g} by diagnose's block test ({e.blocks} blocks of "
                 f"{BLOCK_S:g} s: t = {e.block_t:.2f}, p = {e.block_p:.2g}), its RMSE {e.rmse_gap:.3f} K above "
                 f"{self.favoured}'s, if {self.favoured} is the plant (the run simulated by it with its misfit as "
-                f"noise, {self.other} refitted with that run; the surest of {self.plans_forecast} plans forecast); "
-                f"sample statistic {self.statistic:.1f} (runs so far {self.statistic_now:.1f})",
+                f"noise, {self.other} refitted with that run); sample statistic {self.statistic:.1f} (runs so far "
+                f"{self.statistic_now:.1f})",
                 *([f"caution: {self.favoured} fits the runs so far at {self.floor_ratio:.1f}x their noise floor "
                    f"(diagnose's limit {BEYOND_FLOOR:g}x): the plant may be neither model, and then the run can "
                    f"beat either, {self.favoured} included; it settles the contest, the forecast says which way only "
                    f"if {self.favoured} is right"] if self.neither else [])]
 
 
-def greedy_plan(favoured: Rival, against: Rival, blocks: Sequence[Block], noise: Mapping[str, float], rho: float,
-                ambient_c: float, limits: BenchLimits, budget_s: float, also: Sequence[Rival] = ()) -> list[int]:
-    """The blocks (indices into `blocks`) that add most non-centrality between `favoured` and `against` per second
-    of bench time within `budget_s`, dropped from the end until the plan stays clear of the over-temperature
-    interlocks under the two and `also`. ValueError when even one block does not."""
-    gains = [noncentrality(differences(favoured, against, b.steps, ambient_c, limits), noise, rho) for b in blocks]
-    chosen: list[int] = []
-    spent = 0.0
-    while fits := [i for i, b in enumerate(blocks) if spent + b.expected_s <= budget_s]:
-        best = max(fits, key=lambda i: gains[i] / blocks[i].expected_s)
-        chosen.append(best)
-        spent += blocks[best].expected_s
-    while True:  # the blocks' heat adds up: the plan must stay clear of the interlocks under every model
-        steps = numbered([blocks[i] for i in chosen])
-        if not any(too_hot(predicted(r, steps, ambient_c, limits), limits) for r in (favoured, against, *also)):
-            return chosen
-        if len(chosen) == 1:
-            raise ValueError("every block heats the clutch beyond the over-temperature interlocks")
-        chosen.pop()
-
-
 def design_discrimination(favoured: Rival, other: Rival, runs: Sequence[FitData], limits: BenchLimits,
                           ambient_c: float, budget_s: float) -> DiscriminationDesign:
-    """T-optimal blocks within `budget_s`, `runs` the runs so far at diagnose's step (those the rivals were fitted
-    to). The first plan is greedy against the other at its values (`greedy_plan`); each next one against the other
-    as the forecast of the plan before refitted it (what it absorbs of that plan: the inner minimum of T-optimality,
-    Atkinson and Fedorov's alternation), ADVERSARY_ROUNDS times; of the plans, the one whose forecast (`forecast`,
-    one refit each) beats the other most surely. ValueError when no block fits the budget or the interlocks."""
+    """Greedy T-optimal blocks within `budget_s`, `runs` the runs so far at diagnose's step (those the rivals were
+    fitted to) (the most non-centrality per second of bench time first), the plan
+    dropped from its end until it stays clear of the over-temperature interlocks under both models. ValueError
+    when no block fits the budget or the interlocks."""
     blocks = [b for b in candidate_blocks(limits) if b.expected_s <= budget_s]
     if not blocks:
         raise ValueError("no block fits")
@@ -225,20 +196,24 @@ def design_discrimination(favoured: Rival, other: Rival, runs: Sequence[FitData]
     now = sum(noncentrality({c: simulate_outputs(favoured.network, favoured.params, d)[c]
                              - simulate_outputs(other.network, other.params, d)[c] for c in d.targets}, noise, rho)
               for d in runs)
-    plans: list[tuple[Forecast, list[int]]] = []
-    adversary = other
-    for _ in range(ADVERSARY_ROUNDS + 1):
-        chosen = greedy_plan(favoured, adversary, blocks, noise, rho, ambient_c, limits, budget_s,
-                             (other,) if adversary is not other else ())
-        if any(chosen == earlier for _, earlier in plans):
+    gains = [noncentrality(differences(favoured, other, b.steps, ambient_c, limits), noise, rho) for b in blocks]
+    chosen: list[int] = []
+    spent = 0.0
+    while fits := [i for i, b in enumerate(blocks) if spent + b.expected_s <= budget_s]:
+        best = max(fits, key=lambda i: gains[i] / blocks[i].expected_s)
+        chosen.append(best)
+        spent += blocks[best].expected_s
+    while True:  # the blocks' heat adds up: the plan must stay clear of the interlocks under either model
+        steps = numbered([blocks[i] for i in chosen])
+        hot = any(too_hot(predicted(r, steps, ambient_c, limits), limits) for r in (favoured, other))
+        if len(chosen) == 1 or not hot:
             break
-        expected, adversary = forecast(favoured, other, numbered([blocks[i] for i in chosen]), runs, ambient_c,
-                                       limits)
-        plans.append((expected, chosen))
-    expected, chosen = max(plans, key=lambda plan: plan[0].block_t)
-    steps = numbered([blocks[i] for i in chosen])
+        chosen.pop()
+    if hot:
+        raise ValueError("every block heats the clutch beyond the over-temperature interlocks")
     diff = differences(favoured, other, steps, ambient_c, limits)
     rms = {c: float(np.sqrt(np.nanmean(d ** 2))) for c, d in diff.items() if c in noise}
     ratio = float(np.sqrt(np.mean([v ** 2 for v in favoured.rmse.values()])) / noise_floor(runs))
     return DiscriminationDesign(tuple(blocks[i] for i in chosen), steps, favoured.name, other.name, noise, rms,
-                                noncentrality(diff, noise, rho), now, expected, ratio, len(plans))
+                                noncentrality(diff, noise, rho), now,
+                                forecast(favoured, other, steps, runs, ambient_c, limits), ratio)
