@@ -126,7 +126,7 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
 def scored(doc: dict, runs: list[Path]) -> dict[str, float]:
     """The two rivals refitted to `runs` and scored on the last: RMSE of each (K) and the block test both ways."""
     from benchlab.design.rivals import refitted_rivals
-    from benchlab.diagnose.engine import HeldOut, block_test
+    from benchlab.diagnose.engine import HeldOut, block_statistic
     from benchlab.identify.fit import simulate_outputs
     from benchlab.model.catalog import resolve_model
     from benchlab.model.runs import load_runs
@@ -134,19 +134,9 @@ def scored(doc: dict, runs: list[Path]) -> dict[str, float]:
     frames = load_runs(runs, resolve_model(doc["baseline"]["model"]))
     favoured, other, data = refitted_rivals(doc, "diagnosis", frames)
     held = [HeldOut([data[-1]], [simulate_outputs(r.network, r.params, data[-1])], []) for r in (favoured, other)]
-    return {"rmse_favoured": held[0].rmse, "rmse_other": held[1].rmse, "t_other_beaten": block_t(held[1], held[0]),
-            "p_other_beaten": block_test(held[1], held[0]), "p_favoured_beaten": block_test(held[0], held[1])}
-
-
-def block_t(before, after) -> float:
-    """The t statistic of diagnose's block test (`engine.block_test`, whose p-value it goes with): the mean of the
-    blocks' log MSE ratios over its standard error."""
-    import numpy as np
-
-    _, inverse = np.unique(before.blocks, return_inverse=True)
-    count = np.bincount(inverse)
-    ratio = np.log(np.bincount(inverse, before.squared) / count) - np.log(np.bincount(inverse, after.squared) / count)
-    return float(np.mean(ratio) / (np.std(ratio, ddof=1) / np.sqrt(len(ratio)))) if len(ratio) > 2 else 0.0
+    t, p = block_statistic(held[1], held[0])
+    return {"rmse_favoured": held[0].rmse, "rmse_other": held[1].rmse, "t_other_beaten": t, "p_other_beaten": p,
+            "p_favoured_beaten": block_statistic(held[0], held[1])[1]}
 
 
 def discriminate_seed(seed: int, minutes: float, hours: float, folder: Path) -> dict:

@@ -85,18 +85,26 @@ def test_diagnose_page_names_each_tie_and_the_design_that_settles_it():
     assert "--diagnosis" not in "\n".join(_added(summary))
 
 
-def test_expected_outcome_counts_diagnoses_blocks_not_samples():
-    """30 min of a 0.1 K difference against a 0.1 K misfit: six 5-min blocks, each the other model's MSE twice the
-    favoured's (log 2); the t statistic over those blocks, smaller where the runs so far show the ratio scatter."""
-    import numpy as np
+def test_forecast_names_no_loser_between_one_model_and_itself(short_run, tmp_path):
+    """The forecast simulates the run by the favoured model with its misfit as noise and refits the other with it:
+    where the other is the same model (the plant's own), it absorbs nothing and is not beaten; its RMSE within a
+    tenth of the noise of the favoured's."""
+    from benchlab.design.blocks import candidate_blocks, numbered
+    from benchlab.design.discrimination import Rival, forecast, misfit
+    from benchlab.diagnose.engine import ALPHA, STEP_S, diagnosed_spec
+    from benchlab.identify.data import prepare
+    from benchlab.model.build import build_spec
+    from benchlab.model.catalog import resolve_model
+    from benchlab.model.params import paper_params
 
-    from benchlab.design.discrimination import expected_block_test
-
-    diff = {"T_air": np.full(1800, 0.1), "T_flywheel": np.full(1800, 0.1)}
-    noise = {"T_air": 0.1, "T_flywheel": 0.1}
-    t, p, blocks = expected_block_test(diff, noise, spread=0.5)
-    assert blocks == 6
-    assert t == pytest.approx(np.log(2.0) / (0.5 / np.sqrt(6)), rel=1e-9)
-    wider_t, wider_p, _ = expected_block_test(diff, noise, spread=1.0)
-    assert wider_t < t and wider_p > p
-    assert expected_block_test({"T_air": np.full(500, 0.1)}, noise, spread=0.5)[1] == 1.0  # two blocks: no test
+    model = resolve_model("nonlinear")
+    runs = [prepare(short_run, STEP_S, name="0", network=build_spec(model).network)]
+    spec = diagnosed_spec(model, runs)
+    params = {**{p.name: p.initial for p in spec.free}, **dict(paper_params("nonlinear").items())}
+    plant = Rival("nonlinear", spec, params, *misfit(spec.network, params, runs))
+    limits = bench_config(RunRequest(protocol="design", out=tmp_path / "plan.json", bench="sim")).limits
+    block = min(candidate_blocks(limits), key=lambda b: b.expected_s)
+    steps = numbered([block] * 3)
+    expected = forecast(plant, plant, steps, runs, float(short_run["T_ambient"].mean()), limits)
+    assert expected.blocks >= 3 and expected.block_p >= ALPHA
+    assert abs(expected.rmse_gap) < 0.1 * max(plant.rmse.values())

@@ -199,10 +199,12 @@ def discriminate(args: argparse.Namespace, schema: str) -> int:
            "diagnosis_file": str(args.diagnosis), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
            "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
            "blocks": [b.name for b in plan.blocks],
-           "expected": {"favoured": plan.favoured, "loser": plan.other, "rmse_gap_K": plan.expected_rmse_gap,
+           "expected": {"favoured": plan.favoured, "loser": plan.other, "rmse_gap_K": plan.expected.rmse_gap,
                         "rms_difference_K": plan.rms_difference, "misfit_K": plan.noise,
                         "statistic": plan.statistic, "statistic_now": plan.statistic_now, "p_value": plan.p_value,
-                        "block_t": plan.block_t, "block_p": plan.block_p, "blocks": plan.block_count},
+                        "block_t": plan.expected.block_t, "block_p": plan.expected.block_p,
+                        "blocks": plan.expected.blocks, "floor_ratio": plan.floor_ratio,
+                        "plant_may_be_neither": plan.neither},
            "ambient_C": ambient, "sensors": [asdict(s) for s in sensors],
            "schedule": [s.as_dict() for s in plan.steps]}
     write_text(args.out, json.dumps(out, indent=1) + "\n")

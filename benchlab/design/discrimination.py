@@ -4,8 +4,10 @@ against the model without it), each refitted to the runs so far.
 T-optimal: the criterion is the expected sum of squared differences of the measured channels between the two
 models' predictions of the designed run, each channel weighted by its noise (the non-centrality of the test
 between them under white noise). Greedy like the precision design (`benchlab.design.precision`): the block that
-adds most of it per second of bench time first, each block predicted from a bench at rest; then the chosen plan
-predicted whole for the expected outcome.
+adds most of it per second of bench time first, each block predicted from a bench at rest. The expected outcome
+is a forecast of the verdict (`forecast`): the chosen plan simulated whole by the favoured model with the runs'
+misfit as noise, the other model refitted with that run (it absorbs what it can of the difference, as it will
+after the real run), both scored by diagnose's block test.
 
 The noise a difference is weighed against is each channel's misfit of the better model on the runs so far (its
 in-sample residual RMS), not the sensors' white noise: what the models cannot explain of the runs they were fitted
@@ -18,19 +20,21 @@ are on one scale.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import signal, stats
 
 from benchlab.design import fisher
 from benchlab.design.blocks import Block, candidate_blocks, numbered
 from benchlab.design.precision import too_hot
 from benchlab.diagnose.engine import ALPHA  # the level the loser must be beaten at: diagnose's
-from benchlab.diagnose.engine import BLOCK_S, STEP_S
+from benchlab.diagnose.engine import (BEYOND_FLOOR, BLOCK_S, STEP_S, HeldOut, block_statistic, diagnosed_spec,
+                                      noise_floor)
 from benchlab.identify.data import FitData, prepare
-from benchlab.identify.fit import simulate_outputs
+from benchlab.identify.fit import fit, simulate_outputs
+from benchlab.identify.spec import ModelSpec
 from benchlab.network import ThermalNetwork
 from protocols.limits import BenchLimits
 from protocols.schedule import Step
@@ -38,13 +42,18 @@ from protocols.schedule import Step
 
 @dataclass(frozen=True)
 class Rival:
-    """One competing model: its name (diagnose's candidate key, or the model's), network and refitted values."""
+    """One competing model: its name (diagnose's candidate key, or the model's), spec as diagnose fits it to the
+    runs so far, and refitted values."""
 
     name: str
-    network: ThermalNetwork
+    spec: ModelSpec
     params: Mapping[str, float]
     rmse: Mapping[str, float]  # each measured channel's in-sample residual RMS on the runs so far, K
     rho: float  # lag-1 autocorrelation of those residuals, pooled over channels and runs (0 to 0.99)
+
+    @property
+    def network(self) -> ThermalNetwork:
+        return self.spec.network
 
 
 def misfit(network: ThermalNetwork, params: Mapping[str, float], runs: Sequence[FitData]) -> tuple[dict[str, float],
@@ -84,47 +93,42 @@ def differences(first: Rival, second: Rival, steps: Sequence[Step], ambient_c: f
     return {c: a.targets[c] - b.targets[c] for c in a.targets if c in b.targets}
 
 
-def block_log_ratios(favoured: Mapping[str, np.ndarray], other: Mapping[str, np.ndarray]) -> np.ndarray:
-    """Diagnose's unit of the contest (`engine.block_test`): per BLOCK_S block of a run at its step STEP_S, the log
-    of the other model's mean squared error over the favoured's, the channels' squared errors pooled."""
-    block_len = max(1, int(BLOCK_S / STEP_S))
-    n = max((len(v) for v in favoured.values()), default=0)
-    ratios = []
-    for start in range(0, n, block_len):
-        pair = [(favoured[c][start:start + block_len], other[c][start:start + block_len]) for c in favoured if c in other]
-        f = np.concatenate([a[np.isfinite(a) & np.isfinite(b)] for a, b in pair])
-        o = np.concatenate([b[np.isfinite(a) & np.isfinite(b)] for a, b in pair])
-        if f.size and f.mean() > 0:
-            ratios.append(float(np.log(o.mean() / f.mean())))
-    return np.array(ratios)
+def correlated_noise(n: int, sigma: float, rho: float, rng: np.random.Generator) -> np.ndarray:
+    """n samples of a stationary AR(1) process with standard deviation `sigma` and lag-1 autocorrelation `rho`: a
+    misfit like the runs' at diagnose's step (slow, not white)."""
+    shocks = rng.standard_normal(n) * sigma * np.sqrt(1.0 - rho ** 2)
+    shocks[0] = rng.standard_normal() * sigma
+    return signal.lfilter([1.0], [1.0, -rho], shocks)
 
 
-def expected_block_test(diff: Mapping[str, np.ndarray], noise: Mapping[str, float],
-                        spread: float) -> tuple[float, float, int]:
-    """The block test diagnose will run on the designed run, expected: per block the favoured at its misfit and the
-    other at the misfit plus the predicted difference (`block_log_ratios`), against the blocks' own spread and
-    `spread`, the spread of that log ratio from block to block on the runs so far (what the prediction cannot
-    see). The t statistic, its one-sided p-value and the number of blocks (p = 1 below 3 blocks, as the test)."""
-    squared_fav = {c: np.where(np.isfinite(d), noise[c] ** 2, np.nan) for c, d in diff.items() if c in noise}
-    squared_other = {c: noise[c] ** 2 + diff[c] ** 2 for c in squared_fav}
-    ratios = block_log_ratios(squared_fav, squared_other)
-    if len(ratios) < 3:
-        return 0.0, 1.0, len(ratios)
-    sd = float(np.sqrt(np.var(ratios, ddof=1) + spread ** 2))
-    t = float(np.mean(ratios) / (sd / np.sqrt(len(ratios)))) if sd > 0 else np.inf
-    return t, float(stats.t.sf(t, len(ratios) - 1)), len(ratios)
+@dataclass(frozen=True)
+class Forecast:
+    """The designed run as the favoured model would deliver it, scored as the benchmark and diagnose score it."""
+
+    rmse_gap: float  # K: the other's RMSE on the run minus the favoured's, the other refitted with the run
+    block_t: float  # diagnose's block test "the other is not worse" on the run (`engine.block_statistic`)
+    block_p: float
+    blocks: int
 
 
-def runs_spread(favoured: "Rival", other: "Rival", runs: Sequence[FitData]) -> float:
-    """The standard deviation of `block_log_ratios` of the two rivals' squared residuals on the runs so far, over
-    their blocks: how much the contest's unit varies where neither prediction sees why."""
-    ratios = []
-    for data in runs:
-        sims = [simulate_outputs(r.network, r.params, data) for r in (favoured, other)]
-        squared = [{c: (data.targets[c] - sim[c]) ** 2 for c in sim if c in data.targets} for sim in sims]
-        ratios.append(block_log_ratios(*squared))
-    pooled = np.concatenate(ratios) if ratios else np.array([])
-    return float(np.std(pooled, ddof=1)) if pooled.size > 1 else 0.0
+def forecast(favoured: Rival, other: Rival, steps: Sequence[Step], runs: Sequence[FitData], ambient_c: float,
+             limits: BenchLimits, seed: int = 0) -> Forecast:
+    """T-optimal forecast of the verdict, favoured taken as the plant: the run `steps` simulated by the favoured
+    model with its misfit on the runs so far added as noise (`correlated_noise`, each channel at its RMS, the
+    residuals' lag-1 autocorrelation), the other refitted to the runs and that run from its values (one local fit:
+    what it can absorb of the difference), both scored on the run by diagnose's block test."""
+    truth = predicted(favoured, steps, ambient_c, limits)
+    rng = np.random.default_rng(seed)
+    run = replace(truth, name="forecast", targets={
+        c: t + correlated_noise(len(t), favoured.rmse[c], favoured.rho, rng) for c, t in truth.targets.items()
+        if c in favoured.rmse})
+    data = [*runs, run]
+    spec = diagnosed_spec(other.spec.definition, data, other.spec.per_group)
+    refit = fit(spec, data, start={p.name: other.params.get(p.name, p.initial) for p in spec.free})
+    held = [HeldOut([run], [simulate_outputs(network, params, run)], [])
+            for network, params in ((refit.spec.network, refit.params), (favoured.network, favoured.params))]
+    t, p = block_statistic(*held)
+    return Forecast(held[0].rmse - held[1].rmse, t, p, len(np.unique(held[0].blocks)))
 
 
 def noncentrality(diff: Mapping[str, np.ndarray], noise: Mapping[str, float], rho: float) -> float:
@@ -144,17 +148,14 @@ class DiscriminationDesign:
     rms_difference: dict[str, float]  # per channel, K, over the designed run
     statistic: float  # expected non-centrality (Σ (d/σ)², effective samples) of the designed run
     statistic_now: float  # the same on the runs so far (how far they tell the two apart)
-    #: diagnose's block test on the run, expected (`expected_block_test`): t, p and the blocks it counts
-    block_t: float = 0.0
-    block_p: float = 1.0
-    block_count: int = 0
+    expected: Forecast  # the verdict forecast with the favoured as the plant (`forecast`)
+    floor_ratio: float  # the favoured model's RMSE on the runs so far over their noise floor (`engine.noise_floor`)
 
     @property
-    def expected_rmse_gap(self) -> float:
-        """How much the loser's RMSE should exceed the survivor's on the run (K, over the channels): the survivor at
-        the noise, the loser at the noise and the difference added in quadrature."""
-        gaps = [np.sqrt(self.noise[c] ** 2 + d ** 2) - self.noise[c] for c, d in self.rms_difference.items()]
-        return float(np.mean(gaps)) if gaps else 0.0
+    def neither(self) -> bool:
+        """The runs so far leave the favoured model beyond diagnose's limit of the noise floor: the plant may be
+        neither model, and then the run may beat either (the forecast assumes the favoured is right)."""
+        return self.floor_ratio > BEYOND_FLOOR
 
     @property
     def p_value(self) -> float:
@@ -163,16 +164,22 @@ class DiscriminationDesign:
 
     def lines(self) -> list[str]:
         """The expected outcome, for the terminal before the run."""
-        verdict = "should be beaten" if self.block_p < ALPHA else "may not be beaten"
+        e = self.expected
+        verdict = "should be beaten" if e.block_p < ALPHA else "may not be beaten"
         return [f"designed run: {len(self.blocks)} blocks, {sum(s.expected_s for s in self.steps) / 60:.1f} min",
                 *(f"  block {i}: {b.name}" for i, b in enumerate(self.blocks)),
                 f"to tell apart {self.favoured} (taken as right) and {self.other}:",
                 *(f"  {c}: the two differ by {d:.3f} K RMS on the run against a misfit of {self.noise[c]:.3f} K"
                   for c, d in self.rms_difference.items()),
-                f"expected: {self.other} {verdict} at alpha {ALPHA:g} by diagnose's block test ({self.block_count} "
-                f"blocks of {BLOCK_S:g} s: t = {self.block_t:.2f}, p = {self.block_p:.2g}), its RMSE "
-                f"{self.expected_rmse_gap:.3f} K above {self.favoured}'s; sample statistic {self.statistic:.1f} (runs "
-                f"so far {self.statistic_now:.1f})"]
+                f"expected: {self.other} {verdict} at alpha {ALPHA:g} by diagnose's block test ({e.blocks} blocks of "
+                f"{BLOCK_S:g} s: t = {e.block_t:.2f}, p = {e.block_p:.2g}), its RMSE {e.rmse_gap:.3f} K above "
+                f"{self.favoured}'s, if {self.favoured} is the plant (the run simulated by it with its misfit as "
+                f"noise, {self.other} refitted with that run); sample statistic {self.statistic:.1f} (runs so far "
+                f"{self.statistic_now:.1f})",
+                *([f"caution: {self.favoured} fits the runs so far at {self.floor_ratio:.1f}x their noise floor "
+                   f"(diagnose's limit {BEYOND_FLOOR:g}x): the plant may be neither model, and then the run can "
+                   f"beat either, {self.favoured} included; it settles the contest, the forecast says which way only "
+                   f"if {self.favoured} is right"] if self.neither else [])]
 
 
 def design_discrimination(favoured: Rival, other: Rival, runs: Sequence[FitData], limits: BenchLimits,
@@ -206,6 +213,7 @@ def design_discrimination(favoured: Rival, other: Rival, runs: Sequence[FitData]
         raise ValueError("every block heats the clutch beyond the over-temperature interlocks")
     diff = differences(favoured, other, steps, ambient_c, limits)
     rms = {c: float(np.sqrt(np.nanmean(d ** 2))) for c, d in diff.items() if c in noise}
-    t, p, count = expected_block_test(diff, noise, runs_spread(favoured, other, runs))
+    ratio = float(np.sqrt(np.mean([v ** 2 for v in favoured.rmse.values()])) / noise_floor(runs))
     return DiscriminationDesign(tuple(blocks[i] for i in chosen), steps, favoured.name, other.name, noise, rms,
-                                noncentrality(diff, noise, rho), now, t, p, count)
+                                noncentrality(diff, noise, rho), now,
+                                forecast(favoured, other, steps, runs, ambient_c, limits), ratio)

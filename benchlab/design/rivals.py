@@ -3,7 +3,9 @@
 A finding with alternatives (diagnose's tie) gives the finding's extension against its first alternative, both on
 the same parent (the baseline with the findings of earlier rounds); a finding without one gives the cause against
 its parent. The extensions are rebuilt from the library by their candidate keys (`benchlab.diagnose.library`) and
-refitted as diagnose refits a finding (`engine.extended_spec`, `engine.global_fit`).
+fitted as diagnose fits a finding (`engine.refit_candidate`: screened from a start where the extension acts,
+polished with a scout from the neutral start, refitted whole), not from the nested start alone, where an extension
+whose new parameters are flat (a bridge's node of 1 J/K) stays inert and predicts the parent's run.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from benchlab.design.discrimination import Rival, misfit
-from benchlab.diagnose.engine import STEP_S, diagnosed_spec, extended_spec, global_fit, library_for
+from benchlab.diagnose.engine import STEP_S, diagnosed_spec, extended_spec, library_for, refit_candidate
 from benchlab.diagnose.library import Candidate
 from benchlab.errors import InputError
 from benchlab.identify.data import FitData, prepare
@@ -90,11 +92,9 @@ def refitted_rivals(doc: dict, source: str, runs: Sequence[pd.DataFrame], seed: 
 
     def rival(key: str | None) -> Rival:
         if key is None:
-            return Rival(f"{plan.baseline} without {plan.favoured}", parent.spec.network, parent.params,
+            return Rival(f"{plan.baseline} without {plan.favoured}", parent.spec, parent.params,
                          *misfit(parent.spec.network, parent.params, datasets))
-        released = extended_spec(parent.spec, candidate(key), channels, datasets)
-        start = {**parent.params, **{p.name: p.initial for p in released.free if p.name not in parent.params}}
-        result = global_fit(released, start, datasets, seed + 1)
-        return Rival(key, result.spec.network, result.params, *misfit(result.spec.network, result.params, datasets))
+        result = refit_candidate(candidate(key), parent, datasets, channels, seed + 1)
+        return Rival(key, result.spec, result.params, *misfit(result.spec.network, result.params, datasets))
 
     return rival(plan.favoured), rival(plan.other), datasets

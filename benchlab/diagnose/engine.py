@@ -319,12 +319,18 @@ def block_test(before: HeldOut, after: HeldOut) -> float:
     The t-test is on each block's log ratio of mean squared errors: scale-free, so a few blocks
     where the error was large (a missed heat source after every launch) do not swamp the rest.
     """
+    return block_statistic(before, after)[1]
+
+
+def block_statistic(before: HeldOut, after: HeldOut) -> tuple[float, float]:
+    """`block_test`'s t statistic and one-sided p-value (t 0 and p 1 below three blocks or where no block differs)."""
     _, inverse = np.unique(before.blocks, return_inverse=True)
     count = np.bincount(inverse)
     log_ratio = np.log(np.bincount(inverse, before.squared) / count) - np.log(np.bincount(inverse, after.squared) / count)
     if len(log_ratio) < 3 or np.allclose(log_ratio, 0):
-        return 1.0
-    return float(stats.ttest_1samp(log_ratio, 0.0, alternative="greater").pvalue)
+        return 0.0, 1.0
+    test = stats.ttest_1samp(log_ratio, 0.0, alternative="greater")
+    return float(test.statistic), float(test.pvalue)
 
 
 Screened = tuple[float, Candidate, ModelSpec, dict[str, float]]  # in-sample cost, candidate, its spec, fitted values
@@ -638,6 +644,20 @@ def global_fit(spec: ModelSpec, warm: dict[str, float], datasets: Sequence[FitDa
     fits = [warm_fit, neutral]
     good = [r for r in fits if not at_bound(r)]
     return min(good or fits, key=lambda r: r.cost)
+
+
+def refit_candidate(cand: Candidate, current: FitResult, datasets: Sequence[FitData], channels: dict[str, np.ndarray],
+                    seed: int) -> FitResult:
+    """`cand` added to `current` and fitted as a diagnosis fits the finding it accepts: screened from its best start
+    (`_screen`: a probe where its new parameters are flat at the nested start), polished with a scout from the model
+    file's neutral start (`_polished`), then refitted whole (`global_fit`). Where the screen cannot lower the
+    current cost or the polish leaves its own parameters on a bound, the whole refit starts from the best so far."""
+    judged = pinned(current, datasets)
+    spec = extended_spec(current.spec, cand, channels, datasets)
+    screened = _screen([cand], judged, datasets, channels, SILENT, f"refit {cand.key}")
+    warm = {**current.params, **(screened[0][3] if screened else _nested_start(spec, judged))}
+    polished, _ = _polished(extended_spec(judged.spec, cand, channels, datasets), warm, judged, datasets)
+    return global_fit(spec, {**warm, **(polished.params if polished else {})}, datasets, seed)
 
 
 def _combined(base: ModelSpec, cands: Sequence[Candidate], channels: dict[str, np.ndarray],
