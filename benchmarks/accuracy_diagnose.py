@@ -115,6 +115,8 @@ LADDERS = (  # steps of about 3x (2x where the error grows faster), set from a o
     Ladder("gearbox_churning", "W at 2000 rpm", (1.5, 4.5, 13.0, 40.0), _declared(P.gearbox_churning)),
     Ladder("engine_heat", "W at 2000 rpm", (0.1, 0.3, 1.0, 3.0), _declared(P.engine_heat)),
     Ladder("plate_conduction", "R_PF K/W", (50.0, 15.0, 5.0, 1.5), _declared(P.plate_conduction)),
+    Ladder("contact_torque", "R_PF K/W at 100 N*m", (5.0, 1.5, 0.5, 0.15),
+           _declared(lambda r: P.contact_conduction(r, "clutch_torque", 100.0))),
     Ladder("sensor_lag", "tau_F s", (0.06, 0.2, 0.6, 2.0), _declared(P.sensor_lag)),
     Ladder("extra_mass", "C_H J/K, R 0.2 K/W", (25.0, 50.0, 100.0, 200.0, 400.0),
            _declared(lambda c: P.extra_mass(c, 0.2))),

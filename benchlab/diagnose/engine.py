@@ -387,7 +387,10 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
     start (one simulation each). At the nested start they are projected off the current columns (the current
     parameters are released with them) and only what they add beyond them counts; at a screening start, away from
     the parent, the whole step counts. Columns that vanish at the nested start (an exponent while its factor is
-    zero) are skipped, and a candidate that is its parent exactly there takes the parent's residuals.
+    zero) are skipped, and a candidate that is its parent exactly there takes the parent's residuals. A composition
+    scores the better of its screening starts and its nested start: where the parent bent its parameters to absorb
+    the effect, one step from a probe can rank it below the parent while the first-order gain at the nested start
+    shows it (a contact that differs run by run on 20-min runs); its short fit still starts from its best probe.
     """
     jac = current.jacobian / np.maximum(np.linalg.norm(current.jacobian, axis=0), 1e-300)
     basis, _ = np.linalg.qr(jac)
@@ -418,7 +421,10 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
     def score_one(i: int) -> tuple[float, int]:
         spec, cand = specs[i], cands[i]
         costs = [at(spec, cand, start, cand.probes is None) for start in _starts(cand, spec, current)]
-        return min(costs), int(np.argmin(costs))
+        best = int(np.argmin(costs))
+        if cand.composed and cand.probes:  # ranked by its first-order gain too, screened from its best probe
+            return min(costs[best], at(spec, cand, _nested_start(spec, current), True)), best
+        return costs[best], best
 
     return map_indices(score_one, len(specs))
 
