@@ -66,6 +66,10 @@ STRUCTURAL_FITS = 3  # best-scored extra nodes and lags screened by a short fit 
 #: best-scored explanations among the two-step candidates (a new link with its per-run split or a signal law), each
 #: with all its laws, screened beside them
 COMPOSED_FITS = 2
+#: a screened composition goes on only below this share of the best one-step candidate's screened cost: the second
+#: step must promise the MIN_GAIN_PCT a finding needs beyond what one step already reaches, else the simpler one
+#: would be named before it anyway (it cannot be significantly better held out)
+COMPOSED_MARGIN = (1.0 - MIN_GAIN_PCT / 100.0) ** 2
 SCREEN_NFEV = 8
 HELD_OUT_NFEV = 60
 #: a held-out (cross-validation) fit starts at the all-data fit's optimum and stops once a step changes the cost, the
@@ -436,7 +440,7 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     and every law of the COMPOSED_FITS best-scored two-step explanations (their extra parameter always scores them
     ahead: in slots of their own they leave the one-step candidates' screen as it is; every law, so that the simplest
     form is judged beside the best-scored) from the start that scored best; those that lower the
-    current cost, by cost, best first.
+    current cost (a composition: below COMPOSED_MARGIN of the best one-step cost), by cost, best first.
 
     Every parameter, not only the new ones: a model that lacks an effect has bent its other
     parameters to absorb it, and the new term pays off only once they are released (a plate share
@@ -461,6 +465,8 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     with progress.task(what, len(chosen), unit="fit") as task:
         screened = map_indices(screen_one, len(chosen), task.advance)
     kept = [(cost, cands[i], specs[i], params) for i, (cost, params) in zip(chosen, screened) if cost < current.cost]
+    one_step = min((cost for cost, cand, _, _ in kept if not cand.composed), default=current.cost)
+    kept = [item for item in kept if not item[1].composed or item[0] < COMPOSED_MARGIN * one_step]
     return sorted(kept, key=lambda item: item[0])
 
 
