@@ -241,6 +241,8 @@ class Diagnosis:
     leads: list[Finding] = field(default_factory=list)  # passed in-run but not a cause (Finding.lead_reasons)
     unseen_baseline: HeldOut | None = None  # the baseline simulated on the unseen runs (--validate)
     unseen_final: HeldOut | None = None  # the final model simulated on them
+    evidence: list = field(default_factory=list)  # the baseline's held-out residuals against every signal, ranked
+    # (benchlab.diagnose.evidence.Evidence rows): what guides the level laws, and what the JSON shows
 
 
 def noise_floor(datasets: Sequence[FitData]) -> float:
@@ -403,7 +405,8 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
 
     def score_one(i: int) -> tuple[float, int]:
         spec, cand = specs[i], cands[i]
-        costs = [at(spec, cand, start, cand.probes is None) for start in _starts(cand, spec, current)]
+        costs = [at(spec, cand, start, cand.probes is None or cand.nested_probes)
+                 for start in _starts(cand, spec, current)]
         return min(costs), int(np.argmin(costs))
 
     return map_indices(score_one, len(specs))
@@ -766,6 +769,26 @@ def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, 
     return [], leads, base, base_held
 
 
+LEVEL_CHANNELS = 2  # measured temperatures that get laws of their own level (level_channels)
+
+
+def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
+    """The baseline's held-out residuals tested against every signal and model state, ranked (benchlab.diagnose.
+    evidence; computed once, here, for the library and the JSON)."""
+    from benchlab.diagnose.evidence import residual_evidence  # it reads the engine's constants
+
+    return residual_evidence(base_held, base.spec, base.params)
+
+
+def level_channels(evidence: Sequence) -> tuple[str, ...]:
+    """The LEVEL_CHANNELS measured temperatures (a node's sensor, a boundary's channel) whose best row ranks first
+    in the evidence, at p < ALPHA: a residual that follows a temperature's own level points to a law of that level
+    (a thermostat's fan), and only these get such laws, so the library grows by a few candidates, not by every
+    temperature's."""
+    ranked = [e.signal for e in evidence if e.p_value < ALPHA and e.unit == "degC" and e.kind != "model"]
+    return tuple(dict.fromkeys(ranked))[:LEVEL_CHANNELS]
+
+
 @single_threaded_blas
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", starts: int = 4,
                   seed: int = 0, progress: Progress = SILENT, group_by: str | None = None,
@@ -795,7 +818,8 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
     with progress.task(f"diagnose: {model.label} baseline", starts + 1, unit="fit") as task:
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
-    library = candidates(model, channels, units)
+    evidence = baseline_evidence(base, base_held)
+    library = candidates(model, channels, units, level_channels(evidence))
     if len(run_groups(datasets)) > 1:
         library += per_group_candidates(model, [p.name for p in model.free_parameters()], group_by or "run")
     current, current_held, findings, failed, not_carried = base, base_held, [], [], []
@@ -825,4 +849,4 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held,
                      baseline_at_bound=bound_sides(base), failed_fits=failed, noise_floor=noise_floor(datasets),
                      not_carried=not_carried, leads=leads, unseen_baseline=on_unseen(base.spec, base.params, unseen),
-                     unseen_final=on_unseen(current.spec, current.params, unseen))
+                     unseen_final=on_unseen(current.spec, current.params, unseen), evidence=evidence)

@@ -93,6 +93,9 @@ class Candidate:
     #: parameters the extension fits once per run group instead of once for all runs (per_group_candidates): the
     #: model stays as it is, the runs disagree
     splits: tuple[str, ...] = ()
+    #: its screening starts keep it its parent exactly (a switch's factor at 0, its thresholds placed): each is scored
+    #: as a nested start, one column
+    nested_probes: bool = False
 
     @property
     def reads(self) -> tuple[str, ...]:
@@ -615,6 +618,141 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     return out
 
 
+LEVEL_LAWS = ("linear", "power", "switch")  # of a link against its end's own temperature; a source: power, switch
+#: Screening starts of a switch: its "on" threshold at these quantiles of the temperature in the runs, the band
+#: between on and off these shares of its range (a thermostat's few kelvin of hysteresis in a range of tens)
+SWITCH_QUANTILES = (0.25, 0.5, 0.75)
+SWITCH_BANDS = (0.05, 0.2)
+
+
+def level_elements(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]") -> list[
+        tuple[str, str]]:
+    """(channel, node or boundary) of each temperature in `levels` that measures a node (its output) or that a
+    boundary reads, where the runs hold it and it varies: the elements whose own temperature a law may read."""
+    out = []
+    for channel in levels:
+        if channel not in channels or not np.nanmax(channels[channel]) > np.nanmin(channels[channel]):
+            continue
+        node = model.outputs.get(channel)
+        boundary = next((b for b, reads in model.boundaries.items() if channel in reads), None)
+        if node is not None or boundary is not None:
+            out.append((channel, node if node is not None else boundary))
+    return out
+
+
+def _level_terms(channel: str, tag: str, law: str, ch: Channels) -> tuple[str, dict]:
+    """The factor of a level law on `channel` and its parameters besides the law's own factor: the switch
+    hysteresis(T, on - band, on), or (T − T_min)/span of the runs to the power n (linear: n = 1)."""
+    values = signal_values(channel, ch)
+    low, high = float(np.nanmin(values)), float(np.nanmax(values))
+    span = high - low
+    if law == "switch":
+        on, band = f"on_{tag}", f"band_{tag}"
+        return (f"hysteresis({channel}, {on} - {band}, {on})",
+                {on: (float(np.nanmedian(values)), low, high, "degC (switched on at or above)", span / 10),
+                 band: (0.1 * span, 0.0, span, "K (switched off this far below on)", span / 10)})
+    x = f"maximum({channel} - {low!r}, 0.0) / {span!r}"
+    if law == "linear":
+        return x, {}
+    return f"({x}) ** n_{tag}", {f"n_{tag}": (1.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)", None)}
+
+
+def level_key(channel: str, law: str, where: "tuple[str, ...] | str") -> str:
+    """The key of a level law on links `where`, or of a level source into node `where`."""
+    if isinstance(where, str):
+        return f"source_level_{_slug(channel)}_{law}_{_slug(where)}"
+    return _slug(f"level_{channel}_{law}_{'_'.join(where)}")
+
+
+def level_law(links: tuple[str, ...], channel: str, law: str) -> Build:
+    """The links' resistance R against the temperature of one of their ends, nested at R: R/(1 + g·f) with f a
+    switch with hysteresis (a fan or valve a thermostat turns on and off) or ((T − T_min)/span)^n."""
+    key = level_key(channel, law, links)
+
+    def edit(doc: Doc, tag: str, factor: str) -> None:
+        g = f"g_{tag}"
+        _wrap_links(links, f"({{r}}) / (1.0 + {g} * {factor})")(doc)
+        _parameter(doc, g, 0.0, -0.9, 1e3, "1 (factor on the conductance)", scale=0.5)
+    return _level_build(key, key.removeprefix("level_"), channel, law, edit)
+
+
+def _level_build(key: str, tag: str, channel: str, law: str, edit: Callable[[Doc, str, str], None]) -> Build:
+    """The model with `edit` (its law's own parameter and where the factor enters) and the factor's parameters."""
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        factor, extra = _level_terms(channel, tag, law, ch)
+
+        def edited(doc: Doc) -> None:
+            edit(doc, tag, factor)
+            for name, (start, lo, hi, unit, scale) in extra.items():
+                _parameter(doc, name, start, lo, hi, unit, scale=scale)
+        return revise(model, key, edited)
+    return build
+
+
+def level_source(channel: str, node: str, law: str) -> Build:
+    """Heat q·f into `node`, q from 0 W, f a switch with hysteresis on its own temperature (a heater or cooler a
+    thermostat switches) or ((T − T_min)/span)^n."""
+    key = level_key(channel, law, node)
+
+    def edit(doc: Doc, tag: str, factor: str) -> None:
+        q = f"q_level_{tag}"
+        doc["sources"].append({"name": key, "node": node, "heat": f"{q} * {factor}"})
+        _parameter(doc, q, 0.0, -1e4, 1e4, "W (while on)" if law == "switch" else "W (at the runs' maximum)",
+                   scale=10.0)
+    return _level_build(key, key.removeprefix("source_level_"), channel, law, edit)
+
+
+def switch_probes(channel: str, tag: str, ch: Channels) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+    """Screening starts of a switch, its factor still 0 (the parent exactly: each start costs one column): "on" at
+    SWITCH_QUANTILES of the temperature, the band SWITCH_BANDS of its range."""
+    values = signal_values(channel, ch)
+    span = float(np.nanmax(values) - np.nanmin(values))
+    ons = [float(v) for v in np.nanquantile(values, SWITCH_QUANTILES)]
+    return lambda current: [{f"on_{tag}": on, f"band_{tag}": share * span} for on in ons for share in SWITCH_BANDS]
+
+
+def level_candidates(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]",
+                     link_mechanism: Callable[[tuple[str, ...]], str] = lambda links: "convection") -> list[Candidate]:
+    """Laws of an element's own temperature level (not of a difference across a link): each link group at the node
+    or boundary a temperature of `levels` measures, against that temperature (linear, power, a switch with
+    hysteresis), and heat into that node (power, switch). Like the |ΔT| laws they read the measurement, so the
+    solver stays exact; the engine offers them for the temperatures its evidence ranks first."""
+    out = []
+    for channel, element in level_elements(model, channels, levels):
+        for group in link_groups(model):
+            at = [l for l in model.links if l.name in group and element in l.between]
+            if not at:
+                continue
+            where = tuple(dict.fromkeys(n for l in model.links if l.name in group for n in l.between
+                                        if n in model.nodes))
+            for law in LEVEL_LAWS:
+                key = level_key(channel, law, group)
+                tag = key.removeprefix("level_")
+                what = ("a switch with hysteresis on " if law == "switch" else f"a {law} law of ") + channel
+                out.append(Candidate(
+                    key, channel, link_mechanism(group), f"{' = '.join(group)} = R / (1 + g*f({channel})), {law}",
+                    f"heat crosses {' and '.join(group)} at a rate set by {what}, the temperature of "
+                    f"{element} itself (a fan or valve a thermostat switches, a property that changes as it heats)",
+                    level_law(group, channel, law), nodes=where, signals=(channel,),
+                    inert=(f"on_{tag}", f"band_{tag}") if law == "switch" else ((f"n_{tag}",) if law == "power" else ()),
+                    probes=switch_probes(channel, tag, channels) if law == "switch" else None,
+                    nested_probes=law == "switch"))
+        if element in model.nodes:
+            for law in LEVEL_LAWS[1:]:
+                key = level_key(channel, law, element)
+                tag = key.removeprefix("source_level_")
+                what = "a switch with hysteresis on " if law == "switch" else "a power of "
+                out.append(Candidate(
+                    key, channel, "heat_source", f"heat into {element} = q*f({channel}), {law}",
+                    f"a heat flow set by {what}{channel}, the temperature of node {element} itself, warms or cools it "
+                    "(a heater or cooler a thermostat switches)", level_source(channel, element, law),
+                    nodes=(element,), signals=(channel,),
+                    inert=(f"on_{tag}", f"band_{tag}") if law == "switch" else (f"n_{tag}",),
+                    probes=switch_probes(channel, tag, channels) if law == "switch" else None,
+                    nested_probes=law == "switch"))
+    return out
+
+
 def unused_temperatures(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[str]:
     """Measured temperatures of the runs that the model does not read and that vary: a boundary it could reach or
     should read instead (an engine-side temperature beside a model that ties the crankshaft to ambient). A sensor's
@@ -782,7 +920,8 @@ def _clutch_mechanism(links: tuple[str, ...]) -> str:
     return "conduction" if links == ("R_Feng",) else "convection"
 
 
-def clutch_candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[Candidate]:
+def clutch_candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str],
+                      levels: "tuple[str, ...] | list[str]" = ()) -> list[Candidate]:
     """The clutch's library: the generator on the clutch signals with the physical names, eq. (11) where the
     baseline lacks it, the clamped plate–flywheel conduction and radiation, the measured temperatures it does not
     read as boundaries; learned flows into flywheel and air."""
@@ -801,6 +940,8 @@ def clutch_candidates(model: ModelDefinition, channels: Channels, units: Mapping
                       exact=False, probes=radiation_probes(model))]
     out += [replace(c, summary=_clutch_words(c.summary))
             for c in unused_channel_candidates(model, unused_temperatures(model, channels, units), _clutch_mechanism)]
+    out += [replace(c, summary=_clutch_words(c.summary))
+            for c in level_candidates(model, channels, levels, _clutch_mechanism)]
     return out + learned([s for s in CLUTCH_FALLBACK_SIGNALS if _available(s, channels)], ["F", "A"])
 
 
@@ -834,15 +975,18 @@ def network_signals(model: ModelDefinition, channels: Channels, units: Mapping[s
             and np.nanmax(channels[c]) > np.nanmin(channels[c])]
 
 
-def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str] | None = None) -> list[Candidate]:
-    """The library for this model, none on a channel the runs lack (`load_torque` is optional in a run file)."""
+def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str] | None = None,
+               levels: "tuple[str, ...] | list[str]" = ()) -> list[Candidate]:
+    """The library for this model, none on a channel the runs lack (`load_torque` is optional in a run file);
+    `levels`: the measured temperatures whose own level laws are offered (level_candidates)."""
     units = dict(units or {})
     if is_clutch(model):
-        found = clutch_candidates(model, channels, units)
+        found = clutch_candidates(model, channels, units, levels)
     else:
         signals = network_signals(model, channels, units)
         found = (generated(model, signals, channels)
                  + unused_channel_candidates(model, unused_temperatures(model, channels, units), lambda links: "convection")
+                 + level_candidates(model, channels, levels)
                  + learned(signals, list(model.nodes)))
     return [c for c in found if all(_available(s, channels) for s in c.reads)]
 
