@@ -63,6 +63,9 @@ ALPHA = 0.01
 SCORE_STEP = 0.05  # forward-difference step of a new parameter's column, in fitted coordinates
 SCORED_FITS = 6  # best-scored candidates screened by a short fit
 STRUCTURAL_FITS = 3  # best-scored extra nodes and lags screened by a short fit beside them
+#: best-scored switch with hysteresis screened by a short fit beside them: its score is taken with its thresholds
+#: where its screening start put them, and where they are only near, the first step says little
+SWITCH_FITS = 1
 SCREEN_NFEV = 8
 HELD_OUT_NFEV = 60
 #: a held-out (cross-validation) fit starts at the all-data fit's optimum and stops once a step changes the cost, the
@@ -414,9 +417,10 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
 
 def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[FitData],
             channels: dict[str, np.ndarray], progress: Progress, what: str) -> list[Screened]:
-    """Score every candidate, then a short in-sample fit, every parameter free, of the SCORED_FITS best-scored and
-    the STRUCTURAL_FITS best-scored structural ones (extra nodes, lags: the score's first step is rougher there)
-    from the start that scored best; those that lower the current cost, by cost, best first.
+    """Score every candidate, then a short in-sample fit, every parameter free, of the SCORED_FITS best-scored, the
+    STRUCTURAL_FITS best-scored structural ones (extra nodes, lags: the score's first step is rougher there) and the
+    SWITCH_FITS best-scored switches with hysteresis from the start that scored best; those that lower the current
+    cost, by cost, best first.
 
     Every parameter, not only the new ones: a model that lacks an effect has bent its other
     parameters to absorb it, and the new term pays off only once they are released (a plate share
@@ -426,7 +430,8 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     scores = _score(specs, cands, current, datasets)
     order = list(np.argsort([cost for cost, _ in scores]))
     structural = [i for i in order if cands[i].structural]
-    chosen = list(dict.fromkeys(order[:SCORED_FITS] + structural[:STRUCTURAL_FITS]))
+    switches = [i for i in order if cands[i].nested_probes]
+    chosen = list(dict.fromkeys(order[:SCORED_FITS] + structural[:STRUCTURAL_FITS] + switches[:SWITCH_FITS]))
 
     def screen_one(k: int) -> tuple[float, dict[str, float]]:
         i = chosen[k]
@@ -769,7 +774,7 @@ def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, 
     return [], leads, base, base_held
 
 
-LEVEL_CHANNELS = 2  # measured temperatures that get laws of their own level (level_channels)
+LEVEL_CHANNELS = 1  # measured temperatures that get laws of their own level (level_channels)
 
 
 def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
@@ -780,12 +785,13 @@ def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
     return residual_evidence(base_held, base.spec, base.params)
 
 
-def level_channels(evidence: Sequence) -> tuple[str, ...]:
-    """The LEVEL_CHANNELS measured temperatures (a node's sensor, a boundary's channel) whose best row ranks first
-    in the evidence, at p < ALPHA: a residual that follows a temperature's own level points to a law of that level
-    (a thermostat's fan), and only these get such laws, so the library grows by a few candidates, not by every
-    temperature's."""
-    ranked = [e.signal for e in evidence if e.p_value < ALPHA and e.unit == "degC" and e.kind != "model"]
+def level_channels(evidence: Sequence, channels: dict[str, np.ndarray]) -> tuple[str, ...]:
+    """The LEVEL_CHANNELS temperatures of the runs' `channels` whose best row ranks first in the evidence at
+    p < ALPHA, a model state named by the channel that measures it (`model T_air` is T_air; the library keeps those a
+    node's sensor or a boundary reads): a residual that follows a temperature's own level points to a law of that level (a thermostat's fan),
+    and only these get such laws, so the library grows by a few candidates, not by every temperature's."""
+    ranked = [e.signal.removeprefix("model ") for e in evidence if e.p_value < ALPHA and e.unit == "degC"]
+    ranked = [name for name in ranked if name in channels]  # an unmeasured node's level is no law's to read
     return tuple(dict.fromkeys(ranked))[:LEVEL_CHANNELS]
 
 
@@ -819,7 +825,7 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
     evidence = baseline_evidence(base, base_held)
-    library = candidates(model, channels, units, level_channels(evidence))
+    library = candidates(model, channels, units, level_channels(evidence, channels))
     if len(run_groups(datasets)) > 1:
         library += per_group_candidates(model, [p.name for p in model.free_parameters()], group_by or "run")
     current, current_held, findings, failed, not_carried = base, base_held, [], [], []

@@ -618,11 +618,18 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     return out
 
 
-LEVEL_LAWS = ("linear", "power", "switch")  # of a link against its end's own temperature; a source: power, switch
+#: Laws of a link against its end's own temperature (a source: all but linear): smooth, a step at one threshold
+#: (a switch whose runs never take it back below its "off"), a switch with hysteresis (on at or above "on", off at or
+#: below on − band)
+LEVEL_LAWS = ("linear", "power", "step", "switch")
+SWITCHING = ("step", "switch")
 #: Screening starts of a switch: its "on" threshold at these quantiles of the temperature in the runs, the band
 #: between on and off these shares of its range (a thermostat's few kelvin of hysteresis in a range of tens)
-SWITCH_QUANTILES = (0.25, 0.5, 0.75)
-SWITCH_BANDS = (0.05, 0.2)
+SWITCH_QUANTILES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+SWITCH_BANDS = (0.03, 0.1, 0.3)
+#: A switch's "on" threshold may lie this share of the temperature's range beyond it: a thermostat that switches
+#: at the runs' highest reading (the fan holds the temperature below it) is not on a bound
+SWITCH_MARGIN = 0.25
 
 
 def level_elements(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]") -> list[
@@ -641,16 +648,19 @@ def level_elements(model: ModelDefinition, channels: Channels, levels: "tuple[st
 
 
 def _level_terms(channel: str, tag: str, law: str, ch: Channels) -> tuple[str, dict]:
-    """The factor of a level law on `channel` and its parameters besides the law's own factor: the switch
-    hysteresis(T, on - band, on), or (T − T_min)/span of the runs to the power n (linear: n = 1)."""
+    """The factor of a level law on `channel` and its parameters besides the law's own factor: a switch
+    hysteresis(T, on − band, on) (a step: band 0), or (T − T_min)/span of the runs to the power n (linear: n = 1)."""
     values = signal_values(channel, ch)
     low, high = float(np.nanmin(values)), float(np.nanmax(values))
     span = high - low
-    if law == "switch":
+    if law in SWITCHING:
         on, band = f"on_{tag}", f"band_{tag}"
+        threshold = {on: (float(np.nanmedian(values)), low - SWITCH_MARGIN * span, high + SWITCH_MARGIN * span,
+                          "degC (switched on at or above)", span / 10)}
+        if law == "step":
+            return f"hysteresis({channel}, {on}, {on})", threshold
         return (f"hysteresis({channel}, {on} - {band}, {on})",
-                {on: (float(np.nanmedian(values)), low, high, "degC (switched on at or above)", span / 10),
-                 band: (0.1 * span, 0.0, span, "K (switched off this far below on)", span / 10)})
+                {**threshold, band: (0.1 * span, 0.0, span, "K (switched off this far below on)", span / 10)})
     x = f"maximum({channel} - {low!r}, 0.0) / {span!r}"
     if law == "linear":
         return x, {}
@@ -697,59 +707,66 @@ def level_source(channel: str, node: str, law: str) -> Build:
     def edit(doc: Doc, tag: str, factor: str) -> None:
         q = f"q_level_{tag}"
         doc["sources"].append({"name": key, "node": node, "heat": f"{q} * {factor}"})
-        _parameter(doc, q, 0.0, -1e4, 1e4, "W (while on)" if law == "switch" else "W (at the runs' maximum)",
+        _parameter(doc, q, 0.0, -1e4, 1e4, "W (while on)" if law in SWITCHING else "W (at the runs' maximum)",
                    scale=10.0)
     return _level_build(key, key.removeprefix("source_level_"), channel, law, edit)
 
 
-def switch_probes(channel: str, tag: str, ch: Channels) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
+def switch_probes(channel: str, tag: str, law: str, ch: Channels) -> Callable[[Mapping[str, float]],
+                                                                          list[dict[str, float]]]:
     """Screening starts of a switch, its factor still 0 (the parent exactly: each start costs one column): "on" at
-    SWITCH_QUANTILES of the temperature, the band SWITCH_BANDS of its range."""
+    SWITCH_QUANTILES of the temperature, a switch's band SWITCH_BANDS of its range."""
     values = signal_values(channel, ch)
     span = float(np.nanmax(values) - np.nanmin(values))
     ons = [float(v) for v in np.nanquantile(values, SWITCH_QUANTILES)]
-    return lambda current: [{f"on_{tag}": on, f"band_{tag}": share * span} for on in ons for share in SWITCH_BANDS]
+    bands = SWITCH_BANDS if law == "switch" else (None,)
+    return lambda current: [{f"on_{tag}": on, **({f"band_{tag}": share * span} if share else {})}
+                            for on in ons for share in bands]
+
+
+def _level_candidate(key: str, tag: str, channel: str, law: str, channels: Channels, **fields) -> Candidate:
+    """A level candidate with what its law leaves inert at the nested start and, for a switch, its screening starts."""
+    inert = {"linear": (), "power": (f"n_{tag}",), "step": (f"on_{tag}",), "switch": (f"on_{tag}", f"band_{tag}")}
+    switching = law in SWITCHING
+    return Candidate(key, channel, signals=(channel,), inert=inert[law], nested_probes=switching,
+                     probes=switch_probes(channel, tag, law, channels) if switching else None, **fields)
+
+
+def _level_words(channel: str, law: str) -> str:
+    return {"switch": "a switch with hysteresis on ", "step": "a switch at one threshold of ",
+            "power": "a power of ", "linear": "a linear law of "}[law] + channel
 
 
 def level_candidates(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]",
                      link_mechanism: Callable[[tuple[str, ...]], str] = lambda links: "convection") -> list[Candidate]:
     """Laws of an element's own temperature level (not of a difference across a link): each link group at the node
-    or boundary a temperature of `levels` measures, against that temperature (linear, power, a switch with
-    hysteresis), and heat into that node (power, switch). Like the |ΔT| laws they read the measurement, so the
-    solver stays exact; the engine offers them for the temperatures its evidence ranks first."""
+    or boundary a temperature of `levels` measures, against that temperature (linear, power, a step, a switch with
+    hysteresis), and heat into that node (the same but linear). Like the |ΔT| laws they read the measurement, so
+    the solver stays exact; the engine offers them for the temperatures its evidence ranks first."""
     out = []
     for channel, element in level_elements(model, channels, levels):
         for group in link_groups(model):
-            at = [l for l in model.links if l.name in group and element in l.between]
-            if not at:
+            if not any(element in l.between for l in model.links if l.name in group):
                 continue
             where = tuple(dict.fromkeys(n for l in model.links if l.name in group for n in l.between
                                         if n in model.nodes))
             for law in LEVEL_LAWS:
                 key = level_key(channel, law, group)
-                tag = key.removeprefix("level_")
-                what = ("a switch with hysteresis on " if law == "switch" else f"a {law} law of ") + channel
-                out.append(Candidate(
-                    key, channel, link_mechanism(group), f"{' = '.join(group)} = R / (1 + g*f({channel})), {law}",
-                    f"heat crosses {' and '.join(group)} at a rate set by {what}, the temperature of "
-                    f"{element} itself (a fan or valve a thermostat switches, a property that changes as it heats)",
-                    level_law(group, channel, law), nodes=where, signals=(channel,),
-                    inert=(f"on_{tag}", f"band_{tag}") if law == "switch" else ((f"n_{tag}",) if law == "power" else ()),
-                    probes=switch_probes(channel, tag, channels) if law == "switch" else None,
-                    nested_probes=law == "switch"))
+                out.append(_level_candidate(
+                    key, key.removeprefix("level_"), channel, law, channels, mechanism=link_mechanism(group),
+                    extension=f"{' = '.join(group)} = R / (1 + g*f({channel})), {law}",
+                    summary=f"heat crosses {' and '.join(group)} at a rate set by {_level_words(channel, law)}, the "
+                            f"temperature of {element} itself (a fan or valve a thermostat switches, a property that "
+                            "changes as it heats)", build=level_law(group, channel, law), nodes=where))
         if element in model.nodes:
             for law in LEVEL_LAWS[1:]:
                 key = level_key(channel, law, element)
-                tag = key.removeprefix("source_level_")
-                what = "a switch with hysteresis on " if law == "switch" else "a power of "
-                out.append(Candidate(
-                    key, channel, "heat_source", f"heat into {element} = q*f({channel}), {law}",
-                    f"a heat flow set by {what}{channel}, the temperature of node {element} itself, warms or cools it "
-                    "(a heater or cooler a thermostat switches)", level_source(channel, element, law),
-                    nodes=(element,), signals=(channel,),
-                    inert=(f"on_{tag}", f"band_{tag}") if law == "switch" else (f"n_{tag}",),
-                    probes=switch_probes(channel, tag, channels) if law == "switch" else None,
-                    nested_probes=law == "switch"))
+                out.append(_level_candidate(
+                    key, key.removeprefix("source_level_"), channel, law, channels, mechanism="heat_source",
+                    extension=f"heat into {element} = q*f({channel}), {law}",
+                    summary=f"a heat flow set by {_level_words(channel, law)}, the temperature of node {element} "
+                            "itself, warms or cools it (a heater or cooler a thermostat switches)",
+                    build=level_source(channel, element, law), nodes=(element,)))
     return out
 
 
