@@ -38,7 +38,7 @@ import pandas as pd
 from scipy import stats
 
 from benchlab._blas import single_threaded_blas
-from benchlab.diagnose.library import Candidate, candidates, per_group_candidates
+from benchlab.diagnose.library import Candidate, candidates, carried_values, per_group_candidates
 from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
@@ -419,8 +419,8 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
             channels: dict[str, np.ndarray], progress: Progress, what: str) -> list[Screened]:
     """Score every candidate, then a short in-sample fit, every parameter free, of the SCORED_FITS best-scored, the
     STRUCTURAL_FITS best-scored structural ones (extra nodes, lags: the score's first step is rougher there) and the
-    SWITCH_FITS best-scored switches with hysteresis from the start that scored best; those that lower the current
-    cost, by cost, best first.
+    SWITCH_FITS best-scored switches with their simpler forms (a switch's latch) from the start that scored best;
+    those that lower the current cost, by cost, best first.
 
     Every parameter, not only the new ones: a model that lacks an effect has bent its other
     parameters to absorb it, and the new term pays off only once they are released (a plate share
@@ -430,8 +430,10 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     scores = _score(specs, cands, current, datasets)
     order = list(np.argsort([cost for cost, _ in scores]))
     structural = [i for i in order if cands[i].structural]
-    switches = [i for i in order if cands[i].nested_probes]
-    chosen = list(dict.fromkeys(order[:SCORED_FITS] + structural[:STRUCTURAL_FITS] + switches[:SWITCH_FITS]))
+    switches = [i for i in order if cands[i].nested_probes][:SWITCH_FITS]
+    index = {c.key: i for i, c in enumerate(cands)}
+    switches += [index[key] for i in switches for key in cands[i].simpler if key in index]
+    chosen = list(dict.fromkeys(order[:SCORED_FITS] + structural[:STRUCTURAL_FITS] + switches))
 
     def screen_one(k: int) -> tuple[float, dict[str, float]]:
         i = chosen[k]
@@ -719,15 +721,21 @@ def _simpler_form(lead: Finding, kept: Sequence[Finding], current: FitResult, ba
                   forms: Sequence[Candidate]) -> Finding | None:
     """For a lead whose added parameters are not all identified, the best-fitting of its simpler forms in `forms` (the
     same mechanism on a subset of its nodes, reading no more signals: a node bridging P and F whose link to P the runs
-    cannot pin is a mass hung on F) fitted beside the findings `kept`, with none of its own parameters on a bound; None
+    cannot pin is a mass hung on F; and those it names, `Candidate.simpler`: a switch whose band the runs never
+    exercise is a latch) fitted beside the findings `kept`, with none of its own parameters on a bound; None
     where it has none. Its held-out figures are measured by the drop-one re-check (_recheck) that follows."""
-    cands = [c for c in forms if c.mechanism == lead.candidate.mechanism and set(c.nodes) < set(lead.candidate.nodes)
-             and set(c.reads) <= set(lead.candidate.reads)]
+    cands = [c for c in forms if c.key in lead.candidate.simpler or (
+        c.mechanism == lead.candidate.mechanism and set(c.nodes) < set(lead.candidate.nodes)
+        and set(c.reads) <= set(lead.candidate.reads))]
     parent = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
     fitted = []
     for cand in cands:
         spec = extended_spec(parent, cand, channels, datasets)
         starts = _starts(cand, spec, current)
+        if cand.key in lead.candidate.simpler:  # where the lead's fit put what they share
+            names = {p.name for p in spec.free}
+            starts.append({**_nested_start(spec, current), **{k: v for k, v in carried_values(
+                lead.candidate, cand, current.params).items() if k in names}})
         screened = min((fit(spec, datasets, max_nfev=SCREEN_NFEV, start=start) for start in starts),
                        key=lambda r: r.cost)
         result, _ = _polished(spec, screened.params, current, datasets)
@@ -774,7 +782,7 @@ def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, 
     return [], leads, base, base_held
 
 
-LEVEL_CHANNELS = 1  # measured temperatures that get laws of their own level (level_channels)
+LEVEL_CHANNELS = 2  # measured temperatures that get laws of their own level (level_channels)
 
 
 def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
@@ -786,13 +794,13 @@ def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
 
 
 def level_channels(evidence: Sequence, channels: dict[str, np.ndarray]) -> tuple[str, ...]:
-    """The LEVEL_CHANNELS temperatures of the runs' `channels` whose best row ranks first in the evidence at
-    p < ALPHA, a model state named by the channel that measures it (`model T_air` is T_air; the library keeps those a
-    node's sensor or a boundary reads): a residual that follows a temperature's own level points to a law of that level (a thermostat's fan),
-    and only these get such laws, so the library grows by a few candidates, not by every temperature's."""
-    ranked = [e.signal.removeprefix("model ") for e in evidence if e.p_value < ALPHA and e.unit == "degC"]
-    ranked = [name for name in ranked if name in channels]  # an unmeasured node's level is no law's to read
-    return tuple(dict.fromkeys(ranked))[:LEVEL_CHANNELS]
+    """The LEVEL_CHANNELS temperatures of the runs' `channels` ranked first by the evidence (a model state named by
+    the channel that measures it: `model T_air` is T_air; an unmeasured node's level is no law's to read): a residual
+    that follows a temperature's own level points to a law of that level (a thermostat's fan), and only these get
+    such laws, so the library grows by a few candidates, not by every temperature's. By rank, not by a p-value: the
+    residual of a slow node's switch is autocorrelated, and its row can fall short of ALPHA while it ranks second."""
+    ranked = [e.signal.removeprefix("model ") for e in evidence if e.unit == "degC"]
+    return tuple(dict.fromkeys(name for name in ranked if name in channels))[:LEVEL_CHANNELS]
 
 
 @single_threaded_blas

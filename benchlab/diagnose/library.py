@@ -96,6 +96,9 @@ class Candidate:
     #: its screening starts keep it its parent exactly (a switch's factor at 0, its thresholds placed): each is scored
     #: as a nested start, one column
     nested_probes: bool = False
+    #: keys of its simpler forms that the rule on nodes and signals does not find (a switch's latch: the same law
+    #: with its band beyond the runs): screened beside it, and taken in its place where its own parameters are not identified
+    simpler: tuple[str, ...] = ()
 
     @property
     def reads(self) -> tuple[str, ...]:
@@ -618,11 +621,11 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     return out
 
 
-#: Laws of a link against its end's own temperature (a source: all but linear): smooth, a step at one threshold
-#: (a switch whose runs never take it back below its "off"), a switch with hysteresis (on at or above "on", off at or
-#: below on − band)
-LEVEL_LAWS = ("linear", "power", "step", "switch")
-SWITCHING = ("step", "switch")
+#: Laws of a link against its end's own temperature (a source: all but linear): smooth, a latch (a switch turned on
+#: at one threshold that the runs never take back below its "off": on at or above "on", off only a whole range below
+#: the runs), a switch with hysteresis (on at or above "on", off at or below on − band)
+LEVEL_LAWS = ("linear", "power", "latch", "switch")
+SWITCHING = ("latch", "switch")
 #: Screening starts of a switch: its "on" threshold at these quantiles of the temperature in the runs, the band
 #: between on and off these shares of its range (a thermostat's few kelvin of hysteresis in a range of tens)
 SWITCH_QUANTILES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
@@ -649,7 +652,8 @@ def level_elements(model: ModelDefinition, channels: Channels, levels: "tuple[st
 
 def _level_terms(channel: str, tag: str, law: str, ch: Channels) -> tuple[str, dict]:
     """The factor of a level law on `channel` and its parameters besides the law's own factor: a switch
-    hysteresis(T, on − band, on) (a step: band 0), or (T − T_min)/span of the runs to the power n (linear: n = 1)."""
+    hysteresis(T, on − band, on) (a latch: off a whole range below the runs' lowest), or (T − T_min)/span of the runs
+    to the power n (linear: n = 1)."""
     values = signal_values(channel, ch)
     low, high = float(np.nanmin(values)), float(np.nanmax(values))
     span = high - low
@@ -657,8 +661,8 @@ def _level_terms(channel: str, tag: str, law: str, ch: Channels) -> tuple[str, d
         on, band = f"on_{tag}", f"band_{tag}"
         threshold = {on: (float(np.nanmedian(values)), low - SWITCH_MARGIN * span, high + SWITCH_MARGIN * span,
                           "degC (switched on at or above)", span / 10)}
-        if law == "step":
-            return f"hysteresis({channel}, {on}, {on})", threshold
+        if law == "latch":
+            return f"hysteresis({channel}, {low - span!r}, {on})", threshold
         return (f"hysteresis({channel}, {on} - {band}, {on})",
                 {**threshold, band: (0.1 * span, 0.0, span, "K (switched off this far below on)", span / 10)})
     x = f"maximum({channel} - {low!r}, 0.0) / {span!r}"
@@ -726,21 +730,30 @@ def switch_probes(channel: str, tag: str, law: str, ch: Channels) -> Callable[[M
 
 def _level_candidate(key: str, tag: str, channel: str, law: str, channels: Channels, **fields) -> Candidate:
     """A level candidate with what its law leaves inert at the nested start and, for a switch, its screening starts."""
-    inert = {"linear": (), "power": (f"n_{tag}",), "step": (f"on_{tag}",), "switch": (f"on_{tag}", f"band_{tag}")}
+    inert = {"linear": (), "power": (f"n_{tag}",), "latch": (f"on_{tag}",), "switch": (f"on_{tag}", f"band_{tag}")}
     switching = law in SWITCHING
     return Candidate(key, channel, signals=(channel,), inert=inert[law], nested_probes=switching,
-                     probes=switch_probes(channel, tag, law, channels) if switching else None, **fields)
+                     probes=switch_probes(channel, tag, law, channels) if switching else None,
+                     simpler=(key.replace("_switch_", "_latch_"),) if law == "switch" else (), **fields)
+
+
+def carried_values(lead: Candidate, form: Candidate, values: Mapping[str, float]) -> dict[str, float]:
+    """The lead's fitted values of its own parameters under the names its simpler form `form` gives them (a switch's
+    "on" threshold and factor as its latch's): the form's start where it stands in for the lead."""
+    def tag(key: str) -> str:
+        return key.removeprefix("source_level_").removeprefix("level_")
+    return {name.replace(tag(lead.key), tag(form.key)): value for name, value in values.items() if tag(lead.key) in name}
 
 
 def _level_words(channel: str, law: str) -> str:
-    return {"switch": "a switch with hysteresis on ", "step": "a switch at one threshold of ",
+    return {"switch": "a switch with hysteresis on ", "latch": "a switch the runs turn on once (a latch) on ",
             "power": "a power of ", "linear": "a linear law of "}[law] + channel
 
 
 def level_candidates(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]",
                      link_mechanism: Callable[[tuple[str, ...]], str] = lambda links: "convection") -> list[Candidate]:
     """Laws of an element's own temperature level (not of a difference across a link): each link group at the node
-    or boundary a temperature of `levels` measures, against that temperature (linear, power, a step, a switch with
+    or boundary a temperature of `levels` measures, against that temperature (linear, power, a latch, a switch with
     hysteresis), and heat into that node (the same but linear). Like the |ΔT| laws they read the measurement, so
     the solver stays exact; the engine offers them for the temperatures its evidence ranks first."""
     out = []
