@@ -110,3 +110,30 @@ def test_the_benchs_thermostat_is_carried_from_chunk_to_chunk():
     whole, chunked = advanced([0, n]), advanced([0, 3000, n])  # at a thermostat period (10 samples)
     np.testing.assert_allclose(chunked, whole, atol=1e-9)
     assert whole.max() > 24.0
+
+
+def test_a_housing_fan_switched_by_its_thermostat_is_named_a_law_of_the_housing_temperature():
+    """A fan on the housing's outside, switched on where the housing reaches 27.6 °C and off below 26.4 °C (a 1 h
+    Table 1 run heats it through "on" and never back below "off"), tripling the housing–ambient conductance: named
+    convection on R_Tamb as a switch of T_housing (a latch: the band is not exercised), its threshold within 0.3 K
+    and its factor within 15 %, a cause, the model below 3x the noise floor. (A correct model gets no finding with the
+    level laws in the library: tests/test_diagnose.py's correct models.)"""
+    from benchlab.diagnose import diagnose
+    from benchlab.model.params import paper_params
+    from protocols.table1 import table1_schedule
+    from sim_bench import plant as P
+    from sim_bench.virtual_run import run_schedule
+
+    on_c, factor = 27.6, 3.0
+    plant = P.ThermalPlant(paper_params("nonlinear"), [P.thermostat_fan("R_Tamb", "T", "T_housing", on_c, 26.4, factor)])
+    run = run_schedule(table1_schedule(261, duration_s=3600.0), plant, seed=261)
+    result = diagnose([run], baseline="nonlinear")
+    assert [(f["signal"], f["mechanism"], f["label"]) for f in result["findings"]] == [
+        ("T_housing", "convection", "cause")]
+    finding = result["findings"][0]
+    assert finding["candidate"].startswith("level_T_housing_") and finding["candidate"].endswith("_R_Tamb")
+    on = next(v for k, v in finding["params"].items() if k.startswith("on_"))
+    g = next(v for k, v in finding["params"].items() if k.startswith("g_"))
+    assert on == pytest.approx(on_c, abs=0.3)
+    assert 1.0 + g == pytest.approx(factor, rel=0.15)
+    assert not result["floor"]["beyond_library"]
