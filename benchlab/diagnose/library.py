@@ -629,7 +629,8 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     return out
 
 
-#: Laws of a link against its end's own temperature (a source: all but linear): smooth, a latch (a switch turned on
+#: Laws of a link against its end's own temperature (smooth ones only where no |ΔT| law reads the link; a source: the
+#: switching ones): smooth, a latch (a switch turned on
 #: at one threshold that the runs never take back below its "off": on at or above "on", off only a whole range below
 #: the runs), a switch with hysteresis (on at or above "on", off at or below on − band)
 LEVEL_LAWS = ("linear", "power", "latch", "switch")
@@ -645,16 +646,15 @@ SWITCH_MARGIN = 0.25
 
 def level_elements(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]") -> list[
         tuple[str, str]]:
-    """(channel, node or boundary) of each temperature in `levels` that measures a node (its output) or that a
-    boundary reads, where the runs hold it and it varies: the elements whose own temperature a law may read."""
+    """(channel, node or boundary) of each temperature in `levels` that measures a node (its output), and of each
+    boundary that reads it, where the runs hold it and it varies: the elements whose own temperature a law may read."""
     out = []
     for channel in levels:
         if channel not in channels or not np.nanmax(channels[channel]) > np.nanmin(channels[channel]):
             continue
         node = model.outputs.get(channel)
-        boundary = next((b for b, reads in model.boundaries.items() if channel in reads), None)
-        if node is not None or boundary is not None:
-            out.append((channel, node if node is not None else boundary))
+        out += [(channel, node)] if node is not None else []
+        out += [(channel, b) for b, reads in model.boundaries.items() if channel in reads]
     return out
 
 
@@ -761,9 +761,11 @@ def _level_words(channel: str, law: str) -> str:
 def level_candidates(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]",
                      link_mechanism: Callable[[tuple[str, ...]], str] = lambda links: "convection") -> list[Candidate]:
     """Laws of an element's own temperature level (not of a difference across a link): each link group at the node
-    or boundary a temperature of `levels` measures, against that temperature (linear, power, a latch, a switch with
-    hysteresis), and heat into that node (the same but linear). Like the |ΔT| laws they read the measurement, so
-    the solver stays exact; the engine offers them for the temperatures its evidence ranks first."""
+    or boundary a temperature of `levels` measures, against that temperature (a latch, a switch with hysteresis;
+    linear and power too where no |ΔT| law reads the difference across the group: a smooth law of one end's level
+    only mimics it, and on natural convection was named in its place), and heat into that node (a latch, a switch).
+    Like the |ΔT| laws they read the measurement, so the solver stays exact; the engine offers them for the
+    temperatures its evidence ranks first."""
     out = []
     for channel, element in level_elements(model, channels, levels):
         for group in link_groups(model):
@@ -771,7 +773,8 @@ def level_candidates(model: ModelDefinition, channels: Channels, levels: "tuple[
                 continue
             where = tuple(dict.fromkeys(n for l in model.links if l.name in group for n in l.between
                                         if n in model.nodes))
-            for law in LEVEL_LAWS:
+            smooth = link_difference(model, group, channels) is None  # else the |ΔT| laws: a level is no better
+            for law in LEVEL_LAWS if smooth else SWITCHING:
                 key = level_key(channel, law, group)
                 out.append(_level_candidate(
                     key, key.removeprefix("level_"), channel, law, channels, mechanism=link_mechanism(group),
@@ -780,7 +783,7 @@ def level_candidates(model: ModelDefinition, channels: Channels, levels: "tuple[
                             f"temperature of {element} itself (a fan or valve a thermostat switches, a property that "
                             "changes as it heats)", build=level_law(group, channel, law), nodes=where))
         if element in model.nodes:
-            for law in LEVEL_LAWS[1:]:
+            for law in SWITCHING:
                 key = level_key(channel, law, element)
                 out.append(_level_candidate(
                     key, key.removeprefix("source_level_"), channel, law, channels, mechanism="heat_source",
