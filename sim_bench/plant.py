@@ -150,7 +150,9 @@ class Thermostat:
     """A thermostat on a plant node: on where the node's temperature, sampled every THERMOSTAT_PERIOD_S, has risen to
     `on_c`, off where it has fallen to `off_c`, kept in between (the bench's own switch, independent of the model
     files' hysteresis). The plant carries it from sample to sample and from one advance to the next; a reset plant
-    starts it off. Its law reads it as the channel `channel` (1 while on), held over each period."""
+    starts it off. Its law reads it as the channel `channel` (1 while on), held over each period. One plant advances
+    it (a plant `with_effects` shares it with its parent, which is then not advanced); a real-time bench's cut
+    restores the plant's temperatures, not the switch, which keeps its state at the end of the cut chunk."""
 
     def __init__(self, node: str, on_c: float, off_c: float, channel: str) -> None:
         self.node, self.on_c, self.off_c, self.channel = node, on_c, off_c, channel
