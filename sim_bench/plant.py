@@ -34,6 +34,7 @@ class Effect:
     edit: Edit
     params: Mapping[str, float] = field(default_factory=dict)
     reads_states: bool = False  # its laws read the plant's own temperatures: solved by fixed-point iteration
+    switches: tuple["Thermostat", ...] = ()  # thermostats the plant switches period by period and carries on
 
 
 def _drop_convection(link: Link) -> bool:
@@ -160,6 +161,43 @@ def natural_convection(resistance_at_10k: float, exponent: float = 0.25) -> Effe
                   {"R_nat": resistance_at_10k, "n_nat": exponent}, reads_states=True)
 
 
+class Thermostat:
+    """A thermostat on a plant node: on where the node's temperature, sampled every THERMOSTAT_PERIOD_S, has risen to
+    `on_c`, off where it has fallen to `off_c`, kept in between (the bench's own switch, independent of the model
+    files' hysteresis). The plant carries it from sample to sample and from one advance to the next; a reset plant
+    starts it off. Its law reads it as the channel `channel` (1 while on), held over each period. One plant advances
+    it (a plant `with_effects` shares it with its parent, which is then not advanced); a real-time bench's cut
+    restores the plant's temperatures, not the switch, which keeps its state at the end of the cut chunk."""
+
+    def __init__(self, node: str, on_c: float, off_c: float, channel: str) -> None:
+        self.node, self.on_c, self.off_c, self.channel = node, on_c, off_c, channel
+        self.on = False
+
+    def sample(self, temperature_c: float) -> None:
+        """The switch after reading the node's temperature."""
+        self.on = temperature_c >= self.on_c if not self.on else temperature_c > self.off_c
+
+
+THERMOSTAT_PERIOD_S = 1.0
+
+
+def thermostat_fan(link: str, sensed: str, channel: str, on_c: float, off_c: float,
+                   conductance_factor: float) -> Effect:
+    """A fan switched by a thermostat on the plant's own temperature of node `sensed` (measured as `channel`; on above
+    `on_c`, off below `off_c`, its state kept in between): while it runs, link `link` conducts `conductance_factor`
+    times as much."""
+    switch = Thermostat(sensed, on_c, off_c, f"_thermostat_{link}")
+
+    def edit(net, p):
+        base = next(l for l in net.links if l.label == link)
+
+        def law(q, ch):
+            return base.resistance(q, ch) / (1.0 + (q["fan_factor"] - 1.0) * ch[switch.channel])
+        return net.replace_links(lambda l: l.label != link, (Link(base.a, base.b, law, link),))
+    return Effect("thermostat_fan", channel, "convection", edit, {"fan_factor": conductance_factor},
+                  switches=(switch,))
+
+
 def custom_source(name: str, node: str, signal: str, mechanism: str,
                   heat_flow: Callable[[Mapping[str, np.ndarray]], np.ndarray]) -> Effect:
     """A heat flow of any shape into `node`, driven by channels: for effects no model term describes."""
@@ -188,12 +226,34 @@ class ThermalPlant(NetworkPlant):
             self.params.update(effect.params)
             network = effect.edit(network, self.params)
         network.validate()
+        self._switches = tuple(switch for e in effects for switch in e.switches)
         super().__init__(network, self.params)
         self.effects = tuple(effects)
         self.reads_states = reads_states
         self.friction = friction
         self.name = name
         self._iterative = reads_states or any(e.reads_states for e in effects)
+
+    def reset(self, temperature_c: float | Mapping[str, float]) -> None:
+        """NetworkPlant.reset, the effects' thermostats switched off."""
+        super().reset(temperature_c)
+        for switch in self._switches:
+            switch.on = False
+
+    def advance(self, channels: Mapping[str, np.ndarray], dt: float) -> dict[str, np.ndarray]:
+        """NetworkPlant.advance; with thermostats, period by period (THERMOSTAT_PERIOD_S), each switched on the state
+        at its period's start."""
+        if not self._switches:
+            return super().advance(channels, dt)
+        n = len(next(iter(channels.values())))
+        period = max(1, int(round(THERMOSTAT_PERIOD_S / dt)))
+        pieces = []
+        for start in range(0, n, period):
+            for switch in self._switches:
+                switch.sample(float(self.state[self.state_names.index(switch.node)]))
+            pieces.append(super().advance({name: values[start:start + period] for name, values in channels.items()},
+                                          dt))
+        return {name: np.concatenate([piece[name] for piece in pieces]) for name in self.state_names}
 
     def with_effects(self, effects: Sequence[Effect]) -> "ThermalPlant":
         """The same plant (network, parameters, friction) with `effects` added to its own."""
@@ -219,6 +279,9 @@ class ThermalPlant(NetworkPlant):
         if self.state is None:
             raise RuntimeError("reset() the plant before advancing it")
         channels = dict(channels)
+        n = len(next(iter(channels.values())))
+        for switch in self._switches:  # held over the period (advance)
+            channels[switch.channel] = np.full(n, 1.0 if switch.on else 0.0)
         states = self._run(self._with_states(channels, None), dt)
         for _ in range(self.RADIATION_ITERATIONS if self._iterative else 0):
             previous = states

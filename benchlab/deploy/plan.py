@@ -13,6 +13,7 @@ from benchlab.errors import InputError
 from benchlab.model.definition import kinds
 from benchlab.model.params import ModelParams
 from benchlab.network import state_channels
+from benchlab.network.structure import sequential_laws
 from benchlab.observer.noise import NoiseModel, tune_noise
 from benchlab.observer.online import WEAR_CHANNELS, quantum_of
 from benchlab.wear.clutchfile import ClutchSpec
@@ -71,6 +72,10 @@ def make_plan(params: ModelParams, sensors: Sequence[str], dt: float, clutch: Cl
 
     model = params.definition
     network = params.network
+    switched = sequential_laws(network)
+    if switched:
+        raise InputError(params.definition.source, ", ".join(switched), "a law without hysteresis(...): the deployed C module "
+                         "does not carry a switch's state yet (docs/deploy.md)")
     names = state_channels(network)
     for channel in sensors:
         if channel not in network.outputs:

@@ -38,7 +38,8 @@ import pandas as pd
 from scipy import stats
 
 from benchlab._blas import single_threaded_blas
-from benchlab.diagnose.library import Candidate, applies, candidates, composed_links, per_group_candidates
+from benchlab.diagnose.library import (Candidate, applies, candidates, carried_values, composed_links,
+                                      per_group_candidates)
 from benchlab.diagnose.parallel import map_indices
 from benchlab.identify.api import with_initial_states
 from benchlab.identify.data import FitData, prepare
@@ -70,6 +71,9 @@ COMPOSED_FITS = 2
 #: step must promise the MIN_GAIN_PCT a finding needs beyond what one step already reaches, else the simpler one
 #: would be named before it anyway (it cannot be significantly better held out)
 COMPOSED_MARGIN = (1.0 - MIN_GAIN_PCT / 100.0) ** 2
+#: best-scored switch with hysteresis screened by a short fit beside them: its score is taken with its thresholds
+#: where its screening start put them, and where they are only near, the first step says little
+SWITCH_FITS = 1
 SCREEN_NFEV = 8
 HELD_OUT_NFEV = 60
 #: a held-out (cross-validation) fit starts at the all-data fit's optimum and stops once a step changes the cost, the
@@ -252,6 +256,8 @@ class Diagnosis:
     leads: list[Finding] = field(default_factory=list)  # passed in-run but not a cause (Finding.lead_reasons)
     unseen_baseline: HeldOut | None = None  # the baseline simulated on the unseen runs (--validate)
     unseen_final: HeldOut | None = None  # the final model simulated on them
+    evidence: list = field(default_factory=list)  # the baseline's held-out residuals against every signal, ranked
+    # (benchlab.diagnose.evidence.Evidence rows): what guides the level laws, and what the JSON shows
 
 
 def noise_floor(datasets: Sequence[FitData]) -> float:
@@ -424,7 +430,8 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
 
     def score_one(i: int) -> tuple[float, int]:
         spec, cand = specs[i], cands[i]
-        costs = [at(spec, cand, start, cand.probes is None) for start in _starts(cand, spec, current)]
+        costs = [at(spec, cand, start, cand.probes is None or cand.nested_probes)
+                 for start in _starts(cand, spec, current)]
         best = int(np.argmin(costs))
         if cand.composed and cand.probes:  # ranked by its first-order gain too, screened from its best probe
             return min(costs[best], at(spec, cand, _nested_start(spec, current), True)), best
@@ -435,12 +442,13 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
 
 def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[FitData],
             channels: dict[str, np.ndarray], progress: Progress, what: str) -> list[Screened]:
-    """Score every candidate, then a short in-sample fit, every parameter free, of the SCORED_FITS best-scored and
-    the STRUCTURAL_FITS best-scored structural ones (extra nodes, lags: the score's first step is rougher there)
-    and every law of the COMPOSED_FITS best-scored two-step explanations (their extra parameter always scores them
-    ahead: in slots of their own they leave the one-step candidates' screen as it is; every law, so that the simplest
-    form is judged beside the best-scored) from the start that scored best; those that lower the
-    current cost (a composition: below COMPOSED_MARGIN of the best one-step cost), by cost, best first.
+    """Score every candidate, then a short in-sample fit, every parameter free, of the SCORED_FITS best-scored, the
+    STRUCTURAL_FITS best-scored structural ones (extra nodes, lags: the score's first step is rougher there), the
+    SWITCH_FITS best-scored switches with their simpler forms (a switch's latch) and every law of the COMPOSED_FITS
+    best-scored two-step explanations (their extra parameter always scores them ahead: in slots of their own they
+    leave the one-step candidates' screen as it is; every law, so that the simplest form is judged beside the
+    best-scored) from the start that scored best; those that lower the current cost (a composition: below
+    COMPOSED_MARGIN of the best one-step cost), by cost, best first.
 
     Every parameter, not only the new ones: a model that lacks an effect has bent its other
     parameters to absorb it, and the new term pays off only once they are released (a plate share
@@ -451,10 +459,13 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     order = list(np.argsort([cost for cost, _ in scores]))
     one_step = [i for i in order if not cands[i].composed]
     structural = [i for i in one_step if cands[i].structural]
+    switches = [i for i in one_step if cands[i].nested_probes][:SWITCH_FITS]
+    index = {c.key: i for i, c in enumerate(cands)}
+    switches += [index[key] for i in switches for key in cands[i].simpler if key in index]
     composed = [i for i in order if cands[i].composed]
     explanations = list(dict.fromkeys(_explains(cands[i]) for i in composed))[:COMPOSED_FITS]
     composed = [i for i in composed if _explains(cands[i]) in explanations]  # every law of each: the simplest too
-    chosen = list(dict.fromkeys(one_step[:SCORED_FITS] + structural[:STRUCTURAL_FITS] + composed))
+    chosen = list(dict.fromkeys(one_step[:SCORED_FITS] + structural[:STRUCTURAL_FITS] + switches + composed))
 
     def screen_one(k: int) -> tuple[float, dict[str, float]]:
         i = chosen[k]
@@ -758,15 +769,21 @@ def _simpler_form(lead: Finding, kept: Sequence[Finding], current: FitResult, ba
                   forms: Sequence[Candidate]) -> Finding | None:
     """For a lead whose added parameters are not all identified, the best-fitting of its simpler forms in `forms` (the
     same mechanism on a subset of its nodes, reading no more signals: a node bridging P and F whose link to P the runs
-    cannot pin is a mass hung on F) fitted beside the findings `kept`, with none of its own parameters on a bound; None
+    cannot pin is a mass hung on F; and those it names, `Candidate.simpler`: a switch whose band the runs never
+    exercise is a latch) fitted beside the findings `kept`, with none of its own parameters on a bound; None
     where it has none. Its held-out figures are measured by the drop-one re-check (_recheck) that follows."""
-    cands = [c for c in forms if c.mechanism == lead.candidate.mechanism and set(c.nodes) < set(lead.candidate.nodes)
-             and set(c.reads) <= set(lead.candidate.reads)]
+    cands = [c for c in forms if c.key in lead.candidate.simpler or (
+        c.mechanism == lead.candidate.mechanism and set(c.nodes) < set(lead.candidate.nodes)
+        and set(c.reads) <= set(lead.candidate.reads))]
     parent = _combined(base.spec, [f.candidate for f in kept], channels, datasets)
     fitted = []
     for cand in cands:
         spec = extended_spec(parent, cand, channels, datasets)
         starts = _starts(cand, spec, current)
+        if cand.key in lead.candidate.simpler:  # where the lead's fit put what they share
+            names = {p.name for p in spec.free}
+            starts.append({**_nested_start(spec, current), **{k: v for k, v in carried_values(
+                lead.candidate, cand, current.params).items() if k in names}})
         screened = min((fit(spec, datasets, max_nfev=SCREEN_NFEV, start=start) for start in starts),
                        key=lambda r: r.cost)
         result, _ = _polished(spec, screened.params, current, datasets)
@@ -813,13 +830,36 @@ def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, 
     return [], leads, base, base_held
 
 
+LEVEL_CHANNELS = 2  # measured temperatures that get laws of their own level (level_channels)
+
+
+def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
+    """The baseline's held-out residuals tested against every signal and model state, ranked (benchlab.diagnose.
+    evidence; computed once, here, for the library and the JSON)."""
+    from benchlab.diagnose.evidence import residual_evidence  # it reads the engine's constants
+
+    return residual_evidence(base_held, base.spec, base.params)
+
+
+def level_channels(evidence: Sequence, channels: dict[str, np.ndarray]) -> tuple[str, ...]:
+    """The LEVEL_CHANNELS temperatures of the runs' `channels` ranked first by the evidence (a model state named by
+    the channel that measures it: `model T_air` is T_air; an unmeasured node's level is no law's to read): a residual
+    that follows a temperature's own level points to a law of that level (a thermostat's fan), and only these get
+    such laws, so the library grows by a few candidates, not by every temperature's. By rank, not by a p-value: the
+    residual of a slow node's switch is autocorrelated, and its row can fall short of ALPHA while it ranks second."""
+    ranked = [e.signal.removeprefix("model ") for e in evidence if e.unit == "degC"]
+    return tuple(dict.fromkeys(name for name in ranked if name in channels))[:LEVEL_CHANNELS]
+
+
 @single_threaded_blas
 def library_for(model: ModelDefinition, channels: dict[str, np.ndarray], units: dict[str, str],
-                datasets: Sequence[FitData], group_by: str | None = None) -> list[Candidate]:
-    """Every candidate diagnose tries on these runs: the model's library, its two-step link compositions and, with
-    several run groups, each parameter split per group."""
+                datasets: Sequence[FitData], group_by: str | None = None,
+                levels: Sequence[str] = ()) -> list[Candidate]:
+    """Every candidate diagnose tries on these runs: the model's library (with the level laws of `levels`, the
+    temperatures the baseline's evidence ranks first), its two-step link compositions and, with several run groups,
+    each parameter split per group."""
     groups = run_groups(datasets)
-    library = candidates(model, channels, units) + composed_links(model, channels, units, groups)
+    library = candidates(model, channels, units, levels) + composed_links(model, channels, units, groups)
     if len(groups) > 1:
         library += per_group_candidates(model, [p.name for p in model.free_parameters()], group_by or "run")
     return library
@@ -853,7 +893,8 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
     with progress.task(f"diagnose: {model.label} baseline", starts + 1, unit="fit") as task:
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
-    library = library_for(model, channels, units, datasets, group_by)
+    evidence = baseline_evidence(base, base_held)
+    library = library_for(model, channels, units, datasets, group_by, level_channels(evidence, channels))
     current, current_held, findings, failed, not_carried = base, base_held, [], [], []
     for round_ in range(1, MAX_ROUNDS + 1):
         used = {f.candidate.key for f in findings}
@@ -882,4 +923,4 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
     return Diagnosis(base, base_held, sorted(findings, key=lambda f: -f.gain_pct), current, current_held,
                      baseline_at_bound=bound_sides(base), failed_fits=failed, noise_floor=noise_floor(datasets),
                      not_carried=not_carried, leads=leads, unseen_baseline=on_unseen(base.spec, base.params, unseen),
-                     unseen_final=on_unseen(current.spec, current.params, unseen))
+                     unseen_final=on_unseen(current.spec, current.params, unseen), evidence=evidence)

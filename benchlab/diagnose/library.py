@@ -103,6 +103,12 @@ class Candidate:
     #: the link it adds between two nodes (its resistance's name): once a candidate adding it is accepted, the others
     #: that would add it again no longer apply
     adds_link: str | None = None
+    #: its screening starts keep it its parent exactly (a switch's factor at 0, its thresholds placed): each is scored
+    #: as a nested start, one column
+    nested_probes: bool = False
+    #: keys of its simpler forms that the rule on nodes and signals does not find (a switch's latch: the same law
+    #: with its band beyond the runs): screened beside it, and taken in its place where its own parameters are not identified
+    simpler: tuple[str, ...] = ()
 
     @property
     def reads(self) -> tuple[str, ...]:
@@ -323,11 +329,18 @@ def node_probes(model: ModelDefinition, ends: tuple[str, ...], mass: str) -> Cal
     return probes
 
 
-def link_probes(model: ModelDefinition, resistance: str, factors: tuple[float, ...] = (1.0,)
+#: Screening starts of a new link, as multiples of the model's typical resistance: a path several times weaker than the
+#: typical link scores worse than its parent from the typical one alone (the whole step counts there)
+LINK_PROBE_FACTORS = (1.0, 10.0)
+
+
+def link_probes(model: ModelDefinition, resistance: str, factors: tuple[float, ...] = LINK_PROBE_FACTORS
                 ) -> Callable[[Mapping[str, float]], list[dict[str, float]]]:
-    """Screening starts of a new link: the model's typical resistance (times each of `factors`). From
-    NESTED_RESISTANCE a short fit moves its logarithm too little (a path of 0.3 K/W reached 0.86 of the parent's cost
-    in 8 evaluations, 0.07 from here)."""
+    """Screening starts of a new link: the model's typical resistance times each of `factors` (by default it and ten
+    times it). From NESTED_RESISTANCE a short fit moves its logarithm too little (a path of 0.3 K/W reached 0.86 of
+    the parent's cost in 8 evaluations, 0.07 from the typical one); from the typical one alone a weaker path can
+    score worse than its parent and is never fitted (a plate–flywheel path of 0.6 K/W while clamped on the linear
+    baseline, typical 0.19 K/W: cost 12.86 against the parent's 12.49, ranked 258th, while its fit reaches 1.51)."""
     return lambda values: [{resistance: factor * typical_resistance(model, values)} for factor in factors]
 
 
@@ -627,6 +640,171 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     return out
 
 
+#: Laws of a link against its end's own temperature (smooth ones only where no |ΔT| law reads the link; a source: the
+#: switching ones): smooth, a latch (a switch turned on
+#: at one threshold that the runs never take back below its "off": on at or above "on", off only a whole range below
+#: the runs), a switch with hysteresis (on at or above "on", off at or below on − band)
+LEVEL_LAWS = ("linear", "power", "latch", "switch")
+SWITCHING = ("latch", "switch")
+#: Screening starts of a switch: its "on" threshold at these quantiles of the temperature in the runs, the band
+#: between on and off these shares of its range (a thermostat's few kelvin of hysteresis in a range of tens)
+SWITCH_QUANTILES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+SWITCH_BANDS = (0.03, 0.1, 0.3)
+#: A switch's "on" threshold may lie this share of the temperature's range beyond it: a thermostat that switches
+#: at the runs' highest reading (the fan holds the temperature below it) is not on a bound
+SWITCH_MARGIN = 0.25
+
+
+def level_elements(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]") -> list[
+        tuple[str, str]]:
+    """(channel, node or boundary) of each temperature in `levels` that measures a node (its output), and of each
+    boundary that reads it, where the runs hold it and it varies: the elements whose own temperature a law may read."""
+    out = []
+    for channel in levels:
+        if channel not in channels or not np.nanmax(channels[channel]) > np.nanmin(channels[channel]):
+            continue
+        node = model.outputs.get(channel)
+        out += [(channel, node)] if node is not None else []
+        out += [(channel, b) for b, reads in model.boundaries.items() if channel in reads]
+    return out
+
+
+def _level_terms(channel: str, tag: str, law: str, ch: Channels) -> tuple[str, dict]:
+    """The factor of a level law on `channel` and its parameters besides the law's own factor: a switch
+    hysteresis(T, on − band, on) (a latch: off a whole range below the runs' lowest), or (T − T_min)/span of the runs
+    to the power n (linear: n = 1)."""
+    values = signal_values(channel, ch)
+    low, high = float(np.nanmin(values)), float(np.nanmax(values))
+    span = high - low
+    if law in SWITCHING:
+        on, band = f"on_{tag}", f"band_{tag}"
+        threshold = {on: (float(np.nanmedian(values)), low - SWITCH_MARGIN * span, high + SWITCH_MARGIN * span,
+                          "degC (switched on at or above)", span / 10)}
+        if law == "latch":
+            return f"hysteresis({channel}, {low - span!r}, {on})", threshold
+        return (f"hysteresis({channel}, {on} - {band}, {on})",
+                {**threshold, band: (0.1 * span, 0.0, span, "K (switched off this far below on)", span / 10)})
+    x = f"maximum({channel} - {low!r}, 0.0) / {span!r}"
+    if law == "linear":
+        return x, {}
+    return f"({x}) ** n_{tag}", {f"n_{tag}": (1.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)", None)}
+
+
+def level_key(channel: str, law: str, where: "tuple[str, ...] | str") -> str:
+    """The key of a level law on links `where`, or of a level source into node `where`."""
+    if isinstance(where, str):
+        return f"source_level_{_slug(channel)}_{law}_{_slug(where)}"
+    return _slug(f"level_{channel}_{law}_{'_'.join(where)}")
+
+
+def level_law(links: tuple[str, ...], channel: str, law: str) -> Build:
+    """The links' resistance R against the temperature of one of their ends, nested at R: R/(1 + g·f) with f a
+    switch with hysteresis (a fan or valve a thermostat turns on and off) or ((T − T_min)/span)^n."""
+    key = level_key(channel, law, links)
+
+    def edit(doc: Doc, tag: str, factor: str) -> None:
+        g = f"g_{tag}"
+        _wrap_links(links, f"({{r}}) / (1.0 + {g} * {factor})")(doc)
+        _parameter(doc, g, 0.0, -0.9, 1e3, "1 (factor on the conductance)", scale=0.5)
+    return _level_build(key, key.removeprefix("level_"), channel, law, edit)
+
+
+def _level_build(key: str, tag: str, channel: str, law: str, edit: Callable[[Doc, str, str], None]) -> Build:
+    """The model with `edit` (its law's own parameter and where the factor enters) and the factor's parameters."""
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        factor, extra = _level_terms(channel, tag, law, ch)
+
+        def edited(doc: Doc) -> None:
+            edit(doc, tag, factor)
+            for name, (start, lo, hi, unit, scale) in extra.items():
+                _parameter(doc, name, start, lo, hi, unit, scale=scale)
+        return revise(model, key, edited)
+    return build
+
+
+def level_source(channel: str, node: str, law: str) -> Build:
+    """Heat q·f into `node`, q from 0 W, f a switch with hysteresis on its own temperature (a heater or cooler a
+    thermostat switches) or ((T − T_min)/span)^n."""
+    key = level_key(channel, law, node)
+
+    def edit(doc: Doc, tag: str, factor: str) -> None:
+        q = f"q_level_{tag}"
+        doc["sources"].append({"name": key, "node": node, "heat": f"{q} * {factor}"})
+        _parameter(doc, q, 0.0, -1e4, 1e4, "W (while on)" if law in SWITCHING else "W (at the runs' maximum)",
+                   scale=10.0)
+    return _level_build(key, key.removeprefix("source_level_"), channel, law, edit)
+
+
+def switch_probes(channel: str, tag: str, law: str, ch: Channels) -> Callable[[Mapping[str, float]],
+                                                                          list[dict[str, float]]]:
+    """Screening starts of a switch, its factor still 0 (the parent exactly: each start costs one column): "on" at
+    SWITCH_QUANTILES of the temperature, a switch's band SWITCH_BANDS of its range."""
+    values = signal_values(channel, ch)
+    span = float(np.nanmax(values) - np.nanmin(values))
+    ons = [float(v) for v in np.nanquantile(values, SWITCH_QUANTILES)]
+    bands = SWITCH_BANDS if law == "switch" else (None,)
+    return lambda current: [{f"on_{tag}": on, **({f"band_{tag}": share * span} if share else {})}
+                            for on in ons for share in bands]
+
+
+def _level_candidate(key: str, tag: str, channel: str, law: str, channels: Channels, **fields) -> Candidate:
+    """A level candidate with what its law leaves inert at the nested start and, for a switch, its screening starts."""
+    inert = {"linear": (), "power": (f"n_{tag}",), "latch": (f"on_{tag}",), "switch": (f"on_{tag}", f"band_{tag}")}
+    switching = law in SWITCHING
+    return Candidate(key, channel, signals=(channel,), inert=inert[law], nested_probes=switching,
+                     probes=switch_probes(channel, tag, law, channels) if switching else None,
+                     simpler=(key.replace("_switch_", "_latch_"),) if law == "switch" else (), **fields)
+
+
+def carried_values(lead: Candidate, form: Candidate, values: Mapping[str, float]) -> dict[str, float]:
+    """The lead's fitted values of its own parameters under the names its simpler form `form` gives them (a switch's
+    "on" threshold and factor as its latch's): the form's start where it stands in for the lead."""
+    def tag(key: str) -> str:
+        return key.removeprefix("source_level_").removeprefix("level_")
+    return {name.replace(tag(lead.key), tag(form.key)): value for name, value in values.items() if tag(lead.key) in name}
+
+
+def _level_words(channel: str, law: str) -> str:
+    return {"switch": "a switch with hysteresis on ", "latch": "a switch the runs turn on once (a latch) on ",
+            "power": "a power of ", "linear": "a linear law of "}[law] + channel
+
+
+def level_candidates(model: ModelDefinition, channels: Channels, levels: "tuple[str, ...] | list[str]",
+                     link_mechanism: Callable[[tuple[str, ...]], str] = lambda links: "convection") -> list[Candidate]:
+    """Laws of an element's own temperature level (not of a difference across a link): each link group at the node
+    or boundary a temperature of `levels` measures, against that temperature (a latch, a switch with hysteresis;
+    linear and power too where no |ΔT| law reads the difference across the group: a smooth law of one end's level
+    only mimics it, and on natural convection was named in its place), and heat into that node (a latch, a switch).
+    Like the |ΔT| laws they read the measurement, so the solver stays exact; the engine offers them for the
+    temperatures its evidence ranks first."""
+    out = []
+    for channel, element in level_elements(model, channels, levels):
+        for group in link_groups(model):
+            if not any(element in l.between for l in model.links if l.name in group):
+                continue
+            where = tuple(dict.fromkeys(n for l in model.links if l.name in group for n in l.between
+                                        if n in model.nodes))
+            smooth = link_difference(model, group, channels) is None  # else the |ΔT| laws: a level is no better
+            for law in LEVEL_LAWS if smooth else SWITCHING:
+                key = level_key(channel, law, group)
+                out.append(_level_candidate(
+                    key, key.removeprefix("level_"), channel, law, channels, mechanism=link_mechanism(group),
+                    extension=f"{' = '.join(group)} = R / (1 + g*f({channel})), {law}",
+                    summary=f"heat crosses {' and '.join(group)} at a rate set by {_level_words(channel, law)}, the "
+                            f"temperature of {element} itself (a fan or valve a thermostat switches, a property that "
+                            "changes as it heats)", build=level_law(group, channel, law), nodes=where))
+        if element in model.nodes:
+            for law in SWITCHING:
+                key = level_key(channel, law, element)
+                out.append(_level_candidate(
+                    key, key.removeprefix("source_level_"), channel, law, channels, mechanism="heat_source",
+                    extension=f"heat into {element} = q*f({channel}), {law}",
+                    summary=f"a heat flow set by {_level_words(channel, law)}, the temperature of node {element} "
+                            "itself, warms or cools it (a heater or cooler a thermostat switches)",
+                    build=level_source(channel, element, law), nodes=(element,)))
+    return out
+
+
 def unused_temperatures(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[str]:
     """Measured temperatures of the runs that the model does not read and that vary: a boundary it could reach or
     should read instead (an engine-side temperature beside a model that ties the crankshaft to ambient). A sensor's
@@ -794,7 +972,8 @@ def _clutch_mechanism(links: tuple[str, ...]) -> str:
     return "conduction" if links == ("R_Feng",) else "convection"
 
 
-def clutch_candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str]) -> list[Candidate]:
+def clutch_candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str],
+                      levels: "tuple[str, ...] | list[str]" = ()) -> list[Candidate]:
     """The clutch's library: the generator on the clutch signals with the physical names, eq. (11) where the
     baseline lacks it, the clamped plate–flywheel conduction and radiation, the measured temperatures it does not
     read as boundaries; learned flows into flywheel and air."""
@@ -813,6 +992,8 @@ def clutch_candidates(model: ModelDefinition, channels: Channels, units: Mapping
                       exact=False, probes=radiation_probes(model))]
     out += [replace(c, summary=_clutch_words(c.summary))
             for c in unused_channel_candidates(model, unused_temperatures(model, channels, units), _clutch_mechanism)]
+    out += [replace(c, summary=_clutch_words(c.summary))
+            for c in level_candidates(model, channels, levels, _clutch_mechanism)]
     return out + learned([s for s in CLUTCH_FALLBACK_SIGNALS if _available(s, channels)], ["F", "A"])
 
 
@@ -854,15 +1035,18 @@ def network_signals(model: ModelDefinition, channels: Channels, units: Mapping[s
             and np.nanmax(channels[c]) > np.nanmin(channels[c])]
 
 
-def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str] | None = None) -> list[Candidate]:
-    """The library for this model, none on a channel the runs lack (`load_torque` is optional in a run file)."""
+def candidates(model: ModelDefinition, channels: Channels, units: Mapping[str, str] | None = None,
+               levels: "tuple[str, ...] | list[str]" = ()) -> list[Candidate]:
+    """The library for this model, none on a channel the runs lack (`load_torque` is optional in a run file);
+    `levels`: the measured temperatures whose own level laws are offered (level_candidates)."""
     units = dict(units or {})
     if is_clutch(model):
-        found = clutch_candidates(model, channels, units)
+        found = clutch_candidates(model, channels, units, levels)
     else:
         signals = network_signals(model, channels, units)
         found = (generated(model, signals, channels)
                  + unused_channel_candidates(model, unused_temperatures(model, channels, units), lambda links: "convection")
+                 + level_candidates(model, channels, levels)
                  + learned(signals, list(model.nodes)))
     return [c for c in found if all(_available(s, channels) for s in c.reads)]
 

@@ -11,7 +11,7 @@ import pandas as pd
 from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, COMPOSED_FITS, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT,
                                      SCORED_FITS, STEP_S, STRUCTURAL_FITS, Diagnosis, Finding, HeldOut, block_test,
                                      diagnose_runs, gain_pct, run_groups)
-from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS, residual_evidence
+from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS
 from benchlab.diagnose.library import telling_apart
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
 from benchlab.identify.data import SLIP_POWER
@@ -197,8 +197,7 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                  "nrmse_pct": result.final_held.nrmse_pct, "params": final.params},
         "floor": floor,
         "regimes": {"baseline": regime_errors(result.baseline_held), "best": regime_errors(result.final_held)},
-        "evidence": [e.as_dict() for e in residual_evidence(result.baseline_held, result.baseline.spec,
-                                                             result.baseline.params)],
+        "evidence": [e.as_dict() for e in result.evidence],
         "method": {"validation": f"blocked 2-fold: {FOLD_S:.0f} s blocks dealt alternately to the folds; "
                                  "fit on one fold of each run, score on the other",
                    "step_s": STEP_S, "min_gain_pct": MIN_GAIN_PCT, "alpha": ALPHA,

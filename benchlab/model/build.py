@@ -18,12 +18,15 @@ from benchlab.network import Boundary, Calibration, Channels, Lag, Link, Node, P
 NO_TEMPERATURES: dict[str, float] = {}
 
 
-def _law(compiled: Callable, reads: frozenset[str]) -> Callable[[Params, Channels], "float | np.ndarray"]:
+def _law(compiled: Callable, reads: frozenset[str], sequential: bool = False) -> Callable[[Params, Channels],
+                                                                                     "float | np.ndarray"]:
     """A law of params and channels; `reads`: the parameters it reads (its value changes with nothing else on one
-    run's channels, which lets a fit's solver memo keep it: benchlab.network.memo)."""
+    run's channels, which lets a fit's solver memo keep it: benchlab.network.memo); `sequential`: its value at a
+    sample depends on the samples before it (a switch with hysteresis: benchlab.network.structure.sequential_laws)."""
     def law(params: Params, channels: Channels) -> "float | np.ndarray":
         return compiled(params, channels, NO_TEMPERATURES)
     law.reads = tuple(sorted(reads))
+    law.sequential = sequential
     return law
 
 
@@ -50,15 +53,15 @@ def build_network(model: ModelDefinition) -> ThermalNetwork:
     def law(expr: Expression) -> Callable:
         if expr.text not in laws:
             laws[expr.text] = _law(compile_expression(expr, kinds(model.parameters, model.nodes, expr.names)),
-                                   _parameters_read(model, expr))
+                                   _parameters_read(model, expr), expr.sequential)
         return laws[expr.text]
 
     sources = []
     for entry in model.sources:
         constant, coefficients = affine_parts(entry.heat, kinds(model.parameters, model.nodes, entry.heat.names))
         reads = _parameters_read(model, entry.heat)
-        sources.append(Source(entry.node, _law(constant, reads), entry.name,
-                              tuple((node, _law(k, reads)) for node, k in coefficients.items())))
+        sources.append(Source(entry.node, _law(constant, reads, entry.heat.sequential), entry.name,
+                              tuple((node, _law(k, reads, entry.heat.sequential)) for node, k in coefficients.items())))
     outputs = {**model.simulated, **model.outputs}
     for lag in model.lags:
         outputs[lag.output] = model.lag_state(lag.output)

@@ -2,7 +2,9 @@
 
 Python's `ast` only parses the text; nothing is ever evaluated by Python. The tree is checked against a
 whitelist (numbers, names, `+ - * / **`, unary minus, one comparison `< <= > >= ==`, and calls of
-`exp log sqrt abs minimum maximum where`) and then turned into nested closures over numpy functions.
+`exp log sqrt abs minimum maximum where hysteresis`) and then turned into nested closures over numpy functions.
+`hysteresis(x, off, on)` is a switch (a thermostat, a fan) whose state is carried from sample to sample
+(benchlab.network.switching): the one function whose value is not pointwise (`Expression.sequential`).
 A `heat` expression may name node temperatures where it is affine in them (a copper loss rising with
 winding temperature): `affine_parts` splits it into a temperature-free part and one coefficient per node,
 which the solver puts into the state matrix, so the zero-order hold stays exact.
@@ -26,14 +28,23 @@ MAX_DEPTH = 100  # nesting of the parsed tree (a sum of n terms is n deep)
 FUNCTIONS: dict[str, tuple[Callable, int]] = {
     "exp": (np.exp, 1), "log": (np.log, 1), "sqrt": (np.sqrt, 1), "abs": (np.abs, 1),
     "minimum": (np.minimum, 2), "maximum": (np.maximum, 2), "where": (np.where, 3),
+    "hysteresis": (lambda x, off, on: _hysteresis(x, off, on), 3),
 }
+SEQUENTIAL = frozenset({"hysteresis"})  # functions whose value at a sample depends on the samples before it
+
+
+def _hysteresis(x, off, on):
+    """benchlab.network.switching.hysteresis, loaded on first use (it compiles with numba)."""
+    from benchlab.network.switching import hysteresis
+
+    return hysteresis(x, off, on)
 _BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
            ast.Pow: operator.pow}
 _COMPARE = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE: operator.ge,
             ast.Eq: operator.eq}
 _UNARY = {ast.USub: operator.neg, ast.UAdd: operator.pos}
 ALLOWED = ("numbers, names, + - * / **, parentheses, one comparison < <= > >= ==, and "
-           + " ".join(FUNCTIONS) + "(cond, a, b)")
+           "exp log sqrt abs minimum maximum where(cond, a, b) hysteresis(x, off, on)")
 
 #: A compiled expression: (parameters, channels, node temperatures) -> scalar or one value per sample.
 Values = Mapping[str, "float | np.ndarray"]
@@ -51,6 +62,11 @@ class Expression:
     text: str
     tree: ast.expr = field(compare=False)  # equal texts parse to equal trees
     names: frozenset[str] = frozenset()
+
+    @property
+    def sequential(self) -> bool:
+        """Whether its value at a sample depends on the samples before it (a `hysteresis` switch carries a state)."""
+        return any(isinstance(n, ast.Call) and n.func.id in SEQUENTIAL for n in ast.walk(self.tree))
 
 
 def parse(text: object) -> Expression:
@@ -254,6 +270,8 @@ def _c(node: ast.expr, name: Callable[[str], str]) -> str:
     if isinstance(node, ast.Compare):
         test = f"{_c(node.left, name)} {_C_COMPARE[type(node.ops[0])]} {_c(node.comparators[0], name)}"
         return f"(({test}) ? BL_R(1.0) : BL_R(0.0))"
+    if node.func.id in SEQUENTIAL:
+        raise ExpressionError(f"a law without {node.func.id}(...): its switch state is not carried by the C module yet")
     args = [_c(a, name) for a in node.args]  # ast.Call: _check let nothing else through
     if node.func.id == "where":
         test = node.args[0]

@@ -14,13 +14,17 @@ import numpy as np
 from benchlab.network.sensors import reading
 from benchlab.network.solver import DEFAULT_RESOLUTION, run_network
 from benchlab.network.stream import NetworkStream
-from benchlab.network.structure import Params, ThermalNetwork
+from benchlab.network.structure import Params, ThermalNetwork, sequential_laws
 
 
 class NetworkPlant:
     """True temperatures of a network for given channels; keeps its state between calls."""
 
     def __init__(self, network: ThermalNetwork, params: Params) -> None:
+        switched = sequential_laws(network)
+        if switched:  # each chunk would start its switch afresh
+            raise ValueError(f"a model without hysteresis(...) ({', '.join(switched)} switches: a plant does not carry "
+                             "a switch from chunk to chunk yet, docs/models.md)")
         self.network = network
         self.params = params
         self.state: np.ndarray | None = None

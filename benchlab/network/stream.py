@@ -5,9 +5,11 @@
 run, so each is a fresh mapping the kernel zero-fills page by page (half the CPU of a 10 M-sample simulate).
 Here the run goes through in blocks of `BLOCK` samples: laws, keys and inputs are block-sized (cache-resident,
 reused by the allocator), operating points are numbered across blocks in one growing table and each distinct
-point is discretised once, when first met; the only run-sized array is the result. Every law of a model file is
-pointwise (a sample's value depends on that sample's channels), so a block's laws are the run's laws on it, and
-the states are those of `propagate(discretise(...))` bit for bit (tests/test_stream.py).
+point is discretised once, when first met; the only run-sized array is the result. Every law of a model file but a
+switch with hysteresis is pointwise (a sample's value depends on that sample's channels), so a block's laws are the
+run's laws on it, and the states are those of `propagate(discretise(...))` bit for bit (tests/test_stream.py); a
+network with a switch (`structure.sequential_laws`: its state is carried from sample to sample over the whole
+run) is not streamed in blocks but keyed whole by the solver.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from benchlab.jit import njit
 from benchlab.network.solver import (_assembly, _coefficient_terms, _conductance, _factors, _quantised, _system_matrices, _zoh,
                                      _propagate_combined44, propagate_into)
 from benchlab.network.memo import float_bits
-from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
+from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix, sequential_laws
 
 BLOCK = 1 << 14  # samples per block: a block's float64 column is 128 KiB, inside the core's L2 cache (16,384 measured best of 4,096..131,072)
 
@@ -152,7 +154,8 @@ def stream_network(network: ThermalNetwork, params: Params, channels: Channels, 
                    resolution: float, block: int | None = None) -> np.ndarray | None:
     """States state-major (n, N + 1), column k at time k*dt from x0, as `solver.run_network` without a memo gives
     them (transposed); None where the network has temperature-affine sources (their keys are scaled by the whole
-    run's largest value, so the whole-run solver keys them)."""
+    run's largest value, so the whole-run solver keys them) or, on more than one block, a switch with hysteresis
+    (its state runs through the whole run)."""
     return NetworkStream(network, params, dt, resolution).run(channels, x0, block)
 
 
@@ -203,6 +206,7 @@ class NetworkStream:
     def __init__(self, network: ThermalNetwork, params: Params, dt: float, resolution: float) -> None:
         self.network, self.params, self.dt, self.resolution = network, params, dt, resolution
         self.affine = bool(_coefficient_terms(network))  # temperature-affine sources: keyed by the whole run
+        self.sequential = bool(sequential_laws(network))  # a switch's state runs through the run: never split
         self.assembly = _assembly(network)
         self.factors = _factors(self.assembly[1], params)
         self.states = len(network.state_names)
@@ -225,9 +229,9 @@ class NetworkStream:
     def run(self, channels: Channels, x0: np.ndarray, block: int | None = None) -> np.ndarray | None:
         """States state-major (n, N + 1) over the channels from x0 (see `stream_network`); the caller does not
         change them (a repeated run hands back the same array)."""
-        if self.affine:
-            return None
         n = samples(channels)
+        if self.affine or (self.sequential and n > (block or BLOCK)):
+            return None
         x0 = np.asarray(x0, dtype=np.float64)
         if self.points is not None and self.points.count > MAX_POINTS:
             self.points = None

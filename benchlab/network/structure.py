@@ -122,6 +122,15 @@ class ThermalNetwork:
                 raise ValueError(f"calibration of {channel}, which is no output")
 
 
+def sequential_laws(network: ThermalNetwork) -> list[str]:
+    """The links and sources whose law at a sample depends on the samples before it (a switch with hysteresis,
+    benchlab.network.switching): a run's laws are then evaluated over the whole run, never a part of it alone."""
+    laws = [(link.label or f"{link.a}-{link.b}", link.resistance) for link in network.links]
+    laws += [(src.label or src.node, src.heat_flow) for src in network.sources]
+    laws += [(src.label or src.node, law) for src in network.sources for _, law in src.coefficients]
+    return list(dict.fromkeys(name for name, law in laws if getattr(law, "sequential", False)))
+
+
 def as_samples(value: "float | np.ndarray", n: int) -> np.ndarray:
     """Broadcast a scalar-or-array law result to one float64 value per sample."""
     arr = np.asarray(value, dtype=np.float64)

@@ -20,6 +20,7 @@ import numpy as np
 from benchlab.model.clutch import clutch_network
 from benchlab.errors import InputError
 from benchlab.network import Params, ThermalNetwork
+from benchlab.network.structure import sequential_laws
 from benchlab.observer.kalman import filter_step, reinitialise
 from benchlab.observer.model import ObserverModel
 from benchlab.observer.noise import NoiseModel, tune_noise
@@ -75,6 +76,10 @@ class OnlineObserver:
                  clutch: ClutchSpec | None = None, quantum: Mapping[str, float] | None = None,
                  adapt: Sequence[str] = ()) -> None:
         network = network or clutch_network()
+        switched = sequential_laws(network)
+        if switched:  # stepped a sample at a time, a switch would start afresh at each one
+            raise InputError("model", ", ".join(switched), "a law without hysteresis(...): the online observer does "
+                             "not carry a switch's state from sample to sample yet (docs/deploy.md)")
         noise = noise or tune_noise(network, params, list(network.outputs))
         self.model = ObserverModel(network, params, sensors, noise, adapt=adapt)
         self.states = [self.model.names[s] for s in self.model.states]

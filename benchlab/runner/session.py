@@ -121,7 +121,10 @@ def estimate_plant(request: RunRequest) -> "Plant | None":
         raise InputError(request.params, "model", f"a clutch model that reads only {', '.join(ESTIMATE_CHANNELS)} "
                                                   f"and has a T_flywheel output, to time the sweep (model "
                                                   f"{model.label} reads {', '.join(unknown) or 'no T_flywheel'})")
-    return NetworkPlant(params.network, params)
+    try:
+        return NetworkPlant(params.network, params)
+    except ValueError as exc:  # a switch with hysteresis
+        raise InputError(request.params, "model", str(exc)) from None
 
 
 def bench_config(request: RunRequest) -> BenchConfig:
