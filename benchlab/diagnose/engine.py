@@ -476,8 +476,8 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     with progress.task(what, len(chosen), unit="fit") as task:
         screened = map_indices(screen_one, len(chosen), task.advance)
     kept = [(cost, cands[i], specs[i], params) for i, (cost, params) in zip(chosen, screened) if cost < current.cost]
-    one_step = min((cost for cost, cand, _, _ in kept if not cand.composed), default=current.cost)
-    kept = [item for item in kept if not item[1].composed or item[0] < COMPOSED_MARGIN * one_step]
+    best_one_step = min((cost for cost, cand, _, _ in kept if not cand.composed), default=current.cost)
+    kept = [item for item in kept if not item[1].composed or item[0] < COMPOSED_MARGIN * best_one_step]
     return sorted(kept, key=lambda item: item[0])
 
 
@@ -851,7 +851,6 @@ def level_channels(evidence: Sequence, channels: dict[str, np.ndarray]) -> tuple
     return tuple(dict.fromkeys(name for name in ranked if name in channels))[:LEVEL_CHANNELS]
 
 
-@single_threaded_blas
 def library_for(model: ModelDefinition, channels: dict[str, np.ndarray], units: dict[str, str],
                 datasets: Sequence[FitData], group_by: str | None = None,
                 levels: Sequence[str] = ()) -> list[Candidate]:
@@ -865,6 +864,7 @@ def library_for(model: ModelDefinition, channels: dict[str, np.ndarray], units: 
     return library
 
 
+@single_threaded_blas
 def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition" = "linear", starts: int = 4,
                   seed: int = 0, progress: Progress = SILENT, group_by: str | None = None,
                   validate: Sequence[pd.DataFrame] = ()) -> Diagnosis:
