@@ -286,10 +286,16 @@ def new_link(a: str, b: str, key: str, name: str | None = None, gate: str | None
         law = gated(gate, ch, on, resistance, repr(OPEN_CIRCUIT)) if gate else resistance
 
         def edit(doc: Doc) -> None:
-            doc["links"].append({"name": resistance, "between": [a, b], "resistance": law})
-            _parameter(doc, resistance, NESTED_RESISTANCE, 1e-3, 10 * NESTED_RESISTANCE, "K/W")
+            _add_link(doc, a, b, resistance, law, "K/W")
         return revise(model, key, edit)
     return build
+
+
+def _add_link(doc: Doc, a: str, b: str, resistance: str, law: str, unit: str) -> None:
+    """A link between a and b (nodes, or a node and a boundary) of resistance `law`, its parameter `resistance` from
+    NESTED_RESISTANCE (none)."""
+    doc["links"].append({"name": resistance, "between": [a, b], "resistance": law})
+    _parameter(doc, resistance, NESTED_RESISTANCE, 1e-3, 10 * NESTED_RESISTANCE, unit)
 
 
 def extra_node(ends: tuple[str, ...], key: str, mass: str) -> Build:
@@ -832,8 +838,7 @@ def boundary_link(node: str, channel: str, key: str) -> Build:
     def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
         def edit(doc: Doc) -> None:
             doc["boundaries"][boundary] = channel
-            doc["links"].append({"name": resistance, "between": [node, boundary], "resistance": resistance})
-            _parameter(doc, resistance, NESTED_RESISTANCE, 1e-3, 10 * NESTED_RESISTANCE, "K/W")
+            _add_link(doc, node, boundary, resistance, resistance, "K/W")
         return revise(model, key, edit)
     return build
 
@@ -1088,9 +1093,8 @@ def signal_link(a: str, b: str, key: str, signal: str, law: str) -> Build:
         share = {"linear": x, "power": f"({x}) ** n_{tag}", "exponential": f"(1.0 - exp(-k_{tag} * {x}))"}[law]
 
         def edit(doc: Doc) -> None:
-            doc["links"].append({"name": resistance, "between": [a, b],
-                                 "resistance": f"{resistance} / maximum({share}, {MIN_SHARE!r})"})
-            _parameter(doc, resistance, NESTED_RESISTANCE, 1e-3, 10 * NESTED_RESISTANCE, "K/W (at the signal's maximum)")
+            _add_link(doc, a, b, resistance, f"{resistance} / maximum({share}, {MIN_SHARE!r})",
+                      "K/W (at the signal's maximum)")
             if law == "power":
                 _parameter(doc, f"n_{tag}", 1.0, EXPONENT_RANGE[0], EXPONENT_RANGE[1], "1 (exponent)")
             if law == "exponential":
