@@ -484,20 +484,26 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
 def _polished(spec: ModelSpec, warm: dict[str, float], current: FitResult,
               datasets: Sequence[FitData]) -> tuple[FitResult | None, tuple[str, ...]]:
     """A candidate fitted to convergence from its warm (screened) start, and from the model file's neutral start
-    (the new parameters nested) scouted and polished where it does better; the better fit with none of the
+    (the new parameters nested) scouted and polished where it does better, or where the warm fit failed (the
+    candidate's own parameters on a bound) and the scout found another minimum; the better fit with none of the
     candidate's own new parameters on a bound, or None and those parameters. A scout that reaches the warm fit's
     minimum (within its standard errors, as identify's multistart judges two starts alike: `arrived`) stops there:
-    going on could only find that minimum again."""
+    going on could only find that minimum again. (A parameter of the model itself that ends on a bound fails no
+    candidate: polishing the scout's minimum for it, which the scout's higher cost already ranks below the warm
+    fit's, re-found the warm fit or a worse one in every case of the main job's diagnosis.)"""
     neutral = {**{p.name: p.initial for p in spec.free},
                **{k: v for k, v in current.params.items() if k.startswith("init_") and k in warm}}
-    fits = [fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: warm[p.name] for p in spec.free})]
-    scout = fit(spec, datasets, max_nfev=SCOUT_NFEV, start={p.name: neutral[p.name] for p in spec.free},
-                stop=arrived(fits[0]))
-    if scout.cost < fits[0].cost or at_bound(fits[0]):
-        fits.append(fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: scout.params[p.name] for p in spec.free}))
+
     def own_at_bound(r: FitResult) -> tuple[str, ...]:
         return tuple(name for name in at_bound(r) if name not in current.params)
 
+    fits = [fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: warm[p.name] for p in spec.free})]
+    reached = arrived(fits[0])
+    scout = fit(spec, datasets, max_nfev=SCOUT_NFEV, start={p.name: neutral[p.name] for p in spec.free},
+                stop=reached)
+    elsewhere = reached is None or not reached(scout.params)
+    if scout.cost < fits[0].cost or (own_at_bound(fits[0]) and elsewhere):
+        fits.append(fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: scout.params[p.name] for p in spec.free}))
     good = [r for r in fits if not own_at_bound(r)]
     if good:
         return min(good, key=lambda r: r.cost), ()

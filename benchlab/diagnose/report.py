@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 
 from benchlab.diagnose.engine import (ALPHA, BEYOND_FLOOR, COMPOSED_FITS, CROSS_VALIDATED, FOLD_S, MIN_GAIN_PCT,
-                                     SCORED_FITS, STEP_S, STRUCTURAL_FITS, Diagnosis, Finding, HeldOut, block_test,
-                                     diagnose_runs, gain_pct, run_groups)
+                                     SCORED_FITS, STEP_S, STRUCTURAL_FITS, SWITCH_FITS, Diagnosis, Finding, HeldOut,
+                                     block_test, diagnose_runs, gain_pct, run_groups)
 from benchlab.diagnose.evidence import BINS, RATE_S, SHIFTS
 from benchlab.diagnose.library import telling_apart
 from benchlab.diagnose.regimes import COOLDOWN_SPLIT_S, regime_errors
@@ -204,7 +204,8 @@ def summarise(result: Diagnosis, baseline: str) -> dict:
                    "search": f"candidates generated from the model's structure, each starting nested (no effect); "
                              f"a score test (one Gauss-Newton step, every parameter free; extra nodes, new links and "
                              f"lags from screening starts) ranks them, the {SCORED_FITS} best and the "
-                             f"{STRUCTURAL_FITS} best extra nodes and lags and the {COMPOSED_FITS} best two-step "
+                             f"{STRUCTURAL_FITS} best extra nodes and lags, the {SWITCH_FITS} best switch with hysteresis on a "
+                             f"temperature's level (with its latch) and the {COMPOSED_FITS} best two-step "
                              "compositions (a new link with its per-run split or a signal law) get a short fit, the "
                              f"{CROSS_VALIDATED} best of those are fitted from the warm and the neutral start and "
                              "cross-validated; after each acceptance the whole model is refitted with multistart",
