@@ -10,11 +10,12 @@ numba's first compile or cache load in a process imports its every registry, and
 there by importing `scipy.linalg.cython_blas`, which runs the whole `scipy.linalg` package first (0.2 s CPU, most
 of a command that only simulates: scipy's array-API layer, docstrings parsed). The extension module itself needs
 none of it, so it is loaded here on its own (`blas_without_scipy_linalg`, 4 ms): numba finds it in place and its
-BLAS kernels call it as before; `import scipy.linalg` later still runs the package and keeps this module.
+BLAS kernels call it as before; `import scipy.linalg` later runs the package, which takes the module as its own.
 """
 
 from __future__ import annotations
 
+import importlib.abc
 import importlib.machinery
 import importlib.util
 import logging
@@ -43,6 +44,18 @@ Cache.save_overload = _save_overload_or_log
 _CYTHON_BLAS = "scipy.linalg.cython_blas"
 
 
+class _BackToItsPackage(importlib.abc.MetaPathFinder):
+    """When `scipy.linalg` is imported, the `cython_blas` loaded on its own leaves `sys.modules`, so the package
+    imports it again as its own submodule (Python hands back the same extension module, now also the package's
+    attribute), as if it had never been loaded alone; then this finder goes."""
+
+    def find_spec(self, name: str, path: object = None, target: object = None) -> None:
+        if name == "scipy.linalg":
+            sys.meta_path.remove(self)
+            sys.modules.pop(_CYTHON_BLAS, None)
+        return None
+
+
 def blas_without_scipy_linalg() -> None:
     """scipy's `cython_blas` extension loaded without running the `scipy.linalg` package, where neither is loaded
     yet (nothing done without scipy: numba then reports no BLAS as it would have)."""
@@ -62,6 +75,7 @@ def blas_without_scipy_linalg() -> None:
     except BaseException:
         del sys.modules[_CYTHON_BLAS]
         raise
+    sys.meta_path.insert(0, _BackToItsPackage())
 
 
 blas_without_scipy_linalg()
