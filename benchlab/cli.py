@@ -1,4 +1,5 @@
-"""`benchlab` console script: one module per command in benchlab.commands, discovered at start.
+"""`benchlab` console script: one module per command in benchlab.commands, discovered at start (only the named
+command's module where the command line names one: `build_parser`).
 
 A command module defines NAME, HELP, add_arguments(parser) and run(args) -> int, and stays light to import
 (argparse and constants: `benchlab --help` loads no numpy); run imports the implementation, holding Ctrl-C
