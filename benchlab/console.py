@@ -43,9 +43,9 @@ def main() -> int:
     note_interrupts()
     if not needs_parquet(sys.argv[1:]):
         sys.meta_path.insert(0, _Hidden("pyarrow"))
-    from benchlab.cli import main as run_command_line
+    from benchlab.cli import main_of_process
 
-    return run_command_line()
+    return main_of_process()
 
 
 if __name__ == "__main__":

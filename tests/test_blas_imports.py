@@ -140,3 +140,16 @@ def test_a_csv_export_loads_neither_pyarrow_nor_the_simulation_stack(run_file, t
 
 def test_parquet_export_loads_pyarrow(run_file, tmp_path) -> None:
     assert _as_console("export", run_file, "--to", tmp_path / "run.parquet") == ["True", "True"]
+
+
+def test_numba_finds_a_blas_without_the_scipy_linalg_package() -> None:
+    """Issue 47: numba's first kernel load checks for a BLAS by importing scipy.linalg.cython_blas, which ran the
+    whole scipy.linalg package (0.2 s of a command that simulates). benchlab.jit loads that module alone: a BLAS
+    kernel still computes, scipy.linalg stays unloaded, and a later import of it takes the module as its own."""
+    code = ("import sys\nimport numpy as np\nfrom benchlab.jit import njit\n"
+            "@njit\ndef product(a):\n    return np.dot(a, a)\n"
+            "a = np.arange(9.0).reshape(3, 3)\nsame = np.array_equal(product(a), a @ a)\n"
+            "loaded = 'scipy.linalg' in sys.modules\nimport scipy.linalg.cython_blas\n"
+            "print(same, loaded, scipy.linalg.cython_blas is sys.modules['scipy.linalg.cython_blas'])")
+    out = subprocess.run([sys.executable, "-c", code], env=_clean_env(), capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["True", "False", "True"]

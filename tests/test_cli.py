@@ -40,7 +40,7 @@ def test_a_broken_pipe_elsewhere_is_still_a_failure(monkeypatch, capsys):
         raise BrokenPipeError(32, "Broken pipe")  # a socket's, say: stdout is fine
 
     parser = cli.build_parser()
-    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    monkeypatch.setattr(cli, "build_parser", lambda command=None: parser)
     monkeypatch.setattr(parser, "parse_args", lambda argv: cli.argparse.Namespace(
         command="probe", handler=handler, debug=False, verbose=0))
     assert cli.main(["probe"]) == 1

@@ -28,6 +28,21 @@ def test_export_channels_take_one_value_and_leave_the_run_file_to_the_positional
     assert build_parser().parse_args(["export", "RUN.h5", "--to", "o.csv"]).channels is None
 
 
+@pytest.mark.parametrize("argv", [["simulate", "RUN.h5", "--params", "p.json", "--out", "o.h5", "-q"],
+                                  ["-v", "export", "RUN.h5", "--to", "o.csv", "--channels", "T_air"]])
+def test_a_command_lines_own_parser_holds_its_command_only_and_parses_as_the_whole_one(argv):
+    """Issue 47: `benchlab CMD` builds CMD's parser alone (every command's imports cost each command 60 ms CPU)."""
+    command = argv[1] if argv[0] == "-v" else argv[0]
+    own = build_parser(command)
+    assert list(own._subparsers._group_actions[0].choices) == [command]
+    assert vars(own.parse_args(argv)) == vars(build_parser().parse_args(argv))
+
+
+@pytest.mark.parametrize("command", ["import", "simulte", None])
+def test_a_parser_for_no_command_of_that_module_holds_every_command(command):
+    assert sorted(build_parser(command)._subparsers._group_actions[0].choices) == COMMANDS
+
+
 @pytest.mark.parametrize("argv, quiet", [(["-q", "run", "table1"], True), (["--quiet", "run", "table1"], True),
                                          (["run", "table1", "-q"], True), (["run", "table1"], False),
                                          (["-v", "run", "table1", "-q"], True)])

@@ -8,7 +8,7 @@ must too, since the fit compares with it and the state starts from it.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -52,36 +52,44 @@ def check_laws(model: ModelDefinition, run: pd.DataFrame, params: Mapping[str, f
     """Bad input where a law on the run's samples is not a number the solver can use: a resistance that is not
     positive and finite, a heat flow that is not finite (a division by zero, an overflow of exp). Asked at the model's
     starting (or fixed) values, the model file's fault, then at `params`, the parameter file's. Samples where a
-    channel the law reads is NaN are not asked."""
-    starts = {p.name: p.start if p.fixed is None else p.fixed for p in model.parameters.values()}
-    _check_laws_at(model, run, starts, model.source, "the parameters' starting values")
-    if params is not None:
-        _check_laws_at(model, run, dict(params), params_source or "parameter file",
-                       f"this file's values (model {model.label})")
-
-
-def _check_laws_at(model: ModelDefinition, run: pd.DataFrame, params: dict[str, float], source: str,
-                   values: str) -> None:
-    """check_laws at one set of parameter values; InputError on `source`, saying they are `values`."""
+    channel the law reads is NaN are not asked. A law's text is asked once (R_PA = R_FA of the paper's clutch)."""
     from benchlab.model.build import build_network  # the identify package: only once a run is at hand
 
     network = build_network(model)
-    laws = [(f"links[{entry.name}].resistance", link.resistance, entry.resistance.names, True)
-            for entry, link in zip(model.links, network.links)]
-    laws += [(f"sources[{entry.name}].heat", flow.heat_flow, entry.heat.names, False)
-             for entry, flow in zip(model.sources, network.sources)]
+    laws: dict[tuple[str, bool], tuple[str, Callable, frozenset[str]]] = {}
+    for entry, link in zip(model.links, network.links):
+        laws.setdefault((entry.resistance.text, True),
+                        (f"links[{entry.name}].resistance", link.resistance, entry.resistance.names))
+    for entry, flow in zip(model.sources, network.sources):
+        laws.setdefault((entry.heat.text, False), (f"sources[{entry.name}].heat", flow.heat_flow, entry.heat.names))
     channels = {c: run[c].to_numpy(np.float64) for c in model.law_channels() if c in run.columns}
-    for entry, law, names, positive in laws:
+    starts = {p.name: p.start if p.fixed is None else p.fixed for p in model.parameters.values()}
+    _check_laws_at(laws, channels, run, starts, model.source, "the parameters' starting values")
+    if params is not None:
+        _check_laws_at(laws, channels, run, dict(params), params_source or "parameter file",
+                       f"this file's values (model {model.label})")
+
+
+def _check_laws_at(laws: Mapping[tuple[str, bool], tuple[str, Callable, frozenset[str]]],
+                   channels: Mapping[str, np.ndarray], run: pd.DataFrame, params: dict[str, float], source: str,
+                   values: str) -> None:
+    """check_laws at one set of parameter values; InputError on `source`, saying they are `values`. The samples
+    asked are sought only where some value is unusable."""
+    for (_, positive), (entry, law, names) in laws.items():
+        with np.errstate(all="ignore"):
+            law_values = np.asarray(law(params, channels), dtype=np.float64)
+            usable = np.isfinite(law_values) & (law_values > 0) if positive else np.isfinite(law_values)
+        if usable.all():
+            continue
         reads = [channels[c] for c in names if c in channels]
         asked = np.logical_and.reduce([np.isfinite(v) for v in reads]) if reads else np.ones(len(run), bool)
-        with np.errstate(all="ignore"):
-            law_values = np.broadcast_to(np.asarray(law(params, channels), dtype=np.float64), asked.shape)
-        bad = asked & ~(np.isfinite(law_values) & ((law_values > 0) if positive else True))
+        bad = asked & ~np.broadcast_to(usable, asked.shape)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             what = "a positive finite resistance in K/W" if positive else "a finite heat flow in W"
             raise InputError(source, entry, f"{what} at {values} on {run.attrs.get('source', 'the run')}, got "
-                                            f"{law_values[i]:g} at sample {i} (a division by zero or an overflow?)")
+                                            f"{np.broadcast_to(law_values, asked.shape)[i]:g} at sample {i} "
+                                            "(a division by zero or an overflow?)")
 
 
 def load_runs(paths: Sequence["str | os.PathLike[str]"], model: ModelDefinition,

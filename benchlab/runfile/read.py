@@ -261,7 +261,7 @@ def _read_channels(path: Path, group: h5py.Group, required: Sequence[str],
         if length is not None and ds.shape[0] != length:
             raise InputError(path, f"/aligned/{name}", f"length {length} like /aligned/time, got {ds.shape[0]}")
         length = ds.shape[0]
-        columns[name] = ds[()].astype(np.float64)
+        columns[name] = ds[()].astype(np.float64, copy=False)  # read afresh: no second copy of a float64 one
         units[name] = unit
         if name != "time":
             problem = unmeasurable_sample(name, unit, columns[name])

@@ -89,15 +89,27 @@ def unmeasurable_sample(name: str, unit: str, values: np.ndarray) -> tuple[int, 
     if name == "clutch_state":
         near = np.minimum(np.abs(values), np.abs(values - 1.0)) <= CLUTCH_STATE_NOISE
         expected = f"0 (open) or 1 (clamped) within ±{CLUTCH_STATE_NOISE:g}, or NaN"
-    elif name in CHANNEL_RANGE or unit in MEASURABLE_RANGE:
-        low, high = CHANNEL_RANGE.get(name) or MEASURABLE_RANGE[unit]
-        near = (values >= low) & (values <= high)
-        expected = f"values in [{low:g}, {high:g}] {unit} or NaN (not measured)"
     else:
-        near = np.isfinite(values)
-        expected = "finite values or NaN (not measured)"
+        low, high = CHANNEL_RANGE.get(name) or MEASURABLE_RANGE.get(unit) or (-np.inf, np.inf)
+        if _finite_within(values, low, high):
+            return None
+        if np.isfinite(low):
+            near = (values >= low) & (values <= high)
+            expected = f"values in [{low:g}, {high:g}] {unit} or NaN (not measured)"
+        else:
+            near = np.isfinite(values)
+            expected = "finite values or NaN (not measured)"
     bad = np.flatnonzero(~near & ~np.isnan(values))
     return (int(bad[0]), expected, float(values[bad[0]])) if bad.size else None
+
+
+def _finite_within(values: np.ndarray, low: float, high: float) -> bool:
+    """Whether the samples measured (NaN ignored) are finite and within [low, high], from their extremes alone (one
+    pass each, no mask of a run's length); False also where none is measured."""
+    if not values.size:
+        return False
+    least, most = np.fmin.reduce(values), np.fmax.reduce(values)
+    return bool(np.isfinite(least) and np.isfinite(most) and low <= least and most <= high)
 
 
 def time_stamp_problem(time: np.ndarray) -> str | None:
