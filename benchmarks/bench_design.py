@@ -140,7 +140,8 @@ def scored(doc: dict, runs: list[Path]) -> dict[str, float]:
 
 
 def discriminate_seed(seed: int, minutes: float, hours: float, folder: Path) -> dict:
-    """Table 1, diagnose, design --diagnosis, the designed run and its peer, each scored (`scored`)."""
+    """Table 1, diagnose, design --diagnosis, the designed run and its peer, each scored (`scored`); {"no_contest":
+    the floor's verdict} where the diagnosis names no finding or lead (nothing to tell apart)."""
     import contextlib
     import io
 
@@ -151,9 +152,12 @@ def discriminate_seed(seed: int, minutes: float, hours: float, folder: Path) -> 
     with contextlib.redirect_stdout(printed):
         step(["diagnose", str(table1), "--baseline", "nonlinear", "--json"])
     diagnosis.write_text(printed.getvalue()[printed.getvalue().index("{"):printed.getvalue().rindex("}") + 1])
+    diag = json.loads(diagnosis.read_text())
+    if not diag["findings"] and not diag["leads"]:
+        return {"no_contest": diag["floor"]["verdict"]}
     step(["design", str(table1), "--diagnosis", str(diagnosis), "--budget", str(minutes), "--out", str(plan),
           "--force"])
-    doc, diag = json.loads(plan.read_text()), json.loads(diagnosis.read_text())
+    doc = json.loads(plan.read_text())
     designed, peer = folder / "designed.h5", folder / "peer.h5"
     step(["run", str(plan), *on, "--seed", str(seed + 100), "--out", str(designed), "--force"])
     step(["run", "table1", *on, "--seed", str(seed + 200), "--duration", str(doc["planned_min"] * 60),
@@ -183,6 +187,9 @@ def discriminate(args: argparse.Namespace) -> int:
             folder = args.out / f"discriminate{seed}" if args.out else Path(tmp)
             folder.mkdir(parents=True, exist_ok=True)
             row = discriminate_seed(seed, args.minutes, args.hours, folder)
+        if "no_contest" in row:  # nothing to tell apart: not a seed of the target either way
+            print(f"| {seed} | no contest: the diagnosis names no finding or lead ({row['no_contest']}) |", flush=True)
+            continue
         e, d, p = row["expected"], row["designed"], row["peer"]
         gap = d["rmse_other"] - d["rmse_favoured"]
         ok = gap * e["rmse_gap_K"] > 0 and 0.5 <= gap / e["rmse_gap_K"] <= 2.0
