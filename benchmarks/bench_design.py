@@ -89,6 +89,13 @@ def read_peer(run: Path, params: Path) -> dict | None:
         return None
 
 
+def run_minutes(run: Path) -> float:
+    """How long the run lasted (min): its last sample's time."""
+    from benchlab.runfile import load_run
+
+    return float(load_run(run)["time"].iloc[-1]) / 60.0
+
+
 def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
              plant: str) -> dict[str, dict[str, float]]:
     """The figures of one seed: share before, expected, delivered (designed) and peer, per parameter."""
@@ -106,9 +113,11 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
     step(["run", "table1", *on, "--seed", str(seed + 200), "--duration", str(doc["planned_min"] * 60),
           "--out", str(peer), "--force"])
     after, with_peer = folder / "designed.params.json", folder / "peer.params.json"
+    scatter = {"expected": doc.get("scatter", float("nan")), "delivered": float("nan")}
     if doc.get("identification") == "cooldowns":
         eq11 = read_designed(designed, first)
         delivered, values = read_shares(eq11), {n: (eq11 or {}).get(n, float("nan")) for n in PARAMETERS}
+        scatter["delivered"] = (eq11 or {}).get("scatter", float("nan"))
     else:
         step(["identify", str(table1), str(designed), "--model", "nonlinear", "--starts", "4", "--out", str(after),
               "--force"])
@@ -119,7 +128,9 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
     before, peered = shares(first), shares(with_peer)
     return {n: {"before": before[n], "expected": doc["expected"].get(n, {}).get("relative_error_expected",
                                                                                  float("nan")),
-                "delivered": delivered[n], "value": values[n], "peer": peered[n], "peer_read": peer_read[n]}
+                "delivered": delivered[n], "value": values[n], "peer": peered[n], "peer_read": peer_read[n],
+                "scatter_expected": scatter["expected"], "scatter_delivered": scatter["delivered"],
+                "planned_min": doc["planned_min"], "run_min": run_minutes(designed)}
             for n in PARAMETERS}
 
 
@@ -222,8 +233,8 @@ def main_(argv: list[str] | None = None) -> int:
         return discriminate(args)
     missed = False
     print("| seed | parameter | SE before | expected | delivered (designed) | value | peer, joint | peer, read alike "
-          "| agrees |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| agrees | scatter expected / delivered | planned / run min |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             folder = args.out / f"seed{seed}" if args.out else Path(tmp)
@@ -234,7 +245,8 @@ def main_(argv: list[str] | None = None) -> int:
             missed |= not ok or not row["delivered"] <= TARGET_SHARE
             print(f"| {seed} | {name} | {100 * row['before']:.3g} % | {100 * row['expected']:.3g} % | "
                   f"{100 * row['delivered']:.3g} % | {row['value']:.4g} | {100 * row['peer']:.3g} % | "
-                  f"{100 * row['peer_read']:.3g} % | {'yes' if ok else 'no'} |", flush=True)
+                  f"{100 * row['peer_read']:.3g} % | {'yes' if ok else 'no'} | {100 * row['scatter_expected']:.3g} / "
+                  f"{100 * row['scatter_delivered']:.3g} % | {row['planned_min']:.1f} / {row['run_min']:.1f} |", flush=True)
     print(f"load average at end {os.getloadavg()[0]:.1f}")
     return 1 if missed else 0
 

@@ -67,9 +67,10 @@ def checked_budget(budget_min: float, limits: BenchLimits, blocks: Sequence[Bloc
     return budget_min * 60.0
 
 
-def three_points_min(blocks: Sequence[Block], interest: Sequence[str], limits: BenchLimits, plant: Plant) -> float:
-    """Minutes the shortest plan of steady blocks at three engine speeds in each clutch state `interest` lies in
-    lasts (what the cool-down reading needs to determine eq. 11's branch there), timed in sequence on `plant`."""
+def reading_min(blocks: Sequence[Block], interest: Sequence[str], limits: BenchLimits, plant: Plant) -> float:
+    """Minutes the shortest plan the cool-down reading can read eq. (11)'s branches that `interest` lies in from
+    lasts (`points.determines`: three engine speeds in each such clutch state and one point more, after the
+    conditioning cycle), timed in sequence on `plant`."""
     from benchlab.identify.cooldown import BRANCHES
 
     needed = {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
@@ -77,7 +78,8 @@ def three_points_min(blocks: Sequence[Block], interest: Sequence[str], limits: B
     for state in sorted(needed):
         own = sorted((b for b in blocks if operating_point(b)["clutch_state"] == state), key=lambda b: b.expected_s)
         chosen += own[:3]
-    return duration_s(steady_schedule(chosen, limits, plant)) / 60.0
+    chosen.append(min(chosen, key=lambda b: b.expected_s))
+    return duration_s(steady_schedule(chosen, limits, plant, min(blocks, key=lambda b: b.expected_s))) / 60.0
 
 
 def design(args: argparse.Namespace, schema: str) -> int:
@@ -123,14 +125,17 @@ def design(args: argparse.Namespace, schema: str) -> int:
             fit = params.extra.get("fit") if isinstance(params.extra.get("fit"), dict) else {}
             before = {n: np.inf if n in open_ or not params[n] else float(reported.get(n, np.inf)) / abs(params[n])
                       for n in interest}
-            plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
-                                           fit.get("fitting") or {}, read.disagreement, limits, ambient,
-                                           budget_s, steady, plant, segment_model(params))
-            reading = determines(plan.blocks, interest)
+            try:
+                plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
+                                               fit.get("fitting") or {}, read.disagreement, limits, ambient,
+                                               budget_s, steady, plant, segment_model(params))
+                reading = determines(plan.blocks, interest)
+            except ValueError:  # not one block after the conditioning cycle: the joint design says if any fits
+                reading = False
             if not reading:
                 print(f"--reading: the budget holds too few steady cool-downs to read eq. (11) from (three engine "
-                      f"speeds in the clutch state designed for take "
-                      f"{three_points_min(steady, interest, limits, plant):.0f} min): designed for the joint fit "
+                      f"speeds in the clutch state designed for and one point more, after a conditioning cycle, take "
+                      f"{reading_min(steady, interest, limits, plant):.0f} min): designed for the joint fit "
                       "instead")
                 nominal = nominal_values(params, open_)
         if not reading:
@@ -158,10 +163,10 @@ def design(args: argparse.Namespace, schema: str) -> int:
            "model": params.definition.label,
            "params_file": str(args.params), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
            "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
-           "blocks": [b.name for b in plan.blocks],
+           "blocks": plan.block_names(),
            "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
-           "calibration": plan.calibration, **({"disagreement": plan.disagreement} if reading else {}),
+           "calibration": plan.calibration, **({"disagreement": plan.disagreement, "scatter": plan.scatter} if reading else {}),
            "ambient_C": ambient,
            "sensors": [asdict(s) for s in sensors], "warnings": warnings,
            "schedule": [s.as_dict() for s in plan.steps]}

@@ -58,6 +58,17 @@ def misfit_factor(fitting: Mapping[str, object], noise: Mapping[str, float]) -> 
     return float(np.sqrt(max(1.0, np.mean(ratios)))) if ratios else 1.0
 
 
+def history_scatter(fitting: Mapping[str, object], drop_k: float) -> float:
+    """The share of R by which a reading is expected to move with the run's history (the between-reading scatter
+    `cooldown.fit_eq11` estimates from the points afterwards): a reading fits R to the drop of `drop_k` its
+    cool-down makes; the states the model lacks shift both ends of that drop by about the model's misfit on the
+    runs so far (the parameter file's largest RMSE over the reading's channels), independently, so the drop by
+    sqrt(2) times it. 0 where the file holds no RMSE."""
+    rmse = [float(run["channels"][channel]["rmse_K"]) for run in fitting.values() if isinstance(run, dict)
+            for channel in FIT_CHANNELS if channel in run.get("channels", {})]
+    return math.sqrt(2.0) * max(rmse) / drop_k if rmse else 0.0
+
+
 def point_error(block: Block, params: Mapping[str, float], network: ThermalNetwork, ambient_c: float,
                 limits: BenchLimits, noise: Mapping[str, float], model: ModelDefinition | None = None) -> float:
     """Relative standard error of R the reading gives for the block's cool-down (with `model`'s structure where
@@ -164,8 +175,11 @@ def read_runs(paths: Sequence[Path], params: Mapping[str, float], start: Mapping
 
 
 def determines(blocks: Sequence[Block], interest: Sequence[str]) -> bool:
-    """Whether the blocks' cool-down points determine the branches of eq. (11) that `interest` lies in: at least
-    three engine speeds in that clutch state (its a, b and R0)."""
+    """Whether the blocks' cool-down points determine the branches of eq. (11) that `interest` lies in and show
+    their scatter: at least three engine speeds in each such clutch state (its a, b and R0), and a point more than
+    those branches have parameters (a degree of freedom for `cooldown.fit_eq11` to estimate the between-reading
+    scatter from, without which its errors are the points' alone)."""
     needed = {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
-    return all(len({operating_point(b)["engine_speed"] for b in blocks
-                    if operating_point(b)["clutch_state"] == state}) >= 3 for state in needed)
+    own = [operating_point(b) for b in blocks if operating_point(b)["clutch_state"] in needed]
+    return (all(len({p["engine_speed"] for p in own if p["clutch_state"] == state}) >= 3 for state in needed)
+            and len(own) > 2 * len(needed) + 1)
