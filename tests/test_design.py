@@ -157,11 +157,10 @@ def test_a_fixed_length_cooldown_is_complete_and_a_timed_out_condition_is_not():
 
 def test_eq11_alone_is_designed_for_the_cooldown_reading(run_file, open_params, tmp_path, capsys, refused):
     """Designed for a2 and b2 alone for the reading, the plan is the cool-down sweep's cycles (docs/design.md): each
-    cool-down follows a heat-up until the flywheel is steady, within the bench's limits; the first cycle
-    conditions the bench and is not read; then open-clutch cool-downs at three engine speeds at least (the open
-    branch's a2, b2 and R0) and one more (a degree of freedom to show the readings' scatter), the expected errors
-    those of that reading. A budget shorter than one such cycle is one line, exit 2."""
-    from benchlab.design.blocks import CONDITION_LABEL
+    cool-down follows a heat-up until the flywheel is steady, within the bench's limits; open-clutch cool-downs at
+    three engine speeds at least (the open branch's a2, b2 and R0) and one more (a degree of freedom to show the
+    readings' scatter), the expected errors those of that reading. A budget shorter than one such cycle is one
+    line, exit 2."""
     from protocols.limits import schedule_problems
     from protocols.schedule import step_from_dict
 
@@ -177,8 +176,7 @@ def test_eq11_alone_is_designed_for_the_cooldown_reading(run_file, open_params, 
     cycles = sorted({s.cycle for s in steps})
     for cycle in cycles:
         own = [s for s in steps if s.cycle == cycle]
-        assert own[0].phase == "heat" and own[0].until[0].op == "steady"
-        assert own[-1].label == (CONDITION_LABEL if cycle == cycles[0] else "cooldown")
+        assert own[0].phase == "heat" and own[0].until[0].op == "steady" and own[-1].label == "cooldown"
     read = [s for s in steps if s.label == "cooldown" and dict(s.point)["clutch_state"] == 0.0]
     assert len({s.engine_speed_rpm for s in read}) >= 3 and len(read) >= 4
     for name in ("a2", "b2"):

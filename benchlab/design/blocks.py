@@ -14,7 +14,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from benchlab.identify.cooldown import COOLDOWN_LABEL
 from protocols.cooldown_sweep import SweepConfig, cooldown_sweep_schedule
 from protocols.estimates import Plant
 from protocols.limits import BenchLimits, launch_problem, schedule_problems, with_launch_estimates
@@ -123,23 +122,11 @@ def steady_blocks(limits: BenchLimits, plant: Plant) -> list[Block]:
     return blocks
 
 
-#: The label of a cool-down the reading leaves out (a conditioning cycle's: `steady_schedule`); the runner writes no
-#: cooldown events for it, so `benchlab cooldown` reads it as no point.
-CONDITION_LABEL = "condition"
-
-
-def steady_schedule(blocks: Sequence[Block], limits: BenchLimits, plant: Plant,
-                    conditioning: Block | None = None) -> tuple[Step, ...]:
+def steady_schedule(blocks: Sequence[Block], limits: BenchLimits, plant: Plant) -> tuple[Step, ...]:
     """Steady blocks one after the other: the sweep over their points, block i as cycle i, each heat-up and
-    cool-down timed on `plant` where it follows the one before; with `conditioning`, that block's cycle first
-    (cycle 0), its cool-down labelled CONDITION_LABEL: run, not read (the first cool-down after a heat-up from a
-    bench at rest reads R 20-25 % off the later ones at the same point: docs/design.md)."""
-    ahead = [] if conditioning is None else [conditioning]
-    grid = [(b.steps[-1].engine_speed_rpm, int(dict(b.steps[-1].point)["clutch_state"]), None)
-            for b in [*ahead, *blocks]]
-    steps = with_launch_estimates(cooldown_sweep_schedule(grid, SweepConfig(), plant), limits)
-    return tuple(replace(s, label=CONDITION_LABEL) if ahead and s.cycle == 0 and s.label == COOLDOWN_LABEL else s
-                 for s in steps)
+    cool-down timed on `plant` where it follows the one before."""
+    grid = [(b.steps[-1].engine_speed_rpm, int(dict(b.steps[-1].point)["clutch_state"]), None) for b in blocks]
+    return with_launch_estimates(cooldown_sweep_schedule(grid, SweepConfig(), plant), limits)
 
 
 def numbered(blocks: list[Block]) -> tuple[Step, ...]:

@@ -12,7 +12,7 @@ import numpy as np
 
 from benchlab.design.blocks import Block, candidate_blocks, steady_blocks, steady_schedule
 from benchlab.design.fisher import predicted_run
-from benchlab.design.points import determines, operating_point, read_runs
+from benchlab.design.points import branch_states, determines, operating_point, read_runs
 from benchlab.design.precision import design_cooldown_reading, design_precision
 from benchlab.identify.cooldown import segment_model
 from benchlab.identify.staged import EQ11
@@ -69,17 +69,14 @@ def checked_budget(budget_min: float, limits: BenchLimits, blocks: Sequence[Bloc
 
 def reading_min(blocks: Sequence[Block], interest: Sequence[str], limits: BenchLimits, plant: Plant) -> float:
     """Minutes the shortest plan the cool-down reading can read eq. (11)'s branches that `interest` lies in from
-    lasts (`points.determines`: three engine speeds in each such clutch state and one point more, after the
-    conditioning cycle), timed in sequence on `plant`."""
-    from benchlab.identify.cooldown import BRANCHES
-
-    needed = {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
+    lasts (`points.determines`: three engine speeds in each such clutch state and one point more), timed in
+    sequence on `plant`."""
     chosen: list[Block] = []
-    for state in sorted(needed):
+    for state in sorted(branch_states(interest)):
         own = sorted((b for b in blocks if operating_point(b)["clutch_state"] == state), key=lambda b: b.expected_s)
         chosen += own[:3]
     chosen.append(min(chosen, key=lambda b: b.expected_s))
-    return duration_s(steady_schedule(chosen, limits, plant, min(blocks, key=lambda b: b.expected_s))) / 60.0
+    return duration_s(steady_schedule(chosen, limits, plant)) / 60.0
 
 
 def design(args: argparse.Namespace, schema: str) -> int:
@@ -110,7 +107,7 @@ def design(args: argparse.Namespace, schema: str) -> int:
     if reading:
         free = {p.name: p for p in params.definition.free_parameters()}
         read = read_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
-                         {n: (free[n].min, free[n].max) for n in EQ11}, segment_model(params))
+                         {n: (free[n].min, free[n].max) for n in EQ11}, interest, segment_model(params))
         nominal.update(read.values)
         plant = NetworkPlant(spec.network, dict(params.items()))  # times and checks them: the runs' own fit
         steady = steady_blocks(limits, plant)
@@ -127,14 +124,14 @@ def design(args: argparse.Namespace, schema: str) -> int:
                       for n in interest}
             try:
                 plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
-                                               fit.get("fitting") or {}, read.disagreement, limits, ambient,
+                                               fit.get("fitting") or {}, read, limits, ambient,
                                                budget_s, steady, plant, segment_model(params))
                 reading = determines(plan.blocks, interest)
-            except ValueError:  # not one block after the conditioning cycle: the joint design says if any fits
+            except ValueError:  # no steady block fits: the joint design says whether any block does
                 reading = False
             if not reading:
                 print(f"--reading: the budget holds too few steady cool-downs to read eq. (11) from (three engine "
-                      f"speeds in the clutch state designed for and one point more, after a conditioning cycle, take "
+                      f"speeds in the clutch state designed for and one point more take "
                       f"{reading_min(steady, interest, limits, plant):.0f} min): designed for the joint fit "
                       "instead")
                 nominal = nominal_values(params, open_)
@@ -148,8 +145,8 @@ def design(args: argparse.Namespace, schema: str) -> int:
         print(f"not identified, taken at the model file's start values: {moved}")
     if reading:
         print("eq. (11) taken as the runs' held stretches read as cool-downs give it (b: the model file's), their "
-              f"points {plan.disagreement:.2f} x their errors off it: "
-              + ", ".join(f"{n} {nominal[n]:.4g}" for n in EQ11))
+              f"points {plan.disagreement:.2f} x their errors off it, those at one operating point {100 * plan.scatter:.1f} "
+              "% of R apart beyond their errors: " + ", ".join(f"{n} {nominal[n]:.4g}" for n in EQ11))
     print("\n".join(plan.lines(nominal)))
     warnings = model_error_warnings(params.extra.get("fit"))
     for line in warnings:
@@ -163,7 +160,7 @@ def design(args: argparse.Namespace, schema: str) -> int:
            "model": params.definition.label,
            "params_file": str(args.params), "runs": [str(r) for r in args.runs], "bench": str(args.bench),
            "budget_min": args.budget, "planned_min": round(sum(s.expected_s for s in plan.steps) / 60, 2),
-           "blocks": plan.block_names(),
+           "blocks": [b.name for b in plan.blocks],
            "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
            "calibration": plan.calibration, **({"disagreement": plan.disagreement, "scatter": plan.scatter} if reading else {}),

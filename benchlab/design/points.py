@@ -58,17 +58,6 @@ def misfit_factor(fitting: Mapping[str, object], noise: Mapping[str, float]) -> 
     return float(np.sqrt(max(1.0, np.mean(ratios)))) if ratios else 1.0
 
 
-def history_scatter(fitting: Mapping[str, object], drop_k: float) -> float:
-    """The share of R by which a reading is expected to move with the run's history (the between-reading scatter
-    `cooldown.fit_eq11` estimates from the points afterwards): a reading fits R to the drop of `drop_k` its
-    cool-down makes; the states the model lacks shift both ends of that drop by about the model's misfit on the
-    runs so far (the parameter file's largest RMSE over the reading's channels), independently, so the drop by
-    sqrt(2) times it. 0 where the file holds no RMSE."""
-    rmse = [float(run["channels"][channel]["rmse_K"]) for run in fitting.values() if isinstance(run, dict)
-            for channel in FIT_CHANNELS if channel in run.get("channels", {})]
-    return math.sqrt(2.0) * max(rmse) / drop_k if rmse else 0.0
-
-
 def point_error(block: Block, params: Mapping[str, float], network: ThermalNetwork, ambient_c: float,
                 limits: BenchLimits, noise: Mapping[str, float], model: ModelDefinition | None = None) -> float:
     """Relative standard error of R the reading gives for the block's cool-down (with `model`'s structure where
@@ -151,27 +140,40 @@ def held_points(paths: Sequence[Path], params: Mapping[str, float],
 
 @dataclass(frozen=True)
 class RunsReading:
-    """What the runs so far, read as the designed run will be, say: eq. (11)'s values to design with and how far
-    their points disagree with eq. (11) beyond their own errors (sqrt of the fit's reduced chi-square, at least 1)."""
+    """What the runs so far, read as the designed run will be, say: eq. (11)'s values to design with, how far
+    their points disagree with eq. (11) beyond their own errors (sqrt of the fit's reduced chi-square, at least 1),
+    and the between-reading scatter on the branches designed for (`cooldown.fit_eq11`'s share of R: the same
+    operating point read at different times of the runs' history)."""
 
     values: dict[str, float]
     disagreement: float
+    scatter: float
 
 
 def read_runs(paths: Sequence[Path], params: Mapping[str, float], start: Mapping[str, float],
-              bounds: Mapping[str, tuple[float, float]], model: ModelDefinition | None = None) -> RunsReading:
+              bounds: Mapping[str, tuple[float, float]], interest: Sequence[str],
+              model: ModelDefinition | None = None) -> RunsReading:
     """The runs so far read the way the designed run will be: each held stretch a point (`held_points`). The
-    disagreement from eq. (11) fitted to the points of the branches they determine (`cooldown.fit_eq11`, partial);
-    the values from the amplitudes and R0 fitted with the curvatures b at `start` (the model file's: Table 1's
-    1000-2000 rpm hardly show them), `start` for what the points leave out or put on or beyond `bounds`."""
+    disagreement from eq. (11) fitted to the points of the branches they determine (`cooldown.fit_eq11`, partial),
+    the scatter from the points of the branches `interest` lies in alone; the values from the amplitudes and R0
+    fitted with the curvatures b at `start` (the model file's: Table 1's 1000-2000 rpm hardly show them), `start`
+    for what the points leave out or put on or beyond `bounds`. Without points to tell (another tool's runs), no
+    disagreement and no scatter."""
     found = held_points(paths, params, model)
     try:
         chi2 = fit_eq11(found, partial=True)["chi2_red"]
         eq11 = fit_eq11(found, partial=True, held={n: start[n] for n in ("b1", "b2")})
+        scatter = fit_eq11([p for p in found if p.clutch_state in branch_states(interest)], partial=True)
     except ValueError:
-        return RunsReading({n: start[n] for n in EQ11}, 1.0)
+        return RunsReading({n: start[n] for n in EQ11}, 1.0, 0.0)
     values = {n: eq11[n] if n in eq11 and bounds[n][0] < eq11[n] < bounds[n][1] else start[n] for n in EQ11}
-    return RunsReading(values, float(np.sqrt(max(1.0, chi2))) if np.isfinite(chi2) else 1.0)
+    return RunsReading(values, float(np.sqrt(max(1.0, chi2))) if np.isfinite(chi2) else 1.0,
+                       float(scatter.get("scatter", 0.0)))
+
+
+def branch_states(interest: Sequence[str]) -> set[int]:
+    """The clutch states whose branch of eq. (11) `interest` lies in (both where it names only R0)."""
+    return {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
 
 
 def determines(blocks: Sequence[Block], interest: Sequence[str]) -> bool:
@@ -179,7 +181,7 @@ def determines(blocks: Sequence[Block], interest: Sequence[str]) -> bool:
     their scatter: at least three engine speeds in each such clutch state (its a, b and R0), and a point more than
     those branches have parameters (a degree of freedom for `cooldown.fit_eq11` to estimate the between-reading
     scatter from, without which its errors are the points' alone)."""
-    needed = {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
+    needed = branch_states(interest)
     own = [operating_point(b) for b in blocks if operating_point(b)["clutch_state"] in needed]
     return (all(len({p["engine_speed"] for p in own if p["clutch_state"] == state}) >= 3 for state in needed)
             and len(own) > 2 * len(needed) + 1)

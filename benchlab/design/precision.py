@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +29,9 @@ from benchlab.network import ThermalNetwork
 from benchlab.network.plant import NetworkPlant
 from protocols.limits import BenchLimits
 from protocols.schedule import Step, duration_s
+
+if TYPE_CHECKING:
+    from benchlab.design.points import RunsReading
 
 
 @dataclass(frozen=True)
@@ -48,29 +52,22 @@ class PrecisionDesign:
     #: the cool-down reading's points' disagreement with eq. (11) on the runs so far (`points.RunsReading`)
     disagreement: float = 1.0
     #: the cool-down reading's between-reading scatter each point is expected to carry, a share of R
-    #: (`points.history_scatter`)
+    #: (`points.RunsReading`)
     scatter: float = 0.0
-    #: the cool-down reading's conditioning cycle, run first and not read (`blocks.steady_schedule`)
-    conditioning: Block | None = None
 
     def header(self) -> str:
         """What the expected errors are of, and their calibration."""
         if self.identification == "cooldowns":
             return (f"expected standard errors of eq. (11) fitted to the designed run's cool-downs, each read on its own "
                     f"(each point's error x {self.calibration:.2f}, the runs' misfit against the noise, and "
-                    f"{100 * self.scatter:.1f} % of R from the run's history beside it; now: the parameter file's):")
+                    f"{100 * self.scatter:.1f} % of R beside it, the scatter of the runs' readings at one point; now: the "
+                    "parameter file's):")
         return f"expected standard errors (white-noise information x {self.calibration:.2f}, the runs' own ratio):"
-
-    def block_names(self) -> list[str]:
-        """Each cycle of the plan in words, the conditioning cycle first where there is one."""
-        first = [] if self.conditioning is None else [f"{self.conditioning.name} (conditioning: not read)"]
-        return [*first, *(b.name for b in self.blocks)]
 
     def lines(self, params: Mapping[str, float]) -> list[str]:
         """The expected outcome, one line per parameter, for the terminal before the run."""
-        names = self.block_names()
-        out = [f"designed run: {len(names)} blocks, {sum(s.expected_s for s in self.steps) / 60:.1f} min",
-               *(f"  block {i}: {name}" for i, name in enumerate(names)),
+        out = [f"designed run: {len(self.blocks)} blocks, {sum(s.expected_s for s in self.steps) / 60:.1f} min",
+               *(f"  block {i}: {b.name}" for i, b in enumerate(self.blocks)),
                self.header()]
         for name in self.interest:
             value = abs(params[name])
@@ -162,47 +159,43 @@ def design_precision(network: ThermalNetwork, params: Mapping[str, float], names
 
 def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
                             interest: Sequence[str], runs: Sequence[FitData], before: Mapping[str, float],
-                            fitting: Mapping[str, object], disagreement: float, limits: BenchLimits,
+                            fitting: Mapping[str, object], reading: RunsReading, limits: BenchLimits,
                             ambient_c: float, budget_s: float, blocks: Sequence[Block], plant: NetworkPlant,
                             model: ModelDefinition | None = None) -> PrecisionDesign:
     """Greedy D-optimal steady `blocks` (`blocks.steady_blocks`) within `budget_s` for `interest` (parameters of
     eq. 11) as the designed run's cool-downs read one by one (with `model`'s structure where given, as the reading
-    does) give them (`benchlab.design.points`), after a conditioning cycle that is not read (the shortest block):
-    each point's expected error is its reading's, scaled by the misfit the runs so far show
-    (`points.misfit_factor`, printed as the calibration), and the between-reading scatter the runs' misfit
-    implies beside it (`points.history_scatter`); eq. (11)'s expected errors are those of the points' information.
-    `disagreement` (eq. 11's on the runs so far read alike, `points.read_runs`) is reported; `before` is the
+    does) give them (`benchlab.design.points`): each point's expected error is its reading's, scaled by the misfit
+    the runs so far show (`points.misfit_factor`, printed as the calibration), and beside it the between-reading
+    scatter of the runs so far read alike (`reading.scatter`: a reading depends on the run's history, which no
+    segment's residuals show); eq. (11)'s expected errors are those of the points' information. `before` is the
     parameter file's own share of each value. A block is taken only where the plan with it, timed in sequence on
     `plant` (the model at the parameter file's values, which predict the runs' temperatures: `params` hold eq. 11's
     design values) by `blocks.steady_schedule`, fits the budget and stays clear of the interlocks there; ranked by
     its information per second of bench time where it follows another block. ValueError when no block fits."""
     from benchlab.design import points
-    from protocols.cooldown_sweep import SweepConfig
 
     blocks = [b for b in blocks if b.expected_s <= budget_s]
     if not blocks:
         raise ValueError("no block fits")
-    conditioning = min(blocks, key=lambda b: b.expected_s)
     noise = fisher.channel_noise(runs)
     scale = points.misfit_factor(fitting, noise)
-    sweep = SweepConfig()
-    scatter = points.history_scatter(fitting, sweep.heat_target_c - sweep.cool_target_c)
     gains = [points.point_information(b, params, float(np.hypot(
-        scale * points.point_error(b, params, network, ambient_c, limits, noise, model), scatter))) for b in blocks]
+        scale * points.point_error(b, params, network, ambient_c, limits, noise, model), reading.scatter)))
+        for b in blocks]
     following = [duration_s(steady_schedule([b, b], limits, plant)) - b.expected_s for b in blocks]
     start = np.zeros((len(points.EQ11), len(points.EQ11)))
 
     def fits(chosen: list[int]) -> bool:  # the plan timed in sequence: within the budget, clear of the interlocks
-        steps = steady_schedule([blocks[i] for i in chosen], limits, plant, conditioning)
+        steps = steady_schedule([blocks[i] for i in chosen], limits, plant)
         return duration_s(steps) <= budget_s and not too_hot(
             fisher.predicted_data(steps, plant.params, network, ambient_c, limits.drivetrain), limits)
 
     chosen = greedy(gains, following, start, points.EQ11, interest, math.inf, fits)
     if not chosen:
         raise ValueError("no block fits")
-    steps = steady_schedule([blocks[i] for i in chosen], limits, plant, conditioning)
+    steps = steady_schedule([blocks[i] for i in chosen], limits, plant)
     total = sum((gains[i] for i in chosen), start)
     expected = fisher.relative_errors(total, points.EQ11, interest)
     prior = fisher.information(network, params, names, runs, noise)  # for what a sensor would add
     return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), dict(before), expected, scale,
-                           prior, noise, "cooldowns", disagreement, scatter, conditioning)
+                           prior, noise, "cooldowns", reading.disagreement, reading.scatter)
