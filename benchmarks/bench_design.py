@@ -6,14 +6,16 @@
 Per seed (seeds the tests do not use): the main job's Table 1 run (`--hours`, default 1 h as `benchlab pipeline`)
 on the simulated bench's reference plant, identified with the nonlinear model (4 starts, as the main job); then
 `benchlab design --parameters a2,b2 --reading` on it within `--minutes` (the cool-down reading: docs/design.md;
-its steady cycles need `--minutes 60` for three points, below that the design falls back to the joint fit) and `benchlab
+its steady cycles need `--minutes 70` for four points, three engine speeds and one to show their scatter; below
+that the design falls back to the joint fit) and `benchlab
 run PLAN.json`, and, as the peer, a Table 1 run planned to the designed run's length (seed + 200). The designed run
 is read as the plan says (`benchlab cooldown`: each cool-down a point, eq. 11 fitted to them; with `--joint`, the
 design is for every parameter Table 1 leaves open and the run identified together with Table 1); the peer both
 ways: identified together with Table 1, and its held stretches read as cool-downs (`design.points.held_points`).
 Printed for a2 and b2 of eq. (11): the standard error in % of the value after Table 1 alone, expected by the
 design, delivered by the designed run (and the value), and by the peer; "agrees" where expected and delivered
-shrink alike (the same sign of the change) and lie within a factor of 2. Targets: delivered ≤ 20 % of the value;
+shrink alike (the same sign of the change) and lie within a factor of 2; the between-reading scatter the plan
+expected and the designed run's points showed (eq. 11's `scatter`), the plan's length and the run's. Targets: delivered ≤ 20 % of the value;
 agreement on every seed. Exit 1 if a target is missed.
 
 `--discriminate`: per seed, the Table 1 run diagnosed (nonlinear baseline, as the main job; Table 1 alone),
