@@ -15,8 +15,8 @@ ways: identified together with Table 1, and its held stretches read as cool-down
 Printed for a2 and b2 of eq. (11): the standard error in % of the value after Table 1 alone, expected by the
 design, delivered by the designed run (and the value), and by the peer; "agrees" where expected and delivered
 shrink alike (the same sign of the change) and lie within a factor of 2; the between-reading scatter the plan
-expected and the designed run's points showed (eq. 11's `scatter`), the plan's length and the run's. Targets: delivered ≤ 20 % of the value;
-agreement on every seed. Exit 1 if a target is missed.
+expected and the designed run's points showed (eq. 11's `scatter`), the plan's length and the run's. Targets:
+delivered ≤ 20 % of the value; agreement on every seed. Exit 1 if a target is missed.
 
 `--discriminate`: per seed, the Table 1 run diagnosed (nonlinear baseline, as the main job; Table 1 alone),
 `benchlab design --diagnosis` on it and the designed run, and the peer Table 1 run of the plan's length. The rivals are
@@ -248,7 +248,8 @@ def main_(argv: list[str] | None = None) -> int:
             print(f"| {seed} | {name} | {100 * row['before']:.3g} % | {100 * row['expected']:.3g} % | "
                   f"{100 * row['delivered']:.3g} % | {row['value']:.4g} | {100 * row['peer']:.3g} % | "
                   f"{100 * row['peer_read']:.3g} % | {'yes' if ok else 'no'} | {100 * row['scatter_expected']:.3g} / "
-                  f"{100 * row['scatter_delivered']:.3g} % | {row['planned_min']:.1f} / {row['run_min']:.1f} |", flush=True)
+                  f"{100 * row['scatter_delivered']:.3g} % | {row['planned_min']:.1f} / {row['run_min']:.1f} |",
+                  flush=True)
     print(f"load average at end {os.getloadavg()[0]:.1f}")
     return 1 if missed else 0
 

@@ -145,8 +145,9 @@ def design(args: argparse.Namespace, schema: str) -> int:
         print(f"not identified, taken at the model file's start values: {moved}")
     if reading:
         print("eq. (11) taken as the runs' held stretches read as cool-downs give it (b: the model file's), their "
-              f"points {plan.disagreement:.2f} x their errors off it, those at one operating point {100 * plan.scatter:.1f} "
-              "% of R apart beyond their errors: " + ", ".join(f"{n} {nominal[n]:.4g}" for n in EQ11))
+              f"points {plan.disagreement:.2f} x their errors off it, those at one operating point "
+              f"{100 * plan.scatter:.1f} % of R apart beyond their errors: "
+              + ", ".join(f"{n} {nominal[n]:.4g}" for n in EQ11))
     print("\n".join(plan.lines(nominal)))
     warnings = model_error_warnings(params.extra.get("fit"))
     for line in warnings:
@@ -163,7 +164,8 @@ def design(args: argparse.Namespace, schema: str) -> int:
            "blocks": [b.name for b in plan.blocks],
            "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
-           "calibration": plan.calibration, **({"disagreement": plan.disagreement, "scatter": plan.scatter} if reading else {}),
+           "calibration": plan.calibration,
+           **({"disagreement": plan.disagreement, "scatter": plan.scatter} if reading else {}),
            "ambient_C": ambient,
            "sensors": [asdict(s) for s in sensors], "warnings": warnings,
            "schedule": [s.as_dict() for s in plan.steps]}

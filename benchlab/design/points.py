@@ -194,4 +194,4 @@ def determines(blocks: Sequence[Block], interest: Sequence[str]) -> bool:
     needed = branch_states(interest)
     own = [operating_point(b) for b in blocks if operating_point(b)["clutch_state"] in needed]
     return (all(len({p["engine_speed"] for p in own if p["clutch_state"] == state}) >= 3 for state in needed)
-            and len(own) > 2 * len(needed) + 1)
+            and len(own) > 2 * len(needed) + 1)  # a and b per branch, and R0

@@ -60,8 +60,8 @@ class PrecisionDesign:
         if self.identification == "cooldowns":
             return (f"expected standard errors of eq. (11) fitted to the designed run's cool-downs, each read on its own "
                     f"(each point's error x {self.calibration:.2f}, the runs' misfit against the noise, and "
-                    f"{100 * self.scatter:.1f} % of R beside it, the scatter of the runs' readings at one point; now: the "
-                    "parameter file's):")
+                    f"{100 * self.scatter:.1f} % of R beside it, the scatter of the runs' readings at one point; "
+                    "now: the parameter file's):")
         return f"expected standard errors (white-noise information x {self.calibration:.2f}, the runs' own ratio):"
 
     def lines(self, params: Mapping[str, float]) -> list[str]:
