@@ -141,6 +141,16 @@ def test_points_scattered_beyond_their_errors_carry_the_between_reading_scatter(
     assert "scatter" not in fit_eq11(points(0.05, speeds=(500.0, 1500.0, 2500.0)), partial=True)
 
 
+def test_a_repeated_point_is_read_first_and_last():
+    """A point the reading's design takes twice spans the run (the history that moves a reading then shows in the
+    points' scatter); the other blocks keep their order, and a plan without a repeat stays as chosen."""
+    from benchlab.design.precision import repeats_apart
+
+    speed = {0: 1000, 1: 2000, 2: 500, 3: 500, 4: 1500}.__getitem__
+    assert repeats_apart([0, 1, 2, 3], speed) == [2, 0, 1, 3]
+    assert repeats_apart([0, 1, 4], speed) == [0, 1, 4]
+
+
 def test_a_fixed_length_cooldown_is_complete_and_a_timed_out_condition_is_not():
     from benchlab.identify.cooldown import completed
     from benchlab.runfile.read import Event
