@@ -6,15 +6,17 @@
 Per seed (seeds the tests do not use): the main job's Table 1 run (`--hours`, default 1 h as `benchlab pipeline`)
 on the simulated bench's reference plant, identified with the nonlinear model (4 starts, as the main job); then
 `benchlab design --parameters a2,b2 --reading` on it within `--minutes` (the cool-down reading: docs/design.md;
-its steady cycles need `--minutes 60` for three points, below that the design falls back to the joint fit) and `benchlab
+its steady cycles need `--minutes 70` for four points, three engine speeds and one to show their scatter; below
+that the design falls back to the joint fit) and `benchlab
 run PLAN.json`, and, as the peer, a Table 1 run planned to the designed run's length (seed + 200). The designed run
 is read as the plan says (`benchlab cooldown`: each cool-down a point, eq. 11 fitted to them; with `--joint`, the
 design is for every parameter Table 1 leaves open and the run identified together with Table 1); the peer both
 ways: identified together with Table 1, and its held stretches read as cool-downs (`design.points.held_points`).
 Printed for a2 and b2 of eq. (11): the standard error in % of the value after Table 1 alone, expected by the
 design, delivered by the designed run (and the value), and by the peer; "agrees" where expected and delivered
-shrink alike (the same sign of the change) and lie within a factor of 2. Targets: delivered ≤ 20 % of the value;
-agreement on every seed. Exit 1 if a target is missed.
+shrink alike (the same sign of the change) and lie within a factor of 2; the between-reading scatter the plan
+expected and the designed run's points showed (eq. 11's `scatter`), the plan's length and the run's. Targets:
+delivered ≤ 20 % of the value; agreement on every seed. Exit 1 if a target is missed.
 
 `--discriminate`: per seed, the Table 1 run diagnosed (nonlinear baseline, as the main job; Table 1 alone),
 `benchlab design --diagnosis` on it and the designed run, and the peer Table 1 run of the plan's length. The rivals are
@@ -89,6 +91,13 @@ def read_peer(run: Path, params: Path) -> dict | None:
         return None
 
 
+def run_minutes(run: Path) -> float:
+    """How long the run lasted (min): its last sample's time."""
+    from benchlab.runfile import load_run
+
+    return float(load_run(run)["time"].iloc[-1]) / 60.0
+
+
 def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
              plant: str) -> dict[str, dict[str, float]]:
     """The figures of one seed: share before, expected, delivered (designed) and peer, per parameter."""
@@ -106,9 +115,11 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
     step(["run", "table1", *on, "--seed", str(seed + 200), "--duration", str(doc["planned_min"] * 60),
           "--out", str(peer), "--force"])
     after, with_peer = folder / "designed.params.json", folder / "peer.params.json"
+    scatter = {"expected": doc.get("scatter", float("nan")), "delivered": float("nan")}
     if doc.get("identification") == "cooldowns":
         eq11 = read_designed(designed, first)
         delivered, values = read_shares(eq11), {n: (eq11 or {}).get(n, float("nan")) for n in PARAMETERS}
+        scatter["delivered"] = (eq11 or {}).get("scatter", float("nan"))
     else:
         step(["identify", str(table1), str(designed), "--model", "nonlinear", "--starts", "4", "--out", str(after),
               "--force"])
@@ -119,7 +130,9 @@ def one_seed(seed: int, minutes: float, hours: float, folder: Path, joint: bool,
     before, peered = shares(first), shares(with_peer)
     return {n: {"before": before[n], "expected": doc["expected"].get(n, {}).get("relative_error_expected",
                                                                                  float("nan")),
-                "delivered": delivered[n], "value": values[n], "peer": peered[n], "peer_read": peer_read[n]}
+                "delivered": delivered[n], "value": values[n], "peer": peered[n], "peer_read": peer_read[n],
+                "scatter_expected": scatter["expected"], "scatter_delivered": scatter["delivered"],
+                "planned_min": doc["planned_min"], "run_min": run_minutes(designed)}
             for n in PARAMETERS}
 
 
@@ -229,8 +242,8 @@ def main_(argv: list[str] | None = None) -> int:
         return discriminate(args)
     missed = False
     print("| seed | parameter | SE before | expected | delivered (designed) | value | peer, joint | peer, read alike "
-          "| agrees |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| agrees | scatter expected / delivered | planned / run min |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             folder = args.out / f"seed{seed}" if args.out else Path(tmp)
@@ -241,7 +254,9 @@ def main_(argv: list[str] | None = None) -> int:
             missed |= not ok or not row["delivered"] <= TARGET_SHARE
             print(f"| {seed} | {name} | {100 * row['before']:.3g} % | {100 * row['expected']:.3g} % | "
                   f"{100 * row['delivered']:.3g} % | {row['value']:.4g} | {100 * row['peer']:.3g} % | "
-                  f"{100 * row['peer_read']:.3g} % | {'yes' if ok else 'no'} |", flush=True)
+                  f"{100 * row['peer_read']:.3g} % | {'yes' if ok else 'no'} | {100 * row['scatter_expected']:.3g} / "
+                  f"{100 * row['scatter_delivered']:.3g} % | {row['planned_min']:.1f} / {row['run_min']:.1f} |",
+                  flush=True)
     print(f"load average at end {os.getloadavg()[0]:.1f}")
     return 1 if missed else 0
 

@@ -117,6 +117,40 @@ def test_open_branch_alone_is_fitted_from_its_points_with_the_covariance_error()
                                                                                                 rel=1e-3)
 
 
+def test_points_scattered_beyond_their_errors_carry_the_between_reading_scatter():
+    """Readings that scatter about eq. (11) by a share of R far beyond their own errors (the run's history, not
+    noise): the fit estimates that share (Paule-Mandel: the reduced chi-square brought to 1) and its standard errors
+    grow with it; points within their errors carry none, and points that leave no degree of freedom say nothing."""
+    import numpy as np
+
+    from benchlab.identify.cooldown import CooldownResult, fit_eq11
+
+    def points(share, se_share=0.005, speeds=(500.0, 1000.0, 1500.0, 2000.0, 2500.0) * 2):
+        rng = np.random.default_rng(7)
+        rows = []
+        for rpm in speeds:
+            r = (0.4 * np.exp(-0.0012 * rpm) + 0.03) * (1.0 + share * rng.standard_normal())
+            rows.append(CooldownResult(-1, rpm, 0, rpm, 0.0, 300.0, r, se_share * r, np.nan, np.nan, np.nan,
+                                       np.nan, 300, 1.0))
+        return rows
+
+    small, large = fit_eq11(points(0.05), partial=True), fit_eq11(points(0.10), partial=True)
+    assert 0.025 < small["scatter"] < 0.1 and large["scatter"] == pytest.approx(2 * small["scatter"], rel=0.05)
+    assert large["a2_se"] == pytest.approx(2 * small["a2_se"], rel=0.2)
+    assert fit_eq11(points(0.0), partial=True)["scatter"] == 0.0
+    assert "scatter" not in fit_eq11(points(0.05, speeds=(500.0, 1500.0, 2500.0)), partial=True)
+
+
+def test_a_repeated_point_is_read_first_and_last():
+    """A point the reading's design takes twice spans the run (the history that moves a reading then shows in the
+    points' scatter); the other blocks keep their order, and a plan without a repeat stays as chosen."""
+    from benchlab.design.precision import repeats_apart
+
+    speed = {0: 1000, 1: 2000, 2: 500, 3: 500, 4: 1500}.__getitem__
+    assert repeats_apart([0, 1, 2, 3], speed) == [2, 0, 1, 3]
+    assert repeats_apart([0, 1, 4], speed) == [0, 1, 4]
+
+
 def test_a_fixed_length_cooldown_is_complete_and_a_timed_out_condition_is_not():
     from benchlab.identify.cooldown import completed
     from benchlab.runfile.read import Event
@@ -134,26 +168,27 @@ def test_a_fixed_length_cooldown_is_complete_and_a_timed_out_condition_is_not():
 def test_eq11_alone_is_designed_for_the_cooldown_reading(run_file, open_params, tmp_path, capsys, refused):
     """Designed for a2 and b2 alone for the reading, the plan is the cool-down sweep's cycles (docs/design.md): each
     cool-down follows a heat-up until the flywheel is steady, within the bench's limits; open-clutch cool-downs at
-    three engine speeds at least (the open branch's a2, b2 and R0), the expected errors those of that reading. A
-    budget shorter than one such cycle is one line, exit 2."""
+    three engine speeds at least (the open branch's a2, b2 and R0) and one more (a degree of freedom to show the
+    readings' scatter), the expected errors those of that reading. A budget shorter than one such cycle is one
+    line, exit 2."""
     from protocols.limits import schedule_problems
     from protocols.schedule import step_from_dict
 
     out = tmp_path / "plan.json"
-    assert main(["design", str(run_file), "--params", str(open_params), "--out", str(out), "--budget", "60",
+    assert main(["design", str(run_file), "--params", str(open_params), "--out", str(out), "--budget", "70",
                  "--reading"]) == 0
     printed = capsys.readouterr().out
     doc = json.loads(out.read_text())
-    assert doc["identification"] == "cooldowns" and doc["planned_min"] <= 60
-    assert "each read on its own" in printed
+    assert doc["identification"] == "cooldowns" and doc["planned_min"] <= 70
+    assert "each read on its own" in printed and doc["scatter"] >= 0
     steps = [step_from_dict(row) for row in doc["schedule"]]
     assert not schedule_problems(steps, BenchLimits())
     cycles = sorted({s.cycle for s in steps})
     for cycle in cycles:
         own = [s for s in steps if s.cycle == cycle]
         assert own[0].phase == "heat" and own[0].until[0].op == "steady" and own[-1].label == "cooldown"
-    speeds = {s.engine_speed_rpm for s in steps if s.label == "cooldown" and dict(s.point)["clutch_state"] == 0.0}
-    assert len(speeds) >= 3
+    read = [s for s in steps if s.label == "cooldown" and dict(s.point)["clutch_state"] == 0.0]
+    assert len({s.engine_speed_rpm for s in read}) >= 3 and len(read) >= 4
     for name in ("a2", "b2"):
         assert 0 < doc["expected"][name]["relative_error_expected"] < 1
     refused(["design", str(run_file), "--params", str(open_params), "--out", str(tmp_path / "short.json"),

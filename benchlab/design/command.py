@@ -12,7 +12,7 @@ import numpy as np
 
 from benchlab.design.blocks import Block, candidate_blocks, steady_blocks, steady_schedule
 from benchlab.design.fisher import predicted_run
-from benchlab.design.points import determines, operating_point, read_runs
+from benchlab.design.points import branch_states, determines, operating_point, read_runs
 from benchlab.design.precision import design_cooldown_reading, design_precision
 from benchlab.identify.cooldown import segment_model
 from benchlab.identify.staged import EQ11
@@ -67,16 +67,15 @@ def checked_budget(budget_min: float, limits: BenchLimits, blocks: Sequence[Bloc
     return budget_min * 60.0
 
 
-def three_points_min(blocks: Sequence[Block], interest: Sequence[str], limits: BenchLimits, plant: Plant) -> float:
-    """Minutes the shortest plan of steady blocks at three engine speeds in each clutch state `interest` lies in
-    lasts (what the cool-down reading needs to determine eq. 11's branch there), timed in sequence on `plant`."""
-    from benchlab.identify.cooldown import BRANCHES
-
-    needed = {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
+def reading_min(blocks: Sequence[Block], interest: Sequence[str], limits: BenchLimits, plant: Plant) -> float:
+    """Minutes the shortest plan the cool-down reading can read eq. (11)'s branches that `interest` lies in from
+    lasts (`points.determines`: three engine speeds in each such clutch state and one point more), timed in
+    sequence on `plant`."""
     chosen: list[Block] = []
-    for state in sorted(needed):
+    for state in sorted(branch_states(interest)):
         own = sorted((b for b in blocks if operating_point(b)["clutch_state"] == state), key=lambda b: b.expected_s)
         chosen += own[:3]
+    chosen.append(min(chosen, key=lambda b: b.expected_s))
     return duration_s(steady_schedule(chosen, limits, plant)) / 60.0
 
 
@@ -108,7 +107,7 @@ def design(args: argparse.Namespace, schema: str) -> int:
     if reading:
         free = {p.name: p for p in params.definition.free_parameters()}
         read = read_runs(args.runs, dict(params.items()), {n: free[n].start for n in EQ11},
-                         {n: (free[n].min, free[n].max) for n in EQ11}, segment_model(params))
+                         {n: (free[n].min, free[n].max) for n in EQ11}, interest, segment_model(params))
         nominal.update(read.values)
         plant = NetworkPlant(spec.network, dict(params.items()))  # times and checks them: the runs' own fit
         steady = steady_blocks(limits, plant)
@@ -123,14 +122,17 @@ def design(args: argparse.Namespace, schema: str) -> int:
             fit = params.extra.get("fit") if isinstance(params.extra.get("fit"), dict) else {}
             before = {n: np.inf if n in open_ or not params[n] else float(reported.get(n, np.inf)) / abs(params[n])
                       for n in interest}
-            plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
-                                           fit.get("fitting") or {}, read.disagreement, limits, ambient,
-                                           budget_s, steady, plant, segment_model(params))
-            reading = determines(plan.blocks, interest)
+            try:
+                plan = design_cooldown_reading(spec.network, nominal, names, interest, data, before,
+                                               fit.get("fitting") or {}, read, limits, ambient,
+                                               budget_s, steady, plant, segment_model(params))
+                reading = determines(plan.blocks, interest)
+            except ValueError:  # no steady block fits: the joint design says whether any block does
+                reading = False
             if not reading:
                 print(f"--reading: the budget holds too few steady cool-downs to read eq. (11) from (three engine "
-                      f"speeds in the clutch state designed for take "
-                      f"{three_points_min(steady, interest, limits, plant):.0f} min): designed for the joint fit "
+                      f"speeds in the clutch state designed for and one point more take "
+                      f"{reading_min(steady, interest, limits, plant):.0f} min): designed for the joint fit "
                       "instead")
                 nominal = nominal_values(params, open_)
         if not reading:
@@ -143,7 +145,8 @@ def design(args: argparse.Namespace, schema: str) -> int:
         print(f"not identified, taken at the model file's start values: {moved}")
     if reading:
         print("eq. (11) taken as the runs' held stretches read as cool-downs give it (b: the model file's), their "
-              f"points {plan.disagreement:.2f} x their errors off it: "
+              f"points {plan.disagreement:.2f} x their errors off it, those at one operating point "
+              f"{100 * plan.scatter:.1f} % of R apart beyond their errors: "
               + ", ".join(f"{n} {nominal[n]:.4g}" for n in EQ11))
     print("\n".join(plan.lines(nominal)))
     warnings = model_error_warnings(params.extra.get("fit"))
@@ -161,7 +164,8 @@ def design(args: argparse.Namespace, schema: str) -> int:
            "blocks": [b.name for b in plan.blocks],
            "expected": {n: {"value": nominal[n], "relative_error_now": plan.before[n],
                             "relative_error_expected": plan.expected[n]} for n in interest},
-           "calibration": plan.calibration, **({"disagreement": plan.disagreement} if reading else {}),
+           "calibration": plan.calibration,
+           **({"disagreement": plan.disagreement, "scatter": plan.scatter} if reading else {}),
            "ambient_C": ambient,
            "sensors": [asdict(s) for s in sensors], "warnings": warnings,
            "schedule": [s.as_dict() for s in plan.steps]}

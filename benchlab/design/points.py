@@ -140,32 +140,58 @@ def held_points(paths: Sequence[Path], params: Mapping[str, float],
 
 @dataclass(frozen=True)
 class RunsReading:
-    """What the runs so far, read as the designed run will be, say: eq. (11)'s values to design with and how far
-    their points disagree with eq. (11) beyond their own errors (sqrt of the fit's reduced chi-square, at least 1)."""
+    """What the runs so far, read as the designed run will be, say: eq. (11)'s values to design with, how far
+    their points disagree with eq. (11) beyond their own errors (sqrt of the fit's reduced chi-square, at least 1),
+    and the between-reading scatter on the branches designed for (`cooldown.fit_eq11`'s share of R: the same
+    operating point read at different times of the runs' history)."""
 
     values: dict[str, float]
     disagreement: float
+    scatter: float
 
 
 def read_runs(paths: Sequence[Path], params: Mapping[str, float], start: Mapping[str, float],
-              bounds: Mapping[str, tuple[float, float]], model: ModelDefinition | None = None) -> RunsReading:
+              bounds: Mapping[str, tuple[float, float]], interest: Sequence[str],
+              model: ModelDefinition | None = None) -> RunsReading:
     """The runs so far read the way the designed run will be: each held stretch a point (`held_points`). The
-    disagreement from eq. (11) fitted to the points of the branches they determine (`cooldown.fit_eq11`, partial);
-    the values from the amplitudes and R0 fitted with the curvatures b at `start` (the model file's: Table 1's
-    1000-2000 rpm hardly show them), `start` for what the points leave out or put on or beyond `bounds`."""
+    disagreement from eq. (11) fitted to the points of the branches they determine (`cooldown.fit_eq11`, partial),
+    the scatter from the points of the branches `interest` lies in alone, read from the longer half of their
+    stretches (`longer_half`); the values from the amplitudes and R0
+    fitted with the curvatures b at `start` (the model file's: Table 1's 1000-2000 rpm hardly show them), `start`
+    for what the points leave out or put on or beyond `bounds`. Without points to tell (another tool's runs), no
+    disagreement and no scatter."""
     found = held_points(paths, params, model)
     try:
         chi2 = fit_eq11(found, partial=True)["chi2_red"]
         eq11 = fit_eq11(found, partial=True, held={n: start[n] for n in ("b1", "b2")})
+        scatter = fit_eq11(longer_half([p for p in found if p.clutch_state in branch_states(interest)]),
+                           partial=True)
     except ValueError:
-        return RunsReading({n: start[n] for n in EQ11}, 1.0)
+        return RunsReading({n: start[n] for n in EQ11}, 1.0, 0.0)
     values = {n: eq11[n] if n in eq11 and bounds[n][0] < eq11[n] < bounds[n][1] else start[n] for n in EQ11}
-    return RunsReading(values, float(np.sqrt(max(1.0, chi2))) if np.isfinite(chi2) else 1.0)
+    return RunsReading(values, float(np.sqrt(max(1.0, chi2))) if np.isfinite(chi2) else 1.0,
+                       float(scatter.get("scatter", 0.0)))
+
+
+def longer_half(found: Sequence[CooldownResult]) -> list[CooldownResult]:
+    """The points read from the longer half of their stretches (at least the median length): the readings most like
+    a designed cool-down, which is longer still. A held stretch's reading carries more of the run's history the
+    shorter it is (Table 1's 45-60 s stretches scatter 5-16 % of R, its 30-40 s ones 15-37 %, seeds 101-104)."""
+    lengths = np.array([p.t_end - p.t_start for p in found])
+    return [p for p, length in zip(found, lengths) if length >= np.median(lengths)] if found else []
+
+
+def branch_states(interest: Sequence[str]) -> set[int]:
+    """The clutch states whose branch of eq. (11) `interest` lies in (both where it names only R0)."""
+    return {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
 
 
 def determines(blocks: Sequence[Block], interest: Sequence[str]) -> bool:
-    """Whether the blocks' cool-down points determine the branches of eq. (11) that `interest` lies in: at least
-    three engine speeds in that clutch state (its a, b and R0)."""
-    needed = {state for state, pair in BRANCHES.items() if set(pair) & set(interest)} or {0, 1}
-    return all(len({operating_point(b)["engine_speed"] for b in blocks
-                    if operating_point(b)["clutch_state"] == state}) >= 3 for state in needed)
+    """Whether the blocks' cool-down points determine the branches of eq. (11) that `interest` lies in and show
+    their scatter: at least three engine speeds in each such clutch state (its a, b and R0), and a point more than
+    those branches have parameters (a degree of freedom for `cooldown.fit_eq11` to estimate the between-reading
+    scatter from, without which its errors are the points' alone)."""
+    needed = branch_states(interest)
+    own = [operating_point(b) for b in blocks if operating_point(b)["clutch_state"] in needed]
+    return (all(len({p["engine_speed"] for p in own if p["clutch_state"] == state}) >= 3 for state in needed)
+            and len(own) > 2 * len(needed) + 1)  # a and b per branch, and R0

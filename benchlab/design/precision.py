@@ -15,8 +15,10 @@ parameters), which is printed.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +30,9 @@ from benchlab.network import ThermalNetwork
 from benchlab.network.plant import NetworkPlant
 from protocols.limits import BenchLimits
 from protocols.schedule import Step, duration_s
+
+if TYPE_CHECKING:
+    from benchlab.design.points import RunsReading
 
 
 @dataclass(frozen=True)
@@ -47,14 +52,17 @@ class PrecisionDesign:
     identification: str = "joint"
     #: the cool-down reading's points' disagreement with eq. (11) on the runs so far (`points.RunsReading`)
     disagreement: float = 1.0
+    #: the cool-down reading's between-reading scatter each point is expected to carry, a share of R
+    #: (`points.RunsReading`)
+    scatter: float = 0.0
 
     def header(self) -> str:
         """What the expected errors are of, and their calibration."""
         if self.identification == "cooldowns":
             return (f"expected standard errors of eq. (11) fitted to the designed run's cool-downs, each read on its own "
-                    f"(each point's error x {self.calibration:.2f}, the runs' misfit against the noise; eq. (11)'s "
-                    f"x {self.disagreement:.2f}, its points' disagreement on the runs so far; now: the parameter "
-                    "file's):")
+                    f"(each point's error x {self.calibration:.2f}, the runs' misfit against the noise, and "
+                    f"{100 * self.scatter:.1f} % of R beside it, the scatter of the runs' readings at one point; "
+                    "now: the parameter file's):")
         return f"expected standard errors (white-noise information x {self.calibration:.2f}, the runs' own ratio):"
 
     def lines(self, params: Mapping[str, float]) -> list[str]:
@@ -150,21 +158,34 @@ def design_precision(network: ThermalNetwork, params: Mapping[str, float], names
                            prior, noise, "joint")
 
 
+def repeats_apart(chosen: Sequence[int], point: Callable[[int], object]) -> list[int]:
+    """The blocks in `chosen` order, but an operating point chosen more than once (the first such) read first and
+    last: the repeat then spans the run's history, which moves a reading (docs/design.md), so eq. (11)'s fit sees
+    the scatter instead of two readings taken a cycle apart that agree (seeds 103 and 104: 500 rpm read in
+    consecutive cycles agreed, the scatter read 0 and the errors 2-6 times below the run-to-run spread)."""
+    counts = Counter(point(i) for i in chosen)
+    repeated = next((p for p in (point(i) for i in chosen) if counts[p] > 1), None)
+    if repeated is None:
+        return list(chosen)
+    own = [i for i in chosen if point(i) == repeated]
+    return [own[0], *(i for i in chosen if point(i) != repeated), *own[1:]]
+
+
 def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float], names: Sequence[str],
                             interest: Sequence[str], runs: Sequence[FitData], before: Mapping[str, float],
-                            fitting: Mapping[str, object], disagreement: float, limits: BenchLimits,
+                            fitting: Mapping[str, object], reading: RunsReading, limits: BenchLimits,
                             ambient_c: float, budget_s: float, blocks: Sequence[Block], plant: NetworkPlant,
                             model: ModelDefinition | None = None) -> PrecisionDesign:
     """Greedy D-optimal steady `blocks` (`blocks.steady_blocks`) within `budget_s` for `interest` (parameters of
     eq. 11) as the designed run's cool-downs read one by one (with `model`'s structure where given, as the reading
-    does) give them (`benchlab.design.points`): the expected errors are those of eq. (11) fitted to the run's own
-    points, each point's scaled by the misfit the runs so far show (`points.misfit_factor`, printed as the
-    calibration), eq. (11)'s by `disagreement` (its points' on the runs so far, `points.read_runs`); `before` is
-    the parameter file's own share of each value. A block is taken only where the plan with it, timed in sequence
-    on `plant` (the model at the parameter file's values, which predict the runs' temperatures: `params` hold
-    eq. 11's design values) by `blocks.steady_schedule`, fits the budget and stays clear of the interlocks there;
-    ranked by its information per second of bench time where it follows another block. ValueError when no block
-    fits."""
+    does) give them (`benchlab.design.points`): each point's expected error is its reading's, scaled by the misfit
+    the runs so far show (`points.misfit_factor`, printed as the calibration), and beside it the between-reading
+    scatter of the runs so far read alike (`reading.scatter`: a reading depends on the run's history, which no
+    segment's residuals show); eq. (11)'s expected errors are those of the points' information. `before` is the
+    parameter file's own share of each value. A block is taken only where the plan with it, timed in sequence on
+    `plant` (the model at the parameter file's values, which predict the runs' temperatures: `params` hold eq. 11's
+    design values) by `blocks.steady_schedule`, fits the budget and stays clear of the interlocks there; ranked by
+    its information per second of bench time where it follows another block. ValueError when no block fits."""
     from benchlab.design import points
 
     blocks = [b for b in blocks if b.expected_s <= budget_s]
@@ -172,8 +193,9 @@ def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float]
         raise ValueError("no block fits")
     noise = fisher.channel_noise(runs)
     scale = points.misfit_factor(fitting, noise)
-    gains = [points.point_information(b, params, scale * points.point_error(b, params, network, ambient_c, limits,
-                                                                             noise, model)) for b in blocks]
+    gains = [points.point_information(b, params, float(np.hypot(
+        scale * points.point_error(b, params, network, ambient_c, limits, noise, model), reading.scatter)))
+        for b in blocks]
     following = [duration_s(steady_schedule([b, b], limits, plant)) - b.expected_s for b in blocks]
     start = np.zeros((len(points.EQ11), len(points.EQ11)))
 
@@ -185,9 +207,11 @@ def design_cooldown_reading(network: ThermalNetwork, params: Mapping[str, float]
     chosen = greedy(gains, following, start, points.EQ11, interest, math.inf, fits)
     if not chosen:
         raise ValueError("no block fits")
+    apart = repeats_apart(chosen, lambda i: tuple(sorted(points.operating_point(blocks[i]).items())))
+    chosen = apart if fits(apart) else chosen
     steps = steady_schedule([blocks[i] for i in chosen], limits, plant)
     total = sum((gains[i] for i in chosen), start)
-    expected = {n: disagreement * v for n, v in fisher.relative_errors(total, points.EQ11, interest).items()}
+    expected = fisher.relative_errors(total, points.EQ11, interest)
     prior = fisher.information(network, params, names, runs, noise)  # for what a sensor would add
     return PrecisionDesign(tuple(blocks[i] for i in chosen), steps, tuple(interest), dict(before), expected, scale,
-                           prior, noise, "cooldowns", disagreement)
+                           prior, noise, "cooldowns", reading.disagreement, reading.scatter)

@@ -17,8 +17,11 @@ stated uncertainty is the expanded one, U = 2·sqrt(SE² + (0.25 %·R)²) (about
 the acquisition's own systematic effects (see SYSTEMATIC_REL).
 
 Eq. (11): R = a1·exp(b1·ω_e) + R0 for S = 1 and a2·exp(b2·ω_e) + R0 for S = 0, fitted to the table by
-weighted least squares (weights 1/SE²), standard errors from the covariance (scaled by the reduced
-chi-square when it exceeds 1).
+weighted least squares. Where the points scatter about it beyond their own errors (a reduced chi-square above 1),
+each point also carries a between-reading scatter, a share s of its R: a reading depends on the plant's states it
+does not fit (the slow masses the model lacks, as warm as the run's history left them), which no segment's own
+residuals show. s is the Paule–Mandel estimate (the share that brings the reduced chi-square to 1, the standard
+random-effects estimator), the weights 1/(SE² + (s·R)²), the standard errors those of that fit.
 
 Each cool-down's operating point is its step's `point` in the run's stored schedule (/schedule); the table and
 the fit are stored in /analysis and read back from there (benchlab.runfile.analysis).
@@ -310,7 +313,9 @@ def fit_eq11(results: Sequence[CooldownResult], partial: bool = False,
 
     `partial`: the branches the points determine (at least 2 engine speeds in that clutch state) with R0, the
     others left out (a designed run's cool-downs may all be in one clutch state: docs/design.md). `held`: values
-    (b in 1/rpm) kept as given instead of fitted (returned without a standard error)."""
+    (b in 1/rpm) kept as given instead of fitted (returned without a standard error). `chi2_red` is the points'
+    reduced chi-square against their own errors; `scatter` the between-reading share of R that brings it to 1 (0
+    where it is at most 1; absent where the points leave no degree of freedom to tell)."""
     held = dict(held or {})
     rows = [r for r in results if np.isfinite(r.R) and r.R_se > 0]
     speeds = {s: {r.engine_speed for r in rows if r.clutch_state == s} for s in BRANCHES}
@@ -321,33 +326,59 @@ def fit_eq11(results: Sequence[CooldownResult], partial: bool = False,
             len({(r.engine_speed, r.clutch_state) for r in rows}) < len(names) - len(states) + 1 - len(held):
         raise ValueError("eq. (11) needs at least 5 cool-downs with 2 engine speeds in each clutch state"
                          + (" (or 3 engine speeds in one of them)" if partial else ""))
-    w = np.array([r.engine_speed for r in rows]) / 1000.0  # krpm inside, for conditioning
-    s = np.array([r.clutch_state for r in rows])
     y = np.array([r.R for r in rows])
-    e = np.array([r.R_se for r in rows])
-    operating_point = {"engine_speed": w, "clutch_state": s.astype(float)}
+    se = np.array([r.R_se for r in rows])
+    operating_point = {"engine_speed": np.array([r.engine_speed for r in rows]) / 1000.0,  # krpm, for conditioning
+                       "clutch_state": np.array([float(r.clutch_state) for r in rows])}
+    fit = _weighted_eq11(y, se, operating_point, names, held)
+    n, p = y.size, len(names)
+    chi2 = float(fit.fun @ fit.fun) / (n - p) if n > p else math.nan
+    scatter = between_reading_scatter(y, se, operating_point, names, held) if n > p and chi2 > 1 else 0.0
+    if scatter > 0:
+        fit = _weighted_eq11(y, np.hypot(se, scatter * y), operating_point, names, held)
+    errors = np.sqrt(np.diag(np.linalg.pinv(fit.jac.T @ fit.jac)))
+    scale = np.array([1e-3 if name.startswith("b") else 1.0 for name in names])  # b in 1/rpm
+    out = {k: float(v * c) for k, v, c in zip(names, fit.x, scale)}
+    out.update({f"{k}_se": float(v * c) for k, v, c in zip(names, errors, scale)})
+    out.update({k: float(v) for k, v in held.items() if k in {m for s in states for m in BRANCHES[s]}})
+    out["chi2_red"] = chi2
+    if n > p:
+        out["scatter"] = scatter
+    out["points"] = n
+    return out
 
-    def model(th: np.ndarray) -> np.ndarray:  # eq. (11) of the model file, b in 1/krpm here
-        kept = {n: v * 1e3 if n.startswith("b") else v for n, v in held.items()}  # b in 1/krpm here
+
+def _weighted_eq11(y: np.ndarray, se: np.ndarray, operating_point: Mapping[str, np.ndarray], names: Sequence[str],
+                   held: Mapping[str, float]) -> scipy.optimize.OptimizeResult:
+    """eq. (11)'s `names` fitted to the points R = y by least squares with weights 1/se² (b in 1/krpm here)."""
+    kept = {n: v * 1e3 if n.startswith("b") else v for n, v in held.items()}
+
+    def model(th: np.ndarray) -> np.ndarray:
         return convection_resistance({"a1": 0.0, "b1": 0.0, "a2": 0.0, "b2": 0.0, **kept, **dict(zip(names, th))},
                                      operating_point)
 
     start = {"a1": 0.3, "b1": -1.0, "a2": 0.4, "b2": -1.0, "R0": max(1e-3, 0.8 * y.min())}
     lower = {"a1": 0.0, "b1": -20.0, "a2": 0.0, "b2": -20.0, "R0": 0.0}
     upper = {"a1": 50.0, "b1": 5.0, "a2": 50.0, "b2": 5.0, "R0": 50.0}
-    fit = scipy.optimize.least_squares(lambda th: (model(th) - y) / e, np.array([start[n] for n in names]),
-                                       bounds=([lower[n] for n in names], [upper[n] for n in names]))
-    n, p = y.size, len(names)
-    chi2 = float(fit.fun @ fit.fun) / max(1, n - p) if n > p else math.nan
-    cov = np.linalg.pinv(fit.jac.T @ fit.jac) * (max(1.0, chi2) if np.isfinite(chi2) else 1.0)
-    se = np.sqrt(np.diag(cov))
-    scale = np.array([1e-3 if name.startswith("b") else 1.0 for name in names])  # b in 1/rpm
-    out = {k: float(v * c) for k, v, c in zip(names, fit.x, scale)}
-    out.update({f"{k}_se": float(v * c) for k, v, c in zip(names, se, scale)})
-    out.update({k: float(v) for k, v in held.items() if k in {m for s in states for m in BRANCHES[s]}})
-    out["chi2_red"] = chi2
-    out["points"] = n
-    return out
+    return scipy.optimize.least_squares(lambda th: (model(th) - y) / se, np.array([start[n] for n in names]),
+                                        bounds=([lower[n] for n in names], [upper[n] for n in names]))
+
+
+def between_reading_scatter(y: np.ndarray, se: np.ndarray, operating_point: Mapping[str, np.ndarray],
+                            names: Sequence[str], held: Mapping[str, float]) -> float:
+    """The Paule–Mandel share s of R: each point's variance se² + (s·R)², s where eq. (11)'s reduced chi-square is
+    1 (the fit has more points than `names`, and its chi-square at s = 0 is above 1)."""
+    dof = y.size - len(names)
+
+    def excess(share: float) -> float:
+        errors = np.hypot(se, share * y)
+        fit = _weighted_eq11(y, errors, operating_point, names, held)
+        return float(fit.fun @ fit.fun) / dof - 1.0
+
+    high = 0.01
+    while excess(high) > 0 and high < 100.0:
+        high *= 2.0
+    return float(scipy.optimize.brentq(excess, 0.0, high, xtol=1e-4)) if excess(high) <= 0 else high
 
 
 def store(path: "str | os.PathLike[str]", results: Sequence[CooldownResult], eq11: Mapping[str, float] | None,
