@@ -2,7 +2,7 @@
 nodes, lags and parameter tables), so the extended model diagnose finds can be saved, simulated and re-identified.
 
 The generator works on any network (benchlab.model.ModelDefinition): every link group (links sharing one
-resistance law) × every varying signal under three resistance laws (linear, power, exponential in the signal;
+resistance law) × every varying signal but the heat input (path_signals) under three resistance laws (linear, power, exponential in the signal;
 one factor for an on/off signal); every node × signal as a heat source; a new link between each pair of nodes
 that have none; one extra node hung on each node and one bridging each pair of nodes; a first-order lag, an
 offset-and-gain calibration and a drift on each measured output; heat moved between each pair of sources; then,
@@ -25,6 +25,7 @@ from itertools import combinations
 
 import numpy as np
 
+from benchlab.identify.data import SLIP_POWER
 from benchlab.model.catalog import builtin
 from benchlab.model.definition import ModelDefinition, parse_model
 from benchlab.network import Channels
@@ -64,6 +65,16 @@ CLUTCH_SIGNALS = ("engine_speed", "clutch_speed", "slip_speed", "clutch_state", 
 
 Doc = dict
 Build = Callable[[ModelDefinition, Channels], ModelDefinition]
+
+
+def path_signals(signals: list[str]) -> list[str]:
+    """The signals a link's conductance may follow: all but the heat input (SLIP_POWER). A conductance follows its
+    path's state (contact pressure, air flow, temperature), and heat input changes that only through temperatures,
+    which the |ΔT| and level laws read; its factors, clutch torque and slip speed, are signals of their own. A law
+    of the heat input on a path drains heat in proportion to it and mimics effects that are no path: a flywheel
+    capacity rising with its temperature (two 45-55 min runs) was named a crankshaft conduction growing 54x with
+    friction power, then a |ΔT| law on the same link (1.28x the floor, both causes); without it, beyond the library."""
+    return [s for s in signals if s != SLIP_POWER]
 
 
 @dataclass(frozen=True)
@@ -573,7 +584,7 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
     out, of_temperature = [], []  # laws of the signals, then (after every group's) laws of temperature differences
     for group in link_groups(model):
         where = tuple(dict.fromkeys(n for name in group for n in link_nodes[name]))
-        for signal in signals:
+        for signal in path_signals(signals):
             for law in (LAWS[:1] if is_on_off(signal, channels) else LAWS):
                 out.append(Candidate(f"{signal}_{law}_{'_'.join(group)}", signal, link_mechanism(group),
                                      f"{' = '.join(group)} = R * f({signal}), {law}",
@@ -1110,7 +1121,7 @@ def composed_links(model: ModelDefinition, channels: Channels, units: Mapping[st
     with each law of a continuous signal (a contact conductance that grows with the clamping torque). Alone, such
     a link can gain too little to be chosen (a link at the runs' mean conductance explains little of a contact
     that varies), so the greedy search would never take the second step that explains it."""
-    continuous = [s for s in library_signals(model, channels, units) if not is_on_off(s, channels)]
+    continuous = [s for s in path_signals(library_signals(model, channels, units)) if not is_on_off(s, channels)]
     linked = {frozenset(l.between) for l in model.links}
     words = _clutch_words if is_clutch(model) else (lambda text: text)
     out = []
