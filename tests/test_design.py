@@ -32,6 +32,19 @@ def test_budget_too_short_is_one_line(refused, run_file, open_params, tmp_path):
              "--budget", "2"], "--budget", "shortest block")
 
 
+def test_a_model_with_a_switch_is_one_line(refused, run_file, tmp_path):
+    """A model file with hysteresis(...) cannot be predicted chunk by chunk yet: bad input, not a crash."""
+    from test_level_laws import _switched_model
+
+    from benchlab.model.params import ModelParams
+
+    path = tmp_path / "switched.json"
+    save_params(path, ModelParams(_switched_model(), {"C": 100.0, "R": 0.5, "q": 40.0, "on": 31.0, "off": 29.0}),
+                {"not_identified": {"q": "no effect"}})
+    refused(["design", str(run_file), "--params", str(path), "--out", str(tmp_path / "plan.json")],
+            "switched.json", "model", "hysteresis", "heater")
+
+
 def test_every_block_passes_the_limits_and_a_tighter_bench_is_kept():
     tight = BenchLimits(max_engine_speed_rpm=1800.0, max_slip_energy_j=40e3)
     for limits in (BenchLimits(), tight):
