@@ -2,11 +2,11 @@
 nodes, lags and parameter tables), so the extended model diagnose finds can be saved, simulated and re-identified.
 
 The generator works on any network (benchlab.model.ModelDefinition): every link group (links sharing one
-resistance law) × every varying signal but the heat input (path_signals) under three resistance laws (linear, power, exponential in the signal;
-one factor for an on/off signal); every node × signal as a heat source; a new link between each pair of nodes
-that have none; one extra node hung on each node and one bridging each pair of nodes; a first-order lag, an
-offset-and-gain calibration and a drift on each measured output; heat moved between each pair of sources; then,
-last, learned piecewise-linear heat flows. Every candidate starts NESTED: at its start values it is its parent model
+resistance law) × every varying signal but the heat input (path_signals) under three resistance laws (linear,
+power, exponential in the signal; one factor for an on/off signal); every node × signal as a heat source; a new
+link between each pair of nodes that have none; one extra node hung on each node and one bridging each pair of
+nodes; a first-order lag, an offset-and-gain calibration and a drift on each measured output; heat moved between
+each pair of sources; then, last, learned piecewise-linear heat flows. Every candidate starts NESTED: at its start values it is its parent model
 (a factor of one, a source of zero watts, a node of 1 J/K, a link of 1e4 K/W, a lag of 5 ms, a sensor of gain 1,
 offset 0 K and drift 0 K/s), and that point lies inside its bounds, so a fit that starts there can only lower the
 parent's cost.
