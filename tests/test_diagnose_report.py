@@ -262,7 +262,10 @@ def test_a_source_on_top_of_the_measured_friction_power_creates_energy(churn):
     extended = channel_source(("friction_power",), "P", (None,))(base, channels)
     tag = source_name(("friction_power",), "P", (None,)).removeprefix("source_")
 
-    def finding(q: float):
-        return SimpleNamespace(spec=SimpleNamespace(definition=extended), params={f"q_{tag}": q, f"n_{tag}": 1.0})
+    def finding(q: float, parent: object = None):
+        return SimpleNamespace(spec=SimpleNamespace(definition=extended), params={f"q_{tag}": q, f"n_{tag}": 1.0},
+                               parent=parent)
     assert energy_reasons(finding(50.0), diagnosis) and "creates energy" in energy_reasons(finding(50.0), diagnosis)[0]
     assert energy_reasons(finding(0.0), diagnosis) == []
+    # the source is another finding's where the model this one was measured against already holds it
+    assert energy_reasons(finding(50.0, (SimpleNamespace(definition=extended), {})), diagnosis) == []

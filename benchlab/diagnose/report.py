@@ -75,15 +75,17 @@ MEASURED_POWER = (SLIP_POWER, "slip_speed", "clutch_torque")
 
 
 def energy_reasons(f: Finding, result: Diagnosis) -> list[str]:
-    """Why a finding creates energy: a source it adds (not in the baseline) that reads the measured friction power
-    or its factors (MEASURED_POWER), no temperature, and whose heat integrated over the diagnosed runs is a net input
-    (J), on top of the friction heat the model already holds."""
-    model, baseline = f.spec.definition, {s.name for s in result.baseline.spec.definition.sources}
+    """Why a finding creates energy: a source it adds itself (not in the model it was measured against, its parent:
+    another finding's source is that finding's) that reads the measured friction power or its factors
+    (MEASURED_POWER), no temperature, and whose heat integrated over the diagnosed runs is a net input (J), on top of
+    the friction heat the model already holds."""
+    parent = (f.parent[0] if f.parent is not None else result.baseline.spec).definition
+    model, before = f.spec.definition, {s.name for s in parent.sources}
     values = {**f.params, **result.final.params}
     reasons = []
     for source in model.sources:
         reads = source.heat.names
-        if (source.name in baseline or reads & set(model.nodes) or not reads & set(MEASURED_POWER)
+        if (source.name in before or reads & set(model.nodes) or not reads & set(MEASURED_POWER)
                 or not reads & set(model.parameters) <= set(values)):  # a source split per run group: left out
             continue
         kinds = {name: "parameter" if name in model.parameters else "channel" for name in reads}
