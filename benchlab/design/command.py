@@ -23,8 +23,7 @@ from benchlab.identify.defaults import FIT_STEP_S
 from benchlab.model.catalog import model_spec
 from benchlab.model.params import ModelParams, load_params
 from benchlab.model.runs import load_runs
-from benchlab.network.plant import NetworkPlant
-from benchlab.network.structure import sequential_laws
+from benchlab.network.plant import NetworkPlant, unplayable
 from benchlab.outputs import write_text
 from benchlab.runner.session import RunRequest, bench_config
 from protocols.estimates import Plant
@@ -84,11 +83,9 @@ def design(args: argparse.Namespace, schema: str) -> int:
     """Read, check, design, print the expected outcome, write the plan (docs/design.md)."""
     params = load_params(args.params)
     spec = model_spec(params.definition)
-    switched = sequential_laws(spec.network)
-    if switched:  # a designed run is predicted and timed by a plant that runs chunk by chunk
-        raise InputError(args.params, "model", f"a model without hysteresis(...) to design for ({', '.join(switched)} "
-                                               "switches: a designed run's prediction does not carry a switch from "
-                                               "chunk to chunk yet, docs/models.md)")
+    problem = unplayable(spec.network)  # a designed run is predicted and timed by a plant, chunk by chunk
+    if problem:
+        raise InputError(args.params, "model", problem)
     names = [p.name for p in spec.free]
     open_ = params.extra.get("not_identified") or {}
     if not isinstance(open_, dict):

@@ -6,10 +6,10 @@ resistance law) × every varying signal but the heat input (path_signals) under 
 power, exponential in the signal; one factor for an on/off signal); every node × signal as a heat source; a new
 link between each pair of nodes that have none; one extra node hung on each node and one bridging each pair of
 nodes; a first-order lag, an offset-and-gain calibration and a drift on each measured output; heat moved between
-each pair of sources; then, last, learned piecewise-linear heat flows. Every candidate starts NESTED: at its start values it is its parent model
-(a factor of one, a source of zero watts, a node of 1 J/K, a link of 1e4 K/W, a lag of 5 ms, a sensor of gain 1,
-offset 0 K and drift 0 K/s), and that point lies inside its bounds, so a fit that starts there can only lower the
-parent's cost.
+each pair of sources; then, last, learned piecewise-linear heat flows. Every candidate starts NESTED: at its start
+values it is its parent model (a factor of one, a source of zero watts, a node of 1 J/K, a link of 1e4 K/W, a lag
+of 5 ms, a sensor of gain 1, offset 0 K and drift 0 K/s), and that point lies inside its bounds, so a fit that
+starts there can only lower the parent's cost.
 The paper's clutch gets the same generator plus physical names (convection on R_PA/R_FA, conduction on R_Feng,
 `heat_split` of plate and flywheel shares, `extra_mass` behind the flywheel, `sensor_lag` of the flywheel),
 the convection law of eq. (11) where the baseline lacks it, the clamped plate–flywheel conduction and radiation.
@@ -658,9 +658,9 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
 
 
 #: Laws of a link against its end's own temperature (smooth ones only where no |ΔT| law reads the link; a source: the
-#: switching ones): smooth, a latch (a switch turned on
-#: at one threshold that the runs never take back below its "off": on at or above "on", off only a whole range below
-#: the runs), a switch with hysteresis (on at or above "on", off at or below on − band)
+#: switching ones): smooth, a latch (a switch turned on at one threshold that the runs never take back below its
+#: "off": on at or above "on", off only a whole range below the runs), a switch with hysteresis (on at or above "on",
+#: off at or below on − band)
 LEVEL_LAWS = ("linear", "power", "latch", "switch")
 SWITCHING = ("latch", "switch")
 #: Screening starts of a switch: its "on" threshold at these quantiles of the temperature in the runs, the band

@@ -17,14 +17,23 @@ from benchlab.network.stream import NetworkStream
 from benchlab.network.structure import Params, ThermalNetwork, sequential_laws
 
 
+def unplayable(network: ThermalNetwork) -> str | None:
+    """Why a plant cannot run `network` chunk by chunk (what a model must be instead), or None where it can: each
+    chunk would start a switch with hysteresis afresh."""
+    switched = sequential_laws(network)
+    if not switched:
+        return None
+    return (f"a model without hysteresis(...) ({', '.join(switched)} switches: a plant does not carry a switch from "
+            "chunk to chunk yet, docs/models.md)")
+
+
 class NetworkPlant:
     """True temperatures of a network for given channels; keeps its state between calls."""
 
     def __init__(self, network: ThermalNetwork, params: Params) -> None:
-        switched = sequential_laws(network)
-        if switched:  # each chunk would start its switch afresh
-            raise ValueError(f"a model without hysteresis(...) ({', '.join(switched)} switches: a plant does not carry "
-                             "a switch from chunk to chunk yet, docs/models.md)")
+        problem = unplayable(network)
+        if problem:
+            raise ValueError(problem)
         self.network = network
         self.params = params
         self.state: np.ndarray | None = None
