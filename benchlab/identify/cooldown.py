@@ -376,9 +376,9 @@ def between_reading_scatter(y: np.ndarray, se: np.ndarray, operating_point: Mapp
         return float(fit.fun @ fit.fun) / dof - 1.0
 
     high = 0.01
-    while excess(high) > 0 and high < 100.0:
+    while (above := excess(high) > 0) and high < 100.0:
         high *= 2.0
-    return float(scipy.optimize.brentq(excess, 0.0, high, xtol=1e-4)) if excess(high) <= 0 else high
+    return high if above else float(scipy.optimize.brentq(excess, 0.0, high, xtol=1e-4))
 
 
 def store(path: "str | os.PathLike[str]", results: Sequence[CooldownResult], eq11: Mapping[str, float] | None,
