@@ -23,7 +23,7 @@ import copy
 import itertools
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -36,7 +36,7 @@ from protocols.limits import BenchLimits
 from sim_bench.clock import SimClock
 from benchlab.drivetrain import DrivetrainFacts
 from sim_bench.drivetrain import Drivetrain
-from sim_bench.truth_store import TruthColumn, TruthStore
+from sim_bench.truth_store import TruthStore
 from sim_bench.emulators import can_controllers, clutch_node, registry, sim_can_bus
 from sim_bench.emulators.can_controllers import CanBenchEmulator
 from sim_bench.emulators.clutch_node import ClutchNodeEmulator
@@ -122,7 +122,10 @@ class SimPhysics:
         self.computed_s = 0.0
         self.solver_calls = 0
         self._truth_k0 = k0  # grid index of the first recorded true state
-        self._truth = TruthStore(len(self.plant.state_names))
+        self._truth: TruthStore | None = None  # the bench's own recording, made when first needed (`_keep_truth`)
+        #: where the true states of grid points k0 … go once final (first grid index, (n, states) array): the
+        #: bench's own recording, or a run file's /truth (`SimBench.record_truth_into`)
+        self.truth_sink: Callable[[int, np.ndarray], None] = self._keep_truth
         self.prime()
 
     def prime(self) -> None:
@@ -150,7 +153,6 @@ class SimPhysics:
         cols, states = self._advance(k0, n)
         temps = self.plant.sensor_temperatures(states, (k0 + np.arange(n)) * self.dt)
         temps["_states"] = np.column_stack([states[s] for s in self.plant.state_names])
-        self._record_truth(k0, temps["_states"])
         # what the sensors read on this grid: the node's two sensors, then the DMM's channels, one row each: noise
         # per sample (drawn row after row, one call per noise level), resistances in one vectorised call
         sc, rng = self.cfg.sensors, self.rng_sensor
@@ -167,8 +169,9 @@ class SimPhysics:
         # what the controllers' actual values are made of, one row per grid point (actuals_at takes rows)
         temps["_actuals"] = np.column_stack([cols[c] for c in _ACTUAL_SOURCES] + [noise_speed, noise_torque])
         self._chunks.append((k0, cols, temps))
-        if len(self._chunks) > 3:
-            self._chunks.pop(0)
+        if len(self._chunks) > 3:  # older than any cut can reach (`_cut`): its true states are final
+            first, _, final = self._chunks.pop(0)
+            self.truth_sink(first, final["_states"])
         self._end = k0 + n
         self.computed_s += n * self.dt
         self.solver_calls += 1
@@ -368,20 +371,39 @@ class SimPhysics:
         return NodeInputSeries(self._rows_at(times, "_R_node"))
 
     # -- truth, for tests and analysis ----------------------------------------------------------------
-    def _record_truth(self, k0: int, states: np.ndarray) -> None:
-        """Keep the true states of grid points k0 onwards, on disk (sim_bench.truth_store); a chunk recomputed
-        after a cut overwrites its rows."""
+    def _keep_truth(self, k0: int, states: np.ndarray) -> None:
+        """Keep final true states of grid points k0 onwards in the bench's own recording, on disk
+        (sim_bench.truth_store): the sink when no run file takes them (tests, analysis)."""
+        if self._truth is None:
+            self._truth = TruthStore(len(self.plant.state_names))
         self._truth.write(k0 - self._truth_k0, states)
 
-    def true_states(self, rows: int) -> "dict[str, TruthColumn]":
-        """The plant's true temperatures (degC) on grid rows [first recorded, `rows`), named by
-        `state_channels` of the plant's network; NaN where not computed (yet). Columns read from disk a slice at a
-        time (`np.asarray` reads one whole)."""
+    def hand_over_truth(self) -> None:
+        """The run ends: the true states still kept (the last chunks, not final while a set-point could change)
+        to `truth_sink` too, up to the last grid point computed."""
+        for k0, _, temps in self._chunks:
+            self.truth_sink(k0, temps["_states"])
+
+    def truth_channels(self) -> list[str]:
+        """The names of the true states, in the order of their columns (the plant's `state_names`), by
+        `state_channels` of the plant's network."""
         from benchlab.network import state_channels
 
-        n, computed = max(rows - self._truth_k0, 0), self._end - self._truth_k0
         names = state_channels(self.plant.network)
-        return {names[s]: self._truth.column(i, n, computed) for i, s in enumerate(self.plant.state_names)}
+        return [names[s] for s in self.plant.state_names]
+
+    def true_states(self, rows: int) -> dict[str, np.ndarray]:
+        """The plant's true temperatures (degC) on grid rows [first recorded, `rows`) as the bench's own recording
+        holds them (no run file attached): the final rows, then the chunks still kept; NaN where not computed."""
+        n = max(rows - self._truth_k0, 0)
+        states = np.full((n, len(self.plant.state_names)), np.nan)
+        if self._truth is not None:
+            for i in range(states.shape[1]):
+                states[:, i] = self._truth.read(i, 0, n)
+        for k0, _, temps in self._chunks:
+            rows_kept = temps["_states"][:max(n - (k0 - self._truth_k0), 0)]
+            states[k0 - self._truth_k0:k0 - self._truth_k0 + len(rows_kept)] = rows_kept
+        return dict(zip(self.truth_channels(), states.T))
 
     def true_convection_resistance(self, engine_rpm: float, clutch_state: int) -> float:
         """R_FA = R_PA of eq. (11) at an operating point: the paper plant's own; NaN for a plant without one."""
@@ -490,10 +512,18 @@ class SimBench:
                 "sim_truth": json.dumps({"params": dict(self.physics.truth_params), "effects": effects,
                                          "plant": self.physics.plant_name})}
 
-    def true_states(self, rows: int) -> dict[str, np.ndarray]:
-        """The plant's true temperatures (degC) on the run's grid rows up to `rows`, for the run file's /truth: the
-        rows this bench computed (a resumed run starts later), NaN where not computed."""
-        return self.physics.true_states(rows)
+    def truth_units(self) -> dict[str, str]:
+        """The run file's /truth columns (the plant's true temperatures) with their units."""
+        return {name: "degC" for name in self.physics.truth_channels()}
+
+    def record_truth_into(self, sink: Callable[[int, np.ndarray], None]) -> None:
+        """The plant's true states go to `sink` (first grid row, (n, columns) in `truth_units`' order) once final,
+        the rest when the run ends (`hand_over_truth`): a run file's /truth written as it goes."""
+        self.physics.truth_sink = sink
+
+    def hand_over_truth(self) -> None:
+        """The true states not final yet to the sink: the run ends."""
+        self.physics.hand_over_truth()
 
     def _draw_next(self, t: float) -> float:
         if self._dropout_rate <= 0:

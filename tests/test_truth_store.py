@@ -1,5 +1,5 @@
-"""The simulated bench's true states kept on disk (sim_bench.truth_store): what is written is read back exactly, a
-recomputed chunk overwrites its rows, rows not computed read NaN, and a column slices as the run writer reads it."""
+"""The simulated bench's own recording of its true states on disk (sim_bench.truth_store): what is written is read
+back exactly, rows written again replace theirs, and rows never written read NaN."""
 
 from __future__ import annotations
 
@@ -13,18 +13,10 @@ def test_rows_round_trip_overwrite_and_read_nan_where_nothing_was_written():
     first = np.arange(30, dtype=float).reshape(10, 3) + 0.125
     store.write(0, first)
     again = -np.ones((4, 3))
-    store.write(8, again)  # a chunk recomputed after a cut: rows 8 and 9 replaced, 10 and 11 new
+    store.write(8, again)  # rows 8 and 9 replaced, 10 and 11 new
     assert store.rows == 12
-    column = store.column(1, 14)
-    whole = np.asarray(column)
+    whole = store.read(1, 0, 14)
     assert np.array_equal(whole[:8], first[:8, 1]) and np.array_equal(whole[8:12], again[:, 1])
-    assert np.isnan(whole[12:]).all() and len(column) == 14 and column.shape == (14,)
-    assert np.array_equal(column[3:9], whole[3:9]) and np.array_equal(column[::5], whole[::5], equal_nan=True)
-    assert np.array_equal(column[20:30], np.array([]))
-
-
-def test_rows_a_cut_took_back_read_nan_until_computed_again():
-    store = TruthStore(1)
-    store.write(0, np.arange(10, dtype=float)[:, None])
-    column = np.asarray(store.column(0, 10, valid=6))  # the bench cut back to row 6: rows 6-9 are not computed now
-    assert np.array_equal(column[:6], np.arange(6.0)) and np.isnan(column[6:]).all()
+    assert np.isnan(whole[12:]).all() and len(whole) == 14
+    assert np.array_equal(store.read(2, 3, 9), np.concatenate([first[3:8, 2], again[:1, 2]]))
+    assert store.read(0, 20, 30).shape == (10,) and np.isnan(store.read(0, 20, 30)).all()

@@ -305,7 +305,8 @@ class RunWriter:
     def __init__(self, path: "str | os.PathLike[str]", layout: Layout, *, protocol: str,
                  attrs: Mapping[str, Any] | None = None, schedule: Sequence[Mapping[str, Any]] = (),
                  schedule_units: Mapping[str, str] | None = None, planned_s: float = 3600.0,
-                 flush_every_s: float = 1.0, state_fields: Sequence[str] = (), durable: bool = False, _resume: bool = False) -> None:
+                 flush_every_s: float = 1.0, state_fields: Sequence[str] = (), durable: bool = False,
+                 truth_units: Mapping[str, str] | None = None, _resume: bool = False) -> None:
         self.path = Path(path)
         self.layout = layout
         self.protocol = protocol
@@ -325,7 +326,10 @@ class RunWriter:
         self._status_at: int | None = None  # where the status "running" lies in the file (see RUNNING_ON_DISK)
         self._mm: np.memmap | None = None
         self._views: dict[str, np.ndarray] = {}
-        self._closing_groups: dict[str, Mapping[str, tuple[np.ndarray, str]]] = {}
+        #: the simulated bench's /truth: its columns (time excluded) and units, on the /aligned grid and capacity
+        self.truth_units = dict(truth_units or {})
+        self._truth_end = 0  # first /truth row not written into this file by `put_truth`
+        self._truth_pending: list[tuple[int, np.ndarray]] = []  # rows beyond the capacity, until the file grows
         if _resume:
             return
         capacity = self._capacities(planned_s)
@@ -352,6 +356,19 @@ class RunWriter:
         for people."""
         self._events.append((float(t), int(cycle), kind, detail, int(step), reason))
 
+    def put_truth(self, first_row: int, states: np.ndarray) -> None:
+        """Rows `first_row` … of /truth (an (n, columns) array, columns in `truth_units`' order): the simulated
+        bench's true states once final, written as they come with `os.pwrite` (the page cache, as the mapping's
+        bytes; none of them held in the process's memory), never written twice. Rows beyond the capacity wait for
+        the file to grow (the next flush)."""
+        fits = max(min(len(states), self._capacity("truth/time") - first_row), 0)
+        if fits < len(states):
+            self._truth_pending.append((first_row + fits, states[fits:]))
+        for j, name in enumerate(self.truth_units):
+            offset = self._where[f"truth/{name}"][0]
+            os.pwrite(self._fd, np.ascontiguousarray(states[:fits, j], dtype="<f8").tobytes(), offset + 8 * first_row)
+        self._truth_end = max(self._truth_end, first_row + fits)
+
     def advance(self, now: float, force: bool = False) -> bool:
         """Data up to `now` is complete; flush once `flush_every_s` of data has accumulated. True if flushed."""
         self._now = max(self._now, now)
@@ -366,6 +383,9 @@ class RunWriter:
         assert self._fd is not None
         until_row = int(np.floor(now / self.layout.dt + _EPS)) + 1
         self._ensure_capacity(until_row)
+        pending, self._truth_pending = self._truth_pending, []
+        for first_row, states in pending:  # the file has grown since
+            self.put_truth(first_row, states)
         raw = tuple(readings.take() for readings in self._raw.values())  # every stream: one compiled signature
         k0 = self.builder.rows
         grid, _ = self.builder.finalise_matrix(until_row, raw)
@@ -393,20 +413,14 @@ class RunWriter:
         log.debug("flush %d: %.3f s, %d grid rows, %d events in the file", self.flushes, now, self.builder.rows,
                   self._event_rows)
 
-    def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None,
-              groups: Mapping[str, Mapping[str, tuple[np.ndarray, str]]] | None = None) -> None:
-        """Flush, then replace the file by its compact, compressed form with root attribute `status`.
-
-        `groups`: extra groups known only at the end (the simulated bench's /truth), name -> dataset ->
-        (values, units), written into the compact file before it replaces the run's: all or nothing. Values are
-        arrays, or columns read a slice at a time (`_sliced`: the simulated bench's truth, kept on disk).
-        """
+    def close(self, status: str = "complete", attrs: Mapping[str, Any] | None = None) -> None:
+        """Flush, then replace the file by its compact, compressed form with root attribute `status` (/truth cut,
+        like /aligned, at the grid rows flushed)."""
         if self._fd is None:
             return
         try:
             self.flush()
             self._close_fd()
-            self._closing_groups = dict(groups or {})
             self._rebuild(None, compact=True, status=status, attrs=attrs)
         except OutputError:
             raise self._aborted_for_space() from None
@@ -423,8 +437,9 @@ class RunWriter:
     # -- resume ------------------------------------------------------------------------------------
     @classmethod
     def resume(cls, path: "str | os.PathLike[str]", layout: Layout, *, extra_s: float,
-               flush_every_s: float = 1.0) -> "RunWriter":
-        """Reopen a run file ('running' after a crash, or 'aborted'): keep its valid data, add room for `extra_s`."""
+               flush_every_s: float = 1.0, truth_units: Mapping[str, str] | None = None) -> "RunWriter":
+        """Reopen a run file ('running' after a crash, or 'aborted'): keep its valid data (/truth's rows up to the
+        progress record too), add room for `extra_s`."""
         path = Path(path)
         with h5py.File(path, "r") as src:
             progress = read_progress(src)
@@ -432,7 +447,7 @@ class RunWriter:
             fields = [f for f in json.loads(src["acquire/progress"].attrs["fields"]) if f.startswith("state/")]
             state_fields = [f[len("state/"):] for f in fields]
             writer = cls(path, layout, protocol=protocol, flush_every_s=flush_every_s,
-                         state_fields=state_fields, _resume=True)
+                         state_fields=state_fields, truth_units=truth_units, _resume=True)
             writer.state = {k: progress.get(f"state/{k}", float("nan")) for k in state_fields}
             rows = int(progress["aligned_rows"])
             writer.builder.rows = rows
@@ -451,7 +466,11 @@ class RunWriter:
         caps = {"aligned": int(np.ceil(seconds / self.layout.dt)) + 1, "events": int(seconds / 5) + 1000}
         for s in self.layout.streams:
             caps[f"raw/{s.name}"] = int(np.ceil(seconds * s.rate_hz)) + 100
-        return caps
+        return self._with_truth(caps)
+
+    def _with_truth(self, capacity: dict[str, int]) -> dict[str, int]:
+        """`capacity` with /truth's, /aligned's own (the same grid), where the run has a /truth."""
+        return {**capacity, "truth": capacity["aligned"]} if self.truth_units else capacity
 
     def _rebuild(self, capacity: Mapping[str, int] | None, *, compact: bool, status: str,
                  attrs: Mapping[str, Any] | None) -> None:
@@ -560,7 +579,7 @@ class RunWriter:
         for name in self._raw:
             need[f"raw/{name}"] = self._raw_rows[name] + len(self._raw[name])
             have[f"raw/{name}"] = self._capacity(f"raw/{name}/time")
-        capacity = {k: max(have[k], 2 * need[k]) for k in have}
+        capacity = self._with_truth({k: max(have[k], 2 * need[k]) for k in have})
         self._close_fd()
         self._rebuild(capacity, compact=False, status="running", attrs=None)
         self._open()
@@ -616,12 +635,8 @@ class RunWriter:
             ds.attrs["fields"] = json.dumps(fields)
             ds.attrs["units"] = "1"
             acq.attrs["layout"] = json.dumps(describe_layout(self.layout))
-            for name, columns in self._closing_groups.items():
-                group = f.create_group(name)
-                for col, (values, units) in columns.items():
-                    arr = values if _sliced(values) else np.asarray(values, dtype=float)
-                    ds = _dataset(group, col, arr, compact)
-                    ds.attrs["units"] = units
+            if self.truth_units:
+                self._write_group(f, "truth", {"time": "s", **self.truth_units}, capacity, data, compact, "truth")
             f.flush()
 
     def _write_group(self, parent: h5py.Group, name: str, columns: Mapping[str, str], capacity, data,
@@ -633,7 +648,8 @@ class RunWriter:
             if compact and src is not None and len(src) == n:  # already exactly what is stored: no copy
                 arr = src
             else:
-                arr = np.arange(n) * self.layout.dt if col == "time" and prefix == "aligned" else np.full(n, np.nan)
+                grid = col == "time" and prefix in ("aligned", "truth")
+                arr = np.arange(n) * self.layout.dt if grid else np.full(n, np.nan)
                 if src is not None:
                     arr[:len(src)] = src[:n]
             ds = _dataset(group, col, arr, compact)
@@ -666,6 +682,11 @@ class RunWriter:
             n = int(progress.get(f"rows/{s.name}", 0))
             for col in ("time", *s.names):
                 data[f"raw/{s.name}/{col}"] = _Rows(src["raw"][s.name][col], n)
+        if self.truth_units and "truth" in src:  # growing: the rows this writer put beyond the progress record too
+            n = rows if compact else max(rows, self._truth_end)
+            for col in ("time", *self.truth_units):
+                if col in src["truth"]:
+                    data[f"truth/{col}"] = _Rows(src["truth"][col], n)
         n_ev = int(progress["event_rows"])
         stored = {name: ds[:n_ev] for name, ds in src["events"].items() if name in EVENT_FIELDS}
         data.update({f"events/{name}": column for name, column in complete_events(stored, n_ev).items()})
@@ -746,12 +767,6 @@ class _Rows:
     def __getitem__(self, part: slice) -> np.ndarray:
         start, stop, _ = part.indices(self.rows)
         return self.dataset[start:max(start, stop)]
-
-
-def _sliced(values: Any) -> bool:
-    """Whether closing-group values are a column read a slice at a time (a dtype, slicing, no array): written
-    chunk by chunk by `_dataset`, never held whole."""
-    return hasattr(values, "dtype") and hasattr(values, "__getitem__") and not isinstance(values, np.ndarray)
 
 
 def _dataset(parent: h5py.Group, name: str, arr: "np.ndarray | _Rows", compact: bool) -> h5py.Dataset:

@@ -286,14 +286,17 @@ def _check_time(path: Path, time: np.ndarray, dt: float, stored: np.dtype) -> No
 
 def load_truth(path: "str | os.PathLike[str]") -> pd.DataFrame | None:
     """The simulated bench's /truth: the plant's true temperatures (degC) on the /aligned grid, named like
-    /simulated (T_pressure_plate, ...); None for a run without it (hardware, imported, killed before closing)."""
+    /simulated (T_pressure_plate, ...), up to the progress record in a file still running or killed (NaN where no
+    final state had been written); None for a run without it (hardware, imported, killed before this was written
+    as the run went)."""
     import pandas as pd
 
     path = Path(path)
     with open_run(path) as f:
         if "truth" not in f:
             return None
-        frame = pd.DataFrame({name: ds[()].astype(np.float64) for name, ds in f["truth"].items()})
+        rows = int(read_progress(f)["aligned_rows"]) if "acquire/progress" in f else None
+        frame = pd.DataFrame({name: ds[:rows].astype(np.float64) for name, ds in f["truth"].items()})
     frame.attrs["source"] = str(path)
     return frame
 
@@ -307,7 +310,6 @@ class StoppedRun:
     progress: dict[str, float]  # the progress record
     dt: float
     last_valid: dict[str, float]  # newest measured value (NaN: none) of each channel asked for, up to the progress
-    truth: dict[str, np.ndarray]  # /truth's rows up to the progress record (time excluded); empty without /truth
     _schedule: object  # /schedule's steps_json as stored, parsed by `steps()`
 
     @property
@@ -331,8 +333,7 @@ def load_stopped_run(path: "str | os.PathLike[str]", channels: Sequence[str]) ->
         rows = _check_stopped(path, f, progress, dt)
         last = {name: _last_valid(f[f"aligned/{name}"][:rows] if f"aligned/{name}" in f else np.empty(0))
                 for name in channels}
-        truth = {name: ds[:rows] for name, ds in f["truth"].items() if name != "time"} if "truth" in f else {}
-        return StoppedRun(path, {k: text(v) for k, v in f.attrs.items()}, progress, dt, last, truth,
+        return StoppedRun(path, {k: text(v) for k, v in f.attrs.items()}, progress, dt, last,
                           f["schedule"].attrs.get("steps_json"))
 
 

@@ -19,8 +19,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Union
 
-import numpy as np
-
 from benchlab.acquire import RunWriter
 from benchlab.progress import SILENT, Progress
 from benchlab.errors import InputError
@@ -295,10 +293,11 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
         _restore_signals(previous)
         raise
     layout = bench.layout
+    truth_units = sim.truth_units() if sim is not None else {}  # the simulated bench's /truth
     try:
         if resume_state:
             writer = RunWriter.resume(request.out, layout, extra_s=duration_s(steps[resume_state["start"]:]),
-                                      flush_every_s=config.flush_every_s)
+                                      flush_every_s=config.flush_every_s, truth_units=truth_units)
             writer.state["resumes"] = resume_state["resumes"]
             start = resume_state["start"]
             writer.event(t0, "resume", int(resume_state["cycle"]),
@@ -317,8 +316,10 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
             writer = RunWriter(request.out, layout, protocol=request.protocol, attrs=attrs,
                                schedule=[s.as_dict() for s in steps], schedule_units=SCHEDULE_UNITS,
                                planned_s=duration_s(steps), flush_every_s=config.flush_every_s,
-                               state_fields=STATE_FIELDS, durable=sim is None)
+                               state_fields=STATE_FIELDS, durable=sim is None, truth_units=truth_units)
             writer.state["resumes"] = 0
+        if sim is not None:  # the plant's true states into /truth as they become final
+            sim.record_truth_into(writer.put_truth)
         task = request.progress.task(f"{request.protocol} on the {'simulated ' if sim is not None else ''}bench",
                                      duration_s(steps), unit="s")
         runner = Runner(bench, clock, steps, writer, config.limits, tick_s=config.tick_s,
@@ -333,12 +334,12 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
                 bench.safe_state(runner.safe)
                 writer.event(clock(), "run_aborted", runner.cycle, f"failure: {type(exc).__name__}: {exc}",
                              step=runner.current_step)
-                writer.close("aborted", groups=_truth_groups(sim, writer, resume_state))
+                _close(writer, sim, "aborted")
             finally:
                 raise
         finally:
             task.close()
-        writer.close(summary.status, groups=_truth_groups(sim, writer, resume_state))
+        _close(writer, sim, summary.status)
         if runner.stop_request is not None and summary.status == "complete":  # a signal after the last step or
             writer.set_status("aborted")  # during the compaction: the run ends as it would have a moment earlier
             summary.status, summary.reason = "aborted", runner.stop_request
@@ -354,23 +355,11 @@ def execute(request: RunRequest) -> tuple[int, RunSummary | None]:
     return code, summary
 
 
-def _truth_groups(sim: "SimBench | None", writer: RunWriter, resume_state: dict[str, Any] | None) -> dict[str, Any]:
-    """The simulated bench's /truth for the writer's close: the plant's true temperatures (degC) on the run's
-    grid, the rows before a resume as the file held them; nothing on hardware."""
-    if sim is None:
-        return {}
-    rows = writer.rows
-    before = resume_state["truth"] if resume_state else {}
-    columns = {"time": (np.arange(rows) * writer.layout.dt, "s")}
-    for name, values in sim.true_states(rows).items():
-        if len(values) == rows:  # nothing before this bench's rows (no resume): the values as they are, not copied
-            columns[name] = (values, "degC")
-            continue
-        head = np.full(rows - len(values), np.nan)
-        kept = before.get(name, head)[:len(head)]
-        head[:len(kept)] = kept
-        columns[name] = (np.concatenate([head, values]), "degC")
-    return {"truth": columns}
+def _close(writer: RunWriter, sim: "SimBench | None", status: str) -> None:
+    """Close the run file with `status`, the simulated bench's true states not final yet handed to /truth first."""
+    if sim is not None:
+        sim.hand_over_truth()
+    writer.close(status)
 
 
 def _resume_state(request: RunRequest) -> dict[str, Any]:
@@ -398,4 +387,4 @@ def _resume_state(request: RunRequest) -> dict[str, Any]:
               "T": initial["T_housing"] if math.isfinite(initial["T_housing"]) else f_init}
     return {"steps": steps, "start": start, "cycle": cycle, "t0": rows * stopped.dt, "initial": states,
             "resumes": int(resumes if math.isfinite(resumes) else 0) + 1, "protocol": protocol,
-            "options": options, "seed": seed, "truth": stopped.truth}
+            "options": options, "seed": seed}
