@@ -1,7 +1,8 @@
 """A 2-hour Table 1 run on the simulated bench: killed with SIGKILL in the middle, readable, resumed to the end.
 
 The run file and the raw CAN log beside it both survive the kill: the log reads back with python-can up to
-about the last second of the run file's data. (How fast the bench runs is benchmarks/bench_sim_bench.py's job.)
+about the last second of the run file's data, /truth up to the true states that were final (at most the three
+chunks the bench keeps, 30 s, behind), NaN after. (How fast the bench runs is benchmarks/bench_sim_bench.py's job.)
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import can
 import h5py
 import numpy as np
 
-from benchlab.runfile import load_run, read_progress
+from benchlab.runfile import load_run, load_truth, read_progress
 from benchlab.runner.session import can_log_path
 
 
@@ -53,6 +54,12 @@ def test_two_hour_table1_killed_readable_and_resumed(tmp_path):
     before = {c: run[c].to_numpy()[:rows] for c in ("T_flywheel", "engine_speed", "friction_power")}
     stamps = [m.timestamp for m in can.LogReader(str(can_log_path(out)))]  # the killed run's CAN log
     assert len(stamps) > 300 * 2400 and progress["t_data"] - 2.0 < stamps[-1] <= progress["t_data"] + 2.0
+    truth = load_truth(out)  # written as the run went: the final rows, then NaN up to the progress record
+    flywheel = truth["T_flywheel"].to_numpy()
+    final = int(np.argmax(np.isnan(flywheel)))
+    assert len(truth) == rows and rows - 3100 <= final < rows and np.isnan(flywheel[final:]).all()
+    sensor = run["T_flywheel_1"].to_numpy()[:final] - truth["T_flywheel_1"].to_numpy()[:final]
+    assert np.sqrt(np.nanmean(sensor ** 2)) < 0.1  # the node's sensor reads it within its noise (docs/plant.md)
 
     done = subprocess.run([sys.executable, "-m", "benchlab.cli", "run", "--resume", str(out), "--bench", "sim",
                            "--quiet"], capture_output=True, text=True, timeout=900)
@@ -63,6 +70,9 @@ def test_two_hour_table1_killed_readable_and_resumed(tmp_path):
     assert run["time"].iloc[-1] > 6000
     for c, values in before.items():  # what was acquired before the kill is kept as it was
         np.testing.assert_array_equal(run[c].to_numpy()[:rows], values)
+    resumed = load_truth(out)  # the killed run's final rows kept, NaN where it had none, the resumed bench's after
+    np.testing.assert_array_equal(resumed["T_flywheel"].to_numpy()[:rows], flywheel)
+    assert len(resumed) == len(run) and np.isfinite(resumed.to_numpy()[rows:]).all()
     with h5py.File(out, "r") as f:
         kinds = [k.decode() for k in f["events/kind"][:]]
         cycles = f["events/cycle"][:]
