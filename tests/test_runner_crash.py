@@ -1,8 +1,8 @@
 """A 2-hour Table 1 run on the simulated bench: killed with SIGKILL in the middle, readable, resumed to the end.
 
 The run file and the raw CAN log beside it both survive the kill: the log reads back with python-can up to
-about the last second of the run file's data, /truth up to the true states that were final (at most the three
-chunks the bench keeps, 30 s, behind), NaN after. (How fast the bench runs is benchmarks/bench_sim_bench.py's job.)
+about the last second of the run file's data, /truth up to the true states that were final and written (at most
+the three chunks the bench keeps, 30 s, and a batch of rows, 82 s, behind), NaN after. (How fast the bench runs is benchmarks/bench_sim_bench.py's job.)
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import can
 import h5py
 import numpy as np
 
+from benchlab.acquire.writer import TRUTH_BATCH_ROWS
 from benchlab.runfile import load_run, load_truth, read_progress
 from benchlab.runner.session import can_log_path
 
@@ -57,7 +58,7 @@ def test_two_hour_table1_killed_readable_and_resumed(tmp_path):
     truth = load_truth(out)  # written as the run went: the final rows, then NaN up to the progress record
     flywheel = truth["T_flywheel"].to_numpy()
     final = int(np.argmax(np.isnan(flywheel)))
-    assert len(truth) == rows and rows - 3100 <= final < rows and np.isnan(flywheel[final:]).all()
+    assert len(truth) == rows and rows - 3100 - TRUTH_BATCH_ROWS <= final < rows and np.isnan(flywheel[final:]).all()
     sensor = run["T_flywheel_1"].to_numpy()[:final] - truth["T_flywheel_1"].to_numpy()[:final]
     assert np.sqrt(np.nanmean(sensor ** 2)) < 0.1  # the node's sensor reads it within its noise (docs/plant.md)
 
