@@ -191,3 +191,36 @@ def test_sigkill_leaves_a_readable_file_missing_at_most_one_second(tmp_path, del
     assert run2.attrs["status"] == "complete"
     assert run2["time"].iloc[-1] == pytest.approx(t0 + 1.0, abs=0.011)
     np.testing.assert_array_equal(run2["engine_speed"].to_numpy()[:rows], valid)
+
+
+def test_truth_rows_go_into_the_file_as_handed_over_across_a_growth_a_close_and_a_resume(tmp_path):
+    """The simulated bench's /truth as RunWriter writes it: rows handed over ahead of the file's capacity wait for it
+    to grow, the running file holds them (NaN after the last written batch), the close cuts them at the grid's rows,
+    and a resumed writer keeps them and adds its own."""
+    from benchlab.acquire.writer import TRUTH_BATCH_ROWS
+    from benchlab.runfile import load_truth
+
+    path, units = tmp_path / "run.h5", {"T_a": "degC", "T_b": "degC"}
+    states = np.column_stack([np.arange(14000) * 0.5, -np.arange(14000.0)])
+    w = RunWriter(path, _layout(), protocol="table1", planned_s=2.0, truth_units=units)  # 6,221 rows at first
+    handed = 0
+    for second in range(1, 101):
+        w.advance(float(second))
+        while handed < (second + 20) * 100:  # the bench hands chunks over ahead of the grid, past the capacity too
+            w.put_truth(handed, states[handed:handed + 1000])
+            handed += 1000
+    running = load_truth(path)  # as a killed run would leave it: the written rows, NaN after
+    written = int(np.argmax(np.isnan(running["T_a"].to_numpy())))
+    assert len(running) == w.rows == 10001 and w.rows - TRUTH_BATCH_ROWS - 3000 <= written < w.rows
+    np.testing.assert_array_equal(running[["T_a", "T_b"]].to_numpy()[:written], states[:written])
+    w.close("aborted")
+    closed = load_truth(path)
+    np.testing.assert_array_equal(closed[["T_a", "T_b"]].to_numpy(), states[:10001])
+    np.testing.assert_array_equal(closed["time"].to_numpy(), load_run(path)["time"].to_numpy())
+    with h5py.File(path, "r") as f:
+        assert {k: f["truth"][k].attrs["units"] for k in f["truth"]} == {"time": "s", **units}
+    w = RunWriter.resume(path, _layout(), extra_s=10.0, truth_units=units)
+    w.put_truth(10001, states[10001:11001])
+    w.advance(110.0)
+    w.close()
+    np.testing.assert_array_equal(load_truth(path)[["T_a", "T_b"]].to_numpy(), states[:11001])
