@@ -77,7 +77,7 @@ def test_diagnose_page_names_each_tie_and_the_design_that_settles_it():
     finding = {"candidate": FAVOURED, "summary": "s", "signal": "engine_speed", "mechanism": "m", "extension": "e",
                "params": {}, "units": {}, "label": "cause", "label_reasons": [],
                "alternatives": [{"candidate": OTHER, "gain_pct": 12.0, "tell_apart_by": "a sensor on node P"}]}
-    summary = {"method": {"baseline_bounds": []}, "findings": [finding],
+    summary = {"method": {"baseline_bounds": []}, "findings": [finding], "leads": [],
                "floor": {"noise_K": 0.01, "baseline_ratio": 9.0, "best_ratio": 2.0, "verdict": "v"}}
     page = "\n".join(_added(summary))
     assert OTHER in page and "a sensor on node P" in page and "--diagnosis" in page

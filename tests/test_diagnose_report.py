@@ -269,3 +269,69 @@ def test_a_source_on_top_of_the_measured_friction_power_creates_energy(churn):
     assert energy_reasons(finding(0.0), diagnosis) == []
     # the source is another finding's where the model this one was measured against already holds it
     assert energy_reasons(finding(50.0, (SimpleNamespace(definition=extended), {})), diagnosis) == []
+
+
+def _alternatives(diagnosis):
+    """Each finding and lead of the diagnosis that has alternatives, with them (the churn run's source on the clutch
+    speed is not told apart from the same source gated by the clutch state)."""
+    tied = [f for f in [*diagnosis.findings, *diagnosis.leads] if f.alternatives]
+    assert tied, "the churn diagnosis no longer has a tie: pick a fixture that does"
+    return tied
+
+
+def test_an_alternative_keeps_its_fit_on_the_diagnosed_runs(churn):
+    """The values kept on `engine.Alternative` are its fit, not its nested start: in sample they beat the baseline by
+    about the held-out gain that let it pass, as the named extension's kept fit does."""
+    from benchlab.diagnose.engine import HeldOut
+
+    _, diagnosis, _ = churn
+    datasets = diagnosis.final_held.datasets
+
+    def rmse(spec, params) -> float:
+        return HeldOut(datasets, [simulate_outputs(spec.network, {**spec.fixed, **params}, d) for d in datasets],
+                       []).rmse
+
+    baseline = rmse(diagnosis.baseline.spec, diagnosis.baseline.params)
+    for finding in _alternatives(diagnosis):
+        for a in finding.alternatives:
+            assert rmse(a.spec, a.params) < (1 - a.gain_pct / 200) * baseline
+            assert rmse(*a.named) < (1 - finding.gain_pct / 200) * baseline
+
+
+def test_each_tie_ranks_the_sensor_places_in_the_json(churn):
+    """Every place both models have is ranked: the unmeasured plate removes more of its own estimate variance than
+    any measured place; the finding against itself gains nothing anywhere, against the alternative something."""
+    from benchlab.design.sensors import rank_diagnosed_sensors
+
+    _, diagnosis, summary = churn
+    tied = [f for f in [*summary["findings"], *summary["leads"]] if f["alternatives"]]
+    for f in tied:
+        for a in f["alternatives"]:
+            places = {p["channel"]: p for p in a["sensors"]}
+            assert set(places) >= {"T_pressure_plate", "T_flywheel", "T_air", "T_housing"}
+            assert not places["T_pressure_plate"]["measured"] and places["T_air"]["measured"]
+            plate = places.pop("T_pressure_plate")
+            assert all(plate["plate_variance_reduction_pct"] > p["plate_variance_reduction_pct"] > 0
+                       for p in places.values())
+            assert max(p["test_gain"] for p in a["sensors"]) > 0
+    finding = _alternatives(diagnosis)[0]
+    itself = rank_diagnosed_sensors(finding.alternatives[0].named, [finding.alternatives[0].named],
+                                    diagnosis.final_held.datasets)[0]
+    assert [p.test_gain for p in itself] == [0.0] * len(itself)
+
+
+def test_the_page_and_the_terminal_say_where_a_sensor_would_tell_the_tie_apart(churn, capsys):
+    from benchlab.commands.diagnose import print_report
+    from benchlab.diagnose.page import _added
+
+    _, _, summary = churn
+    page = "\n".join(_added(summary))
+    assert "On these runs a sensor at `T_pressure_plate` (node `P`, no sensor now) would remove" in page
+    assert "to the test statistic between the two; at `T_" in page
+    tied = next(f for f in summary["findings"] if f["alternatives"])  # a lead's tie is said as well
+    as_lead = "\n".join(_added({**summary, "findings": [], "leads": [tied]}))
+    assert f"The lead `{tied['candidate']}` is not told apart from" in as_lead and "would remove" in as_lead
+    print_report(summary)
+    printed = capsys.readouterr().out
+    assert "not told apart from" in printed
+    assert "T_pressure_plate (node P, no sensor now): plate variance -" in printed and "test statistic +" in printed

@@ -55,6 +55,23 @@ def unseen_text(entry: dict) -> str:
             f"{unseen['gain_pct']:.1f} % (p = {unseen['p_value']:.2g}); ")
 
 
+def alternative_lines(finding: dict) -> list[str]:
+    """Each alternative of a finding or lead: what would tell it apart, then every place a sensor could go with what
+    it is worth on the diagnosed runs (the design's wording, `design/sensors.py` `SensorWorth.line`)."""
+    with interrupts_held():  # see benchlab.cli
+        from benchlab.design.sensors import SensorWorth
+
+    lines = []
+    for a in finding.get("alternatives", []):
+        lines.append(f"  not told apart from {a['candidate']} (held-out gain {a['gain_pct']:.1f} %, p = "
+                     f"{a['p_vs_finding']:.2g} that the finding is better): {a['tell_apart_by']}")
+        if a.get("sensors"):
+            lines.append("    a sensor at each place, on these runs (what it removes of the plate's estimate "
+                         "variance, what it adds to the test between the two):")
+            lines += ["  " + SensorWorth(**place).line() for place in a["sensors"]]
+    return lines
+
+
 def print_report(result: dict) -> None:
     """The human-readable summary: baseline, worst held-out regime, strongest evidence, each finding (its gain on
     unseen runs first), the leads, the best model."""
@@ -86,9 +103,13 @@ def print_report(result: dict) -> None:
                   f"± {g['standard_error']:.2g} {g['unit']}")
         if f["label"] != "cause":
             print(f"  a {f['label']}, not a cause: {'; '.join(f['label_reasons'])}")
+        for line in alternative_lines(f):
+            print(line)
     for lead in result["leads"]:
         print(f"lead ({lead['label']}, not a cause): {lead['candidate']} ({lead['signal']}/{lead['mechanism']}), "
               f"{unseen_text(lead)}held-out gain {lead['gain_pct']:.1f} %: {'; '.join(lead['label_reasons'])}")
+        for line in alternative_lines(lead):
+            print(line)
     best, floor = result["best"], result["floor"]
     print(f"best {best['model']}: {unseen_text(best)}held-out RMSE {best['rmse_K']:.3f} K ({best['nrmse_pct']:.2f} %)")
     print(f"noise floor of the measurements {floor['noise_K']:.4f} K: baseline {floor['baseline_ratio']:.1f}x, "

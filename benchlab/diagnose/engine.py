@@ -237,6 +237,12 @@ class Alternative:
     p_value: float  # its own block test against the parent
     p_vs_winner: float  # the block test that the accepted extension's held-out error is lower than this one's
     added: int  # the parameters it would add
+    #: its model (the parent as judged, with this extension) and its fit on all the diagnosed runs, the one its
+    #: held-out test started from: kept so that what would tell it apart is measured without fitting it again
+    spec: ModelSpec
+    params: dict[str, float]
+    #: the named extension's model and fit that it was tested against (p_vs_winner), fitted alike
+    named: tuple[ModelSpec, dict[str, float]]
 
 
 @dataclass
@@ -605,7 +611,7 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
         if named is None:
             return None
     alternatives = [Alternative(t.candidate, t.gain_pct, t.p_value, block_test(t.held, named.held),
-                                len(_added(t.spec, current)))
+                                len(_added(t.spec, current)), t.spec, t.params, (named.spec, named.params))
                     for t in _passing(tried) if _explains(t.candidate) != _explains(named.candidate)]
     return _finding(named.candidate, named.spec, named.params, named.cost, named.residuals, current, current_held,
                     named.held, [a for a in alternatives if a.p_vs_winner >= ALPHA], run_gain)

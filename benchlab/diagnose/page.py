@@ -110,7 +110,7 @@ def _added(summary: dict) -> list[str]:
                  f"baseline is {floor['baseline_ratio']:.1f}x it, the final model {floor['best_ratio']:.1f}x: "
                  f"{floor['verdict']}.")
     if not summary["findings"]:
-        return parts + ["Nothing: no extension lowers the held-out error significantly, so the model is kept as it is."]
+        parts.append("Nothing: no extension lowers the held-out error significantly, so the model is kept as it is.")
     for f in summary["findings"]:
         units = f.get("units", {})  # the extended model file's (library.py writes one for each parameter it adds)
         params = [(literal(k), f"{v:.6g}", text(units[k]) if units.get(k) else unit(k))
@@ -121,14 +121,39 @@ def _added(summary: dict) -> list[str]:
         parts += [f"**{text(f['candidate'])}** ({label}) – {text(f['summary'])}. {signal}, mechanism "
                   f"{literal(f['mechanism'])}: {literal(f['extension'])}",
                   table(("parameter", "value", "unit"), params)]
-        parts += [f"Not told apart from {literal(a['candidate'])} (gain {a['gain_pct']:.0f} %): "
-                  f"{text(a['tell_apart_by'])}." for a in f.get("alternatives", [])]
-    if any(f.get("alternatives") for f in summary["findings"]):
-        parts.append("`benchlab design RUN.h5 … --diagnosis D.json` (this diagnosis as `--json`) designs the run that "
-                     "tells the first tie apart, says which should lose by how much, and ranks every place a sensor "
-                     "could go (the pressure plate, the chamber air, the housing, …) by the plate's estimate "
-                     "variance it removes and the test between the two it adds (docs/design.md).")
+        parts += _ties(f, "Not")
+    for lead in summary["leads"]:  # a lead is out of the final model (How much better), its tie still open
+        parts += _ties(lead, f"The lead {literal(lead['candidate'])} is not")
+    if any(f.get("alternatives") for f in summary["findings"] + summary["leads"]):
+        parts.append("A sensor's place is worth what it removes of the pressure plate's estimate variance (the "
+                     "Kalman observer of the model with the named extension, over the diagnosed runs' inputs; a place "
+                     "measured now: what losing its sensor would add) and what its channel adds to the test statistic "
+                     "between the two models on these runs (the sum over their samples of the squared difference of "
+                     "the two models' predictions over the misfit of the better one, in effective samples; a new "
+                     "sensor weighed against the worst measured misfit). `benchlab design RUN.h5 … --diagnosis "
+                     "D.json` (this diagnosis as `--json`) designs the run that tells the first tie apart and says "
+                     "which should lose by how much (docs/design.md).")
     return parts
+
+
+def _ties(finding: dict, subject: str) -> list[str]:
+    """Each alternative of a finding or lead (`subject` starts the sentence): the measurement that would tell the two
+    apart, and where a sensor would (_sensor_places)."""
+    return [f"{subject} told apart from {literal(a['candidate'])} (gain {a['gain_pct']:.0f} %): "
+            f"{text(a['tell_apart_by'])}." + _sensor_places(a.get("sensors", [])) for a in finding["alternatives"]]
+
+
+def _sensor_places(places: Sequence[dict]) -> str:
+    """An alternative's sensor ranking (`sensors` of the diagnose JSON) in one sentence, best place first."""
+    if not places:
+        return ""
+    said = [f"{literal(p['channel'])} (node {literal(p['node'])}, "
+            f"{'measured now' if p['measured'] else 'no sensor now'})" for p in places]
+    first = places[0]
+    return (f" On these runs a sensor at {said[0]} would remove {number(first['plate_variance_reduction_pct'], 1)} % "
+            f"of the plate's estimate variance and add {first['test_gain']:.3g} to the test statistic between the "
+            "two" + "".join(f"; at {where}: {number(p['plate_variance_reduction_pct'], 1)} % and {p['test_gain']:.3g}"
+                            for where, p in zip(said[1:], places[1:])) + ".")
 
 
 def _unseen_cells(entry: dict) -> tuple[str, str]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import asdict
 
 import numpy as np
 import pandas as pd
@@ -123,12 +124,26 @@ def unseen_json(before: HeldOut | None, after: HeldOut | None) -> dict | None:
             "p_value": block_test(before, after), "runs": runs}
 
 
+def sensors_json(f: Finding, result: Diagnosis) -> list[list[dict]]:
+    """Per alternative of `f`, every place a sensor could go, ranked on the diagnosed runs as `benchlab design`
+    ranks it (`design/sensors.py` `rank_diagnosed_sensors`, from the fits the diagnosis kept): the plate variance it
+    removes under the finding's model, what it adds to the test between the finding and the alternative."""
+    if not f.alternatives:
+        return []
+    from benchlab.design.sensors import rank_diagnosed_sensors
+
+    ranked = rank_diagnosed_sensors(f.alternatives[0].named, [(a.spec, a.params) for a in f.alternatives],
+                                    result.final_held.datasets)
+    return [[asdict(s) for s in worths] for worths in ranked]
+
+
 def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors: dict[str, float],
                   floor: dict) -> dict:
     """Contract §3 keys, the gain on unseen runs, then the test figures, the fitted extension, and the alternatives
-    the data cannot rule out with the measurement that would; for runs that disagree, each group's value; for a lead,
-    why it is not a cause; its label (label_json)."""
+    the data cannot rule out with the measurement that would and each sensor place's worth (sensors_json); for runs
+    that disagree, each group's value; for a lead, why it is not a cause; its label (label_json)."""
     c = f.candidate
+    sensors = sensors_json(f, result)
     out = {"signal": c.signal, "mechanism": c.mechanism, "summary": c.summary, "extension": c.extension,
            "signals": list(c.reads), "unseen_gain_pct": f.unseen_gain_pct,
            "unseen": unseen_json(f.unseen_before, f.unseen_after),
@@ -142,7 +157,8 @@ def _finding_json(f: Finding, model: ModelDefinition, result: Diagnosis, errors:
                              "mechanism": a.candidate.mechanism, "extension": a.candidate.extension,
                              "gain_pct": a.gain_pct, "n_params": a.added, "p_value": a.p_value,
                              "p_vs_finding": a.p_vs_winner,
-                             "tell_apart_by": telling_apart(model, c, a.candidate)} for a in f.alternatives]}
+                             "tell_apart_by": telling_apart(model, c, a.candidate), "sensors": places}
+                            for a, places in zip(f.alternatives, sensors)]}
     groups = per_group_values(f, result, errors) if c.splits else []
     if groups:
         out["per_group"] = groups

@@ -87,14 +87,16 @@ def run_values(params: Mapping[str, float], data: FitData) -> Mapping[str, float
     return {**params, **own} if own else params
 
 
-def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData) -> dict[str, np.ndarray]:
-    """Model outputs at the fitting step for the measured channels of `data`."""
+def simulate_outputs(network: ThermalNetwork, params: Mapping[str, float], data: FitData,
+                     channels: Iterable[str] | None = None) -> dict[str, np.ndarray]:
+    """Model outputs at the fitting step for the measured channels of `data` (or for `channels`, outputs of the
+    model, measured or not)."""
     states = _states(network, params, data)[:-1]
     index = {s: i for i, s in enumerate(network.state_names)}
     seconds = np.arange(len(states)) * data.dt
     values = run_values(params, data)
     return {c: reading(network.calibrations.get(c), values, states[:, index[network.outputs[c]]], seconds)
-            for c in data.targets}
+            for c in (data.targets if channels is None else channels)}
 
 
 def read_fitted(network: ThermalNetwork, params: Mapping[str, float], data: FitData,
