@@ -45,6 +45,19 @@ def test_the_capacity_law_round_trips_through_toml_and_json_and_is_checked():
         parse_model(_one_mass(node="X"), "m.toml")
 
 
+def test_deploy_refuses_a_capacity_law_and_identify_says_what_would_pin_it():
+    """The deployed module holds each capacity constant: one line naming the node; a law's own parameter is pinned
+    by heat-ups and cool-downs over a range of the temperature it reads."""
+    from benchlab.deploy.plan import make_plan
+    from benchlab.identify.excitation import what_identifies
+    from benchlab.model.params import ModelParams
+
+    model = parse_model(_one_mass(), "m.toml")
+    with pytest.raises(InputError, match=r"m\.toml: capacities\[F\]: a model whose capacities are parameters"):
+        make_plan(ModelParams(model, {"C_F": C0, "k_F": K, "R_F": R}), ["T_F"], 1.0, None)
+    assert what_identifies(model, "k_F") == "heat-ups and cool-downs of node F over a wide range of T_F"
+
+
 def _heated(n: int = 3000, dt: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Times, heater power (400 W on and off every 5 min) and a drifting ambient."""
     t = np.arange(n) * dt
