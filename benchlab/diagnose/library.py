@@ -350,7 +350,8 @@ def capacity_law(channel: str, node: str) -> Build:
         def edit(doc: Doc) -> None:
             doc.setdefault("capacities", []).append({"node": node, "capacity": law})
             limit = (1.0 - CAPACITY_FLOOR) / reach
-            _parameter(doc, k, 0.0, -limit, limit, "1/K (the capacity's change per kelvin, relative)", scale=0.1 / reach)
+            _parameter(doc, k, 0.0, -limit, limit, "1/K (the capacity's change per kelvin, relative)",
+                       scale=0.1 / reach)
         return revise(model, f"{CAPACITY_KEY}{_slug(channel)}", edit)
     return build
 

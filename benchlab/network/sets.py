@@ -18,9 +18,9 @@ import numpy as np
 from benchlab.jit import njit
 
 from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
-from benchlab.network.solver import (_capacity, _capacity_terms, _coefficient, _coefficient_terms, _conductance, _per_point,
-                             _propagate, _propagate4, _quantised, _system_matrices, _zoh, discretise, matrix_laws,
-                             propagate, split_laws)
+from benchlab.network.solver import (_capacity, _capacity_terms, _coefficient, _coefficient_terms, _conductance,
+                             _per_point, _propagate, _propagate4, _quantised, _system_matrices, _zoh, discretise,
+                             matrix_laws, propagate, split_laws)
 from benchlab.network.memo import LawMemo, NoMemo
 
 
