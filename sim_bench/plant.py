@@ -127,6 +127,19 @@ def extra_mass(capacity_j_per_k: float, resistance_k_per_w: float) -> Effect:
     return Effect("extra_mass", None, "capacity", edit, {"C_H": capacity_j_per_k, "R_FH": resistance_k_per_w})
 
 
+def capacity_temperature(node: str, channel: str, per_k: float, reference_c: float = 25.0) -> Effect:
+    """The heat capacity C of node `node` (measured as `channel`) rises with its own temperature, as a metal's
+    specific heat does: C·(1 + β·(ϑ − `reference_c`)) on the plant's own state, solved by fixed-point iteration; the
+    state follows dϑ/dt = Q/C(ϑ)."""
+    beta = f"beta_C_{node}"
+
+    def edit(net, p):
+        def law(q, ch, capacity=next(n.capacity for n in net.nodes if n.name == node)):
+            return q[capacity] * (1.0 + q[beta] * (ch[f"_state_{node}"] - reference_c))
+        return replace(net, nodes=tuple(replace(n, capacity_law=law) if n.name == node else n for n in net.nodes))
+    return Effect("capacity_temperature", channel, "capacity", edit, {beta: per_k}, reads_states=True)
+
+
 def radiation(emissivity_area_m2: float) -> Effect:
     """Flywheel and plate radiate to the housing: εA·σ·(T⁴ − T_T⁴), solved by fixed-point iteration."""
     def flow(node: str, sign: float):

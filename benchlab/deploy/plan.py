@@ -76,6 +76,9 @@ def make_plan(params: ModelParams, sensors: Sequence[str], dt: float, clutch: Cl
     if switched:
         raise InputError(params.definition.source, ", ".join(switched), "a law without hysteresis(...): the deployed C module "
                          "does not carry a switch's state yet (docs/deploy.md)")
+    if model.capacities:
+        raise InputError(model.source, f"capacities[{model.capacities[0].node}]", "a model whose capacities are "
+                         "parameters: the deployed C module holds each capacity constant (docs/deploy.md)")
     names = state_channels(network)
     for channel in sensors:
         if channel not in network.outputs:

@@ -5,10 +5,11 @@ The generator works on any network (benchlab.model.ModelDefinition): every link 
 resistance law) × every varying signal but the heat input (path_signals) under three resistance laws (linear,
 power, exponential in the signal; one factor for an on/off signal); every node × signal as a heat source; a new
 link between each pair of nodes that have none; one extra node hung on each node and one bridging each pair of
-nodes; a first-order lag, an offset-and-gain calibration and a drift on each measured output; heat moved between
-each pair of sources; then, last, learned piecewise-linear heat flows. Every candidate starts NESTED: at its start
+nodes; each measured node's capacity as a linear law of its own temperature; a first-order lag, an offset-and-gain
+calibration and a drift on each measured output; heat moved between each pair of sources; then, last, learned
+piecewise-linear heat flows. Every candidate starts NESTED: at its start
 values it is its parent model (a factor of one, a source of zero watts, a node of 1 J/K, a link of 1e4 K/W, a lag
-of 5 ms, a sensor of gain 1, offset 0 K and drift 0 K/s), and that point lies inside its bounds, so a fit that
+of 5 ms, a sensor of gain 1, offset 0 K and drift 0 K/s, a capacity that does not change with temperature), and that point lies inside its bounds, so a fit that
 starts there can only lower the parent's cost.
 The paper's clutch gets the same generator plus physical names (convection on R_PA/R_FA, conduction on R_Feng,
 `heat_split` of plate and flywheel shares, `extra_mass` behind the flywheel, `sensor_lag` of the flywheel),
@@ -54,6 +55,10 @@ CALIBRATION_GAIN = (0.8, 1.25)
 CALIBRATION_OFFSET_K = 20.0
 CALIBRATION_KEY = "sensor_calibration_"  # + the output's channel
 DRIFT_KEY = "sensor_drift_"  # + the output's channel
+CAPACITY_KEY = "capacity_level_"  # + the channel that measures the node
+#: A capacity law's bounds keep it at least this share of its parameter over the runs' temperatures (k up to
+#: (1 − share)/the largest distance from its reference); below it, on runs beyond them, it is held there
+CAPACITY_FLOOR = 0.1
 #: A drift candidate's bound (K/s): 36 K an hour either way
 CALIBRATION_DRIFT_K_PER_S = 0.01
 #: Screening starts of a sensor lag (s): a lag of 5 ms is flat to first order, so its screen starts also here
@@ -327,6 +332,42 @@ def extra_node(ends: tuple[str, ...], key: str, mass: str) -> Build:
             _parameter(doc, capacity, 100.0 if bridging else NESTED_CAPACITY, 0.1, 1e5, "J/K")
         return revise(model, key, edit)
     return build
+
+
+def capacity_law(channel: str, node: str) -> Build:
+    """Node `node`'s capacity C as C·(1 + k·(ϑ − ϑ_ref)), ϑ its own temperature as `channel` measures it (the
+    solver holds it per step, as it holds the |ΔT| and level laws), ϑ_ref the runs' median of it: the linear law of
+    a metal's specific heat over some tens of kelvin. Nested at k = 0 (C itself); the state follows dϑ/dt = Q/C(ϑ),
+    so the heat the node stores is ∫C dϑ and no heat is created."""
+    def build(model: ModelDefinition, ch: Channels) -> ModelDefinition:
+        values = signal_values(channel, ch)
+        reference = round(float(np.nanmedian(values)), 1)
+        reach = float(np.nanmax(np.abs(values - reference))) or 1.0
+        capacity = model.nodes[node]
+        k = f"k_{capacity}"
+        law = f"{capacity} * maximum(1.0 + {k} * ({channel} - {reference!r}), {CAPACITY_FLOOR!r})"
+
+        def edit(doc: Doc) -> None:
+            doc.setdefault("capacities", []).append({"node": node, "capacity": law})
+            limit = (1.0 - CAPACITY_FLOOR) / reach
+            _parameter(doc, k, 0.0, -limit, limit, "1/K (the capacity's change per kelvin, relative)",
+                       scale=0.1 / reach)
+        return revise(model, f"{CAPACITY_KEY}{_slug(channel)}", edit)
+    return build
+
+
+def capacity_candidates(model: ModelDefinition) -> list[Candidate]:
+    """A capacity law (capacity_law) on each node a channel measures (its first output) whose capacity is constant."""
+    measured: dict[str, str] = {}
+    for output, node in model.outputs.items():
+        measured.setdefault(node, output)
+    varying = {c.node for c in model.capacities}
+    return [Candidate(f"{CAPACITY_KEY}{_slug(channel)}", channel, "capacity",
+                      f"C_{node} = C*(1 + k*({channel} - T_ref))",
+                      f"the heat capacity of node {node} changes with its own temperature {channel} (a metal's "
+                      "specific heat rises as it heats)", capacity_law(channel, node), nodes=(node,),
+                      signals=(channel,))
+            for node, channel in measured.items() if node not in varying]
 
 
 def typical_resistance(model: ModelDefinition, values: Mapping[str, float]) -> float:
@@ -629,6 +670,7 @@ def generated(model: ModelDefinition, signals: list[str], channels: Channels,
                              f"a thermal mass the model lacks sits between {a} and {b}",
                              extra_node((a, b), f"bridge_{a}_{b}", f"X{a}{b}"), nodes=(a, b), structural=True,
                              probes=node_probes(model, (a, b), f"X{a}{b}"), exact=False))
+    out += capacity_candidates(model)
     lagged = {g.output for g in model.lags}
     for output, node in model.outputs.items():
         if output not in lagged:

@@ -17,7 +17,7 @@ from benchlab.jit import njit
 from benchlab.identify.data import FitData
 from benchlab.identify.fit import KEY_RESOLUTION, reading_gains, run_values
 from benchlab.network import Channels, ThermalNetwork, as_samples
-from benchlab.network.solver import _coefficients, _conductances, discretise
+from benchlab.network.solver import discretise, matrix_laws
 
 
 class ScoreResponse:
@@ -47,9 +47,8 @@ class ScoreResponse:
         self._changes = np.empty((0, self.gains.shape[1]))
 
     def _laws(self, channels: Channels) -> list:
-        """The laws the operating points are made of (conductances, then source coefficients) on `channels`."""
-        return (_conductances(self.network, self.values, channels, self.samples)
-                + _coefficients(self.network, self.values, channels))
+        """The laws the operating points are made of (conductances, source coefficients, capacities) on `channels`."""
+        return matrix_laws(self.network, self.values, channels, self.samples)[0]
 
     def scores(self, draws: Sequence[Channels]) -> list[np.ndarray | None]:
         """Jᵀe for the run driven by each of `draws` (channels) instead of its own; None where they move an operating

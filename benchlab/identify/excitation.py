@@ -33,6 +33,10 @@ def what_identifies(model: ModelDefinition, name: str) -> str:
             needs.append(f"faster heat-ups and cool-downs of node {node}" if node in model.outputs.values() else
                          f"a temperature sensor on node {node} (nothing measures it: its capacity shows only through "
                          "the measured temperatures)")
+    for entry in model.capacities:
+        if name in entry.capacity.names and name != model.nodes[entry.node]:
+            needs.append(f"heat-ups and cool-downs of node {entry.node} over a wide range of "
+                         f"{', '.join(_channels(model, entry.capacity.tree)) or 'its temperature'}")
     needs += [f"changes of {lag.output} faster than its sensor follows" for lag in model.lags
               if lag.time_constant == name]
     for link in model.links:

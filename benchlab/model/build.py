@@ -47,7 +47,8 @@ def _first_present(channels: tuple[str, ...]) -> Callable[[Channels], np.ndarray
 
 
 def build_network(model: ModelDefinition) -> ThermalNetwork:
-    """The model's nodes, boundaries, links, sources, sensor lags and calibrations as a ThermalNetwork."""
+    """The model's nodes (with their capacity laws), boundaries, links, sources, sensor lags and calibrations as a
+    ThermalNetwork."""
     laws: dict[str, Callable] = {}
 
     def law(expr: Expression) -> Callable:
@@ -62,11 +63,16 @@ def build_network(model: ModelDefinition) -> ThermalNetwork:
         reads = _parameters_read(model, entry.heat)
         sources.append(Source(entry.node, _law(constant, reads, entry.heat.sequential), entry.name,
                               tuple((node, _law(k, reads, entry.heat.sequential)) for node, k in coefficients.items())))
+    # a law object of its own (not shared by text with a link's): the solver's memo keeps a link's 1/R under its law
+    capacity_laws = {entry.node: _law(compile_expression(entry.capacity, kinds(model.parameters, model.nodes,
+                                                                               entry.capacity.names)),
+                                      _parameters_read(model, entry.capacity), entry.capacity.sequential)
+                     for entry in model.capacities}
     outputs = {**model.simulated, **model.outputs}
     for lag in model.lags:
         outputs[lag.output] = model.lag_state(lag.output)
     return ThermalNetwork(
-        nodes=tuple(Node(name, capacity) for name, capacity in model.nodes.items()),
+        nodes=tuple(Node(name, capacity, capacity_laws.get(name)) for name, capacity in model.nodes.items()),
         boundaries=tuple(Boundary(name, _first_present(channels)) for name, channels in model.boundaries.items()),
         links=tuple(Link(l.between[0], l.between[1], law(l.resistance), l.name) for l in model.links),
         sources=tuple(sources),

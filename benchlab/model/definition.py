@@ -23,8 +23,8 @@ from benchlab.values import check_keys, finite_number
 
 SCHEMA = "benchlab-model/1"
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-TOP_KEYS = ("schema", "name", "description", "requires", "nodes", "boundaries", "links", "sources", "lags",
-            "calibrations", "outputs", "simulated", "initial", "parameters")
+TOP_KEYS = ("schema", "name", "description", "requires", "nodes", "capacities", "boundaries", "links", "sources",
+            "lags", "calibrations", "outputs", "simulated", "initial", "parameters")
 PARAMETER_KEYS = ("start", "min", "max", "unit", "fixed", "scale")
 CALIBRATION_TERMS = ("gain", "offset", "drift")  # reading = gain * T + offset + drift * t (benchlab.network.sensors)
 
@@ -50,6 +50,15 @@ class LinkEntry:
     name: str
     between: tuple[str, str]
     resistance: Expression
+
+
+@dataclass(frozen=True)
+class CapacityEntry:
+    """A node's heat capacity (J/K) as a law of parameters and channels, in place of its [nodes] parameter alone: a
+    capacity that varies with the node's own temperature, read from the channel that measures it."""
+
+    node: str
+    capacity: Expression
 
 
 @dataclass(frozen=True)
@@ -104,6 +113,7 @@ class ModelDefinition:
     source: str = field(default="<model>", compare=False)  # where it was read from, for error messages
     alias: str | None = field(default=None, compare=False)
     calibrations: tuple[CalibrationEntry, ...] = ()
+    capacities: tuple[CapacityEntry, ...] = ()
 
     @property
     def label(self) -> str:
@@ -111,8 +121,9 @@ class ModelDefinition:
         return self.alias or self.name
 
     def law_channels(self) -> set[str]:
-        """Channels that resistances and heat flows read."""
-        named = set().union(*(l.resistance.names for l in self.links), *(s.heat.names for s in self.sources))
+        """Channels that resistances, heat flows and capacity laws read."""
+        named = set().union(*(l.resistance.names for l in self.links), *(s.heat.names for s in self.sources),
+                            *(c.capacity.names for c in self.capacities))
         return named - set(self.parameters) - set(self.nodes)
 
     def channels(self) -> list[str]:
@@ -154,6 +165,7 @@ class ModelDefinition:
         if self.requires:
             doc["requires"] = list(self.requires)
         doc["nodes"] = dict(self.nodes)
+        doc["capacities"] = [{"node": c.node, "capacity": c.capacity.text} for c in self.capacities]
         doc["boundaries"] = {k: (v[0] if len(v) == 1 else list(v)) for k, v in self.boundaries.items()}
         doc["links"] = [{"name": l.name, "between": list(l.between), "resistance": l.resistance.text} for l in self.links]
         doc["sources"] = [{"name": s.name, "node": s.node, "heat": s.heat.text} for s in self.sources]
@@ -281,6 +293,7 @@ def parse_model(doc: object, source: "str | os.PathLike[str]", prefix: str = "")
         raise _fail(source, f"{prefix}nodes.{name_}" if name_ in nodes else f"{prefix}boundaries.{name_}",
                     "a name no node, boundary or parameter shares")
     links = _links(source, prefix, doc, nodes, boundaries, params)
+    capacities = _capacities(source, prefix, doc, nodes, boundaries)
     sources = _sources(source, prefix, doc, nodes, boundaries, params)
     outputs = _outputs(source, f"{prefix}outputs", doc["outputs"], nodes, params)
     simulated = _outputs(source, f"{prefix}simulated", doc.get("simulated", {}), nodes, params)
@@ -297,7 +310,7 @@ def parse_model(doc: object, source: "str | os.PathLike[str]", prefix: str = "")
         raise _fail(source, f"{prefix}description", "a string")
     model = ModelDefinition(name, nodes, boundaries, links, sources, lags, outputs, simulated, initial, params,
                             tuple(_name(source, f"{prefix}requires", c, "a channel") for c in requires),
-                            description, source, calibrations=calibrations)
+                            description, source, calibrations=calibrations, capacities=capacities)
     _check_names(model, prefix)
     return model
 
@@ -331,6 +344,27 @@ def _links(source, prefix, doc, nodes, boundaries, params) -> tuple[LinkEntry, .
             if name in nodes or name in boundaries:
                 raise _fail(source, f"{entry}.resistance", f"parameters and channels only, got the temperature {name!r}")
         out.append(LinkEntry(label, (between[0], between[1]), resistance))
+    return tuple(out)
+
+
+def _capacities(source, prefix, doc, nodes, boundaries) -> tuple[CapacityEntry, ...]:
+    out = []
+    for i, table in enumerate(_entries(source, f"{prefix}capacities", doc.get("capacities", []))):
+        entry = f"{prefix}capacities[{i}]"
+        _keys(source, entry, table, ("node", "capacity"), ("node", "capacity"))
+        node = table["node"]
+        if node not in nodes:
+            raise _fail(source, f"{entry}.node", f"a node of the model, got {node!r}")
+        capacity = _expression(source, f"{entry}.capacity", table["capacity"])
+        for name in capacity.names:
+            if name in nodes or name in boundaries:
+                raise _fail(source, f"{entry}.capacity", f"parameters and channels only (a temperature as the "
+                                                         f"channel that measures it), got the temperature {name!r}")
+        if nodes[node] not in capacity.names:
+            raise _fail(source, f"{entry}.capacity", f"a law of node {node}'s capacity parameter {nodes[node]} "
+                                                     "(its [nodes] entry), which it does not name")
+        out.append(CapacityEntry(node, capacity))
+    _unique(source, f"{prefix}capacities", [c.node for c in out])
     return tuple(out)
 
 
@@ -445,6 +479,7 @@ def _check_names(model: ModelDefinition, prefix: str) -> None:
     for name, param in model.parameters.items():
         used = (name in model.nodes.values() or any(g.time_constant == name for g in model.lags)
                 or any(name in c.names for c in model.calibrations)
+                or any(name in c.capacity.names for c in model.capacities)
                 or any(name in l.resistance.names for l in model.links) or any(name in s.heat.names for s in model.sources))
         if not used:
             raise _fail(model.source, f"{prefix}parameters.{name}", "a parameter the model uses (no law names it)")
@@ -478,7 +513,7 @@ def to_toml(model: ModelDefinition) -> str:
     for table in ("nodes", "boundaries"):
         if table in doc:
             lines += ["", f"[{table}]"] + [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in doc[table].items()]
-    for array in ("links", "sources", "lags", "calibrations"):
+    for array in ("capacities", "links", "sources", "lags", "calibrations"):
         for item in doc.get(array, []):
             lines += ["", f"[[{array}]]"] + [f"{k} = {_toml_value(v)}" for k, v in item.items()]
     for table in ("outputs", "simulated", "initial"):

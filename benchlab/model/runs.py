@@ -50,18 +50,23 @@ def check_run(model: ModelDefinition, run: pd.DataFrame, params: Mapping[str, fl
 def check_laws(model: ModelDefinition, run: pd.DataFrame, params: Mapping[str, float] | None = None,
                params_source: str = "") -> None:
     """Bad input where a law on the run's samples is not a number the solver can use: a resistance that is not
-    positive and finite, a heat flow that is not finite (a division by zero, an overflow of exp). Asked at the model's
+    positive and finite, a heat flow that is not finite, a capacity law that is not positive and finite (a division by
+    zero, an overflow of exp). Asked at the model's
     starting (or fixed) values, the model file's fault, then at `params`, the parameter file's. Samples where a
     channel the law reads is NaN are not asked. A law's text is asked once (R_PA = R_FA of the paper's clutch)."""
     from benchlab.model.build import build_network  # the identify package: only once a run is at hand
 
     network = build_network(model)
-    laws: dict[tuple[str, bool], tuple[str, Callable, frozenset[str]]] = {}
+    laws: dict[tuple[str, str], tuple[str, Callable, frozenset[str]]] = {}
     for entry, link in zip(model.links, network.links):
-        laws.setdefault((entry.resistance.text, True),
+        laws.setdefault((entry.resistance.text, "resistance"),
                         (f"links[{entry.name}].resistance", link.resistance, entry.resistance.names))
     for entry, flow in zip(model.sources, network.sources):
-        laws.setdefault((entry.heat.text, False), (f"sources[{entry.name}].heat", flow.heat_flow, entry.heat.names))
+        laws.setdefault((entry.heat.text, "heat"), (f"sources[{entry.name}].heat", flow.heat_flow, entry.heat.names))
+    node_laws = {node.name: node.capacity_law for node in network.nodes}
+    for i, entry in enumerate(model.capacities):
+        laws.setdefault((entry.capacity.text, "capacity"),
+                        (f"capacities[{i}].capacity", node_laws[entry.node], entry.capacity.names))
     channels = {c: run[c].to_numpy(np.float64) for c in model.law_channels() if c in run.columns}
     starts = {p.name: p.start if p.fixed is None else p.fixed for p in model.parameters.values()}
     _check_laws_at(laws, channels, run, starts, model.source, "the parameters' starting values")
@@ -70,12 +75,18 @@ def check_laws(model: ModelDefinition, run: pd.DataFrame, params: Mapping[str, f
                        f"this file's values (model {model.label})")
 
 
-def _check_laws_at(laws: Mapping[tuple[str, bool], tuple[str, Callable, frozenset[str]]],
+#: What each kind of law must be on every sample: positive or only finite, and how the message says it
+USABLE = {"resistance": (True, "a positive finite resistance in K/W"), "heat": (False, "a finite heat flow in W"),
+          "capacity": (True, "a positive finite heat capacity in J/K")}
+
+
+def _check_laws_at(laws: Mapping[tuple[str, str], tuple[str, Callable, frozenset[str]]],
                    channels: Mapping[str, np.ndarray], run: pd.DataFrame, params: dict[str, float], source: str,
                    values: str) -> None:
     """check_laws at one set of parameter values; InputError on `source`, saying they are `values`. The samples
     asked are sought only where some value is unusable."""
-    for (_, positive), (entry, law, names) in laws.items():
+    for (_, kind), (entry, law, names) in laws.items():
+        positive, what = USABLE[kind]
         with np.errstate(all="ignore"):
             law_values = np.asarray(law(params, channels), dtype=np.float64)
             usable = np.isfinite(law_values) & (law_values > 0) if positive else np.isfinite(law_values)
@@ -86,7 +97,6 @@ def _check_laws_at(laws: Mapping[tuple[str, bool], tuple[str, Callable, frozense
         bad = asked & ~np.broadcast_to(usable, asked.shape)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            what = "a positive finite resistance in K/W" if positive else "a finite heat flow in W"
             raise InputError(source, entry, f"{what} at {values} on {run.attrs.get('source', 'the run')}, got "
                                             f"{np.broadcast_to(law_values, asked.shape)[i]:g} at sample {i} "
                                             "(a division by zero or an overflow?)")

@@ -18,18 +18,20 @@ import numpy as np
 from benchlab.jit import njit
 
 from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix
-from benchlab.network.solver import (_coefficient, _coefficient_terms, _coefficients, _conductance, _conductances, _per_point,
-                             _propagate, _propagate4, _quantised, _system_matrices, _zoh, discretise, propagate)
+from benchlab.network.solver import (_capacity, _capacity_terms, _coefficient, _coefficient_terms, _conductance,
+                             _per_point, _propagate, _propagate4, _quantised, _system_matrices, _zoh, discretise,
+                             matrix_laws, propagate, split_laws)
 from benchlab.network.memo import LawMemo, NoMemo
 
 
 @dataclass
 class _Law:
-    """One law of the matrices (a link's conductance or a source's W/K term), how to evaluate it, what it reads."""
+    """One law of the matrices (a link's conductance, a source's W/K term or a node's capacity), how to evaluate it,
+    what it reads."""
 
     key: int  # id of the law object: links that share one law share its value
     reads: frozenset[str] | None  # None: unknown, evaluated again for every set
-    positive: bool  # conductances are keyed on a log scale, signed coefficients on a linear one
+    positive: bool  # conductances and capacities are keyed on a log scale, signed coefficients on a linear one
     evaluate: Callable[[Params], "np.ndarray | float"]
 
 
@@ -55,6 +57,8 @@ def _laws(network: ThermalNetwork, channels: Channels) -> list[_Law]:
     laws += [_Law(id(law), _reads(law), False, lambda p, src=src, node=node, law=law: _coefficient(src, node, law, p,
                                                                                                     channels))
              for src, node, law in _coefficient_terms(network)]
+    laws += [_Law(id(node.capacity_law), _reads(node.capacity_law), True,
+                  lambda p, node=node: _capacity(node, p, channels)) for _, node in _capacity_terms(network)]
     return laws
 
 
@@ -75,7 +79,7 @@ def _base(network: ThermalNetwork, params: Params, channels: Channels, dt: float
     disc = discretise(network, params, channels, dt, resolution, memo)
     stages = memo.stages(network)
     n = len(disc.op_index)
-    values = _conductances(network, params, channels, n, memo) + _coefficients(network, params, channels, memo)
+    values, _ = matrix_laws(network, params, channels, n, memo)
     # points are numbered in order of first appearance: a point's first sample is where the running maximum grows
     first = np.flatnonzero(np.diff(np.maximum.accumulate(disc.op_index), prepend=-1))
     return _Base(values, stages.points[1], disc.op_index, first, disc.Ad, disc.Bd, list(stages.columns), disc.inputs,
@@ -159,9 +163,9 @@ def _moved_matrices(network: ThermalNetwork, params: Params, moved: set[str], la
                 return None  # (points that now agree need no check: their matrices are equal, bit for bit)
             varying[i] = decode(at_points)
     per_op = _per_point(values, varying)
-    conductances = len(network.links)
-    return _system_matrices(network, params, per_op[:conductances], per_op[conductances:],
-                            len(per_op[0]) if per_op else 1, origin.assembly)
+    conductances, coefficients, capacities = split_laws(network, per_op)
+    return _system_matrices(network, params, conductances, coefficients, len(per_op[0]) if per_op else 1,
+                            origin.assembly, capacities=capacities)
 
 
 def _moved_columns(network: ThermalNetwork, params: Params, moved: set[str], source_reads: list,

@@ -6,7 +6,9 @@ x[k+1] = Ad x[k] + Bd u[k] with [Ad Bd] the matrix exponential of the augmented 
 system, computed for all operating points in one compiled loop (Taylor series with scaling
 and squaring: no BLAS call per point, 3-8x faster than scipy.linalg.expm for n = 4..7). Operating points are keyed by their conductances, quantised to a relative
 resolution of `resolution` (1e-6 by default: far below any sensor's error), and
-each distinct one is discretised once.
+each distinct one is discretised once. A node whose capacity is a law (`Node.capacity_law`, a capacity that varies
+with its temperature) is held likewise: its value per sample is one more key, and its row of the system is divided
+by it, so the state follows dϑ/dt = Q/C(ϑ) with C held over each step as a resistance is.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from benchlab.jit import njit
 
-from benchlab.network.structure import Channels, Link, Params, Source, ThermalNetwork, as_samples, sample_matrix
+from benchlab.network.structure import Channels, Link, Node, Params, Source, ThermalNetwork, as_samples, sample_matrix
 from benchlab.network.memo import NO_MEMO, LawMemo, float_bits, parameter_bits
 
 DEFAULT_RESOLUTION = 1e-6
@@ -69,7 +71,8 @@ def _all_positive_finite(values: np.ndarray) -> bool:  # pragma: no cover - comp
 def _system_matrices(network: ThermalNetwork, params: Params, conductances: list[np.ndarray | float],
                      coefficients: list[np.ndarray], n_ops: int,
                      assembly: tuple[np.ndarray, list[tuple[int, str]]] | None = None,
-                     factors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     factors: np.ndarray | None = None,
+                     capacities: "list[np.ndarray | float]" = ()) -> tuple[np.ndarray, np.ndarray]:
     """Continuous A (n_ops, n, n) and B (n_ops, n, m) for each operating point.
 
     `conductances`: per link, its value at each point (or one for all). `coefficients`: per (source, node) term of
@@ -77,7 +80,8 @@ def _system_matrices(network: ThermalNetwork, params: Params, conductances: list
     (an affine source, e.g. copper loss rising with winding temperature), which goes into A.
     The entries are written as a list of steps (`_assembly`) applied in one compiled pass, in the order and with
     the operations of writing them one by one; `assembly`: the network's, and `factors` its `_factors`, where the
-    caller keeps them.
+    caller keeps them. `capacities`: per node of `_capacity_terms`, its capacity (J/K) at each point (or one for
+    all), whose row is then divided by it in place of its capacity parameter.
     """
     steps, recipe = assembly or _assembly(network)
     n, m = len(network.state_names), len(network.sources) + len(network.boundaries)
@@ -88,6 +92,10 @@ def _system_matrices(network: ThermalNetwork, params: Params, conductances: list
     A = np.zeros((n_ops, n, n))
     B = np.zeros((n_ops, n, m))
     _assemble(steps, factors, laws, A, B)
+    for (i, node), capacity in zip(_capacity_terms(network), capacities):
+        ratio = np.reshape(params[node.capacity] / np.asarray(capacity, dtype=np.float64), (-1, 1))
+        A[:, i, :] *= ratio
+        B[:, i, :] *= ratio
     return A, B
 
 
@@ -172,6 +180,47 @@ def _coefficient(src: Source, node: str, law: Callable, params: Params, channels
     if not np.all(np.isfinite(k)):
         raise ValueError(f"heat flow of source {src.label} per kelvin of {node} is not finite")
     return float(k) if k.ndim == 0 else k
+
+
+def _capacity_terms(network: ThermalNetwork) -> list[tuple[int, Node]]:
+    """(state index, node) of every node whose capacity is a law."""
+    return [(i, node) for i, node in enumerate(network.nodes) if node.capacity_law is not None]
+
+
+def _capacities(network: ThermalNetwork, params: Params, channels: Channels,
+                memo: LawMemo = NO_MEMO) -> list[np.ndarray | float]:
+    """J/K of each capacity law: a scalar, or one value per sample."""
+    return [memo.value(node.capacity_law, params, lambda: _capacity(node, params, channels))
+            for _, node in _capacity_terms(network)]
+
+
+def _capacity(node: Node, params: Params, channels: Channels) -> np.ndarray | float:
+    """One node's capacity law in J/K, checked positive and finite."""
+    c = np.asarray(node.capacity_law(params, channels), dtype=np.float64)
+    if not (_all_positive_finite(c.ravel()) if c.ndim else math.isfinite(float(c)) and float(c) > 0):
+        raise ValueError(f"heat capacity of node {node.name} is not positive and finite")
+    return float(c) if c.ndim == 0 else c
+
+
+def matrix_laws(network: ThermalNetwork, params: Params, channels: Channels, n: int,
+                memo: LawMemo = NO_MEMO) -> tuple[list[np.ndarray | float], list[bool]]:
+    """Every law the operating points are made of, in the solver's order (conductances, temperature coefficients of
+    sources, capacity laws), and whether each is keyed as positive (on a log scale)."""
+    laws = (_conductances(network, params, channels, n, memo) + _coefficients(network, params, channels, memo)
+            + _capacities(network, params, channels, memo))
+    return laws, law_signs(network)
+
+
+def law_signs(network: ThermalNetwork) -> list[bool]:
+    """Per law of `matrix_laws`, whether it is positive (a conductance, a capacity) or signed (a coefficient)."""
+    return ([True] * len(network.links) + [False] * len(_coefficient_terms(network))
+            + [True] * len(_capacity_terms(network)))
+
+
+def split_laws(network: ThermalNetwork, per_point: list) -> tuple[list, list, list]:
+    """`matrix_laws`' values split into conductances, coefficients and capacities (`_system_matrices`' arguments)."""
+    links, terms = len(network.links), len(_coefficient_terms(network))
+    return per_point[:links], per_point[links:links + terms], per_point[links + terms:]
 
 
 TAYLOR_THETA = 0.5  # 1-norm of A*h after scaling by 2**-s
@@ -398,14 +447,11 @@ def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: 
     memo = memo if memo is not None and memo.holds(channels) else NO_MEMO
     stages = memo.stages(network)
     n = len(next(iter(channels.values())))
-    conductances = _conductances(network, params, channels, n, memo)
-    coefficients = _coefficients(network, params, channels, memo)
-    laws = conductances + coefficients
+    laws, positive = matrix_laws(network, params, channels, n, memo)
     arrays = [g for g in laws if isinstance(g, np.ndarray)]
-    keyed_by = (n, resolution, len(conductances), tuple(isinstance(g, np.ndarray) for g in laws))
+    keyed_by = (n, resolution, len(network.links), tuple(isinstance(g, np.ndarray) for g in laws))
     if not (stages.same_laws(arrays) and stages.points[2] == keyed_by):
         stages.laws, stages.matrices_key = arrays, None
-        positive = [True] * len(conductances) + [False] * len(coefficients)
         stages.points = (*_varying_points(laws, n, resolution, positive), keyed_by)
     op_index, varying = stages.points[:2]
     stages.assembly = stages.assembly or _assembly(network)
@@ -413,8 +459,9 @@ def discretise(network: ThermalNetwork, params: Params, channels: Channels, dt: 
            + float_bits([dt] + [g for g in laws if not isinstance(g, np.ndarray)]) if memo is not NO_MEMO else None)
     if key is None or key != stages.matrices_key:
         per_op = _per_point(laws, varying)
-        A, B = _system_matrices(network, params, per_op[:len(conductances)], per_op[len(conductances):],
-                                len(per_op[0]) if per_op else 1, stages.assembly)
+        conductances, coefficients, capacities = split_laws(network, per_op)
+        A, B = _system_matrices(network, params, conductances, coefficients, len(per_op[0]) if per_op else 1,
+                                stages.assembly, capacities=capacities)
         stages.matrices, stages.matrices_key = _zoh(A, B, dt), key
     Ad, Bd = stages.matrices
     columns = [memo.value(s.heat_flow, params, lambda: as_samples(s.heat_flow(params, channels), n))

@@ -20,8 +20,8 @@ import numpy as np
 import pandas as pd
 from benchlab.jit import njit
 
-from benchlab.network.solver import (_assembly, _coefficient_terms, _conductance, _factors, _quantised, _system_matrices, _zoh,
-                                     _propagate_combined44, propagate_into)
+from benchlab.network.solver import (_assembly, _capacity_terms, _coefficient_terms, _conductance, _factors, _quantised,
+                                     _system_matrices, _zoh, _propagate_combined44, propagate_into)
 from benchlab.network.memo import float_bits
 from benchlab.network.structure import Channels, Params, ThermalNetwork, as_samples, sample_matrix, sequential_laws
 
@@ -154,7 +154,8 @@ def stream_network(network: ThermalNetwork, params: Params, channels: Channels, 
                    resolution: float, block: int | None = None) -> np.ndarray | None:
     """States state-major (n, N + 1), column k at time k*dt from x0, as `solver.run_network` without a memo gives
     them (transposed); None where the network has temperature-affine sources (their keys are scaled by the whole
-    run's largest value, so the whole-run solver keys them) or, on more than one block, a switch with hysteresis
+    run's largest value, so the whole-run solver keys them) or a capacity law (keyed by the whole-run solver too), or,
+    on more than one block, a switch with hysteresis
     (its state runs through the whole run)."""
     return NetworkStream(network, params, dt, resolution).run(channels, x0, block)
 
@@ -205,7 +206,8 @@ class NetworkStream:
 
     def __init__(self, network: ThermalNetwork, params: Params, dt: float, resolution: float) -> None:
         self.network, self.params, self.dt, self.resolution = network, params, dt, resolution
-        self.affine = bool(_coefficient_terms(network))  # temperature-affine sources: keyed by the whole run
+        # temperature-affine sources and capacity laws: keyed by the whole run
+        self.affine = bool(_coefficient_terms(network) or _capacity_terms(network))
         self.sequential = bool(sequential_laws(network))  # a switch's state runs through the run: never split
         self.assembly = _assembly(network)
         self.factors = _factors(self.assembly[1], params)

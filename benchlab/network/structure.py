@@ -22,10 +22,15 @@ ParamChannelFunction = Callable[[Params, Channels], "float | np.ndarray"]
 
 @dataclass(frozen=True)
 class Node:
-    """A lumped thermal mass whose temperature is a model state."""
+    """A lumped thermal mass whose temperature is a model state.
+
+    `capacity_law`: where the capacity varies (with the node's own temperature, read from its measurement), its value
+    in J/K from params and channels; the state then follows dϑ/dt = Q/C (the heat stored is ∫C dϑ), and the solver
+    holds C per step as it holds a link's resistance. None: the capacity is the parameter `capacity`."""
 
     name: str
-    capacity: str  # parameter name of the heat capacity in J/K
+    capacity: str  # parameter name of the heat capacity in J/K (where a law is given, the one it scales)
+    capacity_law: "ParamChannelFunction | None" = None
 
 
 @dataclass(frozen=True)
@@ -123,11 +128,12 @@ class ThermalNetwork:
 
 
 def sequential_laws(network: ThermalNetwork) -> list[str]:
-    """The links and sources whose law at a sample depends on the samples before it (a switch with hysteresis,
-    benchlab.network.switching): a run's laws are then evaluated over the whole run, never a part of it alone."""
+    """The links, sources and capacities whose law at a sample depends on the samples before it (a switch with
+    hysteresis, benchlab.network.switching): a run's laws are then evaluated over the whole run, never a part of it alone."""
     laws = [(link.label or f"{link.a}-{link.b}", link.resistance) for link in network.links]
     laws += [(src.label or src.node, src.heat_flow) for src in network.sources]
     laws += [(src.label or src.node, law) for src in network.sources for _, law in src.coefficients]
+    laws += [(f"capacity of {node.name}", node.capacity_law) for node in network.nodes if node.capacity_law]
     return list(dict.fromkeys(name for name, law in laws if getattr(law, "sequential", False)))
 
 
