@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from benchlab.cli import main
@@ -108,3 +109,22 @@ def test_forecast_names_no_loser_between_one_model_and_itself(short_run, tmp_pat
     expected = forecast(plant, plant, steps, runs, float(short_run["T_ambient"].mean()), limits)
     assert expected.blocks >= 3 and expected.block_p >= ALPHA
     assert abs(expected.rmse_gap) < 0.1 * max(plant.rmse.values())
+
+
+def test_the_criterion_counts_only_what_the_refitted_model_cannot_absorb():
+    """T-criterion with the refit: a difference the rival's parameters can follow is absorbed (up to what the runs so
+    far hold them to), one they cannot follow counts whole, and a block chosen twice gains less the second time."""
+    from benchlab.design.discrimination import Misfit
+
+    rng = np.random.default_rng(3)
+    jac = rng.standard_normal((200, 2))
+    follows = jac @ np.array([0.5, -1.0])  # what a change of the rival's two parameters does
+    beyond = rng.standard_normal(200)
+    beyond -= jac @ np.linalg.lstsq(jac, beyond, rcond=None)[0]  # what no change of them does
+    loose, held = 1e-9 * np.eye(2), 1e6 * np.eye(2)
+    assert Misfit([follows], [jac], loose).left([0]) == pytest.approx(0.0, abs=1e-6)
+    assert Misfit([follows], [jac], held).left([0]) == pytest.approx(follows @ follows, rel=1e-3)
+    assert Misfit([beyond], [jac], loose).left([0]) == pytest.approx(beyond @ beyond, rel=1e-9)
+    partly = Misfit([follows + beyond], [jac], 10.0 * np.eye(2))
+    first, both = partly.left([0]), partly.left([0, 0])
+    assert 0 < both - first < first

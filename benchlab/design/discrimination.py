@@ -1,10 +1,12 @@
 """Discrimination: the blocks that most separate two competing models (diagnose's tied alternatives, or a cause
 against the model without it), each refitted to the runs so far.
 
-T-optimal: the criterion is the expected sum of squared differences of the measured channels between the two
-models' predictions of the designed run, each channel weighted by its noise (the non-centrality of the test
-between them under white noise). Greedy like the precision design (`benchlab.design.precision`): the block that
-adds most of it per second of bench time first, each block predicted from a bench at rest. The expected outcome
+T-optimal with the refit (Atkinson and Fedorov): the criterion is the sum of squared differences of the measured
+channels, each weighted by its noise, that one model refitted (linearised, held by the runs so far) cannot absorb of
+the other's predictions of the designed run, the smaller of the two directions (`Misfit`). Greedy like the
+precision design (`benchlab.design.precision`): the block that adds most of it per second of bench time first, each
+block predicted from a bench at rest. The difference at present values (`noncentrality`) is still reported: it
+counts what a refit absorbs. The expected outcome
 is a forecast of the verdict (`forecast`): the chosen plan simulated whole by the favoured model with the runs'
 misfit as noise, the other model refitted with that run (it absorbs what it can of the difference, as it will
 after the real run), both scored by diagnose's block test.
@@ -33,7 +35,7 @@ from benchlab.diagnose.engine import ALPHA  # the level the loser must be beaten
 from benchlab.diagnose.engine import (BEYOND_FLOOR, BLOCK_S, STEP_S, HeldOut, block_statistic, diagnosed_spec,
                                       noise_floor)
 from benchlab.identify.data import FitData, prepare
-from benchlab.identify.fit import fit, simulate_outputs
+from benchlab.identify.fit import fit, residual_vector, simulate_outputs
 from benchlab.identify.spec import ModelSpec
 from benchlab.network import ThermalNetwork
 from protocols.limits import BenchLimits
@@ -134,6 +136,43 @@ def forecast(favoured: Rival, other: Rival, steps: Sequence[Step], runs: Sequenc
     return Forecast(held[0].rmse - held[1].rmse, t, p, len(np.unique(held[0].blocks)))
 
 
+@dataclass(frozen=True)
+class Misfit:
+    """What one rival, refitted, cannot absorb of the other's predictions, to first order: on each block its
+    residuals against the other's prediction and their Jacobian in ln|θ| (both weighted by the noise), and the
+    information of the runs so far, which holds its parameters where those runs put them."""
+
+    residuals: list[np.ndarray]  # per block
+    jacobians: list[np.ndarray]  # per block
+    held: np.ndarray  # information of the runs so far (ridge included)
+
+    def left(self, chosen: Sequence[int]) -> float:
+        """Σ r² left after the rival's best linearised refit to the runs so far and the `chosen` blocks (a block
+        chosen twice counts twice): D − gᵀ H⁻¹ g, the T-criterion with the refit (Atkinson and Fedorov)."""
+        if not chosen:
+            return 0.0
+        g = sum(self.jacobians[i].T @ self.residuals[i] for i in chosen)
+        h = self.held + sum(self.jacobians[i].T @ self.jacobians[i] for i in chosen)
+        return float(sum(self.residuals[i] @ self.residuals[i] for i in chosen) - g @ np.linalg.solve(h, g))
+
+
+def refit_misfit(fitted: Rival, truth: Rival, blocks: Sequence[Block], runs: Sequence[FitData],
+                 noise: Mapping[str, float], ambient_c: float, limits: BenchLimits) -> Misfit:
+    """`Misfit` of `fitted` when `truth` is the plant, on each block and with the runs so far
+    (`fisher.information` at its fitted values, every free parameter)."""
+    names = [p.name for p in fitted.spec.free]
+    params = {**fitted.spec.fixed, **fitted.params}
+    held = fisher.information(fitted.network, params, names, runs, noise) + fisher.RIDGE * np.eye(len(names))
+    residuals, jacobians = [], []
+    for block in blocks:
+        run = fisher.predicted_run(block.steps, truth.params, truth.network, ambient_c, limits.drivetrain)
+        data = prepare(run, STEP_S, name="design", network=fitted.network)
+        w = fisher.weights(data, noise)
+        residuals.append(residual_vector(fitted.network, params, [data]) * w)
+        jacobians.append(fisher.jacobian(fitted.network, params, names, data) * w[:, None])
+    return Misfit(residuals, jacobians, held)
+
+
 def noncentrality(diff: Mapping[str, np.ndarray], noise: Mapping[str, float], rho: float) -> float:
     """T-criterion: Σ (difference / noise)² over every channel and sample, in effective samples."""
     return float(sum(np.nansum((d / noise[c]) ** 2) for c, d in diff.items() if c in noise) * (1 - rho) / (1 + rho))
@@ -199,11 +238,17 @@ def design_discrimination(favoured: Rival, other: Rival, runs: Sequence[FitData]
     now = sum(noncentrality({c: simulate_outputs(favoured.network, favoured.params, d)[c]
                              - simulate_outputs(other.network, other.params, d)[c] for c in d.targets}, noise, rho)
               for d in runs)
-    gains = [noncentrality(differences(favoured, other, b.steps, ambient_c, limits), noise, rho) for b in blocks]
+    misfits = [refit_misfit(a, b, blocks, runs, noise, ambient_c, limits) for a, b in ((other, favoured),
+                                                                                         (favoured, other))]
+
+    def separation(chosen: Sequence[int]) -> float:  # whichever is the plant, what the other cannot absorb
+        return min(m.left(chosen) for m in misfits)
+
     chosen: list[int] = []
     spent = 0.0
     while fits := [i for i, b in enumerate(blocks) if spent + b.expected_s <= budget_s]:
-        best = max(fits, key=lambda i: gains[i] / blocks[i].expected_s)
+        now = separation(chosen)
+        best = max(fits, key=lambda i: (separation([*chosen, i]) - now) / blocks[i].expected_s)
         chosen.append(best)
         spent += blocks[best].expected_s
     while True:  # the blocks' heat adds up: the plan must stay clear of the interlocks under either model
