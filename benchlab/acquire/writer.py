@@ -386,7 +386,12 @@ class RunWriter:
                 self._truth_batch.append((first_row + fits, states[fits:]))
             for j, name in enumerate(self.truth_units):
                 offset = self._where[f"truth/{name}"][0] + 8 * first_row
-                os.pwrite(self._fd, np.ascontiguousarray(states[:fits, j], dtype="<f8").tobytes(), offset)
+                try:
+                    os.pwrite(self._fd, np.ascontiguousarray(states[:fits, j], dtype="<f8").tobytes(), offset)
+                except OSError as exc:  # a full disk: the run file as its last flush left it, as for any write
+                    if is_no_space(exc):
+                        raise self._aborted_for_space() from None
+                    raise
             self._truth_end = max(self._truth_end, first_row + fits)
 
     def advance(self, now: float, force: bool = False) -> bool:
