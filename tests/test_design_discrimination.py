@@ -12,6 +12,7 @@ import pytest
 from benchlab.cli import main
 from benchlab.design.discrimination import differences, noncentrality
 from benchlab.design.rivals import contest, refitted_rivals
+from benchlab.identify.fit import simulate_outputs
 from benchlab.runner.session import RunRequest, bench_config
 from protocols.limits import schedule_problems
 from protocols.table1 import table1_schedule
@@ -60,12 +61,17 @@ def test_designed_run_tells_the_rivals_apart_better_than_table1(run_file, short_
     steps = steps_from_rows(doc["schedule"], str(out))
     assert not schedule_problems(steps, limits)
     # the same two models, refitted the same way, on a Table 1 run of the plan's length: less to tell them apart
-    favoured, other, _ = refitted_rivals(tied(), "d.json", [short_run])
+    favoured, other, runs = refitted_rivals(tied(), "d.json", [short_run])
     peer = table1_schedule(11, duration_s=doc["planned_min"] * 60)
     ambient = doc["ambient_C"]
-    peer_statistic = noncentrality(differences(favoured, other, peer, ambient, limits), expected["misfit_K"],
-                                   min(favoured.rho, other.rho))
+    rho = min(favoured.rho, other.rho)
+    peer_statistic = noncentrality(differences(favoured, other, peer, ambient, limits), expected["misfit_K"], rho)
     assert expected["statistic"] > peer_statistic
+    # the runs so far: the same statistic on them (what they already tell apart), not the design's criterion
+    so_far = sum(noncentrality({c: simulate_outputs(favoured.network, favoured.params, d)[c]
+                                - simulate_outputs(other.network, other.params, d)[c] for c in d.targets},
+                               expected["misfit_K"], rho) for d in runs)
+    assert expected["statistic_now"] == pytest.approx(so_far, rel=1e-6)
     # every place both models have is ranked, the plate (unmeasured) by what it removes of its own variance
     assert {s["channel"] for s in doc["sensors"]} >= {"T_pressure_plate", "T_flywheel", "T_air", "T_housing"}
     assert all(s["test_gain"] is not None and s["test_gain"] >= 0 for s in doc["sensors"])

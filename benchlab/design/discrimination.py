@@ -247,8 +247,8 @@ def design_discrimination(favoured: Rival, other: Rival, runs: Sequence[FitData]
     chosen: list[int] = []
     spent = 0.0
     while fits := [i for i, b in enumerate(blocks) if spent + b.expected_s <= budget_s]:
-        now = separation(chosen)
-        best = max(fits, key=lambda i: (separation([*chosen, i]) - now) / blocks[i].expected_s)
+        reached = separation(chosen)
+        best = max(fits, key=lambda i: (separation([*chosen, i]) - reached) / blocks[i].expected_s)
         chosen.append(best)
         spent += blocks[best].expected_s
     while True:  # the blocks' heat adds up: the plan must stay clear of the interlocks under either model
