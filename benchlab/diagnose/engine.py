@@ -842,7 +842,6 @@ def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, 
     return [], leads, base, base_held
 
 
-LEVEL_CHANNELS = 2  # measured temperatures that get laws of their own level (level_channels)
 
 
 def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
@@ -854,13 +853,14 @@ def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
 
 
 def level_channels(evidence: Sequence, channels: dict[str, np.ndarray]) -> tuple[str, ...]:
-    """The LEVEL_CHANNELS temperatures of the runs' `channels` ranked first by the evidence (a model state named by
-    the channel that measures it: `model T_air` is T_air; an unmeasured node's level is no law's to read): a residual
-    that follows a temperature's own level points to a law of that level (a thermostat's fan), and only these get
-    such laws, so the library grows by a few candidates, not by every temperature's. By rank, not by a p-value: the
-    residual of a slow node's switch is autocorrelated, and its row can fall short of ALPHA while it ranks second."""
+    """Every measured temperature of the runs' `channels` that the evidence tests, in the evidence's order (a model
+    state named by the channel that measures it: `model T_air` is T_air; an unmeasured node's level is no law's to
+    read): a residual that follows a temperature's own level points to a law of that level (a thermostat's fan).
+    All of them, not the first few by rank: every temperature rises and falls with the runs' heat, so their level rows
+    explain the residual alike (50-77 % each on a housing thermostat's fan) and their order is noise; a
+    thermostat's own temperature ranked third there and its law was never tried. Each adds about six candidates."""
     ranked = [e.signal.removeprefix("model ") for e in evidence if e.unit == "degC"]
-    return tuple(dict.fromkeys(name for name in ranked if name in channels))[:LEVEL_CHANNELS]
+    return tuple(dict.fromkeys(name for name in ranked if name in channels))
 
 
 def library_for(model: ModelDefinition, channels: dict[str, np.ndarray], units: dict[str, str],
