@@ -38,6 +38,24 @@ def test_contest_is_the_tie_else_the_cause_against_its_parent():
     assert (alone.parent, alone.favoured, alone.other) == ((), FAVOURED, None)
 
 
+def test_a_tie_with_a_law_of_a_temperatures_level_is_rebuilt(short_run, monkeypatch):
+    """A rival that diagnose names among its level laws (a thermostat's fan on the housing) is rebuilt from the
+    library as diagnose built it, every key resolved before the first fit; a key no library holds is one line."""
+    import benchlab.design.rivals as rivals
+    from benchlab.errors import InputError
+
+    class Resolved(Exception):
+        pass
+
+    def resolved(*args, **kwargs):
+        raise Resolved
+    monkeypatch.setattr(rivals, "fit_multistart", resolved)
+    with pytest.raises(Resolved):
+        refitted_rivals(tied(FAVOURED, "level_T_housing_latch_R_AT"), "d.json", [short_run])
+    with pytest.raises(InputError, match="an extension of linear on these runs, got 'level_T_nowhere_latch_R_AT'"):
+        refitted_rivals(tied(FAVOURED, "level_T_nowhere_latch_R_AT"), "d.json", [short_run])
+
+
 def test_a_diagnosis_without_findings_is_one_line(refused, run_file, tmp_path):
     path = tmp_path / "d.json"
     path.write_text(json.dumps({"baseline": {"model": "linear"}, "findings": [], "leads": []}))

@@ -90,10 +90,11 @@ def test_level_candidates_start_nested_inside_their_bounds(short_run):
             assert max(float(np.nanmax(np.abs(out[c] - parent[c]))) for c in parent) < 0.01, (cand.key, probe)
 
 
-def test_every_measured_temperature_gets_its_level_laws_whatever_its_evidence_rank():
+def test_every_measured_temperature_gets_its_level_laws_whatever_its_evidence_rank(short_run):
     """A housing thermostat's residual explained alike by every temperature's level (they all rise with the heat):
-    the housing, ranked behind the flywheel and the air by p-value, is still one whose level laws are tried; the
-    plate (unmeasured) and a speed are not."""
+    the housing, ranked behind the flywheel and the air by p-value, is still one whose level laws are tried, in the
+    evidence's order, and so are those the evidence left out; the plate (unmeasured) and a speed are not. Without
+    evidence (design rebuilding a diagnosis' rivals) the same temperatures."""
     from benchlab.diagnose.engine import level_channels
     from benchlab.diagnose.evidence import Evidence
 
@@ -101,9 +102,12 @@ def test_every_measured_temperature_gets_its_level_laws_whatever_its_evidence_ra
         return Evidence(signal, kind, unit, "T_flywheel", "level", 60.0, 30.0, p, 5000)
     evidence = [row("model T_pressure_plate", "model", "degC", 0.001), row("model T_flywheel", "model", "degC", 0.002),
                 row("T_air", "measured", "degC", 0.005), row("engine_speed", "input", "rpm", 0.006),
-                row("T_housing", "measured", "degC", 0.018), row("T_ambient", "input", "degC", 0.044)]
-    channels = {c: np.zeros(3) for c in ("T_flywheel", "T_air", "T_housing", "T_ambient", "engine_speed")}
-    assert level_channels(evidence, channels) == ("T_flywheel", "T_air", "T_housing", "T_ambient")
+                row("T_housing", "measured", "degC", 0.018)]
+    spec = build_spec(builtin("nonlinear"))
+    data = [prepare(short_run, STEP_S, network=spec.network)]
+    ranked = level_channels(data, spec.network.measured, evidence)
+    assert ranked == ("T_flywheel", "T_air", "T_housing", "T_ambient")
+    assert set(level_channels(data, spec.network.measured)) == set(ranked)
 
 
 def test_the_benchs_thermostat_is_carried_from_chunk_to_chunk():

@@ -17,7 +17,8 @@ import numpy as np
 import pandas as pd
 
 from benchlab.design.discrimination import Rival, misfit
-from benchlab.diagnose.engine import STEP_S, diagnosed_spec, extended_spec, library_for, refit_candidate
+from benchlab.diagnose.engine import (STEP_S, diagnosed_spec, extended_spec, level_channels, library_for,
+                                      refit_candidate)
 from benchlab.diagnose.library import Candidate
 from benchlab.errors import InputError
 from benchlab.identify.data import FitData, prepare
@@ -78,23 +79,26 @@ def refitted_rivals(doc: dict, source: str, runs: Sequence[pd.DataFrame], seed: 
     shared = set.intersection(*(set(d.channels) for d in datasets))
     channels = {k: np.concatenate([d.channels[k] for d in datasets]) for k in datasets[0].channels if k in shared}
     units = {**ALIGNED_UNITS, **runs[0].attrs.get("units", {})}
-    library = {c.key: c for c in library_for(model, channels, units, datasets)}
+    levels = level_channels(datasets, network.measured)
+    library = {c.key: c for c in library_for(model, channels, units, datasets, levels=levels)}
 
     def candidate(key: str) -> Candidate:
         if key not in library:
             raise InputError(source, "candidate", f"an extension of {plan.baseline} on these runs, got {key!r}")
         return library[key]
 
+    ancestors = [candidate(key) for key in plan.parent]  # every key checked before the first fit
+    favoured, other = candidate(plan.favoured), None if plan.other is None else candidate(plan.other)
     spec = diagnosed_spec(model, datasets)
-    for key in plan.parent:
-        spec = extended_spec(spec, candidate(key), channels, datasets)
+    for ancestor in ancestors:
+        spec = extended_spec(spec, ancestor, channels, datasets)
     parent = fit_multistart(spec, datasets, starts=PARENT_STARTS, seed=seed)
 
-    def rival(key: str | None) -> Rival:
-        if key is None:
+    def rival(cand: Candidate | None) -> Rival:
+        if cand is None:
             return Rival(f"{plan.baseline} without {plan.favoured}", parent.spec, parent.params,
                          *misfit(parent.spec.network, parent.params, datasets))
-        result = refit_candidate(candidate(key), parent, datasets, channels, seed + 1)
-        return Rival(key, result.spec, result.params, *misfit(result.spec.network, result.params, datasets))
+        result = refit_candidate(cand, parent, datasets, channels, seed + 1)
+        return Rival(cand.key, result.spec, result.params, *misfit(result.spec.network, result.params, datasets))
 
-    return rival(plan.favoured), rival(plan.other), datasets
+    return rival(favoured), rival(other), datasets

@@ -852,22 +852,27 @@ def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:
     return residual_evidence(base_held, base.spec, base.params)
 
 
-def level_channels(evidence: Sequence, channels: dict[str, np.ndarray]) -> tuple[str, ...]:
-    """Every measured temperature of the runs' `channels` that the evidence tests, in the evidence's order (a model
-    state named by the channel that measures it: `model T_air` is T_air; an unmeasured node's level is no law's to
-    read): a residual that follows a temperature's own level points to a law of that level (a thermostat's fan).
-    All of them, not the first few by rank: every temperature rises and falls with the runs' heat, so their level rows
-    explain the residual alike (50-77 % each on a housing thermostat's fan) and their order is noise; a
-    thermostat's own temperature ranked third there and its law was never tried. Each adds about six candidates."""
+def level_channels(datasets: Sequence[FitData], measured: Sequence[str], evidence: Sequence = ()) -> tuple[str, ...]:
+    """Every temperature of the runs that the evidence tests (the measured outputs and the channels the model reads,
+    `evidence.tested_signals`; an unmeasured node's level is no law's to read), in the order of `evidence` where
+    given (a model state named by the channel that measures it: `model T_air` is T_air): a residual that follows a
+    temperature's own level points to a law of that level (a thermostat's fan). All of them, not the first few by
+    rank: every temperature rises and falls with the runs' heat, so their level rows explain the residual alike
+    (50-77 % each on a housing thermostat's fan) and their order is noise; a thermostat's own temperature ranked
+    third there and its law was never tried. Each adds about six candidates. Without evidence (`benchlab design`
+    rebuilding a diagnosis' rivals) the same temperatures, so every key diagnose can name is rebuilt."""
+    from benchlab.diagnose.evidence import tested_signals  # it reads the engine's constants
+
+    temperatures = [name for name, _, unit in tested_signals(datasets, measured) if unit == "degC"]
     ranked = [e.signal.removeprefix("model ") for e in evidence if e.unit == "degC"]
-    return tuple(dict.fromkeys(name for name in ranked if name in channels))
+    return tuple(dict.fromkeys([name for name in ranked if name in temperatures] + temperatures))
 
 
 def library_for(model: ModelDefinition, channels: dict[str, np.ndarray], units: dict[str, str],
                 datasets: Sequence[FitData], group_by: str | None = None,
                 levels: Sequence[str] = ()) -> list[Candidate]:
     """Every candidate diagnose tries on these runs: the model's library (with the level laws of `levels`, the
-    temperatures the baseline's evidence ranks first), its two-step link compositions and, with several run groups,
+    runs' temperatures: `level_channels`), its two-step link compositions and, with several run groups,
     each parameter split per group."""
     groups = run_groups(datasets)
     library = candidates(model, channels, units, levels) + composed_links(model, channels, units, groups)
@@ -906,7 +911,8 @@ def diagnose_runs(runs: Sequence[pd.DataFrame], baseline: "str | ModelDefinition
         base = fit_multistart(diagnosed_spec(model, datasets), datasets, starts=starts, seed=seed, task=task)
     base_held = _held_out(base.spec, base.params, datasets)
     evidence = baseline_evidence(base, base_held)
-    library = library_for(model, channels, units, datasets, group_by, level_channels(evidence, channels))
+    library = library_for(model, channels, units, datasets, group_by,
+                          level_channels(datasets, network.measured, evidence))
     current, current_held, findings, failed, not_carried = base, base_held, [], [], []
     for round_ in range(1, MAX_ROUNDS + 1):
         used = {f.candidate.key for f in findings}
