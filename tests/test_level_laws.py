@@ -110,6 +110,25 @@ def test_every_measured_temperature_gets_its_level_laws_whatever_its_evidence_ra
     assert set(level_channels(data, spec.network.measured)) == set(ranked)
 
 
+def test_a_switch_threshold_is_refined_between_the_quantiles_beside_its_best_start():
+    """The grid's best "on" gets SWITCH_REFINE_POINTS points into the quantile interval on each side, strictly
+    inside it, the band kept; a switch's band also at half and twice the best, never beyond the range; a latch (no
+    band) and a best start at the grid's end get only what exists."""
+    from benchlab.diagnose.library import SWITCH_QUANTILES, SWITCH_REFINE_POINTS, switch_refinements
+
+    values = np.linspace(20.0, 40.0, 2001)
+    ons = np.quantile(values, SWITCH_QUANTILES)
+    refine = switch_refinements("T_air", "t", "switch", {"T_air": values})
+    probes = refine({"on_t": float(ons[4]), "band_t": 12.0})
+    on_points = sorted(p["on_t"] for p in probes if p["band_t"] == 12.0 and p["on_t"] != ons[4])
+    assert len(on_points) == 2 * SWITCH_REFINE_POINTS
+    assert all(ons[3] < v < ons[5] and v != ons[4] for v in on_points)
+    assert sorted(p["band_t"] for p in probes if p["on_t"] == ons[4]) == [6.0, 20.0]  # 24 K clipped to the range
+    latch = switch_refinements("T_air", "t", "latch", {"T_air": values})({"on_t": float(ons[0])})
+    assert len(latch) == SWITCH_REFINE_POINTS and all(ons[0] < p["on_t"] < ons[1] for p in latch)
+    assert all(set(p) == {"on_t"} for p in latch)
+
+
 def test_the_benchs_thermostat_is_carried_from_chunk_to_chunk():
     """A run advanced in two chunks equals the run advanced whole: the thermostat's switch goes on with the state."""
     from benchlab.model.params import paper_params

@@ -395,9 +395,9 @@ def _starts(cand: Candidate, spec: ModelSpec, current: FitResult) -> list[dict[s
 
 
 def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitResult,
-           datasets: Sequence[FitData]) -> list[tuple[float, int]]:
+           datasets: Sequence[FitData]) -> list[tuple[float, dict[str, float]]]:
     """Per candidate, the in-sample cost one Gauss-Newton step from its best start would reach, every parameter
-    free, and which start that is.
+    free, and that start (a switch's refined around the best of its grid: Candidate.refine).
 
     The current model's Jacobian is the fit's own; the new parameters' columns are forward differences at the
     start (one simulation each). At the nested start they are projected off the current columns (the current
@@ -434,14 +434,19 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
         left = rest - a @ step
         return float(left @ left + (0.0 if not nested else r0 @ r0 - rest @ rest))
 
-    def score_one(i: int) -> tuple[float, int]:
+    def score_one(i: int) -> tuple[float, dict[str, float]]:
         spec, cand = specs[i], cands[i]
-        costs = [at(spec, cand, start, cand.probes is None or cand.nested_probes)
-                 for start in _starts(cand, spec, current)]
+        starts = _starts(cand, spec, current)
+        costs = [at(spec, cand, start, cand.probes is None or cand.nested_probes) for start in starts]
         best = int(np.argmin(costs))
+        if cand.refine is not None:  # a switch's threshold: refined around its best start (Candidate.refine)
+            nested = _nested_start(spec, current)
+            starts = [starts[best]] + [{**nested, **probe} for probe in cand.refine(starts[best])]
+            costs = [costs[best]] + [at(spec, cand, start, True) for start in starts[1:]]
+            best = int(np.argmin(costs))
         if cand.composed and cand.probes:  # ranked by its first-order gain too, screened from its best probe
-            return min(costs[best], at(spec, cand, _nested_start(spec, current), True)), best
-        return costs[best], best
+            return min(costs[best], at(spec, cand, _nested_start(spec, current), True)), starts[best]
+        return costs[best], starts[best]
 
     return map_indices(score_one, len(specs))
 
@@ -475,7 +480,7 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
 
     def screen_one(k: int) -> tuple[float, dict[str, float]]:
         i = chosen[k]
-        start = _starts(cands[i], specs[i], current)[scores[i][1]]
+        start = scores[i][1]
         result = fit(specs[i], datasets, max_nfev=SCREEN_NFEV, start=start)
         return result.cost, result.params
 
