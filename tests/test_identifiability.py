@@ -92,6 +92,18 @@ def test_what_identifies_a_parameter_is_read_from_the_model_file():
     assert "several values of engine_speed with load_torque <= 100" in what_identifies(hot, "k")
 
 
+def test_a_standard_error_at_rounding_level_is_no_standard_error():
+    """A parameter the channels do not depend on gets a covariance of rounding size from the pseudo-inverse (a
+    switch's band the runs never cross: 1.9e-17 on 9.55 K): not identified, like an error of exactly zero; a
+    small but real error is kept."""
+    from benchlab.identify.identifiability import not_identified
+    from benchlab.identify.spec import ParamSpec
+
+    band = ParamSpec("band", 1.0, 0.0, 9.6, log=False)
+    assert "do not depend on it" in not_identified([band], {"band": 9.552}, {"band": 1.93e-17})["band"]
+    assert not_identified([band], {"band": 9.552}, {"band": 1e-6}) == {}
+
+
 def test_warnings_group_close_pairs_and_say_no_infinite_correlation():
     names = ["x", "y", "z", "w", "v"]
     errors = np.array([0.1, 0.2, 0.3, 0.0, 0.1])

@@ -37,6 +37,10 @@ SAME_COST_CHI2 = 3.84
 #: for a positive parameter, by more than this factor: the data then allow zero or twice the value, as a standard
 #: error above the value says.
 FAR_APART_FACTOR = 2.0
+#: A standard error below this share of its value is rounding, not information: the covariance of a parameter whose
+#: Jacobian column is zero comes out of the pseudo-inverse as 1e-17-ish instead of 0 (a switch's band that the runs
+#: never cross: 1.9e-17 K on 9.55 K); no run of kelvin-level noise pins a parameter to a part in 10^12.
+ZERO_ERROR_SHARE = 1e-12
 
 
 def _coordinate(spec: ParamSpec, value: float) -> float:
@@ -82,7 +86,7 @@ def _why(spec: ParamSpec, value: float, error: float | None, others: Sequence[fl
         limit = spec.lower if side == "lower" else spec.upper
         return (f"on its {side} bound ({value:.4g}, bound {limit:.4g}): the runs push it as far as the model file "
                 "allows")
-    if error is not None and (not np.isfinite(error) or error == 0.0):
+    if error is not None and (not np.isfinite(error) or error <= ZERO_ERROR_SHARE * abs(value)):
         return "the measured channels do not depend on it (no standard error)"
     if error is not None and error > abs(value):
         return f"standard error {error:.3g} exceeds its value {value:.4g}"
