@@ -436,13 +436,13 @@ def _score(specs: Sequence[ModelSpec], cands: Sequence[Candidate], current: FitR
 
     def score_one(i: int) -> tuple[float, dict[str, float]]:
         spec, cand = specs[i], cands[i]
-        starts = _starts(cand, spec, current)
-        costs = [at(spec, cand, start, cand.probes is None or cand.nested_probes) for start in starts]
+        starts, nested = _starts(cand, spec, current), cand.probes is None or cand.nested_probes
+        costs = [at(spec, cand, start, nested) for start in starts]
         best = int(np.argmin(costs))
         if cand.refine is not None:  # a switch's threshold: refined around its best start (Candidate.refine)
-            nested = _nested_start(spec, current)
-            starts = [starts[best]] + [{**nested, **probe} for probe in cand.refine(starts[best])]
-            costs = [costs[best]] + [at(spec, cand, start, True) for start in starts[1:]]
+            origin = _nested_start(spec, current)
+            starts = [starts[best]] + [{**origin, **probe} for probe in cand.refine(starts[best])]
+            costs = [costs[best]] + [at(spec, cand, start, nested) for start in starts[1:]]
             best = int(np.argmin(costs))
         if cand.composed and cand.probes:  # ranked by its first-order gain too, screened from its best probe
             return min(costs[best], at(spec, cand, _nested_start(spec, current), True)), starts[best]
@@ -845,8 +845,6 @@ def _causes(findings: list[Finding], current: FitResult, current_held: HeldOut, 
             _recheck(base, base_held, kept, current, current_held, datasets, channels), current, current_held, base,
             base_held, datasets, channels)
     return [], leads, base, base_held
-
-
 
 
 def baseline_evidence(base: FitResult, base_held: HeldOut) -> list:

@@ -801,13 +801,17 @@ def level_source(channel: str, node: str, law: str) -> Build:
     return _level_build(key, key.removeprefix("source_level_"), channel, law, edit)
 
 
+def _switch_grid(channel: str, ch: Channels) -> tuple[list[float], float]:
+    """A switch's "on" thresholds to screen (SWITCH_QUANTILES of the temperature in the runs) and the runs' range."""
+    values = signal_values(channel, ch)
+    return [float(v) for v in np.nanquantile(values, SWITCH_QUANTILES)], float(np.nanmax(values) - np.nanmin(values))
+
+
 def switch_probes(channel: str, tag: str, law: str, ch: Channels) -> Callable[[Mapping[str, float]],
                                                                           list[dict[str, float]]]:
     """Screening starts of a switch, its factor still 0 (the parent exactly: each start costs one column): "on" at
     SWITCH_QUANTILES of the temperature, a switch's band SWITCH_BANDS of its range."""
-    values = signal_values(channel, ch)
-    span = float(np.nanmax(values) - np.nanmin(values))
-    ons = [float(v) for v in np.nanquantile(values, SWITCH_QUANTILES)]
+    ons, span = _switch_grid(channel, ch)
     bands = SWITCH_BANDS if law == "switch" else (None,)
     return lambda current: [{f"on_{tag}": on, **({f"band_{tag}": share * span} if share else {})}
                             for on in ons for share in bands]
@@ -820,9 +824,8 @@ def switch_refinements(channel: str, tag: str, law: str, ch: Channels) -> Callab
     the best (within the temperature's range). Measured: a thermostat on the chamber air scored 290 from its best
     decile (30.1 degC), 183 at 30.5 degC, 445 at 31.0 (the plant's own threshold, which its lagging sensor reads
     late), so 0.5 K decided whether it or a smooth proxy on the housing (204) was screened."""
-    values = signal_values(channel, ch)
-    span = float(np.nanmax(values) - np.nanmin(values))
-    ons = sorted({float(v) for v in np.nanquantile(values, SWITCH_QUANTILES)})
+    grid, span = _switch_grid(channel, ch)
+    ons = sorted(set(grid))
     fractions = [k / (SWITCH_REFINE_POINTS + 1) for k in range(1, SWITCH_REFINE_POINTS + 1)]
 
     def refine(best: Mapping[str, float]) -> list[dict[str, float]]:
