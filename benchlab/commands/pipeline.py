@@ -195,15 +195,16 @@ def _plate(run: pd.DataFrame, path: Path, nonlinear, model: pd.DataFrame, altern
                                                                 default_clutch(), flywheel_miss_k))
 
 
-def _sweep_comparison(fitting: pd.DataFrame, validation: pd.DataFrame, nonlinear, out: Path, figures: dict,
-                      progress: Progress):
+def _sweep_comparison(fitting: pd.DataFrame, validation: pd.DataFrame, sweep: pd.DataFrame, nonlinear, out: Path,
+                      figures: dict, progress: Progress):
     """Eq. (11) as the sweep measures it against the Table 1 model, and the paper's procedure (eq. (11) from the sweep,
     the rest refitted on Table 1) saved as its own parameter file and scored beside the others."""
     with interrupts_held():
         from benchlab.identify.staged import COMPARED_RPM, compare_with_sweep
         from benchlab.model.params import save_params
 
-    comparison = compare_with_sweep([fitting], nonlinear, out / "sweep.h5", validate=[validation], progress=progress)
+    comparison = compare_with_sweep([fitting], nonlinear, out / "sweep.h5", validate=[validation], progress=progress,
+                                    sweep_run=sweep)
     speeds = " and ".join(f"{s:.0f}" for s in COMPARED_RPM)
     print(f"eq. (11)  the Table 1 model's R(engine speed, clutch state) lies up to {100 * comparison.rel_error:.0f} % "
           f"from the sweep's cool-downs at {speeds} rpm")
@@ -232,9 +233,9 @@ def _eq11_errors(comparison, fitting: pd.DataFrame, sweep: pd.DataFrame, validat
     errors = {"nonlinear": comparison.rel_error}
     if comparison.sweep_model is not None:
         errors[SWEEP_MODEL] = eq11_rel_error(comparison.sweep_model.params, comparison.points)
-    points, errors[DIAGNOSED_MODEL] = own_points_error(out / "sweep.h5", diagnosed, progress)
+    points, errors[DIAGNOSED_MODEL] = own_points_error(out / "sweep.h5", diagnosed, progress, sweep)
     held = held_to_own_points([fitting, sweep], diagnosed, out / "sweep.h5", points, validate=[validation],
-                              progress=progress)
+                              progress=progress, sweep_run=sweep)
     speeds = " and ".join(f"{s:.0f}" for s in COMPARED_RPM)
     print(f"eq. (11)  the model identified with the sweep ({DIAGNOSED_MODEL}) lies up to "
           f"{100 * errors[DIAGNOSED_MODEL]:.0f} % from the sweep's points as it reads them, at {speeds} rpm "
@@ -370,7 +371,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"identify  {model:9s}: fit RMSE {fit_fig['rmse_K']:.3f} K ({fit_fig['nrmse_pct']:.2f} %), "
               f"validation RMSE {val_fig['rmse_K']:.3f} K ({val_fig['nrmse_pct']:.2f} %) -> {out / (model + '.json')}")
     nonlinear, linear = load_params(out / "nonlinear.json"), load_params(out / "linear.json")
-    comparison = _sweep_comparison(fitting, validation, nonlinear, out, figures, progress)
+    comparison = _sweep_comparison(fitting, validation, sweep, nonlinear, out, figures, progress)
     diagnosis, diagnosed = _diagnose(fitting, sweep, validation, out, progress)
     eq11_errors, held = _eq11_errors(comparison, fitting, sweep, validation, diagnosed, out, figures, progress)
     alternatives = _alternatives(diagnosis, diagnosed, figures["nonlinear"])

@@ -265,12 +265,14 @@ def segment_model(params: Mapping[str, float]) -> ModelDefinition | None:
 
 
 def analyse(path: "str | os.PathLike[str]", params: Mapping[str, float], sample_s: float = 1.0,
-            progress: Progress = SILENT, model: ModelDefinition | None = None) -> list[CooldownResult]:
+            progress: Progress = SILENT, model: ModelDefinition | None = None,
+            run: pd.DataFrame | None = None) -> list[CooldownResult]:
     """Every cool-down of a cooldown-sweep run, fitted (one progress step each; with `model`'s structure where given:
-    fit_segment); R_true filled in for a simulated bench. A run without completed cool-downs (or without /events at
-    all: another tool's file) is no_cooldowns' InputError."""
+    fit_segment); R_true filled in for a simulated bench. `run`: the caller's `load_run(path)`, not read again (a
+    2 h sweep's channels take 0.5 s to read). A run without completed cool-downs (or without /events at all: another
+    tool's file) is no_cooldowns' InputError."""
     path = Path(path)
-    run = load_run(path)
+    run = load_run(path) if run is None else run
     sim_truth = load_attrs(path).get("sim_truth")
     recorded = json.loads(sim_truth) if sim_truth is not None else {}
     # the true R of eq. (11) exists only for the paper's plant (the reference clutch has no such resistance)

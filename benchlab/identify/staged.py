@@ -68,20 +68,22 @@ def eq11_rel_error(params: "dict[str, float]", points: Sequence[CooldownResult],
     return float(np.max(np.abs(resistance_at(params, chosen) / measured - 1.0)))
 
 
-def own_points_error(sweep: "str | Path", params: ModelParams,
-                     progress: Progress = SILENT) -> tuple[list[CooldownResult], float]:
+def own_points_error(sweep: "str | Path", params: ModelParams, progress: Progress = SILENT,
+                     sweep_run: pd.DataFrame | None = None) -> tuple[list[CooldownResult], float]:
     """The sweep's points read with `params`' own model (benchlab.identify.cooldown.segment_model) and the largest
-    relative error of that model's eq. (11) against them (eq11_rel_error)."""
-    points = analyse(sweep, params, progress=progress, model=segment_model(params))
+    relative error of that model's eq. (11) against them (eq11_rel_error). `sweep_run`: the sweep already loaded
+    (benchlab.identify.cooldown.analyse)."""
+    points = analyse(sweep, params, progress=progress, model=segment_model(params), run=sweep_run)
     return points, eq11_rel_error(params, points)
 
 
 def compare_with_sweep(runs: Sequence[pd.DataFrame], params: ModelParams, sweep: "str | Path",
                        validate: Sequence[pd.DataFrame] = (), starts: int = 4, seed: int = 0,
-                       progress: Progress = SILENT) -> SweepComparison:
+                       progress: Progress = SILENT, sweep_run: pd.DataFrame | None = None) -> SweepComparison:
     """The sweep's points with the Table 1 model `params` (identified on `runs`), its eq. (11) against them, and the
-    paper's procedure on the same runs (eq. (11) from the points held, the rest refitted)."""
-    points = analyse(sweep, params, progress=progress)
+    paper's procedure on the same runs (eq. (11) from the points held, the rest refitted). `sweep_run`: the sweep
+    already loaded (benchlab.identify.cooldown.analyse)."""
+    points = analyse(sweep, params, progress=progress, run=sweep_run)
     try:
         eq11 = fit_eq11(points)
     except ValueError:
@@ -94,15 +96,16 @@ def compare_with_sweep(runs: Sequence[pd.DataFrame], params: ModelParams, sweep:
 
 def held_to_own_points(runs: Sequence[pd.DataFrame], params: ModelParams, sweep: "str | Path",
                        points: Sequence[CooldownResult], validate: Sequence[pd.DataFrame] = (), starts: int = 2,
-                       seed: int = 0, progress: Progress = SILENT) -> tuple[Identification, float] | None:
+                       seed: int = 0, progress: Progress = SILENT,
+                       sweep_run: pd.DataFrame | None = None) -> tuple[Identification, float] | None:
     """The paper's procedure on `params`' own structure (module doc): eq. (11) fitted to `points` (the sweep as
     that model reads it, `own_points_error`) and held, every other parameter refitted on `runs`; the refitted model
     and its eq. (11)'s largest relative error against the points it reads itself. None where the points cannot
-    determine eq. (11)."""
+    determine eq. (11). `sweep_run`: the sweep already loaded (benchlab.identify.cooldown.analyse)."""
     try:
         eq11 = fit_eq11(points)
     except ValueError:
         return None
     model = identify(runs, params.definition, fixed={k: eq11[k] for k in EQ11}, validate=validate, starts=starts,
                      seed=seed, progress=progress)
-    return model, own_points_error(sweep, model.params, progress)[1]
+    return model, own_points_error(sweep, model.params, progress, sweep_run)[1]
