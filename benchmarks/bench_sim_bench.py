@@ -44,6 +44,9 @@ from benchlab.runner.session import RunRequest, execute  # noqa: E402
 from sim_bench.bench import SimulatedBench  # noqa: E402
 from sim_bench.reference_plant import DEFAULT_PLANT, PLANTS, plant_named  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from python_can_floor import python_can_floor_us  # noqa: E402
+
 TARGET = 500.0
 
 
@@ -74,19 +77,6 @@ def one_run(out: Path, duration: float, seed: int, bench: SimulatedBench) -> tup
     counts["CAN frames sent by the driver"] = bench.can.stats.sent
     counts["node frames"] = sim.node.frames_sent
     return summary.sim_s, wall, cpu, counts
-
-
-def python_can_floor_us(path: Path, n: int = 50_000) -> float:
-    """CPU µs per frame that python-can itself costs: one can.Message built and written by its BLFWriter."""
-    import can
-
-    cpu0 = time.process_time()
-    writer = can.Logger(str(path))
-    for i in range(n):
-        writer.on_message_received(can.Message(timestamp=i * 0.01, arbitration_id=0x111, data=bytes(8),
-                                               is_extended_id=False))
-    writer.stop()
-    return (time.process_time() - cpu0) / n * 1e6
 
 
 def peak_rss_mb(out: Path, duration_s: float) -> float:

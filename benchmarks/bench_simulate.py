@@ -207,7 +207,7 @@ def best_of(fn, repeats: int) -> tuple[float, object]:
 
 
 STREAM_STAGES = (  # (stage, the benchlab.network.stream function timed as it, where an attribute of a class)
-    ("laws -> conductances", None, "_conductances"),
+    ("laws: resistances, heat flows", "_Law", "value_on"),
     ("operating points: keys", None, "_quantised"),
     ("operating points: numbering", "_Points", "number"),
     ("new points: matrices + ZOH", None, "_discretise_points"),
