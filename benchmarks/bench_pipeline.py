@@ -16,6 +16,13 @@ Peers, measured in the same run:
 - the interpreter's floor: `python -c 'import numpy, pandas, h5py, numba, scipy, matplotlib'`, the libraries the
   job needs before it does anything.
 
+Where diagnose's CPU goes: after the repeats, diagnose on the last job's Table 1 run and sweep (the unseen
+validation run beside them, as the job calls it) again in a child pinned to one CPU (its candidate fits then run
+one after another in that process, where they can be timed), its CPU split by what the engine was doing, each
+second counted to the innermost step: the score test of every candidate, the screening fits, the polishing fits
+and their scouts from the neutral start, the held-out fold fits, leave-one-run-out, the multistart fits (baseline,
+refit after an acceptance), the evidence, the identifiability and unseen-run judgement, and the rest.
+
 Targets (issue 47): the whole job <= 60 s CPU on a quiet machine; the bench stage within its floor / 0.8 (the
 simulated bench at >= 0.8 of python-can's per-frame bound). The figure is the median over the repeats. Exit code 1
 if a target is missed.
@@ -84,6 +91,50 @@ json.dump({"code": code, "stages": spent, "in_process": cpu() - started}, open(s
 """
 
 
+# The child for diagnose's own breakdown: argv[1] the JSON to write, argv[2] the job's directory.
+_DIAGNOSE_CHILD = r"""
+import json, os, resource, sys
+os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # one CPU: the candidate fits run in this process
+def cpu():
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    return own.ru_utime + own.ru_stime
+import benchlab.diagnose.engine as engine
+from benchlab.runfile import load_run
+stack, spent, mark = ["rest (library, re-checks, predictions)"], {}, [0.0]
+def switch():
+    now = cpu()
+    spent[stack[-1]] = spent.get(stack[-1], 0.0) + now - mark[0]
+    mark[0] = now
+def labelled(name, label):
+    original = getattr(engine, name)
+    def step(*args, **kwargs):
+        switch()
+        inner = label(kwargs) if callable(label) else label
+        stack.append(inner)
+        try:
+            return original(*args, **kwargs)
+        finally:
+            switch()
+            stack.pop()
+    setattr(engine, name, step)
+labelled("_score", "score test of every candidate")
+labelled("_screen", "screening fits")
+labelled("_polished", "polishing fits")
+labelled("_held_out", "held-out fold fits")
+labelled("_held_out_runs", "leave-one-run-out fits")
+labelled("fit_multistart", "multistart fits (baseline, refits)")
+labelled("baseline_evidence", "evidence")
+labelled("_judge", "identifiability, unseen runs")
+labelled("fit", lambda kwargs: "polishing: scouts from the neutral start"
+         if stack[-1] == "polishing fits" and kwargs.get("max_nfev") == engine.SCOUT_NFEV else stack[-1])
+runs = [load_run(os.path.join(sys.argv[2], name + ".h5")) for name in ("table1", "sweep", "validation")]
+mark[0] = cpu()
+diagnosis = engine.diagnose_runs(runs[:2], "nonlinear", validate=runs[2:])
+switch()
+json.dump({"spent": spent, "findings": [f.candidate.key for f in diagnosis.findings]}, open(sys.argv[1], "w"))
+"""
+
+
 def children_cpu() -> float:
     """CPU seconds (user + system) of this process's finished children so far."""
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -133,6 +184,8 @@ def main() -> int:
             print(f"  repeat {repeat + 1}: {total:6.1f} s CPU ({result['in_process']:.1f} s inside the command)",
                   flush=True)
         frames = frames_logged(tmp_path / "out")
+        child(["-c", _DIAGNOSE_CHILD, str(tmp_path / "diagnose.json"), str(tmp_path / "out")])
+        diagnose = json.loads((tmp_path / "diagnose.json").read_text())
         floor_us = statistics.median(python_can_floor_us(tmp_path / "floor.blf") for _ in range(3))
     imports_s = statistics.median(
         child(["-c", "import numpy, pandas, h5py, numba, scipy, matplotlib"]) for _ in range(3))
@@ -146,6 +199,10 @@ def main() -> int:
         print(f"  {label:<42}{seconds:8.1f}{100 * seconds / total:7.0f} %")
     print(f"  {'rest (imports, arguments, printing)':<42}{rest:8.1f}{100 * rest / total:7.0f} %")
     print(f"  {'the whole job (median)':<42}{total:8.1f}")
+    one_cpu = sum(diagnose["spent"].values())
+    print(f"\n  diagnose alone, pinned to one CPU ({one_cpu:.1f} s; findings: {', '.join(diagnose['findings']) or 'none'}):")
+    for label, seconds in sorted(diagnose["spent"].items(), key=lambda item: -item[1]):
+        print(f"    {label:<44}{seconds:8.1f}{100 * seconds / one_cpu:7.0f} %")
     bench_s = stages.get("bench runs (Table 1, validation, sweep)", float("nan"))
     share = bench_floor_s / bench_s
     print(f"\n  peers, same run:")

@@ -92,6 +92,19 @@ def test_measured_states_keep_the_filters_band_and_the_draws_are_reproducible(re
     assert [dict(p) for p in again] == [dict(p) for p in parameter_draws(params)]
 
 
+def test_the_spread_taken_draw_by_draw_is_the_sample_deviation_of_all_the_draws_together(reference):
+    """model_spread never holds the draws' predictions together (Welford's running sums): it must still give their
+    sample standard deviation, to rounding."""
+    run, _, params = reference
+    channels = [PLATE, "T_flywheel"]
+    draws = parameter_draws(params, 8)
+    together = np.std([simulate(run, p, params.network)[channels].to_numpy() for p in draws], axis=0, ddof=1)
+    spread = model_spread(run, params, channels, draws=8)
+    assert list(spread.columns) == channels
+    assert together.max() > 1.0  # draws that differ: the comparison is not of zeros
+    np.testing.assert_allclose(spread.to_numpy(), together, rtol=1e-9, atol=1e-9)
+
+
 def test_a_parameter_file_without_uncertainty_adds_no_spread(reference):
     run, _, params = reference
     bare = ModelParams(params.definition, dict(params))

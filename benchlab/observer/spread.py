@@ -106,14 +106,24 @@ def parameter_draws(params: ModelParams, draws: int = DRAWS, seed: int = SEED) -
 def model_spread(run: pd.DataFrame, params: ModelParams, channels: Sequence[str], draws: int = DRAWS
                  ) -> pd.DataFrame:
     """Per channel the standard deviation (K) of the open-loop prediction across `parameter_draws`, on the run's
-    grid (the channels the model simulates); zeros when the parameter file states no uncertainty."""
+    grid (the channels the model simulates); zeros when the parameter file states no uncertainty. The draws are
+    taken in one at a time (Welford's running mean and sum of squares): 32 predictions of a long run are never held
+    together (a week at 10 ms would be 15 GB), nor stacked into one array to be reduced."""
     sets = parameter_draws(params, draws)
     if not sets:
         return pd.DataFrame({c: np.zeros(len(run)) for c in channels}, index=run.index)
-    predictions = [simulate(run, p, params.network) for p in sets]
-    named = [c for c in channels if c in predictions[0].columns]
-    spread = np.std([prediction[named].to_numpy() for prediction in predictions], axis=0, ddof=1)
-    return pd.DataFrame(spread, columns=named, index=run.index)
+    named: list[str] = []
+    mean = squares = np.zeros(0)
+    for count, draw in enumerate(sets, start=1):
+        prediction = simulate(run, draw, params.network)
+        if count == 1:
+            named = [c for c in channels if c in prediction.columns]
+            mean, squares = np.zeros((len(run), len(named))), np.zeros((len(run), len(named)))
+        values = prediction[named].to_numpy()
+        delta = values - mean
+        mean += delta / count
+        squares += delta * (values - mean)
+    return pd.DataFrame(np.sqrt(squares / (len(sets) - 1)), columns=named, index=run.index)
 
 
 def form_spread(run: pd.DataFrame, models: Sequence[ModelParams], channels: Sequence[str]) -> pd.DataFrame:
