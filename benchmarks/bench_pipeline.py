@@ -23,9 +23,10 @@ second counted to the innermost step: the score test of every candidate, the scr
 and their scouts from the neutral start, the held-out fold fits, leave-one-run-out, the multistart fits (baseline,
 refit after an acceptance), the evidence, the identifiability and unseen-run judgement, and the rest.
 
-Targets (issue 47): the whole job <= 60 s CPU on a quiet machine; the bench stage within its floor / 0.8 (the
-simulated bench at >= 0.8 of python-can's per-frame bound). The figure is the median over the repeats. Exit code 1
-if a target is missed.
+Target (issue 47): the whole job <= 60 s CPU on a quiet machine, the median over the repeats (printed with the
+range: the same job on this shared machine moved by 57-75 s within one hour). Exit code 1 if it is missed. The bench
+stage's share of its floor is printed, not a target: it counts reading each run back and describing it, and the
+simulated bench's own target (>= 0.8 of python-can's bound on the reference plant) is bench_sim_bench.py's.
 """
 
 from __future__ import annotations
@@ -46,7 +47,6 @@ from python_can_floor import python_can_floor_us  # noqa: E402
 from targets import load, print_target, summarise_targets  # noqa: E402
 
 TARGET_CPU_S = 60.0
-TARGET_BENCH_SHARE = 0.8
 
 # The child: the pipeline in process, each stage's CPU (outermost call only) written as JSON to argv[1].
 _CHILD = r"""
@@ -198,7 +198,7 @@ def main() -> int:
     for label, seconds in sorted(stages.items(), key=lambda item: -item[1]):
         print(f"  {label:<42}{seconds:8.1f}{100 * seconds / total:7.0f} %")
     print(f"  {'rest (imports, arguments, printing)':<42}{rest:8.1f}{100 * rest / total:7.0f} %")
-    print(f"  {'the whole job (median)':<42}{total:8.1f}")
+    print(f"  {'the whole job (median)':<42}{total:8.1f}   (repeats {min(totals):.1f}-{max(totals):.1f})")
     one_cpu = sum(diagnose["spent"].values())
     print(f"\n  diagnose alone, pinned to one CPU ({one_cpu:.1f} s; findings: {', '.join(diagnose['findings']) or 'none'}):")
     for label, seconds in sorted(diagnose["spent"].items(), key=lambda item: -item[1]):
@@ -210,8 +210,7 @@ def main() -> int:
           f" {bench_floor_s:6.1f} s; the bench stage is at {share:.2f} of it")
     print(f"  the interpreter and the six libraries it imports             {imports_s:6.1f} s")
     print(f"  the job beyond those two floors                              {total - bench_floor_s - imports_s:6.1f} s")
-    targets = [("pipeline CPU", f"{total:.1f} s <= {TARGET_CPU_S:.0f} s", total <= TARGET_CPU_S),
-               ("bench stage vs python-can", f"{share:.2f} >= {TARGET_BENCH_SHARE}", share >= TARGET_BENCH_SHARE)]
+    targets = [("pipeline CPU", f"{total:.1f} s <= {TARGET_CPU_S:.0f} s", total <= TARGET_CPU_S)]
     print()
     for name, text, ok in targets:
         print_target(name, text, ok)

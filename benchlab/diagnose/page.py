@@ -140,7 +140,8 @@ def _ties(finding: dict, subject: str) -> list[str]:
     """Each alternative of a finding or lead (`subject` starts the sentence): the measurement that would tell the two
     apart, and where a sensor would (_sensor_places)."""
     return [f"{subject} told apart from {literal(a['candidate'])} (gain {a['gain_pct']:.0f} %): "
-            f"{text(a['tell_apart_by'])}." + _sensor_places(a.get("sensors", [])) for a in finding["alternatives"]]
+            f"{text(a['tell_apart_by'])}." + _sensor_places(a.get("sensors", []))
+            for a in finding.get("alternatives", [])]
 
 
 def _sensor_places(places: Sequence[dict]) -> str:
