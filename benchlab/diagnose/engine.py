@@ -84,6 +84,11 @@ HELD_OUT_TOLERANCE = 1e-6
 #: for 2e-3 of cost) moves its predictions along the directions the data do not see
 HELD_OUT_STALL = (5, 1e-3)
 POLISH_NFEV = 80  # the all-data fit of a screened candidate: near convergence, so its gain is not underrated
+#: ... where it stops as a held-out fit does (HELD_OUT_TOLERANCE, HELD_OUT_STALL): five steps that lower the cost by less
+#: than 1e-3 of it move the gain by less than 0.05 % of the RMSE (the main job's diagnosis: the same finding, the
+#: named model's values within 1e-4, 14 % less CPU). Not a switch's polish: its threshold's cost is stepwise (each
+#: sample that changes side is a step), so its fit crawls to the threshold through steps that each lower the cost
+#: little; stopped there, a housing thermostat's latch stayed at 26.9 degC, not 27.0, and the model at 3x the floor
 SCOUT_NFEV = 25  # the fit from a neutral start before it is polished (where it beats the warm start)
 CROSS_VALIDATED = 3
 #: a polished fit whose in-sample RMSE is not lower by this share of MIN_GAIN_PCT is not cross-validated: the
@@ -492,29 +497,32 @@ def _screen(cands: Sequence[Candidate], current: FitResult, datasets: Sequence[F
     return sorted(kept, key=lambda item: item[0])
 
 
-def _polished(spec: ModelSpec, warm: dict[str, float], current: FitResult,
-              datasets: Sequence[FitData]) -> tuple[FitResult | None, tuple[str, ...]]:
-    """A candidate fitted to convergence from its warm (screened) start, and from the model file's neutral start
-    (the new parameters nested) scouted and polished where it does better, or where the warm fit failed (the
-    candidate's own parameters on a bound) and the scout found another minimum; the better fit with none of the
-    candidate's own new parameters on a bound, or None and those parameters. A scout that reaches the warm fit's
-    minimum (within its standard errors, as identify's multistart judges two starts alike: `arrived`) stops there:
-    going on could only find that minimum again. (A parameter of the model itself that ends on a bound fails no
-    candidate: polishing the scout's minimum for it, which the scout's higher cost already ranks below the warm
-    fit's, re-found the warm fit or a worse one in every case of the main job's diagnosis.)"""
+def _polished(spec: ModelSpec, warm: dict[str, float], current: FitResult, datasets: Sequence[FitData],
+              stepwise: bool = False) -> tuple[FitResult | None, tuple[str, ...]]:
+    """A candidate fitted near convergence (POLISH_NFEV; to convergence where `stepwise`: a switch's threshold) from
+    its warm (screened) start, and from the model file's neutral start (the new parameters nested) scouted and
+    polished where it does better, or where the warm fit failed (the candidate's own parameters on a bound) and the
+    scout found another minimum; the better fit with none of the candidate's own new parameters on a bound, or None
+    and those parameters. A scout that reaches the warm fit's minimum (within its standard errors, as identify's
+    multistart judges two starts alike: `arrived`) stops there: going on could only find that minimum again. (A
+    parameter of the model itself that ends on a bound fails no candidate: polishing the scout's minimum for it,
+    which the scout's higher cost already ranks below the warm fit's, re-found the warm fit or a worse one in every
+    case of the main job's diagnosis.)"""
     neutral = {**{p.name: p.initial for p in spec.free},
                **{k: v for k, v in current.params.items() if k.startswith("init_") and k in warm}}
 
     def own_at_bound(r: FitResult) -> tuple[str, ...]:
         return tuple(name for name in at_bound(r) if name not in current.params)
 
-    fits = [fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: warm[p.name] for p in spec.free})]
+    stops = {} if stepwise else {"tolerance": HELD_OUT_TOLERANCE, "stall": HELD_OUT_STALL}
+    fits = [fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: warm[p.name] for p in spec.free}, **stops)]
     reached = arrived(fits[0])
     scout = fit(spec, datasets, max_nfev=SCOUT_NFEV, start={p.name: neutral[p.name] for p in spec.free},
                 stop=reached)
     elsewhere = reached is None or not reached(scout.params)
     if scout.cost < fits[0].cost or (own_at_bound(fits[0]) and elsewhere):
-        fits.append(fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: scout.params[p.name] for p in spec.free}))
+        fits.append(fit(spec, datasets, max_nfev=POLISH_NFEV, start={p.name: scout.params[p.name] for p in spec.free},
+                        **stops))
     good = [r for r in fits if not own_at_bound(r)]
     if good:
         return min(good, key=lambda r: r.cost), ()
@@ -560,8 +568,8 @@ def _try(scored: Sequence[Screened], current: FitResult, current_held: HeldOut, 
     def run(batch: Sequence[Screened]) -> None:
         """Polish and cross-validate `batch` (on all cores) and record each."""
         def validate(i: int) -> tuple:  # plain values: a worker's result is pickled, the networks' laws cannot be
-            _, _, spec, params = batch[i]
-            result, bound = _polished(spec, params, current, datasets)
+            _, cand, spec, params = batch[i]
+            result, bound = _polished(spec, params, current, datasets, cand.nested_probes)
             if result is None:
                 return None, bound
             if 100.0 * (1.0 - np.sqrt(result.cost / current.cost)) < IN_SAMPLE_SHARE * MIN_GAIN_PCT:
@@ -696,7 +704,8 @@ def refit_candidate(cand: Candidate, current: FitResult, datasets: Sequence[FitD
     spec = extended_spec(current.spec, cand, channels, datasets)
     screened = _screen([cand], judged, datasets, channels, SILENT, f"refit {cand.key}")
     warm = {**current.params, **(screened[0][3] if screened else _nested_start(spec, judged))}
-    polished, _ = _polished(extended_spec(judged.spec, cand, channels, datasets), warm, judged, datasets)
+    polished, _ = _polished(extended_spec(judged.spec, cand, channels, datasets), warm, judged, datasets,
+                            cand.nested_probes)
     return global_fit(spec, {**warm, **(polished.params if polished else {})}, datasets, seed)
 
 
@@ -803,7 +812,7 @@ def _simpler_form(lead: Finding, kept: Sequence[Finding], current: FitResult, ba
                 lead.candidate, cand, current.params).items() if k in names}})
         screened = min((fit(spec, datasets, max_nfev=SCREEN_NFEV, start=start) for start in starts),
                        key=lambda r: r.cost)
-        result, _ = _polished(spec, screened.params, current, datasets)
+        result, _ = _polished(spec, screened.params, current, datasets, cand.nested_probes)
         if result is not None:
             fitted.append((result, cand, spec))
     if not fitted:
