@@ -143,14 +143,17 @@ def test_a_reading_with_the_wrong_number_of_values_is_refused(tmp_path):
         w.add("s", 0.1, _row(0.1)[:-1])
 
 
+# The writer is paced (0.2 ms a reading, 4 ms a second of run): unpaced, a fast machine wrote 10,000 s of run in the
+# 1.1 s before the kill, and every channel reads t, so the temperatures passed the reader's 10,000 degC bound.
 WRITER = textwrap.dedent("""
-    import sys
+    import sys, time
     sys.path.insert(0, {root!r})
     from tests.test_acquire import _layout, _row
     from benchlab.acquire import RunWriter
     w = RunWriter(sys.argv[1], _layout(), protocol="table1", planned_s=600.0, state_fields=("cycle",))
     t = 0.0
     while True:
+        time.sleep(0.0002)
         t = round(t + 0.05, 10)
         w.add("s", t, _row(t))
         if w.advance(t):
