@@ -127,9 +127,11 @@ labelled("baseline_evidence", "evidence")
 labelled("_judge", "identifiability, unseen runs")
 labelled("fit", lambda kwargs: "polishing: scouts from the neutral start"
          if stack[-1] == "polishing fits" and kwargs.get("max_nfev") == engine.SCOUT_NFEV else stack[-1])
-runs = [load_run(os.path.join(sys.argv[2], name + ".h5")) for name in ("table1", "sweep", "validation")]
+from benchlab.commands.pipeline import DIAGNOSED_RUNS  # the runs the job diagnoses; the validation run unseen
+runs = [load_run(os.path.join(sys.argv[2], name + ".h5")) for name in DIAGNOSED_RUNS]
+unseen = [load_run(os.path.join(sys.argv[2], "validation.h5"))]
 mark[0] = cpu()
-diagnosis = engine.diagnose_runs(runs[:2], "nonlinear", validate=runs[2:])
+diagnosis = engine.diagnose_runs(runs, "nonlinear", validate=unseen)
 switch()
 json.dump({"spent": spent, "findings": [f.candidate.key for f in diagnosis.findings]}, open(sys.argv[1], "w"))
 """

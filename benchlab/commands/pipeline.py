@@ -233,7 +233,7 @@ def _eq11_errors(comparison, fitting: pd.DataFrame, sweep: pd.DataFrame, validat
     errors = {"nonlinear": comparison.rel_error}
     if comparison.sweep_model is not None:
         errors[SWEEP_MODEL] = eq11_rel_error(comparison.sweep_model.params, comparison.points)
-    points, errors[DIAGNOSED_MODEL] = own_points_error(out / "sweep.h5", diagnosed, progress, sweep)
+    points, errors[DIAGNOSED_MODEL] = own_points_error(out / "sweep.h5", diagnosed, progress, sweep_run=sweep)
     held = held_to_own_points([fitting, sweep], diagnosed, out / "sweep.h5", points, validate=[validation],
                               progress=progress, sweep_run=sweep)
     speeds = " and ".join(f"{s:.0f}" for s in COMPARED_RPM)

@@ -112,14 +112,12 @@ def model_spread(run: pd.DataFrame, params: ModelParams, channels: Sequence[str]
     sets = parameter_draws(params, draws)
     if not sets:
         return pd.DataFrame({c: np.zeros(len(run)) for c in channels}, index=run.index)
-    named: list[str] = []
-    mean = squares = np.zeros(0)
-    for count, draw in enumerate(sets, start=1):
-        prediction = simulate(run, draw, params.network)
-        if count == 1:
-            named = [c for c in channels if c in prediction.columns]
-            mean, squares = np.zeros((len(run), len(named))), np.zeros((len(run), len(named)))
-        values = prediction[named].to_numpy()
+    first = simulate(run, sets[0], params.network)
+    named = [c for c in channels if c in first.columns]
+    mean = first[named].to_numpy(dtype=float, copy=True)
+    squares = np.zeros_like(mean)
+    for count, draw in enumerate(sets[1:], start=2):
+        values = simulate(run, draw, params.network)[named].to_numpy()
         delta = values - mean
         mean += delta / count
         squares += delta * (values - mean)
