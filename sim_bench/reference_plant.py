@@ -109,8 +109,19 @@ _R_OUT_SQUARED, _AIR_NU, _AIR_K, _AIR_RHO, _AIR_C = R_OUT ** 2, AIR["nu"], AIR["
 
 
 @njit(cache=True, nogil=True)
+def _bin(r: float) -> float:  # pragma: no cover - compiled
+    """The 0.5 % bin of a resistance, as a whole number (its value: _bin_value)."""
+    return np.rint(math.log(r) / _BIN)
+
+
+@njit(cache=True, nogil=True)
+def _bin_value(bin_: float) -> float:  # pragma: no cover - compiled
+    return math.exp(bin_ * _BIN)
+
+
+@njit(cache=True, nogil=True)
 def _binned(r: float) -> float:  # pragma: no cover - compiled
-    return math.exp(np.rint(math.log(r) / _BIN) * _BIN)
+    return _bin_value(_bin(r))
 
 
 @njit(cache=True, nogil=True)
@@ -141,7 +152,7 @@ def _convection_r(rpm, node_c, air_c, wall_c, area, eps_area, length):  # pragma
     """Forced (engine speed) + natural (own ΔT to the air) + radiation to the housing wall, as one resistance per
     sample (the chamber air is transparent: radiation goes to the wall, which the air follows closely)."""
     out = np.empty(rpm.shape[0])
-    forced = 0.0
+    forced, last = 0.0, np.nan
     for k in range(rpm.shape[0]):
         if k > 0 and node_c[k] == node_c[k - 1] and air_c[k] == air_c[k - 1] and wall_c[k] == wall_c[k - 1] \
                 and rpm[k] == rpm[k - 1]:
@@ -150,7 +161,9 @@ def _convection_r(rpm, node_c, air_c, wall_c, area, eps_area, length):  # pragma
         if k == 0 or rpm[k] != rpm[k - 1]:
             forced = rotating_h(rpm[k])
         g = (forced + natural_h(node_c[k] - air_c[k], length)) * area
-        out[k] = _binned(1.0 / (g + radiation_h(eps_area, node_c[k], wall_c[k])))
+        bin_ = _bin(1.0 / (g + radiation_h(eps_area, node_c[k], wall_c[k])))
+        out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)  # the bin's value again: no exp
+        last = bin_
     return out
 
 
@@ -171,14 +184,16 @@ def _open_face_r(speed, clutch_state, area):  # pragma: no cover - compiled
 def _air_housing_r(rpm, air_c, wall_c, area):  # pragma: no cover - compiled
     """Chamber air to the bell housing's inside per sample: half the disc's forced convection plus natural."""
     out = np.empty(rpm.shape[0])
-    forced = 0.0
+    forced, last = 0.0, np.nan
     for k in range(rpm.shape[0]):
         if k > 0 and air_c[k] == air_c[k - 1] and wall_c[k] == wall_c[k - 1] and rpm[k] == rpm[k - 1]:
             out[k] = out[k - 1]
             continue
         if k == 0 or rpm[k] != rpm[k - 1]:
             forced = rotating_h(rpm[k])
-        out[k] = _binned(1.0 / ((0.5 * forced + natural_h(air_c[k] - wall_c[k], 0.3)) * area))
+        bin_ = _bin(1.0 / ((0.5 * forced + natural_h(air_c[k] - wall_c[k], 0.3)) * area))
+        out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)
+        last = bin_
     return out
 
 
@@ -199,12 +214,15 @@ def _ventilation_r(rpm, leak_l_per_s, l_per_s_per_krpm):  # pragma: no cover - c
 def _outside_r(node_c, ambient_c, area, eps_area, length):  # pragma: no cover - compiled
     """A housing's outside to the room per sample: natural convection plus radiation."""
     out = np.empty(node_c.shape[0])
+    last = np.nan
     for k in range(node_c.shape[0]):
         if k > 0 and node_c[k] == node_c[k - 1] and ambient_c[k] == ambient_c[k - 1]:
             out[k] = out[k - 1]
             continue
         g = natural_h(node_c[k] - ambient_c[k], length) * area
-        out[k] = _binned(1.0 / (g + radiation_h(eps_area, node_c[k], ambient_c[k])))
+        bin_ = _bin(1.0 / (g + radiation_h(eps_area, node_c[k], ambient_c[k])))
+        out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)
+        last = bin_
     return out
 
 

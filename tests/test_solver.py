@@ -16,7 +16,8 @@ from scipy.integrate import solve_ivp
 import benchlab
 from benchlab.model.clutch import clutch_network, convection_resistance
 from benchlab.model.params import paper_params
-from benchlab.network.solver import Discretised, _propagate, _propagate4, _propagate_combined44, _zoh
+from benchlab.network.solver import (Discretised, _horner_step, _propagate, _propagate4, _propagate_combined44,
+                                     _sparse_horner_step, _zoh)
 
 
 def _reference(run: pd.DataFrame, params, x0: np.ndarray) -> np.ndarray:
@@ -107,11 +108,14 @@ def test_network_rejects_unknown_node():
         broken.validate()
 
 
-def _thermal_systems(n: int, m: int, points: int, capacity: tuple[float, float], seed: int):
-    """Random conductance networks (symmetric, grounded) over random capacities; the last state a sensor lag."""
+def _thermal_systems(n: int, m: int, points: int, capacity: tuple[float, float], seed: int, chain: bool = False):
+    """Random conductance networks (symmetric, grounded) over random capacities; the last state a sensor lag.
+    `chain`: each node linked to its neighbours only (a sparse A, as a network of many nodes is)."""
     rng = np.random.default_rng(seed)
     g = rng.uniform(0.1, 20.0, size=(points, n, n))
     g = (g + g.transpose(0, 2, 1)) / 2
+    if chain:
+        g *= np.abs(np.subtract.outer(np.arange(n), np.arange(n))) <= 1
     a = g.copy()
     idx = np.arange(n)
     a[:, idx, idx] = -(g.sum(axis=2) - g[:, idx, idx]) - rng.uniform(0.0, 1.0, size=(points, n))
@@ -122,11 +126,13 @@ def _thermal_systems(n: int, m: int, points: int, capacity: tuple[float, float],
     return a, rng.uniform(0.0, 1.0, size=(points, n, m)) / c
 
 
-@pytest.mark.parametrize("n, m, capacity, dt", [(4, 4, (1e3, 2e4), 0.01), (4, 4, (1e3, 2e4), 0.5),
-                                                 (7, 5, (1e3, 2e4), 0.5), (6, 4, (1.0, 10.0), 1.0)])
-def test_batched_zoh_matches_scipy_expm(n, m, capacity, dt):
-    """The compiled Taylor/squaring ZOH equals scipy's expm of the augmented matrix to 1e-9 relative."""
-    a, b = _thermal_systems(n, m, 200, capacity, seed=n + m)
+@pytest.mark.parametrize("n, m, capacity, dt, chain", [(4, 4, (1e3, 2e4), 0.01, False), (4, 4, (1e3, 2e4), 0.5, False),
+                                                        (7, 5, (1e3, 2e4), 0.5, False), (6, 4, (1.0, 10.0), 1.0, False),
+                                                        (13, 8, (5.0, 2e4), 0.01, True), (13, 8, (5.0, 2e4), 1.0, True)])
+def test_batched_zoh_matches_scipy_expm(n, m, capacity, dt, chain):
+    """The compiled Taylor/squaring ZOH equals scipy's expm of the augmented matrix to 1e-9 relative, dense and
+    sparse (a chain of 13 nodes: _sparse_horner_step)."""
+    a, b = _thermal_systems(n, m, 200, capacity, seed=n + m, chain=chain)
     ad, bd = _zoh(a, b, dt)
     aug = np.zeros((len(a), n + m, n + m))
     aug[:, :n, :n], aug[:, :n, n:] = a * dt, b * dt
@@ -134,6 +140,23 @@ def test_batched_zoh_matches_scipy_expm(n, m, capacity, dt):
     for got, want in ((ad, ref[:, :n, :n]), (bd, ref[:, :n, n:])):
         scale = np.max(np.abs(want), axis=(1, 2), keepdims=True)
         assert np.max(np.abs(got - want) / scale) < 1e-9
+
+
+def test_the_sparse_horner_step_adds_the_dense_step_s_products_bit_for_bit():
+    """Issue 47: the row-wise step over A's non-zero columns (the reference clutch's 13 states) gives the dense step's
+    every bit, zeros of A skipped: the same sums in the same order."""
+    a = _thermal_systems(13, 8, 1, (5.0, 2e4), seed=5, chain=True)[0][0]
+    cols, counts = np.zeros((13, 13), dtype=np.int64), np.zeros(13, dtype=np.int64)
+    for i in range(13):
+        nonzero = np.flatnonzero(a[i])
+        cols[i, :len(nonzero)], counts[i] = nonzero, len(nonzero)
+    assert counts.sum() * 3 <= 13 * 13  # the kernel takes the sparse step for it
+    P = np.random.default_rng(6).normal(size=(13, 13))
+    dense, sparse = P.copy(), P.copy()
+    _horner_step(a, 0.01, 1 / 6, dense, np.empty((13, 13)))
+    _sparse_horner_step(a, cols, counts, 0.01, 1 / 6, sparse, np.empty((13, 13)))
+    assert np.array_equal(sparse.view(np.uint64), dense.view(np.uint64))
+    assert not np.array_equal(dense, P)
 
 
 def test_four_state_kernel_equals_general_kernel():

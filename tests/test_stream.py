@@ -64,11 +64,16 @@ def test_simulate_keeps_its_columns_and_values():
         assert np.array_equal(sim[name].to_numpy(), states[:, network.state_names.index(state)])
 
 
-def test_a_stream_kept_across_runs_gives_each_run_s_fresh_states():
+@pytest.mark.parametrize("max_points", [1 << 13, 2])
+def test_a_stream_kept_across_runs_gives_each_run_s_fresh_states(max_points, monkeypatch):
     """NetworkStream (the simulated bench's plant): operating points, law values and a repeated run's states kept
     from run to run change no bit of any run's states, whether a channel is the same array, a new array with the
-    same values, or new values."""
+    same values, or new values; also where the points are forgotten before every run (MAX_POINTS 2: the buffers
+    kept, `_Points.clear`)."""
+    from benchlab.network import stream as stream_module
     from benchlab.network.stream import NetworkStream
+
+    monkeypatch.setattr(stream_module, "MAX_POINTS", max_points)
     from sim_bench.reference_plant import reference_network, reference_params
 
     network, params = reference_network(), reference_params()
@@ -86,6 +91,7 @@ def test_a_stream_kept_across_runs_gives_each_run_s_fresh_states():
         runs.append(channels)
     runs.append(dict(runs[-1], engine_speed=base["engine_speed"] + 200.0))  # one channel changed, the rest kept
     runs.append(runs[-1])  # the very same channels: the last run's states again
+    runs.append(dict(runs[0]))  # points met before, forgotten since where MAX_POINTS is 2
     for channels in runs:
         want = stream_network(network, params, channels, 0.01, x0, 1e-6)
         assert np.array_equal(stream.run(channels, x0), want)

@@ -244,6 +244,29 @@ def _horner_step(a, h, c, P, T):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _sparse_horner_step(a, cols, counts, h, c, P, T):  # pragma: no cover - compiled
+    """_horner_step's P = c I + a h P with row i of a h P summed over the columns of a that are not zero
+    (cols[i, :counts[i]], in increasing order) and a whole row of P at a time: the same sums in the same order, bit
+    for bit (a zero of a adds ±0 to a finite sum that starts at +0, which changes no bit), on a third of the
+    products of a network whose nodes each touch a few others (the reference clutch: 50 of 169), vectorised."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(n):
+            T[i, j] = 0.0
+        for k in range(counts[i]):
+            l = cols[i, k]
+            ail = a[i, l]
+            for j in range(n):
+                T[i, j] += ail * P[l, j]
+        for j in range(n):
+            T[i, j] *= h
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = T[i, j]
+        P[i, i] += c
+
+
+@njit(cache=True, nogil=True)
 def _zoh_kernel(A, B, dt, Ad, Bd):  # pragma: no cover - compiled
     """Ad = exp(A dt), Bd = int_0^dt exp(A s) ds B for each point: Taylor series of Psi, then scaling and squaring.
 
@@ -256,6 +279,8 @@ def _zoh_kernel(A, B, dt, Ad, Bd):  # pragma: no cover - compiled
     T = np.empty((n, n))
     G = np.empty((n, m))
     G2 = np.empty((n, m))
+    cols = np.empty((n, n), dtype=np.int64)  # per row of A, its columns that are not zero (_sparse_horner_step)
+    counts = np.empty(n, dtype=np.int64)
     for o in range(A.shape[0]):
         a = A[o]
         norm = 0.0
@@ -274,6 +299,15 @@ def _zoh_kernel(A, B, dt, Ad, Bd):  # pragma: no cover - compiled
             norm *= 0.5
             s += 1
         h = dt / 2.0 ** s
+        nonzero = 0
+        for i in range(n):
+            counts[i] = 0
+            for j in range(n):
+                if a[i, j] != 0.0:
+                    cols[i, counts[i]] = j
+                    counts[i] += 1
+            nonzero += counts[i]
+        sparse = 3 * nonzero <= n * n  # below a third, the row-wise sparse step is faster (measured n = 4..13)
         q = 1  # tail of Psi after degree q <= theta^(q+1) / (q+2)! / (1 - theta)
         tail = norm * norm / 6.0 / (1.0 - TAYLOR_THETA)
         while tail > TAYLOR_TOL:
@@ -288,14 +322,20 @@ def _zoh_kernel(A, B, dt, Ad, Bd):  # pragma: no cover - compiled
             P[i, i] = 1.0 / f
         for k in range(q - 1, -1, -1):
             f /= k + 2
-            _horner_step(a, h, 1.0 / f, P, T)
+            if sparse:
+                _sparse_horner_step(a, cols, counts, h, 1.0 / f, P, T)
+            else:
+                _horner_step(a, h, 1.0 / f, P, T)
         for i in range(n):
             for j in range(m):
                 acc = 0.0
                 for l in range(n):
                     acc += P[i, l] * B[o, l, j]
                 G[i, j] = acc * h
-        _horner_step(a, h, 1.0, P, T)  # P = exp(A h) = I + A h Psi
+        if sparse:  # P = exp(A h) = I + A h Psi
+            _sparse_horner_step(a, cols, counts, h, 1.0, P, T)
+        else:
+            _horner_step(a, h, 1.0, P, T)
         for _ in range(s):
             for i in range(n):
                 for j in range(m):

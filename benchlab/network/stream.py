@@ -46,6 +46,7 @@ class _Points:
     appearance, and the discrete matrices of each."""
 
     def __init__(self, columns: int, n: int, m: int) -> None:
+        self.columns = columns
         self.count = 0
         self.bits = 12
         self.table = np.full((1 << self.bits, columns + 1), -1, dtype=np.int64)  # per slot: the key, then its point
@@ -53,6 +54,12 @@ class _Points:
         # the paper's clutch (4 states, 4 inputs): [Ad Bd] side by side, one contiguous record per step; else apart
         self.ABd = np.empty((1024, n, n + m)) if (n, m) == (4, 4) else None
         self.Ad, self.Bd = (None, None) if self.ABd is not None else (np.empty((1024, n, n)), np.empty((1024, n, m)))
+
+    def clear(self) -> None:
+        """Forget every point, keeping the buffers (grown to a run's working set, their pages already mapped: a
+        fresh set costs the growth's copies and page faults again, a tenth of the reference plant's solver)."""
+        self.count = 0
+        self.table.fill(-1)
 
     def number(self, keys: np.ndarray) -> np.ndarray:
         """Each row's point index; rows not met before become new points (numbered after the known ones)."""
@@ -236,7 +243,7 @@ class NetworkStream:
             return None
         x0 = np.asarray(x0, dtype=np.float64)
         if self.points is not None and self.points.count > MAX_POINTS:
-            self.points = None
+            self.points.clear()
         out: np.ndarray | None = None
         run_pattern = None
         decode = None
@@ -258,8 +265,11 @@ class NetworkStream:
                 return None  # a law constant on one block and not on another: key the run as a whole
             keyed_by = (pattern, tuple(g for g in laws if not isinstance(g, np.ndarray)))
             columns = _key_columns(laws, pattern)
-            if self.points is None or keyed_by != self.keyed_by:
+            if self.points is None or self.points.columns != max(len(columns), 1):
                 self.points, self.keyed_by = _Points(max(len(columns), 1), self.states, self.inputs), keyed_by
+            elif keyed_by != self.keyed_by:
+                self.points.clear()
+                self.keyed_by = keyed_by
             keys = np.empty((size, max(len(columns), 1)), dtype=np.int64)
             if columns:
                 for c, (column, _) in enumerate(columns):
