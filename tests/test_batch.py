@@ -122,6 +122,20 @@ def test_map_indices_workers_end_quietly_under_the_commands_sigterm_answer(monke
     assert "Terminated" not in err and "Traceback" not in err, err
 
 
+def test_a_long_map_goes_out_in_chunks_and_comes_back_in_order(monkeypatch):
+    """Issue 47: a map of many short tasks (diagnose's score test: 336 candidates) goes to the workers in chunks,
+    not one task per round trip; its results come back in order, one progress call each."""
+    monkeypatch.setattr(parallel, "workers", lambda: 2)
+    sizes = []
+    real_chunk_size = parallel.chunk_size
+    monkeypatch.setattr(parallel, "chunk_size", lambda count, n: sizes.append(real_chunk_size(count, n)) or sizes[-1])
+    progress = []
+    results = map_indices(lambda i: (os.getpid(), i * i), 336, lambda: progress.append(1))
+    assert [sq for _, sq in results] == [i * i for i in range(336)] and len(progress) == 336
+    assert {pid for pid, _ in results} != {os.getpid()}  # forked
+    assert sizes[-1] > 1 and real_chunk_size(3, 2) == 1  # a long map in chunks, a short one task by task
+
+
 def test_map_indices_in_a_dask_worker_thread_runs_serially_where_it_would_fork_elsewhere(scheduler, monkeypatch):
     monkeypatch.setattr(parallel, "workers", lambda: 2)  # two cores to fork onto, however many this process has
     with distributed.Client(scheduler) as client:
