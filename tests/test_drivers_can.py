@@ -1,20 +1,24 @@
 """Bench CAN: DBC contents, exact frames, codec vs cantools, watchdog events, fault injection, safe state."""
 
 import itertools
+import zlib
 from pathlib import Path
 
 import can
 import cantools
 import numpy as np
 import pytest
+from can.io import blf
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from isal import isal_zlib
 
+from benchlab.runner.devices import BLF_COMPRESSION, BLF_OBJECT_BYTES, BenchConfig, open_can_log
 from drivers import can_signals as sig
 from drivers.can_bench import CanBench
 from drivers.can_codec import CodecTable, MessageCodec
 from drivers.can_frames import frames_from_messages, messages_from_frames
-from drivers.can_log import log_frames
+from drivers.can_log import IsalBLFWriter, log_frames
 from drivers.errors import CanBusError, CanConfigError, CanLogError
 from sim_bench.emulators import CanBenchEmulator, ManualClock, SimCanBus
 from sim_bench.emulators.drivetrain import FirstOrderDrivetrain
@@ -236,12 +240,11 @@ def test_codec_table_decodes_and_encodes_a_mixed_batch_as_each_codec_frame_by_fr
         assert not encoded[i, codec.length:].any()
 
 
-def test_bulk_blf_log_is_byte_for_byte_what_python_can_writes_frame_by_frame(tmp_path) -> None:
-    """Frames of every kind (standard, extended, remote, error, FD; sent and received; channels) into a BLF file:
-    fed as arrays, python-can's own writer produces the same file, and python-can reads the frames back."""
+def _messages_of_every_kind(count: int) -> list[can.Message]:
+    """Frames of every kind (standard, extended, remote, error, FD; sent and received; channels), in time order."""
     rng = np.random.default_rng(3)
     messages, t = [], 1.7e9 + 0.1234567
-    for _ in range(3000):
+    for _ in range(count):
         t += rng.uniform(0, 0.003)
         kind = rng.integers(0, 20)
         kw = dict(timestamp=t, arbitration_id=int(rng.integers(0, 0x7FF)), is_extended_id=bool(rng.integers(0, 2)),
@@ -254,6 +257,13 @@ def test_bulk_blf_log_is_byte_for_byte_what_python_can_writes_frame_by_frame(tmp
         elif kind == 2:
             kw.update(is_remote_frame=True, data=b"", dlc=4)
         messages.append(can.Message(**kw))
+    return messages
+
+
+def test_bulk_blf_log_is_byte_for_byte_what_python_can_writes_frame_by_frame(tmp_path) -> None:
+    """Frames of every kind into a BLF file: fed as arrays, python-can's own writer produces the same file, and
+    python-can reads the frames back."""
+    messages = _messages_of_every_kind(3000)
     one_by_one = can.Logger(str(tmp_path / "a.blf"), max_container_size=4096)
     for msg in messages:
         one_by_one.on_message_received(msg)
@@ -268,6 +278,88 @@ def test_bulk_blf_log_is_byte_for_byte_what_python_can_writes_frame_by_frame(tmp
     assert np.allclose([m.timestamp for m in back], [m.timestamp for m in messages], rtol=0, atol=1e-6)
     assert all(a.equals(b, timestamp_delta=0, check_channel=False)
                for a, b in zip(messages, messages_from_frames(frames_from_messages(messages))))
+
+
+def _blf_contents(path: Path) -> tuple[tuple, list[tuple[int, int, bytes, bytes]]]:
+    """A BLF file's header fields but the file's size, and each log container's compression method, declared
+    size, stored bytes and inflated bytes (read here, not by python-can's reader, which hides the containers)."""
+    data = path.read_bytes()
+    header = blf.FILE_HEADER_STRUCT.unpack_from(data)
+    at, containers = header[1], []
+    while at < len(data):
+        _, _, _, size, kind = blf.OBJ_HEADER_BASE_STRUCT.unpack_from(data, at)
+        assert kind == blf.LOG_CONTAINER
+        method, declared = blf.LOG_CONTAINER_STRUCT.unpack_from(data, at + blf.OBJ_HEADER_BASE_STRUCT.size)
+        stored = data[at + blf.OBJ_HEADER_BASE_STRUCT.size + blf.LOG_CONTAINER_STRUCT.size:at + size]
+        containers.append((method, declared, stored, zlib.decompress(stored) if method == blf.ZLIB_DEFLATE else stored))
+        at += size + size % 4
+    return header[:10] + header[11:], containers
+
+
+@pytest.mark.parametrize("level", [1, 3])
+def test_the_isal_blf_log_holds_what_python_cans_writer_writes_only_deflated_by_isal(tmp_path, level) -> None:
+    """The bench's BLF writer (frames in bulk and frame by frame) against python-can's (frame by frame) at the
+    same level: the same header, the same containers inflated, each deflated by ISA-L at that level; python-can's
+    BLFReader reads the same messages back (time stamps, ids, data, flags, channels)."""
+    messages = _messages_of_every_kind(3000)
+    theirs = can.BLFWriter(tmp_path / "zlib.blf", max_container_size=4096, compression_level=level)
+    for msg in messages:
+        theirs.on_message_received(msg)
+    theirs.stop()
+    in_bulk = IsalBLFWriter(tmp_path / "bulk.blf", max_container_size=4096, compression_level=level)
+    for chunk in np.array_split(frames_from_messages(messages), 37):
+        log_frames(in_bulk, chunk)
+    in_bulk.stop()
+    one_by_one = IsalBLFWriter(tmp_path / "single.blf", max_container_size=4096, compression_level=level)
+    for msg in messages:
+        one_by_one.on_message_received(msg)
+    one_by_one.stop()
+    head, containers = _blf_contents(tmp_path / "zlib.blf")
+    assert len(containers) > 30 and all(c[0] == blf.ZLIB_DEFLATE for c in containers)
+    expected = [(blf.ZLIB_DEFLATE, declared, isal_zlib.compress(inflated, level), inflated)
+                for _, declared, _, inflated in containers]
+    assert [c[2] for c in expected] != [c[2] for c in containers]  # zlib's and ISA-L's streams differ
+    read = list(can.BLFReader(tmp_path / "zlib.blf"))
+    assert len(read) == len(messages)
+    for name in ("bulk.blf", "single.blf"):
+        assert _blf_contents(tmp_path / name) == (head, expected)
+        assert all(a.equals(b, timestamp_delta=0) for a, b in zip(can.BLFReader(tmp_path / name), read, strict=True))
+
+
+def test_the_isal_blf_log_at_level_0_is_python_cans_uncompressed_log(tmp_path) -> None:
+    """compression_level 0 keeps python-can's meaning (containers stored, not ISA-L's level 0): the very file."""
+    messages = _messages_of_every_kind(500)
+    for name, writer in (("zlib.blf", can.BLFWriter), ("isal.blf", IsalBLFWriter)):
+        log = writer(tmp_path / name, max_container_size=4096, compression_level=0)
+        log_frames(log, frames_from_messages(messages))
+        log.stop()
+    _, containers = _blf_contents(tmp_path / "isal.blf")
+    assert len(containers) > 5 and all(c[0] == blf.NO_COMPRESSION for c in containers)
+    assert (tmp_path / "isal.blf").read_bytes() == (tmp_path / "zlib.blf").read_bytes()
+
+
+@pytest.mark.parametrize("level", [-1, 4, 9])
+def test_a_blf_compression_level_isal_lacks_is_refused_before_the_file_is_made(tmp_path, level) -> None:
+    """ISA-L has levels 0 to 3 (0 stays python-can's "stored"): any other is one line, and no file."""
+    with pytest.raises(ValueError, match=f"^BLF compression_level {level}: 0 \\(uncompressed\\) to 3"):
+        IsalBLFWriter(tmp_path / "x.blf", compression_level=level)
+    assert not (tmp_path / "x.blf").exists()
+
+
+def test_the_bench_logs_blf_through_the_isal_writer_and_asc_through_python_cans(tmp_path) -> None:
+    """open_can_log: a .blf log is an IsalBLFWriter at BLF_COMPRESSION, containers of about one second of the DBC's
+    frames; an .asc log python-can's writer; a log that cannot be created one CanLogError line."""
+    config = BenchConfig(instrument_url="sim://dmm", node_url="sim://node", can={})
+    frames_per_s = sum(1000.0 / m.cycle_time for m in DB.messages if m.cycle_time)
+    log = open_can_log(tmp_path / "run.blf", config)
+    log.stop()
+    assert type(log) is IsalBLFWriter and log.compression_level == BLF_COMPRESSION
+    assert log.max_container_size == int(frames_per_s * BLF_OBJECT_BYTES) > 4096
+    log = open_can_log(tmp_path / "run.asc", config)
+    log.stop()
+    assert type(log) is can.ASCWriter
+    with pytest.raises(CanLogError, match=r"^\S*nowhere.run.blf: cannot be written \(No such file or directory\)$"):
+        open_can_log(tmp_path / "nowhere" / "run.blf", config)
 
 
 class _FrameByFrame(can.BusABC):
@@ -342,14 +434,15 @@ def test_driver_gives_the_same_results_frame_by_frame_as_in_bulk(tmp_path) -> No
     assert (tmp_path / "False.blf").read_bytes()[144:] == (tmp_path / "True.blf").read_bytes()[144:]  # header: sizes
 
 
-def test_a_can_log_that_cannot_be_written_stops_with_can_log_error(tmp_path, loop) -> None:
+@pytest.mark.parametrize("writer", [can.BLFWriter, IsalBLFWriter])
+def test_a_can_log_that_cannot_be_written_stops_with_can_log_error(tmp_path, loop, writer) -> None:
     """The bulk write into a BLF file that fails (here: its file closed under it, as a full disk fails a write)
     is one CanLogError, and the log is given up, not written half."""
     clock, emu, bench = loop
-    bench.log = can.Logger(str(tmp_path / "run.blf"), max_container_size=4096)
+    bench.log = writer(tmp_path / "run.blf", max_container_size=4096)
     step(clock, emu, bench, 0.5)
     bench.log.file.close()
-    with pytest.raises(CanLogError, match="CAN log cannot be written"):
+    with pytest.raises(CanLogError, match="CAN log cannot be written: ValueError: .*run.blf: closed, frames cannot be"):
         step(clock, emu, bench, 1.0)
     assert bench.log is None
 
