@@ -100,7 +100,8 @@ def reference_params() -> dict[str, float]:
 # -- laws ---------------------------------------------------------------------------------------------------------
 # Each law that reads a speed or a temperature is one compiled loop over its samples (numpy's dozen small array
 # operations per law cost 15-40 µs on a 2 s chunk of the bench, several times per chunk), which reuses the previous
-# sample's value where the inputs repeat it (a speed held, the first pass's held temperatures). The formulas are
+# sample's value where the inputs repeat it (a speed held, the first pass's held temperatures), and its bin where the
+# resistance falls well inside that bin (`_inside`: no log, no exp; the bin the log gives, bit for bit). The formulas are
 # numpy's, in the same order, on each sample; only the last bit of an exp, log or power may differ from numpy's
 # vectorised ones, and it does not reach the solver, which keys each 0.5 % bin (tests/test_reference_plant.py
 # compares the plant with states stored from the numpy laws).
@@ -122,6 +123,17 @@ def _bin_value(bin_: float) -> float:  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _binned(r: float) -> float:  # pragma: no cover - compiled
     return _bin_value(_bin(r))
+
+
+# a bin's value times these: its edges, pulled in by 1e-9 (a million times exp's and log's rounding), so that a
+# resistance between them is in that bin whatever log(r) rounds to
+_INSIDE_LOW, _INSIDE_HIGH = math.exp(-_BIN / 2) * (1 + 1e-9), math.exp(_BIN / 2) * (1 - 1e-9)
+
+
+@njit(cache=True, nogil=True)
+def _inside(r: float, value: float) -> bool:  # pragma: no cover - compiled
+    """Whether `r` is, clear of the edges, in the bin whose value is `value`: its bin without a log."""
+    return value * _INSIDE_LOW < r < value * _INSIDE_HIGH
 
 
 @njit(cache=True, nogil=True)
@@ -161,8 +173,12 @@ def _convection_r(rpm, node_c, air_c, wall_c, area, eps_area, length):  # pragma
         if k == 0 or rpm[k] != rpm[k - 1]:
             forced = rotating_h(rpm[k])
         g = (forced + natural_h(node_c[k] - air_c[k], length)) * area
-        bin_ = _bin(1.0 / (g + radiation_h(eps_area, node_c[k], wall_c[k])))
-        out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)  # the bin's value again: no exp
+        r = 1.0 / (g + radiation_h(eps_area, node_c[k], wall_c[k]))
+        if k > 0 and _inside(r, out[k - 1]):  # the sample before's bin: no log, no exp
+            out[k] = out[k - 1]
+            continue
+        bin_ = _bin(r)
+        out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)
         last = bin_
     return out
 
@@ -191,7 +207,11 @@ def _air_housing_r(rpm, air_c, wall_c, area):  # pragma: no cover - compiled
             continue
         if k == 0 or rpm[k] != rpm[k - 1]:
             forced = rotating_h(rpm[k])
-        bin_ = _bin(1.0 / ((0.5 * forced + natural_h(air_c[k] - wall_c[k], 0.3)) * area))
+        r = 1.0 / ((0.5 * forced + natural_h(air_c[k] - wall_c[k], 0.3)) * area)
+        if k > 0 and _inside(r, out[k - 1]):  # the sample before's bin: no log, no exp
+            out[k] = out[k - 1]
+            continue
+        bin_ = _bin(r)
         out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)
         last = bin_
     return out
@@ -220,7 +240,11 @@ def _outside_r(node_c, ambient_c, area, eps_area, length):  # pragma: no cover -
             out[k] = out[k - 1]
             continue
         g = natural_h(node_c[k] - ambient_c[k], length) * area
-        bin_ = _bin(1.0 / (g + radiation_h(eps_area, node_c[k], ambient_c[k])))
+        r = 1.0 / (g + radiation_h(eps_area, node_c[k], ambient_c[k]))
+        if k > 0 and _inside(r, out[k - 1]):  # the sample before's bin: no log, no exp
+            out[k] = out[k - 1]
+            continue
+        bin_ = _bin(r)
         out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)
         last = bin_
     return out

@@ -152,3 +152,21 @@ def test_a_piece_per_slipping_period_only_keeps_the_states():
         assert np.all(np.abs(merged[name] - pieces[name]) <= ref._BIN * neighbours + 1e-3), name
     # the launches slipped over several periods, each its own piece; the rest of the run came in far fewer
     assert len(script) < merged_pieces < per_period_pieces / 3
+
+
+def test_a_resistance_inside_a_bin_by_its_edges_test_is_in_that_bin_by_its_log():
+    """Issue 47: the laws take a sample's bin from the sample before's where `_inside` says so, without a log; that
+    must be the bin the log gives, also next to the bins' edges (where a wrong margin would put it in the next)."""
+    from sim_bench.reference_plant import _BIN, _bin, _bin_value, _inside
+
+    rng = np.random.default_rng(7)
+    bins = rng.integers(-2000, 2000, 2000).astype(float)
+    edges = np.exp((bins + 0.5) * _BIN)
+    for bin_, edge in zip(bins, edges):
+        value = _bin_value(bin_)
+        low = edge / np.exp(_BIN)
+        for r in (edge * (1 - 1e-12), edge * (1 - 2e-9), edge * (1 - 1e-6), edge * (1 + 1e-6), value,
+                  low * (1 + 2e-9), low * (1 - 1e-6)):
+            if _inside(r, value):
+                assert _bin(r) == bin_, (bin_, r)
+        assert _inside(value, value) and not _inside(edge * (1 + 1e-12), value)

@@ -50,14 +50,17 @@ class _Points:
         self.count = 0
         self.bits = 12
         self.table = np.full((1 << self.bits, columns + 1), -1, dtype=np.int64)  # per slot: the key, then its point
-        self.keys = np.empty((1024, columns), dtype=np.int64)
+        # room for the points a stream keeps (MAX_POINTS) and a run's worth beyond, reserved, not touched: the pages a
+        # point's matrices take are mapped when it is written (growing from a few rows copied 20 MB on the
+        # reference plant)
+        rows = 2 * MAX_POINTS
+        self.keys = np.empty((rows, columns), dtype=np.int64)
         # the paper's clutch (4 states, 4 inputs): [Ad Bd] side by side, one contiguous record per step; else apart
-        self.ABd = np.empty((1024, n, n + m)) if (n, m) == (4, 4) else None
-        self.Ad, self.Bd = (None, None) if self.ABd is not None else (np.empty((1024, n, n)), np.empty((1024, n, m)))
+        self.ABd = np.empty((rows, n, n + m)) if (n, m) == (4, 4) else None
+        self.Ad, self.Bd = (None, None) if self.ABd is not None else (np.empty((rows, n, n)), np.empty((rows, n, m)))
 
     def clear(self) -> None:
-        """Forget every point, keeping the buffers (grown to a run's working set, their pages already mapped: a
-        fresh set costs the growth's copies and page faults again, a tenth of the reference plant's solver)."""
+        """Forget every point, keeping the buffers (their pages already mapped: a fresh set faults them in again)."""
         self.count = 0
         self.table.fill(-1)
 
