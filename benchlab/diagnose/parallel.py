@@ -40,9 +40,8 @@ def release_free_heap() -> None:
     parent's, shared copy-on-write: every fit's arrays reuse them, and each first write copied a 4 KiB page the fit
     then overwrote. Handed back, they come as fresh zero pages. Diagnose on the main job's runs, two workers, seven
     runs alternated with seven without: minor faults 360-400 k -> 320-340 k (one outlier each, 595 k and 587 k),
-    CPU median 23.7 -> 23.5 s (paired
-    differences -0.9..+0.1 s; serially, in one process: 22.5-22.8 s). Nothing where
-    the C library has no malloc_trim (not glibc)."""
+    CPU median 23.7 -> 23.5 s (paired differences -0.9..+0.1 s; serially, in one process: 22.5-22.8 s). Nothing
+    where the C library has no malloc_trim (not glibc)."""
     trim = getattr(ctypes.CDLL(None), "malloc_trim", None)
     if trim is not None:
         trim(0)
