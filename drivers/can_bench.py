@@ -30,7 +30,7 @@ import cantools
 import numpy as np
 from numba import njit
 
-from drivers import can_codec, can_log, timebase
+from drivers import can_codec, can_frames, can_log, timebase
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, MessageCodec, compile_codecs, decode_row, encode_rows
 from drivers.can_frames import (ERROR, EXTENDED, FRAME, REMOTE, RX, drain, frames_from_messages, join, make_frames, pick,
@@ -705,6 +705,7 @@ def prime() -> None:
     once on zero frames and zero-length arrays of the dtypes the driver's tables hold (nothing sent, logged or
     changed)."""
     can_codec.prime()
+    can_frames.prime()
     can_log.prime()
     timebase.prime()
     frames, none, index = np.zeros(0, FRAME), np.zeros(0), np.zeros(0, np.int64)

@@ -15,6 +15,8 @@ import can
 import numpy as np
 from can.util import channel2int
 
+from benchlab.jit import njit
+
 MAX_DATA = 64  # CAN FD; classic frames use the first 8 bytes, the rest stays 0
 
 EXTENDED, REMOTE, ERROR, RX, FD, BRS, ESI = (1 << i for i in range(7))
@@ -45,14 +47,21 @@ def make_frames(timestamp: np.ndarray, arbitration_id: "int | np.ndarray", paylo
 
 
 def in_time_order(frames: np.ndarray) -> np.ndarray:
-    """FRAME records in time-stamp order, ties in the given order (a stable sort); as given if already in order.
-    Plain numpy, not a kernel: np.argsort's merge sort compiled in a kernel took 1.6 s of a first run."""
-    if len(frames) < 2:  # the usual poll of the emulated controllers: 4 us of numpy saved
+    """FRAME records in time-stamp order, ties in the given order (a stable sort); as given if already in order (a
+    compiled check: 0.4 us against numpy's 3 us, twice per poll of the simulated bench). The sort is numpy's:
+    np.argsort's merge sort compiled in a kernel took 1.6 s of a first run."""
+    if len(frames) < 2 or _stamps_in_order(frames):  # < 2: the usual poll of the emulated controllers
         return frames
-    stamps = frames["timestamp"]
-    if np.all(stamps[1:] >= stamps[:-1]):
-        return frames
-    return frames[np.argsort(stamps, kind="stable")]
+    return frames[np.argsort(frames["timestamp"], kind="stable")]
+
+
+@njit(cache=True, nogil=True)
+def _stamps_in_order(frames: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """Whether the FRAME records' time stamps never decrease."""
+    for i in range(1, frames.shape[0]):
+        if frames[i].timestamp < frames[i - 1].timestamp:
+            return False
+    return True
 
 
 def record(msg: can.Message) -> Record:
@@ -126,3 +135,8 @@ def drain(bus: can.BusABC) -> np.ndarray:
     """Every frame waiting on `bus`, in arrival order: `bus.recv_frames()` where offered, else `recv_each`."""
     bulk = getattr(bus, "recv_frames", None)
     return bulk() if bulk is not None else recv_each(bus)
+
+
+def prime() -> None:
+    """Compile (or load from numba's cache) the time-order check on zero frames, before a control loop calls it."""
+    _stamps_in_order(np.zeros(0, FRAME))

@@ -17,7 +17,7 @@ from benchlab.runner.devices import BLF_COMPRESSION, BLF_OBJECT_BYTES, BenchConf
 from drivers import can_signals as sig
 from drivers.can_bench import CanBench
 from drivers.can_codec import CodecTable, MessageCodec
-from drivers.can_frames import frames_from_messages, messages_from_frames
+from drivers.can_frames import FRAME, frames_from_messages, in_time_order, messages_from_frames
 from drivers.can_log import IsalBLFWriter, log_frames
 from drivers.errors import CanBusError, CanConfigError, CanLogError
 from sim_bench.emulators import CanBenchEmulator, ManualClock, SimCanBus
@@ -63,6 +63,20 @@ def frames(bus: can.BusABC) -> list[tuple[int, bytes]]:
     while (m := bus.recv(timeout=0)) is not None:
         out.append((m.arbitration_id, bytes(m.data)))
     return out
+
+
+def test_frames_come_in_time_order_ties_as_they_arrived() -> None:
+    """A poll's frames as given where their stamps never decrease (the same array), else stably sorted."""
+    frames = np.zeros(6, FRAME)
+    frames["timestamp"] = [0.1, 0.2, 0.2, 0.3, 0.3, 0.5]
+    frames["arbitration_id"] = np.arange(6)
+    assert in_time_order(frames) is frames
+    shuffled = frames[[4, 0, 3, 2, 1, 5]]
+    ordered = in_time_order(shuffled)
+    assert ordered["timestamp"].tolist() == frames["timestamp"].tolist()
+    assert ordered["arbitration_id"].tolist() == [0, 2, 1, 4, 3, 5]  # ties keep their order of arrival
+    ties_swapped = frames[[0, 2, 1]]
+    assert in_time_order(ties_swapped) is ties_swapped  # equal stamps: in order as they are
 
 
 def test_dbc_describes_every_controller() -> None:

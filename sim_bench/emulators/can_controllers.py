@@ -26,6 +26,7 @@ from benchlab.jit import njit
 
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, compile_codecs, decode_row, encode_rows
+from drivers import can_frames
 from drivers.can_frames import EXTENDED, FRAME, drain, in_time_order, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
@@ -460,6 +461,7 @@ def prime() -> None:
     """Compile (or load from numba's cache) the emulated controllers' kernels for the one signature each is called
     with, before a real-time run: a first-call compile inside it silences the controllers past the driver's limit.
     Each once on zero frames and zero-length arrays of the emulator's dtypes (nothing taken, sent or changed)."""
+    can_frames.prime()  # the time-order check of every poll
     frames, none, index, flags = np.zeros(0, FRAME), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool)
     bits, linear, values = np.zeros((0, 4, 0), np.uint64), np.zeros((0, 4, 0)), np.zeros((0, 0))
     rx, setpoint = np.zeros((0, _RX_CONTROLLER + 1), np.int64), np.zeros((0, 0), bool)
