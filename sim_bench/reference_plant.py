@@ -101,7 +101,7 @@ def reference_params() -> dict[str, float]:
 # Each law that reads a speed or a temperature is one compiled loop over its samples (numpy's dozen small array
 # operations per law cost 15-40 µs on a 2 s chunk of the bench, several times per chunk), which reuses the previous
 # sample's value where the inputs repeat it (a speed held, the first pass's held temperatures), and its bin where the
-# resistance falls well inside that bin (`_inside`: no log, no exp; the bin the log gives, bit for bit). The formulas are
+# resistance falls well inside that bin (`_binned_after`: no log, no exp; the bin the log gives, bit for bit). The formulas are
 # numpy's, in the same order, on each sample; only the last bit of an exp, log or power may differ from numpy's
 # vectorised ones, and it does not reach the solver, which keys each 0.5 % bin (tests/test_reference_plant.py
 # compares the plant with states stored from the numpy laws).
@@ -110,19 +110,8 @@ _R_OUT_SQUARED, _AIR_NU, _AIR_K, _AIR_RHO, _AIR_C = R_OUT ** 2, AIR["nu"], AIR["
 
 
 @njit(cache=True, nogil=True)
-def _bin(r: float) -> float:  # pragma: no cover - compiled
-    """The 0.5 % bin of a resistance, as a whole number (its value: _bin_value)."""
-    return np.rint(math.log(r) / _BIN)
-
-
-@njit(cache=True, nogil=True)
-def _bin_value(bin_: float) -> float:  # pragma: no cover - compiled
-    return math.exp(bin_ * _BIN)
-
-
-@njit(cache=True, nogil=True)
 def _binned(r: float) -> float:  # pragma: no cover - compiled
-    return _bin_value(_bin(r))
+    return math.exp(np.rint(math.log(r) / _BIN) * _BIN)
 
 
 # a bin's value times these: its edges, pulled in by 1e-9 (a million times exp's and log's rounding), so that a
@@ -134,6 +123,12 @@ _INSIDE_LOW, _INSIDE_HIGH = math.exp(-_BIN / 2) * (1 + 1e-9), math.exp(_BIN / 2)
 def _inside(r: float, value: float) -> bool:  # pragma: no cover - compiled
     """Whether `r` is, clear of the edges, in the bin whose value is `value`: its bin without a log."""
     return value * _INSIDE_LOW < r < value * _INSIDE_HIGH
+
+
+@njit(cache=True, nogil=True)
+def _binned_after(r: float, k: int, out: np.ndarray) -> float:  # pragma: no cover - compiled
+    """`_binned(r)` for sample k of a law's loop: the sample before's value where r lies inside its bin."""
+    return out[k - 1] if k > 0 and _inside(r, out[k - 1]) else _binned(r)
 
 
 @njit(cache=True, nogil=True)
@@ -164,7 +159,7 @@ def _convection_r(rpm, node_c, air_c, wall_c, area, eps_area, length):  # pragma
     """Forced (engine speed) + natural (own ΔT to the air) + radiation to the housing wall, as one resistance per
     sample (the chamber air is transparent: radiation goes to the wall, which the air follows closely)."""
     out = np.empty(rpm.shape[0])
-    forced, last = 0.0, np.nan
+    forced = 0.0
     for k in range(rpm.shape[0]):
         if k > 0 and node_c[k] == node_c[k - 1] and air_c[k] == air_c[k - 1] and wall_c[k] == wall_c[k - 1] \
                 and rpm[k] == rpm[k - 1]:
@@ -173,13 +168,7 @@ def _convection_r(rpm, node_c, air_c, wall_c, area, eps_area, length):  # pragma
         if k == 0 or rpm[k] != rpm[k - 1]:
             forced = rotating_h(rpm[k])
         g = (forced + natural_h(node_c[k] - air_c[k], length)) * area
-        r = 1.0 / (g + radiation_h(eps_area, node_c[k], wall_c[k]))
-        if k > 0 and _inside(r, out[k - 1]):  # the sample before's bin: no log, no exp
-            out[k] = out[k - 1]
-            continue
-        bin_ = _bin(r)
-        out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)
-        last = bin_
+        out[k] = _binned_after(1.0 / (g + radiation_h(eps_area, node_c[k], wall_c[k])), k, out)
     return out
 
 
@@ -200,20 +189,14 @@ def _open_face_r(speed, clutch_state, area):  # pragma: no cover - compiled
 def _air_housing_r(rpm, air_c, wall_c, area):  # pragma: no cover - compiled
     """Chamber air to the bell housing's inside per sample: half the disc's forced convection plus natural."""
     out = np.empty(rpm.shape[0])
-    forced, last = 0.0, np.nan
+    forced = 0.0
     for k in range(rpm.shape[0]):
         if k > 0 and air_c[k] == air_c[k - 1] and wall_c[k] == wall_c[k - 1] and rpm[k] == rpm[k - 1]:
             out[k] = out[k - 1]
             continue
         if k == 0 or rpm[k] != rpm[k - 1]:
             forced = rotating_h(rpm[k])
-        r = 1.0 / ((0.5 * forced + natural_h(air_c[k] - wall_c[k], 0.3)) * area)
-        if k > 0 and _inside(r, out[k - 1]):  # the sample before's bin: no log, no exp
-            out[k] = out[k - 1]
-            continue
-        bin_ = _bin(r)
-        out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)
-        last = bin_
+        out[k] = _binned_after(1.0 / ((0.5 * forced + natural_h(air_c[k] - wall_c[k], 0.3)) * area), k, out)
     return out
 
 
@@ -234,19 +217,12 @@ def _ventilation_r(rpm, leak_l_per_s, l_per_s_per_krpm):  # pragma: no cover - c
 def _outside_r(node_c, ambient_c, area, eps_area, length):  # pragma: no cover - compiled
     """A housing's outside to the room per sample: natural convection plus radiation."""
     out = np.empty(node_c.shape[0])
-    last = np.nan
     for k in range(node_c.shape[0]):
         if k > 0 and node_c[k] == node_c[k - 1] and ambient_c[k] == ambient_c[k - 1]:
             out[k] = out[k - 1]
             continue
         g = natural_h(node_c[k] - ambient_c[k], length) * area
-        r = 1.0 / (g + radiation_h(eps_area, node_c[k], ambient_c[k]))
-        if k > 0 and _inside(r, out[k - 1]):  # the sample before's bin: no log, no exp
-            out[k] = out[k - 1]
-            continue
-        bin_ = _bin(r)
-        out[k] = out[k - 1] if bin_ == last else _bin_value(bin_)
-        last = bin_
+        out[k] = _binned_after(1.0 / (g + radiation_h(eps_area, node_c[k], ambient_c[k])), k, out)
     return out
 
 

@@ -157,16 +157,16 @@ def test_a_piece_per_slipping_period_only_keeps_the_states():
 def test_a_resistance_inside_a_bin_by_its_edges_test_is_in_that_bin_by_its_log():
     """Issue 47: the laws take a sample's bin from the sample before's where `_inside` says so, without a log; that
     must be the bin the log gives, also next to the bins' edges (where a wrong margin would put it in the next)."""
-    from sim_bench.reference_plant import _BIN, _bin, _bin_value, _inside
+    from sim_bench.reference_plant import _BIN, _binned, _inside
 
     rng = np.random.default_rng(7)
     bins = rng.integers(-2000, 2000, 2000).astype(float)
     edges = np.exp((bins + 0.5) * _BIN)
     for bin_, edge in zip(bins, edges):
-        value = _bin_value(bin_)
+        value = _binned(float(np.exp(bin_ * _BIN)))
         low = edge / np.exp(_BIN)
         for r in (edge * (1 - 1e-12), edge * (1 - 2e-9), edge * (1 - 1e-6), edge * (1 + 1e-6), value,
                   low * (1 + 2e-9), low * (1 - 1e-6)):
             if _inside(r, value):
-                assert _bin(r) == bin_, (bin_, r)
+                assert _binned(r) == value, (bin_, r)
         assert _inside(value, value) and not _inside(edge * (1 + 1e-12), value)
