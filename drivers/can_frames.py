@@ -14,8 +14,7 @@ from collections.abc import Sequence
 import can
 import numpy as np
 from can.util import channel2int
-
-from benchlab.jit import njit
+from numba import njit
 
 MAX_DATA = 64  # CAN FD; classic frames use the first 8 bytes, the rest stays 0
 

@@ -24,9 +24,9 @@ import cantools
 import numpy as np
 from benchlab.jit import njit
 
+from drivers import can_frames
 from drivers import can_signals as sig
 from drivers.can_codec import CodecTable, compile_codecs, decode_row, encode_rows
-from drivers import can_frames
 from drivers.can_frames import EXTENDED, FRAME, drain, in_time_order, make_frames, send_all
 from sim_bench.emulators.drivetrain import DrivetrainActuals, DrivetrainProvider, FirstOrderDrivetrain
 
